@@ -1,0 +1,33 @@
+"""The IMMS estimator: beam model, unit deformations, kinematic and aiding models, the EKF.
+
+Lower layer: knows nothing of the service or the web.
+"""
+
+from ._beam import BeamModel, NaturalModes, NodalShapes, assemble_beam, natural_modes
+from ._calibration import TABLE1_HZ, CalibrationParameter, CalibrationResult, calibrate, modal_frequencies
+from ._rig import Beam, PointMass, RigDescription, RigError, Sensor, StiffnessSegment, load_rig, parse_rig
+from ._unit_deformations import MAX_UNIT_DEFORMATIONS, UnitDeformations, unit_deformations
+
+__all__ = [
+    "MAX_UNIT_DEFORMATIONS",
+    "TABLE1_HZ",
+    "Beam",
+    "BeamModel",
+    "CalibrationParameter",
+    "CalibrationResult",
+    "NaturalModes",
+    "NodalShapes",
+    "PointMass",
+    "RigDescription",
+    "RigError",
+    "Sensor",
+    "StiffnessSegment",
+    "UnitDeformations",
+    "assemble_beam",
+    "calibrate",
+    "load_rig",
+    "modal_frequencies",
+    "natural_modes",
+    "parse_rig",
+    "unit_deformations",
+]

@@ -1,0 +1,206 @@
+"""The rig description (``rig.json`` of the recording contract) as a typed model.
+
+The contract allows extra keys (noise figures, simulator settings, damage descriptions) and
+readers that do not know them ignore them, so the models keep unknown keys instead of
+forbidding them; everything the contract does name is validated strictly.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+__all__ = [
+    "Beam",
+    "PointMass",
+    "RigDescription",
+    "RigError",
+    "Sensor",
+    "StiffnessSegment",
+    "load_rig",
+    "parse_rig",
+]
+
+SensorKind = Literal["imu", "tof", "strain", "bearing", "temperature"]
+
+# Kinds whose sensors sit on the beam and therefore need a position.
+_POSITIONED_KINDS = ("imu", "tof", "strain")
+
+#: Steel loses about 0.03 % of its Young's modulus per kelvin.
+STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT = -3.0e-4
+
+
+class RigError(ValueError):
+    """A rig description that breaks the contract; the message names the offending key."""
+
+
+class _ContractModel(BaseModel):
+    # Extra keys are part of the contract ("allowed and ignored"): keep them for those who know them.
+    model_config = ConfigDict(extra="allow", frozen=True)
+
+
+class StiffnessSegment(_ContractModel):
+    """A segment [start, end] (m) whose bending stiffness is ``factor`` times the nominal EI.
+
+    An extension of the contract (an extra key of ``beam``): damage (factor < 1) or a
+    stiffener (factor > 1).
+    """
+
+    start: float = Field(ge=0.0)
+    end: float
+    factor: float = Field(gt=0.0)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "StiffnessSegment":
+        if not self.end > self.start:
+            raise ValueError(f"stiffness segment needs end > start, got start={self.start}, end={self.end}")
+        return self
+
+
+class Beam(_ContractModel):
+    length: float = Field(gt=0.0)
+    width: float = Field(gt=0.0)
+    thickness: float = Field(gt=0.0)
+    youngs_modulus: float = Field(gt=0.0)
+    density: float = Field(gt=0.0)
+    youngs_modulus_temperature_coefficient: float = STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT
+    reference_temperature: float = 20.0
+    stiffness_segments: tuple[StiffnessSegment, ...] = ()
+
+    @property
+    def area(self) -> float:
+        return self.width * self.thickness
+
+    @property
+    def second_moment_of_area(self) -> float:
+        """I of the rectangular section for bending across the thickness (m^4)."""
+        return self.width * self.thickness**3 / 12.0
+
+    @property
+    def mass_per_length(self) -> float:
+        return self.density * self.area
+
+    @property
+    def mass(self) -> float:
+        return self.mass_per_length * self.length
+
+    def youngs_modulus_at(self, temperature_c: float | None) -> float:
+        """E (Pa) at ``temperature_c`` (°C); ``None`` means the reference temperature."""
+        if temperature_c is None:
+            return self.youngs_modulus
+        if not math.isfinite(temperature_c):
+            raise RigError(f"{temperature_c=} must be finite")
+        factor = 1.0 + self.youngs_modulus_temperature_coefficient * (temperature_c - self.reference_temperature)
+        if factor <= 0.0:
+            raise RigError(f"{temperature_c=} gives a non-positive Young's modulus")
+        return self.youngs_modulus * factor
+
+
+class PointMass(_ContractModel):
+    position: float = Field(ge=0.0)
+    mass: float = Field(ge=0.0)
+    rotary_inertia: float = Field(default=0.0, ge=0.0)
+
+
+class Sensor(_ContractModel):
+    name: str = Field(min_length=1)
+    kind: SensorKind
+    position: float | None = None
+
+    @property
+    def topic(self) -> str:
+        if self.kind == "bearing":
+            return "/bearing/displacement"
+        if self.kind == "temperature":
+            return "/env/temperature"
+        if self.kind in _POSITIONED_KINDS:
+            return f"/{self.kind}/{self.name}"
+        raise RigError(f"unknown sensor kind {self.kind!r}")
+
+
+class RigDescription(_ContractModel):
+    beam: Beam
+    gravity: float = Field(gt=0.0)
+    reflector_distance: float
+    point_masses: tuple[PointMass, ...] = ()
+    sensors: tuple[Sensor, ...]
+    truth_stations: tuple[float, ...] = ()
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "RigDescription":
+        length = self.beam.length
+        seen: set[tuple[str, str]] = set()
+        for index, sensor in enumerate(self.sensors):
+            key = (sensor.kind, sensor.name)
+            if key in seen:
+                raise ValueError(f"sensors[{index}]: name {sensor.name!r} is not unique within kind {sensor.kind!r}")
+            seen.add(key)
+            if sensor.kind in _POSITIONED_KINDS:
+                if sensor.position is None:
+                    raise ValueError(f"sensors[{index}] ({sensor.kind} {sensor.name!r}): position is required")
+                if not (0.0 <= sensor.position <= length) or not math.isfinite(sensor.position):
+                    raise ValueError(
+                        f"sensors[{index}] ({sensor.kind} {sensor.name!r}): position={sensor.position} "
+                        f"is outside the beam [0, {length}]"
+                    )
+        for index, mass in enumerate(self.point_masses):
+            if mass.position > length:
+                raise ValueError(f"point_masses[{index}]: position={mass.position} is outside the beam [0, {length}]")
+        for index, segment in enumerate(self.beam.stiffness_segments):
+            if segment.end > length:
+                raise ValueError(f"beam.stiffness_segments[{index}]: end={segment.end} is outside the beam [0, {length}]")
+        for index, station in enumerate(self.truth_stations):
+            if not (0.0 <= station <= length):
+                raise ValueError(f"truth_stations[{index}]={station} is outside the beam [0, {length}]")
+        return self
+
+    def sensors_of(self, kind: SensorKind) -> tuple[Sensor, ...]:
+        return tuple(s for s in self.sensors if s.kind == kind)
+
+    def sensor_by_topic(self) -> dict[str, Sensor]:
+        return {s.topic: s for s in self.sensors}
+
+    def extra(self, key: str, default: Any = None) -> Any:
+        """An extension key of the description (for example the simulator's settings)."""
+        return (self.model_extra or {}).get(key, default)
+
+    def to_json(self) -> str:
+        return json.dumps(self.model_dump(mode="json", exclude_defaults=False), indent=2)
+
+
+def parse_rig(data: bytes | str | dict[str, Any], *, source: str = "rig.json") -> RigDescription:
+    """Validate a rig description given as JSON text/bytes or an already parsed mapping."""
+    if isinstance(data, (bytes, str)):
+        try:
+            data = json.loads(data)
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise RigError(f"{source}: not valid JSON: {exc}") from exc
+    if not isinstance(data, dict):
+        raise RigError(f"{source}: must be a JSON object, got {type(data).__name__}")
+    try:
+        return RigDescription.model_validate(data)
+    except ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in err['loc']) or '<root>'}: {err['msg']}" for err in exc.errors()
+        )
+        raise RigError(f"{source}: {problems}") from None
+
+
+def load_rig(path: str | Path) -> RigDescription:
+    """Read a rig description from a ``.json`` or ``.toml`` file."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise RigError(f"cannot read rig description {str(path)!r}: {exc}") from exc
+    if path.suffix.lower() == ".toml":
+        try:
+            return parse_rig(tomllib.loads(raw.decode("utf-8")), source=str(path))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise RigError(f"{path}: not valid TOML: {exc}") from exc
+    return parse_rig(raw, source=str(path))

@@ -1,0 +1,123 @@
+"""Unit deformations: the eigenmodes of the hanging beam seen from the body frame.
+
+The body frame is the tangent of the beam at D, so every unit deformation satisfies
+s(0) = 0 and s'(0) = 0: an eigenmode w_k becomes s̃_k(η) = w_k(η) − w_k'(0)·η, scaled so that
+max |s̃_k| = 1 over the beam. After this transformation modes 1 and 2 look alike (both are
+dominated by the first bending shape); they are merged into the combimode, the dominant shape of
+the pair (first singular vector over the beam), so six modes give five unit deformations:
+unit deformation 1 = modes 1 + 2, unit deformation χ ≥ 2 = mode χ + 1 (paper, Table 1).
+
+Because s̃ is η times a constant away from a Hermite field, the unit deformations stay exact
+Hermite fields and s, s', s'' are interpolated exactly at any η.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._beam import BeamModel, NaturalModes, NodalShapes, natural_modes
+
+__all__ = ["UnitDeformations", "unit_deformations", "MAX_UNIT_DEFORMATIONS"]
+
+MAX_UNIT_DEFORMATIONS = 5
+_SAMPLES = 4001  # evaluation grid for the max-norm and the combimode's singular vector
+
+
+@dataclass(frozen=True)
+class UnitDeformations:
+    """Γ unit deformations s_χ(η) in body coordinates.
+
+    Attributes
+    ----------
+    shapes : NodalShapes with Γ columns (max |s_χ| = 1, s_χ(L) > 0 where it is not ~0).
+    modes : tuple of tuples, the 1-based eigenmode numbers behind each unit deformation.
+    frequencies_hz : tuple of tuples, the eigenfrequencies of those modes (Hz).
+    """
+
+    shapes: NodalShapes
+    modes: tuple[tuple[int, ...], ...]
+    frequencies_hz: tuple[tuple[float, ...], ...]
+
+    @property
+    def count(self) -> int:
+        return self.shapes.count
+
+    @property
+    def length(self) -> float:
+        return float(self.shapes.nodes[-1])
+
+    def shape(self, eta: np.ndarray | float) -> np.ndarray:
+        """s_χ(η): shape (len(η), Γ) (m per unit b)."""
+        return self.shapes.evaluate(eta, 0)
+
+    def slope(self, eta: np.ndarray | float) -> np.ndarray:
+        """s'_χ(η): shape (len(η), Γ) (rad per unit b)."""
+        return self.shapes.evaluate(eta, 1)
+
+    def curvature(self, eta: np.ndarray | float) -> np.ndarray:
+        """s''_χ(η): shape (len(η), Γ) (1/m per unit b)."""
+        return self.shapes.evaluate(eta, 2)
+
+    def subset(self, count: int) -> "UnitDeformations":
+        """The first ``count`` unit deformations."""
+        if not 1 <= count <= self.count:
+            raise ValueError(f"{count=} must be in [1, {self.count}]")
+        return UnitDeformations(
+            NodalShapes(self.shapes.nodes, self.shapes.dofs[:, :count]),
+            self.modes[:count],
+            self.frequencies_hz[:count],
+        )
+
+
+def _normalise(field: NodalShapes) -> np.ndarray:
+    grid = np.linspace(0.0, field.nodes[-1], _SAMPLES)
+    grid = np.union1d(grid, field.nodes)
+    values = field.evaluate(grid)
+    peak = np.max(np.abs(values), axis=0)
+    if np.any(peak <= 0):
+        raise ValueError("a unit deformation vanishes over the whole beam")
+    dofs = field.dofs / peak
+    tip = values[-1] / peak
+    # Sign: tip positive, or the largest excursion positive where the tip is nearly still.
+    largest = values[np.argmax(np.abs(values), axis=0), np.arange(values.shape[1])] / peak
+    reference = np.where(np.abs(tip) > 1e-3, tip, largest)
+    return dofs * np.where(reference < 0, -1.0, 1.0)
+
+
+def unit_deformations(
+    model_or_modes: BeamModel | NaturalModes, count: int = 4, *, combimode: bool = True
+) -> UnitDeformations:
+    """The first ``count`` (Γ, 1..5) unit deformations of a beam model (or of its modes).
+
+    With ``combimode=False`` each eigenmode becomes its own unit deformation (as for a beam
+    with a fixed bearing, where modes 1 and 2 no longer look alike).
+    """
+    if not isinstance(count, (int, np.integer)) or not 1 <= count <= MAX_UNIT_DEFORMATIONS:
+        raise ValueError(f"{count=} must be an integer in [1, {MAX_UNIT_DEFORMATIONS}]")
+    needed = count + 1 if combimode else count
+    modes = model_or_modes if isinstance(model_or_modes, NaturalModes) else natural_modes(model_or_modes, needed)
+    if modes.shapes.count < needed:
+        raise ValueError(f"{count} unit deformations need {needed} eigenmodes, got {modes.shapes.count}")
+    nodes = modes.shapes.nodes
+    dofs = modes.shapes.dofs[:, :needed].copy()
+    rigid = np.zeros(2 * len(nodes))
+    rigid[0::2] = nodes
+    rigid[1::2] = 1.0
+    body = dofs - np.outer(rigid, dofs[1])
+    body = _normalise(NodalShapes(nodes, body))
+    freqs = [float(f) for f in modes.frequencies_hz[:needed]]
+    if combimode:
+        grid = np.linspace(0.0, nodes[-1], _SAMPLES)
+        pair = NodalShapes(nodes, body[:, :2]).evaluate(grid)
+        _, _, vt = np.linalg.svd(pair, full_matrices=False)
+        combined = body[:, :2] @ vt[0]
+        body = np.column_stack([combined, body[:, 2:]])
+        body = _normalise(NodalShapes(nodes, body))
+        mode_numbers = ((1, 2),) + tuple((k,) for k in range(3, needed + 1))
+        frequencies = ((freqs[0], freqs[1]),) + tuple((f,) for f in freqs[2:])
+    else:
+        mode_numbers = tuple((k,) for k in range(1, needed + 1))
+        frequencies = tuple((f,) for f in freqs)
+    return UnitDeformations(NodalShapes(nodes, body), mode_numbers, frequencies)
