@@ -14,6 +14,7 @@ Units: SI throughout (m, kg, s, N, Pa). Matrices are over all 2(n+1) nodal DOFs 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 import scipy.linalg
@@ -141,7 +142,7 @@ class BeamModel:
         return float(t @ self.mass @ t)
 
 
-def _mesh(rig: RigDescription, elements: int) -> np.ndarray:
+def _mesh(rig: RigDescription, elements: int, extra_nodes: Sequence[float] = ()) -> np.ndarray:
     """Uniform nodes with extra nodes at attached masses and stiffness-segment ends.
 
     Grid nodes closer than 0.3 element lengths to such a point give way to it, so no
@@ -150,7 +151,7 @@ def _mesh(rig: RigDescription, elements: int) -> np.ndarray:
     length = rig.beam.length
     grid = np.linspace(0.0, length, elements + 1)
     h = length / elements
-    special = {m.position for m in rig.point_masses}
+    special = {m.position for m in rig.point_masses} | {float(x) for x in extra_nodes}
     for segment in rig.beam.stiffness_segments:
         special.update((segment.start, segment.end))
     special = np.array(sorted(p for p in special if 1e-9 < p < length - 1e-9))
@@ -162,16 +163,23 @@ def _mesh(rig: RigDescription, elements: int) -> np.ndarray:
     return grid
 
 
-def assemble_beam(rig: RigDescription, *, temperature_c: float | None = None, elements: int = 40) -> BeamModel:
+def assemble_beam(
+    rig: RigDescription,
+    *,
+    temperature_c: float | None = None,
+    elements: int = 40,
+    extra_nodes: Sequence[float] = (),
+) -> BeamModel:
     """Assemble the FE matrices of the beam described by ``rig`` at ``temperature_c`` (°C).
 
-    ``elements`` is the number of uniform elements before nodes are added at attached masses
-    and stiffness-segment ends. ``temperature_c=None`` uses the beam's reference temperature.
+    ``elements`` is the number of uniform elements before nodes are added at attached masses,
+    stiffness-segment ends and ``extra_nodes`` (m; e.g. where a later damage will sit, so two
+    models share one mesh). ``temperature_c=None`` uses the beam's reference temperature.
     """
     if not isinstance(elements, (int, np.integer)) or elements < 2:
         raise ValueError(f"{elements=} must be an integer >= 2")
     beam = rig.beam
-    nodes = _mesh(rig, int(elements))
+    nodes = _mesh(rig, int(elements), extra_nodes)
     n_dof = 2 * len(nodes)
     E = beam.youngs_modulus_at(temperature_c)
     EI = E * beam.second_moment_of_area
