@@ -1,0 +1,189 @@
+"""The ``shm`` command line: simulate, inspect, modes, demo."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["main"]
+
+
+class CliError(Exception):
+    """A user error: printed as one line, exit code 2."""
+
+
+def _print_json(data: object) -> None:
+    print(json.dumps(data, indent=2, allow_nan=False))
+
+
+def _rig_from_args(args: argparse.Namespace):
+    from estimator import load_rig
+
+    from .rig_layouts import default_rig
+
+    if getattr(args, "rig", None):
+        return load_rig(args.rig)
+    return default_rig(args.layout)
+
+
+# -- shm modes ---------------------------------------------------------------------------
+def _cmd_modes(args: argparse.Namespace) -> int:
+    from estimator import TABLE1_HZ, assemble_beam, natural_modes, unit_deformations
+
+    rig = _rig_from_args(args)
+    model = assemble_beam(rig, temperature_c=args.temperature)
+    count = max(args.count, 6)
+    modes = natural_modes(model, count)
+    freqs = modes.frequencies_hz[: args.count]
+    table = np.array(TABLE1_HZ)
+    n = min(len(freqs), len(table))
+    relative = (freqs[:n] / table[:n] - 1).tolist()
+    if args.json:
+        _print_json({
+            "frequencies_hz": [round(float(f), 6) for f in freqs],
+            "table1_hz": list(TABLE1_HZ),
+            "relative_error": [round(float(r), 6) for r in relative],
+        })
+        return 0
+    units = unit_deformations(modes, 5)
+    unit_of_mode = {m: i + 1 for i, group in enumerate(units.modes) for m in group}
+    print(f"{'mode':>4} {'f [Hz]':>9} {'Table 1':>8} {'error':>8}  unit deformation")
+    for k, f in enumerate(freqs, start=1):
+        t = f"{table[k - 1]:8.3f}" if k <= len(table) else " " * 8
+        r = f"{100 * relative[k - 1]:+7.2f}%" if k <= n else " " * 8
+        print(f"{k:4d} {f:9.4f} {t} {r}  {unit_of_mode.get(k, '-')}")
+    return 0
+
+
+# -- shm simulate ------------------------------------------------------------------------
+def _simulation_settings(args: argparse.Namespace):
+    from pydantic import ValidationError
+
+    from .virtual_rig import SimulationSettings
+
+    try:
+        return SimulationSettings(
+            duration=args.duration,
+            seed=args.seed,
+            excitation=args.excitation,
+            layout=args.layout,
+            ideal=args.ideal,
+            damage=tuple(args.damage or ()),
+            damage_at=args.damage_at,
+            temperature_swing=args.temperature_swing,
+            temperature_mean=args.temperature_mean,
+        )
+    except (ValidationError, ValueError) as exc:
+        raise CliError(str(exc).splitlines()[0] if not isinstance(exc, ValidationError) else _pydantic_message(exc)) from None
+
+
+def _pydantic_message(exc) -> str:
+    return "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors())
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from .virtual_rig import simulate
+
+    settings = _simulation_settings(args)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    summary = simulate(settings, out)
+    if args.json:
+        _print_json(summary.as_dict())
+    else:
+        data = summary.as_dict()
+        print(f"wrote {data['path']}: {data['duration_s']:.1f} s, {data['total_messages']} messages "
+              f"in {data['wall_time_s']:.1f} s")
+        print("plant eigenfrequencies [Hz]: " + ", ".join(f"{f:.4f}" for f in data["eigenfrequencies_hz"][:6]))
+        if data["eigenfrequencies_after_damage_hz"]:
+            print("after damage [Hz]:           " + ", ".join(f"{f:.4f}" for f in data["eigenfrequencies_after_damage_hz"][:6]))
+    return 0
+
+
+# -- shm inspect -------------------------------------------------------------------------
+def _cmd_inspect(args: argparse.Namespace) -> int:
+    from .recording import format_inspection, inspect_recording
+
+    report = inspect_recording(args.recording, rig=args.rig)
+    if args.json:
+        _print_json(report)
+    else:
+        print(format_inspection(report))
+    return 0
+
+
+# -- shm demo ----------------------------------------------------------------------------
+def _cmd_demo(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    print("== simulating the benchmark rig (paper excitation) ==")
+    sim_args = argparse.Namespace(
+        duration=args.duration, seed=1, excitation="paper", layout="benchmark", ideal=False, damage=None,
+        damage_at=None, temperature_swing=0.0, temperature_mean=20.0, out=str(out), json=False,
+    )
+    _cmd_simulate(sim_args)
+    print("\n== recording ==")
+    _cmd_inspect(argparse.Namespace(recording=str(out), rig=None, json=False))
+    print("\n== model eigenfrequencies (nominal rig.json) ==")
+    return _cmd_modes(argparse.Namespace(rig=None, layout="benchmark", temperature=None, count=6, json=False))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="shm", description="Structural health monitoring by integrated motion measurement.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("modes", help="eigenfrequencies of the rig model against the paper's Table 1")
+    p.add_argument("--rig", help="rig description (.json or .toml); default: the calibrated rig of --layout")
+    p.add_argument("--layout", choices=("benchmark", "dense"), default="benchmark")
+    p.add_argument("--temperature", type=float, default=None, help="°C (default: the beam's reference temperature)")
+    p.add_argument("--count", type=int, default=6, choices=range(1, 21), metavar="N", help="modes to list (1-20)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_modes)
+
+    p = sub.add_parser("simulate", help="simulate the virtual rig and write a recording")
+    p.add_argument("--duration", type=float, default=300.0, help="s (default 300)")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--out", required=True, help="output .mcap")
+    p.add_argument("--excitation", choices=("paper", "ambient", "decay"), default="paper")
+    p.add_argument("--layout", choices=("benchmark", "dense"), default="benchmark")
+    p.add_argument("--ideal", action="store_true", help="plant = nominal rig (no mismatch, friction, scale/misalignment)")
+    p.add_argument("--damage", action="append", metavar="SPEC", help="mass:KG@POS or stiffness:FACTOR@A-B (repeatable)")
+    p.add_argument("--damage-at", type=float, default=None, metavar="SECONDS", help="damage appears at this time")
+    p.add_argument("--temperature-swing", type=float, default=0.0, metavar="K", help="peak-to-peak swing")
+    p.add_argument("--temperature-mean", type=float, default=20.0, metavar="C")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("inspect", help="topics, counts, rates, gaps and problems of a recording")
+    p.add_argument("recording")
+    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_inspect)
+
+    p = sub.add_parser("demo", help="the main job on the embedded defaults")
+    p.add_argument("--out", default="var/demo.mcap")
+    p.add_argument("--duration", type=float, default=300.0)
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from estimator import RigError
+
+    from .recording import RecordingError
+
+    try:
+        return args.func(args)
+    except (CliError, RigError, RecordingError, FileNotFoundError) as exc:
+        print(f"shm {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

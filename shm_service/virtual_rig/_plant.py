@@ -1,0 +1,248 @@
+"""The plant of the virtual rig: the hanging beam as a flexible pendulum on a moving bearing.
+
+Formulation (floating frame of reference, exact in the large rotation):
+the frame sits at the bearing D and turns with the beam's tangent there (angle θ, positive
+turning η towards ζ). In it the beam's lateral deflection is w(x, t) = Σ_i Φ_i(x) q_i(t), with
+Φ_i the first modes of the beam clamped in the frame (w(0) = w'(0) = 0), mass-normalised,
+computed with the nominal gravity tension. Axial shortening u(x) = −½∫₀ˣ w'² (inextensible
+beam) is kept in the sensor kinematics.
+
+With y = [θ, q], bearing displacement d(t) (prescribed, horizontal), gravity g:
+
+    I_D θ̈ + bᵀ q̈ = −S_D (d̈ cos θ + g sin θ) − (g cos θ − d̈ sin θ) cᵀ q + M_f − (C ẏ)_θ + F_θ
+    b θ̈ + M_q q̈ = −[κ_E K_b + (g cos θ − d̈ sin θ) K_g + θ̇² K_c] q − c (d̈ cos θ + g sin θ) − (C ẏ)_q + F_q
+
+where I_D, S_D are the beam's second and first moments of mass about D, b and c the modal
+first moments (∫ m x Φ_i + J Φ_i', ∫ m Φ_i), K_b, K_g the bending and gravity-tension
+stiffness, K_c the centrifugal tension stiffness minus the centrifugal softening, κ_E the
+temperature factor of Young's modulus, M_f the bearing's Coulomb friction and C modal damping of
+the linearised structure. Linearised at θ = 0 this is the pinned FE beam projected on [θ, Φ], so
+the plant's eigenfrequencies are those of ``linear_frequencies``.
+
+This model is the plant, not the estimator's kinematic model: more modes than unit
+deformations, no small-angle shortcuts, foreshortening in the kinematics, exact sensor angles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+import scipy.linalg
+
+from estimator import BeamModel, NodalShapes
+
+__all__ = ["Plant", "build_plant", "clamped_basis", "integrate"]
+
+
+def clamped_basis(models: list[BeamModel], count: int) -> NodalShapes:
+    """Mass-orthonormal basis spanning the first ``count`` clamped-in-frame modes of each model.
+
+    With one model these are its clamped modes; with a healthy and a damaged model the basis
+    holds both, so a stiffness change keeps its local curvature in the simulation.
+    """
+    reference = models[0]
+    n_dof = reference.mass.shape[0]
+    inner = np.arange(2, n_dof)
+    columns = []
+    for model in models:
+        if model.mass.shape != reference.mass.shape or not np.allclose(model.nodes, reference.nodes):
+            raise ValueError("the models of one plant must share their mesh")
+        K = model.stiffness[np.ix_(inner, inner)]
+        M = model.mass[np.ix_(inner, inner)]
+        _, vectors = scipy.linalg.eigh(K, M, subset_by_index=(0, count - 1))
+        columns.append(vectors)
+    stacked = np.hstack(columns)
+    K = reference.stiffness[np.ix_(inner, inner)]
+    M = reference.mass[np.ix_(inner, inner)]
+    # Rayleigh–Ritz on the span, dropping directions the stack repeats.
+    gram = stacked.T @ M @ stacked
+    eigval, eigvec = np.linalg.eigh(gram)
+    keep = eigval > 1e-10 * eigval.max()
+    orth = stacked @ (eigvec[:, keep] / np.sqrt(eigval[keep]))
+    _, ritz = scipy.linalg.eigh(orth.T @ K @ orth, orth.T @ M @ orth)
+    basis = orth @ ritz
+    dofs = np.zeros((n_dof, basis.shape[1]))
+    dofs[inner] = basis
+    return NodalShapes(reference.nodes, dofs)
+
+
+@dataclass(frozen=True)
+class Plant:
+    """Reduced matrices of one configuration of the plant (see module docstring)."""
+
+    basis: NodalShapes
+    mass: np.ndarray  # (n, n), n = 1 + modes: [θ, q]
+    bending: np.ndarray  # (m, m) K_b at the reference temperature
+    tension: np.ndarray  # (m, m) K_g per unit effective gravity
+    centrifugal: np.ndarray  # (m, m) K_c per unit θ̇²
+    first_moment: float  # S_D (kg·m)
+    modal_first_moment: np.ndarray  # c (m,)
+    damping: np.ndarray  # (n, n)
+    gravity: float
+    friction_torque: float  # Coulomb torque of the bearing (N·m)
+    friction_smoothing: float  # rate (rad/s) over which the friction torque builds up
+    temperature_coefficient: float
+    reference_temperature: float
+    linear_frequencies_hz: np.ndarray
+    modal_damping: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return self.mass.shape[0]
+
+    def youngs_factor(self, temperature_c: np.ndarray) -> np.ndarray:
+        return 1.0 + self.temperature_coefficient * (np.asarray(temperature_c) - self.reference_temperature)
+
+
+def build_plant(
+    model: BeamModel,
+    basis: NodalShapes,
+    *,
+    damping_ratios: np.ndarray,
+    friction_torque: float = 0.0,
+    friction_smoothing: float = 2e-3,
+) -> Plant:
+    """Reduce ``model`` onto [θ, basis] and add modal damping ``damping_ratios`` (one per mode, the
+    last value repeats for higher modes)."""
+    if np.any(np.asarray(damping_ratios) < 0):
+        raise ValueError(f"{damping_ratios=} must be non-negative")
+    if friction_torque < 0 or friction_smoothing <= 0:
+        raise ValueError(f"{friction_torque=} must be >= 0 and {friction_smoothing=} > 0")
+    phi = basis.dofs
+    rigid = model.rigid_rotation()
+    translation = model.uniform_translation()
+    T = np.column_stack([rigid, phi])
+    M = T.T @ model.mass @ T
+    M = 0.5 * (M + M.T)
+    m_trans = model.mass - model.rotary_mass
+    bending = phi.T @ model.bending_stiffness @ phi
+    tension = phi.T @ model.tension_stiffness @ phi
+    centrifugal = phi.T @ (model.centrifugal_stiffness - m_trans) @ phi
+    c = phi.T @ model.mass @ translation
+    first_moment = float(rigid @ model.mass @ translation)
+    g = model.gravity
+    n = T.shape[1]
+    K_lin = np.zeros((n, n))
+    K_lin[0, 0] = g * first_moment
+    K_lin[0, 1:] = K_lin[1:, 0] = g * c
+    K_lin[1:, 1:] = bending + g * tension
+    K_lin = 0.5 * (K_lin + K_lin.T)
+    eigval, vectors = scipy.linalg.eigh(K_lin, M)
+    omega = np.sqrt(np.clip(eigval, 0.0, None))
+    ratios = np.asarray(damping_ratios, dtype=float)
+    zeta = np.concatenate([ratios, np.full(max(0, n - ratios.size), ratios[-1])])[:n]
+    damping = M @ vectors @ np.diag(2.0 * zeta * omega) @ vectors.T @ M
+    beam = model.rig.beam
+    return Plant(
+        basis=basis,
+        mass=M,
+        bending=bending / (model.youngs_modulus / beam.youngs_modulus),
+        tension=tension,
+        centrifugal=centrifugal,
+        first_moment=first_moment,
+        modal_first_moment=c,
+        damping=0.5 * (damping + damping.T),
+        gravity=g,
+        friction_torque=float(friction_torque),
+        friction_smoothing=float(friction_smoothing),
+        temperature_coefficient=beam.youngs_modulus_temperature_coefficient,
+        reference_temperature=beam.reference_temperature,
+        linear_frequencies_hz=omega / (2 * np.pi),
+        modal_damping=zeta,
+    )
+
+
+@numba.njit(cache=True)
+def _acceleration(y, yd, ddot, kappa, force, Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws):
+    theta = y[0]
+    omega = yd[0]
+    ct = np.cos(theta)
+    st = np.sin(theta)
+    g_axial = g * ct - ddot * st
+    g_lateral = ddot * ct + g * st
+    n = y.shape[0]
+    m = n - 1
+    rhs = force.copy()
+    damp = C @ yd
+    cq = 0.0
+    for i in range(m):
+        cq += c[i] * y[1 + i]
+    rhs[0] += -SD * g_lateral - g_axial * cq - Tc * np.tanh(omega / Ws) - damp[0]
+    w2 = omega * omega
+    for i in range(m):
+        acc = 0.0
+        for j in range(m):
+            acc += (kappa * Kb[i, j] + g_axial * Kg[i, j] + w2 * Kc[i, j]) * y[1 + j]
+        rhs[1 + i] += -acc - c[i] * g_lateral - damp[1 + i]
+    return Minv @ rhs
+
+
+@numba.njit(cache=True)
+def _integrate(y0, yd0, ddot_fine, kappa, force, substeps, h, Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, out_y, out_yd, out_ydd):
+    n_samples = out_y.shape[0]
+    y = y0.copy()
+    yd = yd0.copy()
+    for k in range(n_samples):
+        out_y[k] = y
+        out_yd[k] = yd
+        out_ydd[k] = _acceleration(y, yd, ddot_fine[2 * substeps * k], kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws)
+        for s in range(substeps):
+            base = 2 * (substeps * k + s)
+            a0 = ddot_fine[base]
+            a1 = ddot_fine[base + 1]
+            a2 = ddot_fine[base + 2]
+            k1v = yd
+            k1a = _acceleration(y, yd, a0, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws)
+            y2 = y + 0.5 * h * k1v
+            yd2 = yd + 0.5 * h * k1a
+            k2a = _acceleration(y2, yd2, a1, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws)
+            y3 = y + 0.5 * h * yd2
+            yd3 = yd + 0.5 * h * k2a
+            k3a = _acceleration(y3, yd3, a1, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws)
+            y4 = y + h * yd3
+            yd4 = yd + h * k3a
+            k4a = _acceleration(y4, yd4, a2, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws)
+            y = y + h / 6.0 * (k1v + 2.0 * yd2 + 2.0 * yd3 + yd4)
+            yd = yd + h / 6.0 * (k1a + 2.0 * k2a + 2.0 * k3a + k4a)
+    return y, yd
+
+
+def integrate(
+    plant: Plant,
+    y0: np.ndarray,
+    yd0: np.ndarray,
+    bearing_acceleration_fine: np.ndarray,
+    temperature_c: np.ndarray,
+    generalized_force: np.ndarray,
+    *,
+    sample_period: float,
+    substeps: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Integrate the plant over len(temperature_c) samples with classical Runge–Kutta.
+
+    ``bearing_acceleration_fine`` holds d̈ on the half-step grid (2·substeps·samples + 1 values,
+    starting at the first sample); temperature and the generalized force (samples, n) are held
+    over each sample period. Returns y, ẏ, ÿ at the samples (samples, n) and the state after the
+    last sample (y, ẏ).
+    """
+    n_samples = len(temperature_c)
+    n = plant.size
+    if bearing_acceleration_fine.shape != (2 * substeps * n_samples + 1,):
+        raise ValueError(f"bearing_acceleration_fine has shape {bearing_acceleration_fine.shape}, "
+                         f"expected ({2 * substeps * n_samples + 1},)")
+    if generalized_force.shape != (n_samples, n):
+        raise ValueError(f"generalized_force has shape {generalized_force.shape}, expected ({n_samples}, {n})")
+    out_y = np.empty((n_samples, n))
+    out_yd = np.empty((n_samples, n))
+    out_ydd = np.empty((n_samples, n))
+    kappa = plant.youngs_factor(temperature_c).astype(float)
+    y_end, yd_end = _integrate(
+        np.asarray(y0, float), np.asarray(yd0, float), np.ascontiguousarray(bearing_acceleration_fine, float),
+        kappa, np.ascontiguousarray(generalized_force, float), int(substeps), sample_period / substeps,
+        np.linalg.inv(plant.mass), plant.bending, plant.tension, plant.centrifugal,
+        plant.modal_first_moment, plant.first_moment, plant.damping, plant.gravity,
+        plant.friction_torque, plant.friction_smoothing, out_y, out_yd, out_ydd,
+    )
+    return out_y, out_yd, out_ydd, y_end, yd_end

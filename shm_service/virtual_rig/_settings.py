@@ -1,0 +1,122 @@
+"""Settings of the virtual rig: typed, closed, with every default documented."""
+
+from __future__ import annotations
+
+import re
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from estimator import PointMass, StiffnessSegment
+
+__all__ = ["Damage", "PlantSettings", "SensorErrors", "SimulationSettings", "parse_damage"]
+
+
+class _Closed(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class SensorErrors(_Closed):
+    """Sensor error figures (1σ unless named otherwise), typical of the paper's MEMS boards."""
+
+    accel_noise: float = Field(0.012, ge=0, description="white noise per sample, m/s² (≈120 µg/√Hz at 200 Hz)")
+    gyro_noise: float = Field(7e-4, ge=0, description="white noise per sample, rad/s (≈4 mdps/√Hz)")
+    accel_bias: float = Field(0.03, ge=0, description="constant bias per axis, m/s²")
+    gyro_bias: float = Field(5e-3, ge=0, description="constant bias per axis, rad/s (≈0.3 °/s)")
+    accel_bias_instability: float = Field(2e-3, ge=0, description="wandering bias (Gauss–Markov), m/s²")
+    gyro_bias_instability: float = Field(3e-5, ge=0, description="wandering bias (Gauss–Markov), rad/s")
+    bias_correlation_time: float = Field(300.0, gt=0, description="correlation time of the wander, s")
+    accel_scale_factor: float = Field(0.01, ge=0, description="scale-factor error, relative (realistic only)")
+    gyro_scale_factor: float = Field(0.01, ge=0, description="scale-factor error, relative (realistic only)")
+    misalignment: float = Field(0.005, ge=0, description="in-plane axis misalignment, rad (realistic only)")
+    tof_noise: float = Field(0.002, ge=0, description="ToF white noise, m")
+    tof_resolution: float = Field(0.001, ge=0, description="ToF quantisation step, m")
+    tof_offset: float = Field(0.002, ge=0, description="ToF constant offset, m (realistic only)")
+    strain_noise: float = Field(5e-7, ge=0, description="strain white noise, m/m")
+    strain_offset: float = Field(2e-6, ge=0, description="strain zero offset, m/m (realistic only)")
+    bearing_noise: float = Field(5e-5, ge=0, description="bearing displacement sensor noise, m")
+    temperature_noise: float = Field(0.05, ge=0, description="temperature sensor noise, K")
+    imu_delay: float = Field(0.004, ge=0, description="delivery delay of IMU samples, s")
+    strain_delay: float = Field(0.003, ge=0, description="delivery delay of strain samples, s")
+    tof_delay: float = Field(0.030, ge=0, description="delivery delay of ToF and bearing samples, s")
+    delay_jitter: float = Field(0.002, ge=0, description="random part of the delivery delay, s")
+
+
+class PlantSettings(_Closed):
+    """How the simulated beam differs from the nominal description (all off with ``ideal``)."""
+
+    modes: int = Field(12, ge=4, le=30, description="clamped-frame modes in the plant's basis")
+    damping_ratios: tuple[float, ...] = Field(
+        (0.006, 0.005, 0.005, 0.006, 0.007, 0.008, 0.01),
+        description="modal damping of modes 1, 2, ...; the last value holds for higher modes",
+    )
+    friction_torque: float = Field(0.03, ge=0, description="Coulomb friction torque of the bearing, N·m")
+    stiffness_mismatch: float = Field(0.03, ge=0, description="1σ relative error of the sheet's E")
+    mass_mismatch: float = Field(0.05, ge=0, description="1σ relative error of each board's mass and inertia")
+    substeps: int = Field(5, ge=1, le=50, description="Runge–Kutta steps per 200 Hz sample")
+    ambient_force: float = Field(0.4, ge=0, description="random load per FE node and sample (ambient), N")
+
+
+class Damage(_Closed):
+    kind: Literal["mass", "stiffness"]
+    mass: float | None = None
+    position: float | None = None
+    factor: float | None = None
+    start: float | None = None
+    end: float | None = None
+
+    def as_point_mass(self) -> PointMass:
+        return PointMass(position=self.position, mass=self.mass, label="damage")
+
+    def as_segment(self) -> StiffnessSegment:
+        return StiffnessSegment(start=self.start, end=self.end, factor=self.factor)
+
+    @property
+    def nodes(self) -> tuple[float, ...]:
+        return (self.position,) if self.kind == "mass" else (self.start, self.end)
+
+
+_MASS = re.compile(r"^mass:(?P<kg>[^@]+)@(?P<pos>.+)$")
+_STIFFNESS = re.compile(r"^stiffness:(?P<factor>[^@]+)@(?P<a>[^-]+)-(?P<b>.+)$")
+
+
+def parse_damage(text: str) -> Damage:
+    """Parse ``mass:KG@POS`` or ``stiffness:FACTOR@A-B`` (positions in m from D)."""
+    text = text.strip()
+    try:
+        if m := _MASS.match(text):
+            kg, pos = float(m["kg"]), float(m["pos"])
+            if not kg > 0 or not pos >= 0:
+                raise ValueError
+            return Damage(kind="mass", mass=kg, position=pos)
+        if m := _STIFFNESS.match(text):
+            factor, a, b = float(m["factor"]), float(m["a"]), float(m["b"])
+            if not factor > 0 or not 0 <= a < b:
+                raise ValueError
+            return Damage(kind="stiffness", factor=factor, start=a, end=b)
+    except ValueError:
+        pass
+    raise ValueError(f"damage {text!r} must be 'mass:KG@POS' (KG > 0) or 'stiffness:FACTOR@A-B' (FACTOR > 0, A < B)")
+
+
+class SimulationSettings(_Closed):
+    duration: float = Field(300.0, gt=0, le=7 * 24 * 3600, description="recording length, s")
+    seed: int = Field(1, ge=0)
+    excitation: Literal["paper", "ambient", "decay"] = "paper"
+    layout: Literal["benchmark", "dense"] = "benchmark"
+    ideal: bool = Field(False, description="plant = nominal rig: no mismatch, friction, scale or misalignment errors")
+    damage: tuple[Damage, ...] = ()
+    damage_at: float | None = Field(None, ge=0, description="time the damage appears, s (None: from the start)")
+    temperature_mean: float = Field(20.0, description="°C")
+    temperature_swing: float = Field(0.0, ge=0, description="peak-to-peak temperature swing over the run, K")
+    rest: float = Field(60.0, ge=0, description="initial rest phase, s")
+    start_time_ns: int = Field(1_767_225_600_000_000_000, ge=0, description="log_time of the first sample (2026-01-01 UTC)")
+    plant: PlantSettings = PlantSettings()
+    errors: SensorErrors = SensorErrors()
+
+    @field_validator("damage", mode="before")
+    @classmethod
+    def _parse_damage(cls, value: object) -> object:
+        if isinstance(value, (list, tuple)):
+            return tuple(parse_damage(v) if isinstance(v, str) else v for v in value)
+        return value

@@ -1,0 +1,286 @@
+"""The virtual rig: plant, excitation and sensors, producing samples in blocks.
+
+Blocks keep memory bounded for long runs and let a live source pace them; ``simulate`` gathers
+them into one recording.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Iterator
+
+import numpy as np
+import scipy.signal
+
+from estimator import RigDescription, assemble_beam, natural_modes, parse_rig
+
+from ..rig_layouts import build_rig
+from ._excitation import Excitation, make_excitation
+from ._kinematics import point_motion
+from ._plant import Plant, build_plant, clamped_basis, integrate
+from ._settings import SimulationSettings
+
+__all__ = ["SampleBlock", "VirtualRig", "SAMPLE_RATE_HZ", "SLOW_DIVIDER"]
+
+SAMPLE_RATE_HZ = 200.0
+SLOW_DIVIDER = 6  # ToF and bearing run at 200 / 6 = 33.33 Hz
+TEMPERATURE_DIVIDER = 200  # 1 Hz
+
+
+@dataclass
+class SampleBlock:
+    """Samples of one block. Times are seconds from the start of the run.
+
+    ``measurements`` maps topic → (times (n,), values (n, k)); ``truth`` holds the
+    ``/truth/state`` fields at the 200 Hz times.
+    """
+
+    times: np.ndarray
+    measurements: dict[str, tuple[np.ndarray, np.ndarray]]
+    truth: dict[str, np.ndarray]
+    delays: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+class _GaussMarkov:
+    """First-order Gauss–Markov processes (one per column), continued across blocks."""
+
+    def __init__(self, rng: np.random.Generator, sigma: np.ndarray, tau: float, dt: float):
+        self.rng = rng
+        self.sigma = np.asarray(sigma, dtype=float)
+        self.a = np.exp(-dt / tau)
+        self.state = self.sigma * rng.standard_normal(self.sigma.shape)
+
+    def next(self, n: int) -> np.ndarray:
+        drive = self.sigma * np.sqrt(1 - self.a**2) * self.rng.standard_normal((n,) + self.sigma.shape)
+        out, _ = scipy.signal.lfilter([1.0], [1.0, -self.a], drive, axis=0, zi=(self.a * self.state)[None, ...])
+        self.state = out[-1]
+        return out
+
+
+def _perturbed_rig(nominal: RigDescription, settings: SimulationSettings, rng: np.random.Generator) -> RigDescription:
+    """The beam as built: stiffness and board masses a few per cent off the nominal description."""
+    data = nominal.model_dump(mode="json")
+    plant = settings.plant
+    if not settings.ideal:
+        data["beam"]["youngs_modulus"] *= 1 + plant.stiffness_mismatch * rng.standard_normal()
+        for mass in data["point_masses"]:
+            factor = 1 + plant.mass_mismatch * rng.standard_normal()
+            mass["mass"] *= factor
+            mass["rotary_inertia"] *= factor
+    return parse_rig(data)
+
+
+def _with_damage(rig: RigDescription, settings: SimulationSettings) -> RigDescription:
+    data = rig.model_dump(mode="json")
+    for damage in settings.damage:
+        if damage.kind == "mass":
+            data["point_masses"].append(damage.as_point_mass().model_dump(mode="json"))
+        else:
+            data["beam"]["stiffness_segments"] = list(data["beam"].get("stiffness_segments", [])) + [
+                damage.as_segment().model_dump(mode="json")
+            ]
+    return parse_rig(data)
+
+
+class VirtualRig:
+    """Simulates the rig of ``settings``; ``nominal_rig`` is what the recording's rig.json says."""
+
+    def __init__(self, settings: SimulationSettings, nominal_rig: RigDescription | None = None):
+        self.settings = settings
+        self.dt = 1.0 / SAMPLE_RATE_HZ
+        self.n_samples = int(round(settings.duration * SAMPLE_RATE_HZ))
+        seeds = np.random.SeedSequence(settings.seed).spawn(4)
+        self._rng_plant = np.random.default_rng(seeds[0])
+        self._rng_excitation = np.random.default_rng(seeds[1])
+        self._rng_sensors = np.random.default_rng(seeds[2])
+        self._rng_ambient = np.random.default_rng(seeds[3])
+        self.nominal_rig = nominal_rig or build_rig(settings.layout, simulator=settings.model_dump(mode="json"))
+        for damage in settings.damage:
+            for x in damage.nodes:
+                if not 0 <= x <= self.nominal_rig.beam.length:
+                    raise ValueError(f"damage position {x} m is outside the beam [0, {self.nominal_rig.beam.length}]")
+        self.plant_rig = _perturbed_rig(self.nominal_rig, settings, self._rng_plant)
+        damage_nodes = [x for d in settings.damage for x in d.nodes]
+        healthy_model = assemble_beam(self.plant_rig, extra_nodes=damage_nodes)
+        models = [healthy_model]
+        if settings.damage:
+            self.damaged_rig = _with_damage(self.plant_rig, settings)
+            models.append(assemble_beam(self.damaged_rig, extra_nodes=damage_nodes))
+        else:
+            self.damaged_rig = None
+        basis = clamped_basis(models, settings.plant.modes)
+        friction = 0.0 if settings.ideal else settings.plant.friction_torque
+        self.plants: list[Plant] = [
+            build_plant(m, basis, damping_ratios=np.array(settings.plant.damping_ratios), friction_torque=friction)
+            for m in models
+        ]
+        self.basis = basis
+        self.damage_sample = (
+            None if not settings.damage else int(round((settings.damage_at or 0.0) * SAMPLE_RATE_HZ))
+        )
+        nominal_freqs = natural_modes(assemble_beam(self.nominal_rig), 6).frequencies_hz
+        self.excitation: Excitation = make_excitation(
+            settings.excitation, settings.duration, self._rng_excitation,
+            eigenfrequencies_hz=nominal_freqs, rest_s=settings.rest, ambient_force_std=settings.plant.ambient_force,
+        )
+        # Ambient loads act on the lateral DOF of every node below D.
+        n_nodes = len(basis.nodes)
+        rigid = np.zeros((2 * n_nodes,))
+        rigid[0::2] = basis.nodes
+        rigid[1::2] = 1.0
+        T = np.column_stack([rigid, basis.dofs])
+        self._load_map = T[2::2].T  # (n, nodes-1): generalized force per nodal load
+        self._sensor_setup()
+        self._state = (np.zeros(self.plants[0].size), np.zeros(self.plants[0].size))
+        self._next_sample = 0
+
+    # -- sensors -------------------------------------------------------------------------
+    def _sensor_setup(self) -> None:
+        e = self.settings.errors
+        ideal = self.settings.ideal
+        rng = self._rng_sensors
+        rig = self.nominal_rig
+        self.imus = rig.sensors_of("imu")
+        self.tofs = rig.sensors_of("tof")
+        self.gauges = rig.sensors_of("strain")
+        n_imu = len(self.imus)
+        tau = e.bias_correlation_time
+        self._accel_bias = e.accel_bias * rng.standard_normal((n_imu, 3))
+        self._gyro_bias = e.gyro_bias * rng.standard_normal((n_imu, 3))
+        self._accel_wander = _GaussMarkov(rng, np.full((n_imu, 3), e.accel_bias_instability), tau, self.dt)
+        self._gyro_wander = _GaussMarkov(rng, np.full((n_imu, 3), e.gyro_bias_instability), tau, self.dt)
+        scale = 0.0 if ideal else 1.0
+        self._accel_scale = 1 + scale * e.accel_scale_factor * rng.standard_normal((n_imu, 3))
+        self._gyro_scale = 1 + scale * e.gyro_scale_factor * rng.standard_normal((n_imu, 3))
+        self._misalignment = scale * e.misalignment * rng.standard_normal(n_imu)
+        self._tof_offset = scale * e.tof_offset * rng.standard_normal(len(self.tofs))
+        self._strain_offset = scale * e.strain_offset * rng.standard_normal(len(self.gauges))
+
+    def truth_metadata(self) -> dict[str, str]:
+        """The ``truth`` metadata record: the plant's exact modal figures and what was simulated."""
+        healthy = self.plants[0]
+        meta = {
+            "eigenfrequencies_hz": json.dumps(healthy.linear_frequencies_hz[:8].round(6).tolist()),
+            "modal_damping_ratios": json.dumps(healthy.modal_damping[:8].round(6).tolist()),
+            "reference_temperature_c": json.dumps(self.plant_rig.beam.reference_temperature),
+            "excitation": self.settings.excitation,
+            "rest_s": json.dumps(self.excitation.rest_s),
+            "still_phases_s": json.dumps([[round(a, 3), round(b, 3)] for a, b in self.excitation.still_phases]),
+            "ideal": json.dumps(self.settings.ideal),
+            "friction_torque_nm": json.dumps(healthy.friction_torque),
+            "plant_rig": self.plant_rig.model_dump_json(),
+        }
+        if self.damaged_rig is not None:
+            meta["eigenfrequencies_after_damage_hz"] = json.dumps(self.plants[1].linear_frequencies_hz[:8].round(6).tolist())
+            meta["damage_time_s"] = json.dumps((self.damage_sample or 0) / SAMPLE_RATE_HZ)
+            meta["damage"] = json.dumps([d.model_dump(mode="json", exclude_none=True) for d in self.settings.damage])
+        return meta
+
+    def temperature(self, t: np.ndarray) -> np.ndarray:
+        s = self.settings
+        return s.temperature_mean + 0.5 * s.temperature_swing * np.sin(2 * np.pi * t / s.duration)
+
+    # -- simulation ----------------------------------------------------------------------
+    def _integrate_range(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        substeps = self.settings.plant.substeps
+        n = k1 - k0
+        fine_t = (k0 + np.arange(2 * substeps * n + 1) / (2 * substeps)) * self.dt
+        _, _, fine_acc = self.excitation.bearing(fine_t)
+        t = (k0 + np.arange(n)) * self.dt
+        temperature = self.temperature(t)
+        plant = self.plants[1] if (self.damage_sample is not None and k0 >= self.damage_sample) else self.plants[0]
+        if self.excitation.ambient_force_std > 0:
+            loads = self.excitation.ambient_force_std * self._rng_ambient.standard_normal((n, self._load_map.shape[1]))
+            loads[t < self.excitation.rest_s] = 0.0
+            force = loads @ self._load_map.T
+        else:
+            force = np.zeros((n, plant.size))
+        y, yd, ydd, y_end, yd_end = integrate(
+            plant, self._state[0], self._state[1], fine_acc, temperature, force,
+            sample_period=self.dt, substeps=substeps,
+        )
+        self._state = (y_end, yd_end)
+        return y, yd, ydd
+
+    def blocks(self, block_seconds: float = 60.0) -> Iterator[SampleBlock]:
+        """Yield consecutive blocks until the run's duration is reached."""
+        if block_seconds <= 0:
+            raise ValueError(f"{block_seconds=} must be positive")
+        step = max(SLOW_DIVIDER, int(round(block_seconds * SAMPLE_RATE_HZ)) // SLOW_DIVIDER * SLOW_DIVIDER)
+        while self._next_sample < self.n_samples:
+            k0 = self._next_sample
+            k1 = min(self.n_samples, k0 + step)
+            if self.damage_sample is not None and k0 < self.damage_sample < k1:
+                k1 = self.damage_sample
+            yield self._block(k0, k1)
+            self._next_sample = k1
+
+    def _block(self, k0: int, k1: int) -> SampleBlock:
+        y, yd, ydd = self._integrate_range(k0, k1)
+        n = k1 - k0
+        index = k0 + np.arange(n)
+        t = index * self.dt
+        d, _, d_acc = self.excitation.bearing(t)
+        rig = self.nominal_rig
+        e = self.settings.errors
+        rng = self._rng_sensors
+        plant_g = self.plants[0].gravity
+        meas: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        delays: dict[str, np.ndarray] = {}
+
+        accel_wander = self._accel_wander.next(n)
+        gyro_wander = self._gyro_wander.next(n)
+        for i, imu in enumerate(self.imus):
+            motion = point_motion(self.basis, imu.position, y, yd, ydd, d, d_acc, plant_g)
+            fx, fy = motion.specific_force_x, motion.specific_force_y
+            mis = self._misalignment[i]
+            cm, sm = np.cos(mis), np.sin(mis)
+            accel = np.column_stack([cm * fx + sm * fy, -sm * fx + cm * fy, np.zeros(n)])
+            gyro = np.column_stack([np.zeros(n), np.zeros(n), motion.rate])
+            accel = accel * self._accel_scale[i] + self._accel_bias[i] + accel_wander[:, i] + e.accel_noise * rng.standard_normal((n, 3))
+            gyro = gyro * self._gyro_scale[i] + self._gyro_bias[i] + gyro_wander[:, i] + e.gyro_noise * rng.standard_normal((n, 3))
+            meas[imu.topic] = (t, np.hstack([accel, gyro]))
+            delays[imu.topic] = e.imu_delay + e.delay_jitter * rng.random(n)
+
+        half_thickness = 0.5 * rig.beam.thickness
+        for i, gauge in enumerate(self.gauges):
+            motion = point_motion(self.basis, gauge.position, y, yd, ydd, d, d_acc, plant_g)
+            strain = -half_thickness * motion.curvature + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
+            meas[gauge.topic] = (t, strain[:, None])
+            delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
+
+        slow = index % SLOW_DIVIDER == 0
+        t_slow = t[slow]
+        theta_slow = y[slow, 0]
+        for i, tof in enumerate(self.tofs):
+            motion = point_motion(self.basis, tof.position, y[slow], yd[slow], ydd[slow], d[slow], d_acc[slow], plant_g)
+            distance = (rig.reflector_distance - motion.inertial_zeta) / np.cos(theta_slow + motion.slope_angle)
+            distance = distance + self._tof_offset[i] + e.tof_noise * rng.standard_normal(distance.size)
+            if e.tof_resolution > 0:
+                distance = np.round(distance / e.tof_resolution) * e.tof_resolution
+            meas[tof.topic] = (t_slow, distance[:, None])
+            delays[tof.topic] = e.tof_delay + e.delay_jitter * rng.random(t_slow.size)
+        if rig.sensors_of("bearing"):
+            bearing = d[slow] + e.bearing_noise * rng.standard_normal(t_slow.size)
+            meas["/bearing/displacement"] = (t_slow, bearing[:, None])
+            delays["/bearing/displacement"] = e.tof_delay + e.delay_jitter * rng.random(t_slow.size)
+        if rig.sensors_of("temperature"):
+            every = index % TEMPERATURE_DIVIDER == 0
+            temp = self.temperature(t[every]) + e.temperature_noise * rng.standard_normal(int(every.sum()))
+            meas["/env/temperature"] = (t[every], temp[:, None])
+            delays["/env/temperature"] = np.full(int(every.sum()), 0.01)
+
+        stations = np.asarray(rig.truth_stations, dtype=float)
+        deflection = self.basis.evaluate(stations, 0)
+        curvature = self.basis.evaluate(stations, 2)
+        q = y[:, 1:]
+        truth = {
+            "d": d,
+            "h": np.zeros(n),
+            "phi": y[:, 0],
+            "e": q @ self.basis.evaluate(rig.beam.length, 0),
+            "deflection": q @ deflection.T,
+            "curvature": q @ curvature.T,
+        }
+        return SampleBlock(times=t, measurements=meas, truth=truth, delays=delays)

@@ -1,0 +1,131 @@
+"""Physics of the virtual rig: static hang, exact kinematics, strain, spectrum, linearisation."""
+
+import numpy as np
+import pytest
+
+from estimator import assemble_beam, natural_modes, parse_rig
+from shm_service.rig_layouts import default_rig
+from shm_service.virtual_rig import SensorErrors, SimulationSettings, VirtualRig, parse_damage
+from shm_service.virtual_rig._kinematics import point_motion
+
+NO_ERRORS = SensorErrors(**{name: 0.0 for name in SensorErrors.model_fields if name != "bias_correlation_time"})
+
+
+def run(settings, rig=None):
+    vr = VirtualRig(settings, rig)
+    blocks = list(vr.blocks())
+    meas = {
+        topic: (np.concatenate([b.measurements[topic][0] for b in blocks]), np.concatenate([b.measurements[topic][1] for b in blocks]))
+        for topic in blocks[0].measurements
+    }
+    truth = {k: np.concatenate([b.truth[k] for b in blocks]) for k in blocks[0].truth}
+    return vr, meas, truth
+
+
+def test_static_hang_reads_gravity_and_the_reflector():
+    vr, meas, truth = run(SimulationSettings(duration=5, ideal=True, errors=NO_ERRORS))
+    for sensor in vr.nominal_rig.sensors_of("imu"):
+        _, values = meas[sensor.topic]
+        np.testing.assert_allclose(values[:, 0], -9.81, atol=1e-9)  # accel x: −g along the hanging beam
+        np.testing.assert_allclose(values[:, 1:], 0.0, atol=1e-9)
+    for sensor in vr.nominal_rig.sensors_of("tof"):
+        np.testing.assert_allclose(meas[sensor.topic][1], 0.5, atol=1e-12)
+    for sensor in vr.nominal_rig.sensors_of("strain"):
+        np.testing.assert_allclose(meas[sensor.topic][1], 0.0, atol=1e-15)
+    assert np.all(truth["phi"] == 0) and np.all(truth["e"] == 0)
+
+
+@pytest.fixture(scope="module")
+def paper_run():
+    # Station-aligned gauges so strain can be compared with the truth curvature directly.
+    rig = default_rig().model_dump(mode="json")
+    rig["sensors"] += [{"name": "t1", "kind": "strain", "position": 1.0}, {"name": "t3", "kind": "strain", "position": 3.0}]
+    rig = parse_rig(rig)
+    settings = SimulationSettings(duration=120, rest=5, ideal=True, seed=3, errors=NO_ERRORS)
+    return run(settings, rig)
+
+
+def test_strain_is_consistent_with_truth_curvature(paper_run):
+    vr, meas, truth = paper_run
+    stations = list(vr.nominal_rig.truth_stations)
+    for name, eta in (("t1", 1.0), ("t3", 3.0)):
+        kappa = truth["curvature"][:, stations.index(eta)]
+        strain = meas[f"/strain/{name}"][1][:, 0]
+        assert np.abs(kappa).max() > 1e-3  # the beam did bend
+        # ε = −(h/2) κ; the exact κ = w''/cos α differs from w'' only at second order.
+        np.testing.assert_allclose(strain, -0.001 * kappa, atol=2e-3 * 0.001 * np.abs(kappa).max())
+
+
+def test_imu_outputs_are_the_exact_kinematics_of_the_simulated_motion(paper_run):
+    vr, meas, truth = paper_run
+    # Re-simulate a stretch to get the states, then differentiate positions numerically.
+    settings = SimulationSettings(duration=40, rest=5, ideal=True, seed=3, errors=NO_ERRORS)
+    rig = VirtualRig(settings)
+    y, yd, ydd = rig._integrate_range(0, int(40 * 200))
+    t = np.arange(y.shape[0]) / 200.0
+    d, _, d_acc = rig.excitation.bearing(t)
+    x = 3.8
+    motion = point_motion(rig.basis, x, y, yd, ydd, d, d_acc, 9.81)
+    dt = 1 / 200.0
+    acc_eta = np.gradient(np.gradient(motion.inertial_eta, dt), dt)
+    acc_zeta = np.gradient(np.gradient(motion.inertial_zeta, dt), dt)
+    angle = y[:, 0] + motion.slope_angle
+    # Specific force in the sensor frame from the inertial acceleration minus gravity (+g along η).
+    fx = np.cos(angle) * (acc_eta - 9.81) + np.sin(angle) * acc_zeta
+    fy = -np.sin(angle) * (acc_eta - 9.81) + np.cos(angle) * acc_zeta
+    rate = np.gradient(angle, dt)
+    inner = slice(5, -5)
+    scale = np.abs(motion.specific_force_y[inner]).max()
+    assert scale > 0.1
+    np.testing.assert_allclose(motion.specific_force_x[inner], fx[inner], atol=5e-3 * scale)
+    np.testing.assert_allclose(motion.specific_force_y[inner], fy[inner], atol=5e-3 * scale)
+    np.testing.assert_allclose(motion.rate[inner], rate[inner], atol=5e-3 * np.abs(rate).max())
+
+
+def test_linearised_plant_has_the_fe_eigenfrequencies():
+    vr = VirtualRig(SimulationSettings(duration=1, ideal=True))
+    fe = natural_modes(assemble_beam(vr.plant_rig), 6).frequencies_hz
+    np.testing.assert_allclose(vr.plants[0].linear_frequencies_hz[:6], fe, rtol=2e-4)
+
+
+def test_truth_metadata_carries_the_damaged_frequencies():
+    settings = SimulationSettings(duration=10, damage=("mass:0.126@4.0",), damage_at=5.0, ideal=True)
+    vr = VirtualRig(settings)
+    meta = vr.truth_metadata()
+    before = np.array(eval(meta["eigenfrequencies_hz"]))
+    after = np.array(eval(meta["eigenfrequencies_after_damage_hz"]))
+    assert np.all(after[1:6] < before[1:6])
+    assert float(meta["damage_time_s"]) == 5.0
+
+
+def test_ambient_spectrum_peaks_at_the_plant_eigenfrequencies():
+    settings = SimulationSettings(duration=400, rest=0, excitation="ambient", ideal=True, seed=5, errors=NO_ERRORS)
+    vr, meas, truth = run(settings)
+    freqs = vr.plants[0].linear_frequencies_hz
+    signal = truth["curvature"][:, 1]  # curvature at η = 1 m sees modes 2–5 well
+    window = np.hanning(signal.size)
+    spectrum = np.abs(np.fft.rfft((signal - signal.mean()) * window, 8 * signal.size))
+    f = np.fft.rfftfreq(8 * signal.size, 1 / 200.0)
+    for k in range(1, 5):
+        band = (f > 0.9 * freqs[k]) & (f < 1.1 * freqs[k])
+        peak = f[band][np.argmax(spectrum[band])]
+        assert peak == pytest.approx(freqs[k], rel=0.01), k
+
+
+def test_realistic_plant_differs_from_nominal_and_ideal_does_not():
+    ideal = VirtualRig(SimulationSettings(duration=1, ideal=True))
+    real = VirtualRig(SimulationSettings(duration=1, ideal=False, seed=2))
+    assert ideal.plant_rig.beam.youngs_modulus == ideal.nominal_rig.beam.youngs_modulus
+    assert real.plant_rig.beam.youngs_modulus != real.nominal_rig.beam.youngs_modulus
+    assert real.plants[0].friction_torque > 0 and ideal.plants[0].friction_torque == 0
+
+
+@pytest.mark.parametrize("spec", ["mass:-1@2", "mass:1", "stiffness:0.8@2-1", "crack:1@2", "stiffness:x@1-2"])
+def test_bad_damage_specs_are_refused(spec):
+    with pytest.raises(ValueError, match="damage"):
+        parse_damage(spec)
+
+
+def test_damage_outside_the_beam_is_refused():
+    with pytest.raises(ValueError, match="outside the beam"):
+        VirtualRig(SimulationSettings(duration=1, damage=("mass:0.1@5.0",)))
