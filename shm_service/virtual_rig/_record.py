@@ -5,16 +5,13 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import orjson
 
+from ..recording import RecordingWriter
 from ._settings import SimulationSettings
 from ._virtual_rig import SampleBlock, VirtualRig
-
-if TYPE_CHECKING:
-    from ..recording import RecordingWriter
 
 __all__ = ["SimulationSummary", "simulate", "encode_payloads"]
 
@@ -68,7 +65,7 @@ def _truth_payloads(truth: dict[str, np.ndarray]) -> list[bytes]:
     ]
 
 
-def write_block(writer: "RecordingWriter", block: SampleBlock, start_time_ns: int) -> dict[str, int]:
+def write_block(writer: RecordingWriter, block: SampleBlock, start_time_ns: int) -> dict[str, int]:
     """Write one block in the order a logger receives it (by publish time)."""
     topics: list[str] = []
     log_ns: list[np.ndarray] = []
@@ -98,8 +95,6 @@ def write_block(writer: "RecordingWriter", block: SampleBlock, start_time_ns: in
 
 def simulate(settings: SimulationSettings, out: str | Path, *, block_seconds: float = 60.0) -> SimulationSummary:
     """Simulate ``settings`` and write the recording to ``out`` (rig.json and truth included)."""
-    from ..recording import RecordingWriter
-
     started = time.perf_counter()
     rig = VirtualRig(settings)
     metadata = rig.truth_metadata()

@@ -1,0 +1,29 @@
+"""Recordings of the data contract (``/work/shared/spec/recording-format.md``): MCAP files with
+JSON messages, a ``rig.json`` attachment and optional ``truth`` metadata.
+
+``RecordingWriter`` writes them; ``read_recording`` is the one reader for everything downstream
+(it checks the contract, keeps what is valid and reports what is not); ``inspect_recording`` and
+``format_inspection`` summarise a file for ``shm inspect``.
+"""
+
+from ._inspect import format_inspection, inspect_recording
+from ._reader import Channel, ReadReport, Recording, RecordingError, TopicReport, read_recording
+from ._schemas import ESTIMATE_TOPIC, PAYLOAD_FIELDS, SCHEMAS, TRUTH_TOPIC, classify_topic
+from ._writer import RecordingWriter
+
+__all__ = [
+    "ESTIMATE_TOPIC",
+    "PAYLOAD_FIELDS",
+    "SCHEMAS",
+    "TRUTH_TOPIC",
+    "Channel",
+    "ReadReport",
+    "Recording",
+    "RecordingError",
+    "RecordingWriter",
+    "TopicReport",
+    "classify_topic",
+    "format_inspection",
+    "inspect_recording",
+    "read_recording",
+]

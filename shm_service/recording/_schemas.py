@@ -1,0 +1,183 @@
+"""JSON schemas of the recording contract and the mapping from topics to them.
+
+Every channel of a recording carries a ``jsonschema`` schema whose title names the payload type.
+``PAYLOAD_FIELDS`` gives, per title, the payload keys in the order in which readers lay them out
+as a row of numbers, and the size of each: a scalar, a fixed-length vector, a vector with one
+entry per ``truth_stations`` entry of ``rig.json``, or a vector whose length is set by the
+channel's first valid message (the estimator's state size).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Final, Literal
+
+__all__ = [
+    "BEARING_TOPIC",
+    "ESTIMATE_TOPIC",
+    "NOMINAL_PERIOD_NS",
+    "PAYLOAD_FIELDS",
+    "SCHEMAS",
+    "TEMPERATURE_TOPIC",
+    "TRUTH_TOPIC",
+    "FieldSpec",
+    "Kind",
+    "TopicInfo",
+    "classify_topic",
+]
+
+TRUTH_TOPIC: Final = "/truth/state"
+ESTIMATE_TOPIC: Final = "/estimate/state"
+BEARING_TOPIC: Final = "/bearing/displacement"
+TEMPERATURE_TOPIC: Final = "/env/temperature"
+
+Kind = Literal["imu", "tof", "strain", "bearing", "temperature", "truth", "estimate"]
+
+
+def _number(description: str) -> dict[str, Any]:
+    return {"type": "number", "description": description}
+
+
+def _vector(description: str, size: int | None = None) -> dict[str, Any]:
+    schema: dict[str, Any] = {"type": "array", "items": {"type": "number"}, "description": description}
+    if size is not None:
+        schema["minItems"] = size
+        schema["maxItems"] = size
+    return schema
+
+
+def _object(title: str, description: str, properties: dict[str, Any]) -> dict[str, Any]:
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": title,
+        "description": description,
+        "type": "object",
+        "properties": properties,
+        "required": list(properties),
+    }
+
+
+_BODY_STATE = {
+    "d": _number("horizontal position of the bearing D (zeta), m"),
+    "h": _number("vertical position of the bearing D (eta), m"),
+    "phi": _number("attitude of the body frame, rad (positive turns eta towards zeta)"),
+    "e": _number("tip deflection Delta(L) in the body frame, m"),
+}
+
+#: The contract's schemas, by title.
+SCHEMAS: Final[dict[str, dict[str, Any]]] = {
+    "shm.Imu": _object(
+        "shm.Imu",
+        "IMU sample in the sensor frame",
+        {
+            "accel": _vector("specific force [x, y, z], m/s^2", 3),
+            "gyro": _vector("angular rate [x, y, z], rad/s", 3),
+        },
+    ),
+    "shm.Distance": _object(
+        "shm.Distance", "a distance sample", {"distance": _number("distance, m")}
+    ),
+    "shm.Strain": _object(
+        "shm.Strain", "bending strain on the +zeta face", {"strain": _number("strain, m/m")}
+    ),
+    "shm.Temperature": _object(
+        "shm.Temperature", "ambient temperature", {"celsius": _number("temperature, degC")}
+    ),
+    "shm.TruthState": _object(
+        "shm.TruthState",
+        "the simulated plant's exact state (simulated recordings only)",
+        {
+            **_BODY_STATE,
+            "deflection": _vector("Delta(eta_k) in the body frame at truth_stations, m"),
+            "curvature": _vector("d2 Delta / d eta2 (eta_k) at truth_stations, 1/m"),
+        },
+    ),
+    "shm.EstimateState": _object(
+        "shm.EstimateState",
+        "the estimator's output",
+        {
+            **_BODY_STATE,
+            "b": _vector("amplitudes of the unit deformations (dimensionless)"),
+            "deflection": _vector("Delta(eta_k) in the body frame at truth_stations, m"),
+            "curvature": _vector("d2 Delta / d eta2 (eta_k) at truth_stations, 1/m"),
+            "covariance_diagonal": _vector("diagonal of the state covariance (units of the state squared)"),
+        },
+    ),
+}
+
+FieldSize = int | Literal["stations", "free"]
+
+
+@dataclass(frozen=True, slots=True)
+class FieldSpec:
+    """One payload key: ``size`` is 0 for a number, n for a vector of n numbers, ``"stations"``
+    for one number per truth station, ``"free"`` for a length fixed by the channel's first valid
+    message."""
+
+    name: str
+    size: FieldSize
+
+
+_STATE_FIELDS = (FieldSpec("d", 0), FieldSpec("h", 0), FieldSpec("phi", 0), FieldSpec("e", 0))
+
+#: Payload layout by schema title: the row of a sample is the fields' values in this order.
+PAYLOAD_FIELDS: Final[dict[str, tuple[FieldSpec, ...]]] = {
+    "shm.Imu": (FieldSpec("accel", 3), FieldSpec("gyro", 3)),
+    "shm.Distance": (FieldSpec("distance", 0),),
+    "shm.Strain": (FieldSpec("strain", 0),),
+    "shm.Temperature": (FieldSpec("celsius", 0),),
+    "shm.TruthState": (*_STATE_FIELDS, FieldSpec("deflection", "stations"), FieldSpec("curvature", "stations")),
+    "shm.EstimateState": (
+        *_STATE_FIELDS,
+        FieldSpec("b", "free"),
+        FieldSpec("deflection", "stations"),
+        FieldSpec("curvature", "stations"),
+        FieldSpec("covariance_diagonal", "free"),
+    ),
+}
+
+#: Nominal sample period (ns) of the kinds that have a fixed rate.
+NOMINAL_PERIOD_NS: Final[dict[str, int]] = {
+    "imu": 5_000_000,
+    "strain": 5_000_000,
+    "truth": 5_000_000,
+    "tof": 30_000_000,
+    "bearing": 30_000_000,
+}
+
+
+@dataclass(frozen=True, slots=True)
+class TopicInfo:
+    """What a topic is: the kind of data, the sensor name (``None`` for the fixed topics whose
+    sensor name comes from ``rig.json``, and for truth and estimate), and the schema title."""
+
+    kind: Kind
+    name: str | None
+    title: str
+
+
+_SENSOR_PREFIXES: Final[dict[str, tuple[Kind, str]]] = {
+    "/imu/": ("imu", "shm.Imu"),
+    "/tof/": ("tof", "shm.Distance"),
+    "/strain/": ("strain", "shm.Strain"),
+}
+
+_FIXED_TOPICS: Final[dict[str, TopicInfo]] = {
+    BEARING_TOPIC: TopicInfo("bearing", None, "shm.Distance"),
+    TEMPERATURE_TOPIC: TopicInfo("temperature", None, "shm.Temperature"),
+    TRUTH_TOPIC: TopicInfo("truth", None, "shm.TruthState"),
+    ESTIMATE_TOPIC: TopicInfo("estimate", None, "shm.EstimateState"),
+}
+
+
+def classify_topic(topic: str) -> TopicInfo | None:
+    """The contract's meaning of ``topic``, or ``None`` for a topic the contract does not know."""
+    fixed = _FIXED_TOPICS.get(topic)
+    if fixed is not None:
+        return fixed
+    for prefix, (kind, title) in _SENSOR_PREFIXES.items():
+        if topic.startswith(prefix):
+            name = topic[len(prefix):]
+            if name and "/" not in name:
+                return TopicInfo(kind, name, title)
+    return None

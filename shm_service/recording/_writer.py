@@ -1,0 +1,360 @@
+"""Writing recordings (MCAP files of the recording contract).
+
+The message path is written here rather than through ``mcap.writer.Writer``: the library builds
+a record object and several small writes per message (about 4 µs each), which made a one-hour
+recording slow to write. The file layout is the library's (chunked, message indexes, summary
+with schemas, channels, statistics and indexes, summary offsets, CRCs), so any MCAP reader
+opens it; the non-message records are written with ``mcap.records``.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import zlib
+from collections.abc import Mapping
+from itertools import count
+from pathlib import Path
+from types import TracebackType
+from typing import IO, Any, Final
+
+import lz4.frame
+import numpy as np
+import orjson
+import zstandard
+from mcap.data_stream import RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+
+from estimator._rig import RigDescription, parse_rig
+
+from ._schemas import SCHEMAS, classify_topic
+
+__all__ = ["RecordingWriter"]
+
+MAGIC: Final = b"\x89MCAP0\r\n"
+LIBRARY: Final = "imms-shm"
+RIG_ATTACHMENT: Final = "rig.json"
+COMPRESSIONS: Final = ("zstd", "lz4", "none")
+
+# opcode, record length, channel id, sequence, log time, publish time
+_MESSAGE_HEAD = struct.Struct("<BQHIQQ")
+_MESSAGE_HEAD_SIZE: Final = _MESSAGE_HEAD.size - 9  # the message body before its data
+_ORJSON_OPTIONS: Final = orjson.OPT_SERIALIZE_NUMPY
+
+
+class _ChannelState:
+    """A registered channel and the message index of the chunk being built."""
+
+    __slots__ = ("channel", "sequence", "times", "offsets", "message_count")
+
+    def __init__(self, channel: Channel) -> None:
+        self.channel = channel
+        self.sequence = count()
+        self.times: list[int] = []
+        self.offsets: list[int] = []
+        self.message_count = 0
+
+
+class RecordingWriter:
+    """Writes one recording: ``rig.json`` attachment first, then JSON messages in chunks.
+
+    Use as a context manager (``close()`` on exit). Times are integer nanoseconds of any epoch;
+    ``log_time`` is the measurement instant, ``publish_time`` (>= ``log_time``) when it was
+    written. Payload dicts are encoded with orjson (numpy arrays allowed; note that orjson
+    writes NaN and infinities as ``null``, which readers count as malformed).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        rig: RigDescription | bytes | str | Mapping[str, Any],
+        *,
+        metadata: Mapping[str, Mapping[str, str]] | None = None,
+        compression: str = "zstd",
+        chunk_size: int = 1 << 20,
+    ) -> None:
+        """Open ``path`` and write the header and the ``rig.json`` attachment.
+
+        ``rig`` is a parsed description, its JSON text (written unchanged after validation) or
+        a mapping. ``metadata`` records are written at ``close()``. ``compression`` is
+        ``"zstd"``, ``"lz4"`` or ``"none"``; ``chunk_size`` is the uncompressed chunk size in
+        bytes after which a chunk is written.
+        """
+        if compression not in COMPRESSIONS:
+            raise ValueError(f"compression={compression!r} is not one of {COMPRESSIONS}")
+        if chunk_size <= 0:
+            raise ValueError(f"chunk_size={chunk_size} must be positive")
+        if isinstance(rig, RigDescription):
+            rig_json = rig.to_json().encode()
+        elif isinstance(rig, (bytes, str)):
+            parse_rig(rig)
+            rig_json = rig.encode() if isinstance(rig, str) else bytes(rig)
+        else:
+            rig_json = json.dumps(rig, indent=2).encode()
+            parse_rig(rig_json)
+        self._pending_metadata = {name: _checked_metadata(name, data) for name, data in (metadata or {}).items()}
+        self._compression = compression
+        self._compressor = zstandard.ZstdCompressor() if compression == "zstd" else None
+        self._chunk_size = chunk_size
+        self._chunk = bytearray()
+        self._chunk_message_count = 0
+        self._schemas: dict[str, Schema] = {}
+        self._channels: dict[str, _ChannelState] = {}
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._attachment_indexes: list[AttachmentIndex] = []
+        self._metadata_indexes: list[MetadataIndex] = []
+        self._chunk_count = 0
+        self._message_start = 0
+        self._message_end = 0
+        self._message_count = 0
+        self._closed = False
+        self._out: IO[bytes] = open(path, "wb")
+        try:
+            self._out.write(MAGIC)
+            self._write_record(Header(profile="", library=LIBRARY))
+            offset = self._out.tell()
+            length = self._write_record(
+                Attachment(create_time=0, log_time=0, name=RIG_ATTACHMENT, media_type="application/json", data=rig_json)
+            )
+            self._attachment_indexes.append(
+                AttachmentIndex(
+                    offset=offset,
+                    length=length,
+                    log_time=0,
+                    create_time=0,
+                    data_size=len(rig_json),
+                    name=RIG_ATTACHMENT,
+                    media_type="application/json",
+                )
+            )
+        except BaseException:
+            self._out.close()
+            raise
+
+    def __enter__(self) -> RecordingWriter:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def write(
+        self, topic: str, log_time_ns: int, payload: Mapping[str, Any] | bytes, publish_time_ns: int | None = None
+    ) -> None:
+        """Add one message on ``topic`` measured at ``log_time_ns`` (ns).
+
+        ``payload`` is a dict (encoded as JSON) or already encoded JSON bytes (written as is).
+        ``publish_time_ns`` defaults to ``log_time_ns``.
+        """
+        state = self._channels.get(topic)
+        if state is None:
+            state = self._register(topic)
+        data = payload if isinstance(payload, bytes) else orjson.dumps(payload, option=_ORJSON_OPTIONS)
+        if publish_time_ns is None:
+            publish_time_ns = log_time_ns
+        elif publish_time_ns < log_time_ns:
+            raise ValueError(f"{topic}: publish_time_ns={publish_time_ns} is before log_time_ns={log_time_ns}")
+        chunk = self._chunk
+        offset = len(chunk)
+        try:
+            chunk += _MESSAGE_HEAD.pack(
+                Opcode.MESSAGE,
+                _MESSAGE_HEAD_SIZE + len(data),
+                state.channel.id,
+                next(state.sequence) & 0xFFFFFFFF,
+                log_time_ns,
+                publish_time_ns,
+            )
+        except struct.error as exc:
+            raise ValueError(
+                f"{topic}: times must be integers in [0, 2**64) ns, got {log_time_ns=!r}, {publish_time_ns=!r}"
+            ) from exc
+        chunk += data
+        state.times.append(log_time_ns)
+        state.offsets.append(offset)
+        self._chunk_message_count += 1
+        if len(chunk) >= self._chunk_size:
+            self._finish_chunk()
+
+    def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
+        """Write a metadata record ``name`` (string keys and values) now."""
+        self._check_open()
+        record = Metadata(name=name, metadata=_checked_metadata(name, data))
+        offset = self._out.tell()
+        length = self._write_record(record)
+        self._metadata_indexes.append(MetadataIndex(offset=offset, length=length, name=name))
+
+    def flush(self) -> None:
+        """End the current chunk and flush the file, so that a reader following it sees the
+        messages written so far."""
+        self._check_open()
+        self._finish_chunk()
+        self._out.flush()
+
+    def close(self) -> None:
+        """Write the last chunk, the constructor's metadata, the summary and the footer."""
+        if self._closed:
+            return
+        try:
+            self._finish_chunk()
+            for name, data in self._pending_metadata.items():
+                self.add_metadata(name, data)
+            self._write_record(DataEnd(data_section_crc=0))
+            self._write_summary()
+        finally:
+            self._closed = True
+            self._out.close()
+
+    # -- internals ----------------------------------------------------------------------------
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ValueError("the recording writer is closed")
+
+    def _register(self, topic: str) -> _ChannelState:
+        self._check_open()
+        info = classify_topic(topic)
+        if info is None:
+            raise ValueError(f"topic {topic!r} is not a topic of the recording contract")
+        schema = self._schemas.get(info.title)
+        builder = RecordBuilder()
+        if schema is None:
+            schema = Schema(
+                id=len(self._schemas) + 1,
+                name=info.title,
+                encoding="jsonschema",
+                data=json.dumps(SCHEMAS[info.title]).encode(),
+            )
+            self._schemas[info.title] = schema
+            schema.write(builder)
+        channel = Channel(
+            id=len(self._channels) + 1, topic=topic, message_encoding="json", metadata={}, schema_id=schema.id
+        )
+        channel.write(builder)
+        self._chunk += builder.end()
+        state = self._channels[topic] = _ChannelState(channel)
+        return state
+
+    def _write_record(self, record: Any) -> int:
+        """Write one record at the current position; returns its length in bytes."""
+        builder = RecordBuilder()
+        record.write(builder)
+        data = builder.end()
+        self._out.write(data)
+        return len(data)
+
+    def _finish_chunk(self) -> None:
+        if self._chunk_message_count == 0:
+            return
+        data = bytes(self._chunk)
+        active = [state for state in self._channels.values() if state.times]
+        start = min(min(state.times) for state in active)
+        end = max(max(state.times) for state in active)
+        if self._compression == "zstd":
+            assert self._compressor is not None
+            compressed, name = self._compressor.compress(data), "zstd"
+        elif self._compression == "lz4":
+            compressed, name = lz4.frame.compress(data), "lz4"
+        else:
+            compressed, name = data, ""
+        chunk_offset = self._out.tell()
+        head = struct.pack("<QQQII", start, end, len(data), zlib.crc32(data), len(name)) + name.encode()
+        body_length = len(head) + 8 + len(compressed)
+        self._out.write(struct.pack("<BQ", Opcode.CHUNK, body_length) + head + struct.pack("<Q", len(compressed)))
+        self._out.write(compressed)
+        chunk_length = 9 + body_length
+        index_start = self._out.tell()
+        index_offsets: dict[int, int] = {}
+        for state in active:
+            entries = np.empty((len(state.times), 2), dtype="<u8")
+            entries[:, 0] = state.times
+            entries[:, 1] = state.offsets
+            record = entries.tobytes()
+            index_offsets[state.channel.id] = self._out.tell()
+            self._out.write(
+                struct.pack("<BQHI", Opcode.MESSAGE_INDEX, 6 + len(record), state.channel.id, len(record)) + record
+            )
+            state.message_count += len(state.times)
+            state.times.clear()
+            state.offsets.clear()
+        self._chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=start,
+                message_end_time=end,
+                chunk_start_offset=chunk_offset,
+                chunk_length=chunk_length,
+                message_index_offsets=index_offsets,
+                message_index_length=self._out.tell() - index_start,
+                compression=name,
+                compressed_size=len(compressed),
+                uncompressed_size=len(data),
+            )
+        )
+        self._message_start = start if self._message_count == 0 else min(self._message_start, start)
+        self._message_end = max(self._message_end, end)
+        self._message_count += self._chunk_message_count
+        self._chunk_count += 1
+        self._chunk.clear()
+        self._chunk_message_count = 0
+
+    def _write_summary(self) -> None:
+        summary_start = self._out.tell()
+        builder = RecordBuilder()
+        offsets: list[SummaryOffset] = []
+
+        def group(opcode: Opcode, records: list[Any]) -> None:
+            begin = builder.count
+            for record in records:
+                record.write(builder)
+            offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + begin, group_length=builder.count - begin))
+
+        statistics = Statistics(
+            attachment_count=len(self._attachment_indexes),
+            channel_count=len(self._channels),
+            channel_message_counts={s.channel.id: s.message_count for s in self._channels.values()},
+            chunk_count=self._chunk_count,
+            message_count=self._message_count,
+            message_end_time=self._message_end,
+            message_start_time=self._message_start,
+            metadata_count=len(self._metadata_indexes),
+            schema_count=len(self._schemas),
+        )
+        group(Opcode.SCHEMA, list(self._schemas.values()))
+        group(Opcode.CHANNEL, [s.channel for s in self._channels.values()])
+        group(Opcode.STATISTICS, [statistics])
+        group(Opcode.CHUNK_INDEX, self._chunk_indexes)
+        group(Opcode.ATTACHMENT_INDEX, self._attachment_indexes)
+        group(Opcode.METADATA_INDEX, self._metadata_indexes)
+        summary_offset_start = summary_start + builder.count
+        for offset in offsets:
+            offset.write(builder)
+        summary = builder.end()
+        crc = zlib.crc32(
+            struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, summary_offset_start), zlib.crc32(summary)
+        )
+        self._out.write(summary)
+        self._write_record(Footer(summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc))
+        self._out.write(MAGIC)
+
+
+def _checked_metadata(name: str, data: Mapping[str, str]) -> dict[str, str]:
+    """``data`` as a dict, refusing keys or values that are not strings (MCAP metadata is text)."""
+    for key, value in data.items():
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise TypeError(f"metadata {name!r}: key {key!r} -> {value!r} must map a str to a str")
+    return dict(data)
