@@ -5,10 +5,43 @@ Lower layer: knows nothing of the service or the web.
 
 from ._beam import BeamModel, NaturalModes, NodalShapes, assemble_beam, natural_modes
 from ._calibration import TABLE1_HZ, CalibrationParameter, CalibrationResult, calibrate, modal_frequencies
+from ._filter import (
+    EstimateResult,
+    Events,
+    FilterConfig,
+    FilterOutput,
+    ImmsFilter,
+    ImmsModel,
+    Measurements,
+    RestCalibration,
+    SensorSeries,
+    build_events,
+    build_model,
+    calibrate_at_rest,
+    estimate,
+)
 from ._rig import Beam, PointMass, RigDescription, RigError, Sensor, StiffnessSegment, load_rig, parse_rig
+from ._selection import SensorSelection, default_aided, effective_independence, select_sensors
 from ._unit_deformations import MAX_UNIT_DEFORMATIONS, UnitDeformations, unit_deformations
 
 __all__ = [
+    "EstimateResult",
+    "Events",
+    "FilterConfig",
+    "FilterOutput",
+    "ImmsFilter",
+    "ImmsModel",
+    "Measurements",
+    "RestCalibration",
+    "SensorSelection",
+    "SensorSeries",
+    "build_events",
+    "build_model",
+    "calibrate_at_rest",
+    "default_aided",
+    "effective_independence",
+    "estimate",
+    "select_sensors",
     "MAX_UNIT_DEFORMATIONS",
     "TABLE1_HZ",
     "Beam",

@@ -1,0 +1,588 @@
+"""The IMMS filter: model set-up from rig.json, rest-phase calibration, and the filter class.
+
+Inputs are plain arrays (``Measurements``); readers and services convert recordings into them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, Mapping
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ._beam import assemble_beam
+from ._imms import (
+    EVENT_BEARING,
+    EVENT_IMU_D,
+    EVENT_IMU_PERIPHERAL,
+    EVENT_STRAIN,
+    EVENT_TOF,
+    FLOAT_PARAMS,
+    KIND_ACC,
+    KIND_GYRO,
+    run_events,
+    state_size,
+)
+from ._rig import RigDescription
+from ._selection import SensorSelection, select_sensors
+from ._unit_deformations import UnitDeformations, unit_deformations
+
+__all__ = [
+    "EstimateResult",
+    "Events",
+    "FilterConfig",
+    "FilterOutput",
+    "ImmsFilter",
+    "ImmsModel",
+    "Measurements",
+    "RestCalibration",
+    "SensorSeries",
+    "build_events",
+    "build_model",
+    "calibrate_at_rest",
+    "estimate",
+]
+
+
+class FilterConfig(BaseModel):
+    """Tuning of the EKF. Noise levels of the sensors are learnt from the rest phase; these are
+    the floors and the model-error terms that the data cannot tell."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    gate: float = Field(30.0, gt=0, description="innovation gate on the squared Mahalanobis distance (≈5.5σ)")
+    stale_after_s: float = Field(0.05, gt=0, description="a peripheral IMU silent this long leaves the solution, s")
+    max_step_s: float = Field(0.005, gt=0, description="longest single prediction step, s")
+    rest_max_s: float = Field(60.0, gt=0, description="longest rest phase used for calibration, s")
+    rest_min_s: float = Field(2.0, gt=0, description="shortest rest phase accepted for calibration, s")
+    accel_noise_floor: float = Field(0.005, ge=0, description="m/s²")
+    gyro_noise_floor: float = Field(3e-4, ge=0, description="rad/s")
+    q_b: float = Field(1e-7, ge=0, description="model error of ḃ (truncated modes), 1/s")
+    q_v: float = Field(1e-4, ge=0, description="model error of b̈ (accelerometers), 1/s³")
+    q_beta: float = Field(1e-11, ge=0, description="random walk of the gyro bias at D, rad²/s³")
+    q_rigid: float = Field(1e-4, ge=0, description="model error of the bearing's acceleration, m²/s³")
+    q_null: float = Field(1e-2, ge=0, description="random walk of unit deformations no sensor sees, 1/s")
+    tof_model_std: float = Field(0.002, ge=0, description="ToF model error (higher modes, beam surface), m")
+    strain_model_std: float = Field(1e-6, ge=0, description="strain model error (higher modes), m/m")
+    bearing_std: float = Field(1e-4, gt=0, description="floor of the bearing sensor's noise, m")
+    pseudo_h_std: float = Field(1e-4, gt=0, description="h = 0 pseudo-measurement, m")
+    pseudo_h_rate_std: float = Field(1e-3, gt=0, description="ḣ = 0 pseudo-measurement, m/s")
+    initial_std: float = Field(1e-3, gt=0, description="initial standard deviation of every state (at rest)")
+
+
+@dataclass(frozen=True)
+class SensorSeries:
+    """Samples of one sensor: ``times`` (n,) in s (increasing), ``values`` (n, k)."""
+
+    times: np.ndarray
+    values: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.times, dtype=float)
+        v = np.asarray(self.values, dtype=float)
+        if v.ndim == 1:
+            v = v[:, None]
+        if t.ndim != 1 or v.shape[0] != t.shape[0]:
+            raise ValueError(f"times {t.shape} and values {v.shape} do not match")
+        object.__setattr__(self, "times", t)
+        object.__setattr__(self, "values", v)
+
+    def window(self, start: float, end: float) -> "SensorSeries":
+        lo, hi = np.searchsorted(self.times, [start, end])
+        return SensorSeries(self.times[lo:hi], self.values[lo:hi])
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """Measurements of one recording, times in s from a common origin.
+
+    imu values are [f_x, f_y, ω_z] (sensor frame, m/s² and rad/s); tof, strain and bearing
+    values are the distance (m), strain (m/m) and bearing displacement (m).
+    """
+
+    imu: Mapping[str, SensorSeries]
+    tof: Mapping[str, SensorSeries] = field(default_factory=dict)
+    strain: Mapping[str, SensorSeries] = field(default_factory=dict)
+    bearing: SensorSeries | None = None
+
+    @property
+    def start(self) -> float:
+        return min(s.times[0] for s in self.imu.values() if s.times.size)
+
+    @property
+    def end(self) -> float:
+        return max(s.times[-1] for s in self.imu.values() if s.times.size)
+
+
+@dataclass(frozen=True)
+class ImmsModel:
+    """The estimator's model of one configuration, built from rig.json and a sensor selection."""
+
+    rig: RigDescription
+    units: UnitDeformations
+    selection: SensorSelection
+    imu_eta: np.ndarray
+    tof_eta: np.ndarray
+    gauge_eta: np.ndarray
+    stations: np.ndarray
+
+    @property
+    def kind(self) -> int:
+        return KIND_GYRO if self.selection.peripheral == "gyro" else KIND_ACC
+
+    @property
+    def gamma(self) -> int:
+        return self.units.count
+
+    @property
+    def state_size(self) -> int:
+        return int(state_size(self.kind, self.gamma))
+
+    @property
+    def state_names(self) -> list[str]:
+        names = ["d", "h", "d_rate", "h_rate", "phi"] + [f"b{k + 1}" for k in range(self.gamma)]
+        if self.kind == KIND_ACC:
+            names += [f"v{k + 1}" for k in range(self.gamma)]
+        return names + ["gyro_bias_D"]
+
+    @property
+    def aiding_channels(self) -> list[str]:
+        return ([f"/tof/{n}" for n in self.selection.tofs] + [f"/strain/{n}" for n in self.selection.gauges]
+                + ["/bearing/displacement", "pseudo:h", "pseudo:h_rate"])
+
+    def tip_row(self) -> np.ndarray:
+        return self.units.shape(self.rig.beam.length)
+
+    def strain_matrix(self) -> np.ndarray:
+        """Eq. (19): ε = −(h*/2) S'' b, rows for the selected gauges."""
+        if self.gauge_eta.size == 0:
+            return np.zeros((0, self.gamma))
+        return -0.5 * self.rig.beam.thickness * self.units.curvature(self.gauge_eta)
+
+
+def build_model(
+    rig: RigDescription,
+    *,
+    peripheral: Literal["gyro", "acc"] = "gyro",
+    modes: int = 4,
+    imus=4,
+    tofs=4,
+    gauges=4,
+    aided=None,
+    temperature_c: float | None = None,
+) -> ImmsModel:
+    """Unit deformations (Γ = ``modes``) of the rig's FE model and the selected sensors (EfI for counts)."""
+    if not any(s.kind == "imu" and s.name == "D" for s in rig.sensors):
+        raise ValueError("rig.json has no IMU named 'D' at the bearing: the IMMS needs it")
+    units = unit_deformations(assemble_beam(rig, temperature_c=temperature_c), modes)
+    selection = select_sensors(rig, units, peripheral=peripheral, imus=imus, tofs=tofs, gauges=gauges, aided=aided)
+    by_name = {(s.kind, s.name): s for s in rig.sensors}
+    return ImmsModel(
+        rig=rig,
+        units=units,
+        selection=selection,
+        imu_eta=np.array([by_name["imu", n].position for n in selection.imus], dtype=float),
+        tof_eta=np.array([by_name["tof", n].position for n in selection.tofs], dtype=float),
+        gauge_eta=np.array([by_name["strain", n].position for n in selection.gauges], dtype=float),
+        stations=np.asarray(rig.truth_stations, dtype=float),
+    )
+
+
+@dataclass(frozen=True)
+class RestCalibration:
+    """What the rest phase told: biases, offsets and noise levels of every selected sensor."""
+
+    rest_end: float  # s (same origin as the measurements); equal to the start if there was no rest
+    rested: bool
+    bias_D: np.ndarray  # [f_x, f_y, ω_z]
+    bias_imu: np.ndarray  # (ν, 3)
+    noise_D: np.ndarray  # (3,) std
+    noise_imu: np.ndarray  # (ν, 3)
+    tof_offset: np.ndarray
+    tof_std: np.ndarray
+    strain_offset: np.ndarray
+    strain_std: np.ndarray
+    bearing_std: float
+
+    def as_dict(self) -> dict:
+        return {
+            "rest_end_s": float(self.rest_end),
+            "rested": self.rested,
+            "gyro_bias_D_rad_s": float(self.bias_D[2]),
+            "accel_bias_D_m_s2": self.bias_D[:2].tolist(),
+            "gyro_bias_peripheral_rad_s": self.bias_imu[:, 2].tolist(),
+            "tof_offset_m": self.tof_offset.tolist(),
+            "strain_offset": self.strain_offset.tolist(),
+        }
+
+
+def _rest_end(meas: Measurements, config: FilterConfig) -> float:
+    """End of the initial rest: the first sign of motion at D (gyro, lateral accel) or the bearing."""
+    d_imu = meas.imu["D"]
+    t = d_imu.times
+    start = t[0]
+    limit = start + config.rest_max_s
+    quiet = t < start + min(2.0, config.rest_max_s)
+    if quiet.sum() < 20:
+        return start
+    end = limit
+    for column in (1, 2):
+        x = d_imu.values[:, column]
+        ref = x[quiet]
+        level, spread = np.median(ref), np.std(ref)
+        threshold = max(8.0 * spread, 0.01 if column == 2 else 0.05)
+        moving = np.nonzero((np.abs(x - level) > threshold) & (t < limit))[0]
+        if moving.size:
+            end = min(end, t[moving[0]])
+    if meas.bearing is not None and meas.bearing.times.size:
+        b = meas.bearing
+        ref = b.values[b.times < start + 2.0, 0]
+        if ref.size >= 5:
+            moving = np.nonzero((np.abs(b.values[:, 0] - np.median(ref)) > max(8 * np.std(ref), 1e-3)) & (b.times < limit))[0]
+            if moving.size:
+                end = min(end, b.times[moving[0]])
+    # Motion builds up before it shows: keep a margin.
+    end = max(start, end - 1.0)
+    return end
+
+
+def calibrate_at_rest(meas: Measurements, model: ImmsModel, config: FilterConfig = FilterConfig()) -> RestCalibration:
+    """Learn biases, offsets and noise levels from the initial rest phase (hanging still, φ = 0, b = 0).
+
+    Without a usable rest phase biases start at zero and noise levels at the floors; the
+    gyro bias at D is estimated by the filter in any case.
+    """
+    if "D" not in meas.imu:
+        raise ValueError("measurements have no IMU 'D' (the IMU at the bearing)")
+    g = model.rig.gravity
+    start = meas.start
+    end = _rest_end(meas, config)
+    rested = end - start >= config.rest_min_s
+    expected = np.array([-g, 0.0, 0.0])  # specific force along the hanging beam, nothing across, no rate
+
+    def stats(series: SensorSeries | None, columns: int) -> tuple[np.ndarray, np.ndarray]:
+        if series is None or not rested:
+            return np.zeros(columns), np.full(columns, np.nan)
+        part = series.window(start, end).values
+        part = part[np.all(np.isfinite(part), axis=1)]
+        if part.shape[0] < 10:
+            return np.zeros(columns), np.full(columns, np.nan)
+        return part.mean(axis=0)[:columns], part.std(axis=0)[:columns]
+
+    def floor(std: np.ndarray) -> np.ndarray:
+        floors = np.array([config.accel_noise_floor, config.accel_noise_floor, config.gyro_noise_floor])
+        return np.where(np.isfinite(std), np.maximum(std, floors), floors * 4)
+
+    mean_D, std_D = stats(meas.imu["D"], 3)
+    bias_D = np.where(rested, mean_D - expected, 0.0)
+    bias_imu = np.zeros((len(model.selection.imus), 3))
+    noise_imu = np.zeros((len(model.selection.imus), 3))
+    for i, name in enumerate(model.selection.imus):
+        mean, std = stats(meas.imu.get(name), 3)
+        bias_imu[i] = mean - expected if rested and np.all(np.isfinite(std)) else 0.0
+        noise_imu[i] = floor(std)
+    bearing_mean, bearing_std = stats(meas.bearing, 1)
+    d_ref = model.rig.reflector_distance
+    tof_offset = np.zeros(len(model.selection.tofs))
+    tof_std = np.zeros(len(model.selection.tofs))
+    for i, name in enumerate(model.selection.tofs):
+        mean, std = stats(meas.tof.get(name), 1)
+        at_rest = d_ref - (bearing_mean[0] if np.isfinite(bearing_std[0]) else 0.0)
+        tof_offset[i] = mean[0] - at_rest if np.isfinite(std[0]) else 0.0
+        tof_std[i] = std[0] if np.isfinite(std[0]) else 0.003
+    strain_offset = np.zeros(len(model.selection.gauges))
+    strain_std = np.zeros(len(model.selection.gauges))
+    for i, name in enumerate(model.selection.gauges):
+        mean, std = stats(meas.strain.get(name), 1)
+        strain_offset[i] = mean[0] if np.isfinite(std[0]) else 0.0
+        strain_std[i] = std[0] if np.isfinite(std[0]) else 2e-6
+    return RestCalibration(
+        rest_end=end,
+        rested=bool(rested),
+        bias_D=bias_D,
+        bias_imu=bias_imu,
+        noise_D=floor(std_D),
+        noise_imu=noise_imu,
+        tof_offset=tof_offset,
+        tof_std=tof_std,
+        strain_offset=strain_offset,
+        strain_std=strain_std,
+        bearing_std=float(bearing_std[0]) if np.isfinite(bearing_std[0]) else float("nan"),
+    )
+
+
+@dataclass(frozen=True)
+class Events:
+    """Time-ordered measurement events: t (s), kind (event code), index (sensor), values (n, 3)."""
+
+    t: np.ndarray
+    kind: np.ndarray
+    index: np.ndarray
+    values: np.ndarray
+
+    def __len__(self) -> int:
+        return self.t.shape[0]
+
+    def slice(self, lo: int, hi: int) -> "Events":
+        return Events(self.t[lo:hi], self.kind[lo:hi], self.index[lo:hi], self.values[lo:hi])
+
+
+def build_events(meas: Measurements, model: ImmsModel) -> Events:
+    """Merge the selected sensors' samples into one stream ordered by time (inputs before aiding)."""
+    parts: list[tuple[np.ndarray, int, int, np.ndarray]] = []
+
+    def add(series: SensorSeries | None, kind: int, index: int, columns: int) -> None:
+        if series is None or series.times.size == 0:
+            return
+        values = np.zeros((series.times.size, 3))
+        values[:, :columns] = series.values[:, :columns]
+        parts.append((series.times, kind, index, values))
+
+    add(meas.imu.get("D"), EVENT_IMU_D, 0, 3)
+    for i, name in enumerate(model.selection.imus):
+        add(meas.imu.get(name), EVENT_IMU_PERIPHERAL, i, 3)
+    for i, name in enumerate(model.selection.tofs):
+        add(meas.tof.get(name), EVENT_TOF, i, 1)
+    for i, name in enumerate(model.selection.gauges):
+        add(meas.strain.get(name), EVENT_STRAIN, i, 1)
+    add(meas.bearing, EVENT_BEARING, 0, 1)
+    if not parts:
+        return Events(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
+    t = np.concatenate([p[0] for p in parts])
+    kind = np.concatenate([np.full(p[0].size, p[1], dtype=np.int64) for p in parts])
+    index = np.concatenate([np.full(p[0].size, p[2], dtype=np.int64) for p in parts])
+    values = np.concatenate([p[3] for p in parts])
+    order = np.lexsort((kind, t))
+    return Events(t[order], kind[order], index[order], values[order])
+
+
+def _concat_events(a: Events, b: Events) -> Events:
+    return Events(np.concatenate([a.t, b.t]), np.concatenate([a.kind, b.kind]),
+                  np.concatenate([a.index, b.index]), np.concatenate([a.values, b.values]))
+
+
+@dataclass(frozen=True)
+class FilterOutput:
+    """Filter states at the D-IMU sample times: t (N,), x (N, n), P_diag (N, n)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    P_diag: np.ndarray
+
+
+class ImmsFilter:
+    """The EKF of one configuration; holds the state between calls of ``process``."""
+
+    def __init__(self, model: ImmsModel, calibration: RestCalibration, config: FilterConfig = FilterConfig(), *, t0: float):
+        self.model = model
+        self.calibration = calibration
+        self.config = config
+        n = model.state_size
+        nu = len(model.selection.imus)
+        self.x = np.zeros(n)
+        self.P = np.eye(n) * config.initial_std**2
+        self.t = float(t0)
+        self._held_fD = np.array([-model.rig.gravity, 0.0])
+        self._held_wD = np.zeros(1)
+        self._held_fj = np.tile([-model.rig.gravity, 0.0], (nu, 1))
+        self._held_wj = np.zeros(nu)
+        self._last_seen = np.full(nu, float(t0))
+        self._active = np.ones(nu, dtype=np.bool_)
+        self._held_t = np.array([float(t0)])
+        self._pending = False
+        self._tail = Events(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
+        n_channels = len(model.aiding_channels)
+        self.accepted = np.zeros(n_channels, dtype=np.int64)
+        self.rejected = np.zeros(n_channels, dtype=np.int64)
+        self.nis_sum = np.zeros(n_channels)
+        self.last_innovation = np.zeros(n_channels)
+        self.degraded_time = np.zeros(nu)
+        self._arrays = self._model_arrays()
+
+    def _model_arrays(self) -> dict[str, np.ndarray]:
+        m, c, cfg = self.model, self.calibration, self.config
+        units = m.units
+        params = dict.fromkeys(FLOAT_PARAMS, 0.0)
+        noise_D = c.noise_D
+        bearing_std = max(cfg.bearing_std, c.bearing_std if np.isfinite(c.bearing_std) else 0.0)
+        params.update(
+            gravity=m.rig.gravity, reflector_distance=m.rig.reflector_distance, gate=cfg.gate,
+            stale_after=cfg.stale_after_s, sigma_f_d_x=noise_D[0], sigma_f_d_y=noise_D[1], sigma_omega_d=noise_D[2],
+            q_b=cfg.q_b, q_v=cfg.q_v, q_beta=cfg.q_beta, q_rigid=cfg.q_rigid, bearing_var=bearing_std**2,
+            pseudo_h_var=cfg.pseudo_h_std**2, pseudo_h_rate_var=cfg.pseudo_h_rate_std**2, max_step=cfg.max_step_s,
+            q_null=cfg.q_null,
+        )
+        gamma = m.gamma
+        empty = np.zeros((0, gamma))
+        aided = np.zeros(gamma)
+        aided[[a - 1 for a in m.selection.aided]] = 1.0
+        return {
+            "iparams": np.array([m.kind, gamma, len(m.selection.imus), len(m.selection.tofs), len(m.selection.gauges)], dtype=np.int64),
+            "params": np.array([params[k] for k in FLOAT_PARAMS]),
+            "bias_D": c.bias_D.astype(float),
+            "bias_j": c.bias_imu.astype(float),
+            "imu_eta": m.imu_eta,
+            "imu_S": units.shape(m.imu_eta) if m.imu_eta.size else empty,
+            "imu_S1": units.slope(m.imu_eta) if m.imu_eta.size else empty,
+            "sig_fj": np.ascontiguousarray(c.noise_imu[:, :2]),
+            "sig_wj": np.ascontiguousarray(c.noise_imu[:, 2]),
+            "tof_eta": m.tof_eta,
+            "tof_S": units.shape(m.tof_eta) if m.tof_eta.size else empty,
+            "tof_S1": units.slope(m.tof_eta) if m.tof_eta.size else empty,
+            "tof_offset": c.tof_offset.astype(float),
+            "tof_var": c.tof_std**2 + cfg.tof_model_std**2,
+            "strain_K": m.strain_matrix(),
+            "strain_offset": c.strain_offset.astype(float),
+            "strain_var": c.strain_std**2 + cfg.strain_model_std**2,
+            "aided": aided,
+        }
+
+    def process(self, events: Events, *, final: bool = False) -> FilterOutput:
+        """Run the filter over ``events`` (times must not precede the filter's time).
+
+        Events after the last IMU sample at D wait for the next call (their inputs are
+        interpolated towards the next sample); ``final=True`` processes them with held inputs.
+        """
+        if len(self._tail):
+            events = _concat_events(self._tail, events)
+        d_index = np.nonzero(events.kind == EVENT_IMU_D)[0]
+        if final or not d_index.size:
+            cut = len(events) if final else 0
+        else:
+            cut = int(np.searchsorted(events.t, events.t[d_index[-1]], side="right"))
+        self._tail = events.slice(cut, len(events))
+        events = events.slice(0, cut)
+        d_index = d_index[d_index < cut]
+        next_d = np.full(len(events), -1, dtype=np.int64)
+        if d_index.size:
+            pos = np.searchsorted(d_index, np.arange(len(events)))
+            has = pos < d_index.size
+            next_d[has] = d_index[pos[has]]
+        n = self.model.state_size
+        capacity = int(np.count_nonzero(events.kind == EVENT_IMU_D)) + 1
+        out_t = np.empty(capacity)
+        out_x = np.empty((capacity, n))
+        out_P = np.empty((capacity, n))
+        n_out = 0
+        if self._pending and len(events) and events.t[0] > self.t:
+            out_t[0], out_x[0], out_P[0] = self.t, self.x, np.diag(self.P)
+            n_out = 1
+            self._pending = False
+        a = self._arrays
+        x, P, t_now, n_out, pending = run_events(
+            events.t, events.kind, events.index, events.values, next_d,
+            self.x, self.P, self.t, self._held_t, self._held_fD, self._held_wD, self._held_fj, self._held_wj,
+            self._last_seen, self._active,
+            a["iparams"], a["params"], a["bias_D"], a["bias_j"], a["imu_eta"], a["imu_S"], a["imu_S1"],
+            a["sig_fj"], a["sig_wj"], a["tof_eta"], a["tof_S"], a["tof_S1"], a["tof_offset"], a["tof_var"],
+            a["strain_K"], a["strain_offset"], a["strain_var"], a["aided"],
+            out_t, out_x, out_P, n_out,
+            self.accepted, self.rejected, self.nis_sum, self.last_innovation, self.degraded_time,
+        )
+        self.x, self.P, self.t = x, P, float(t_now)
+        self._pending = self._pending or pending
+        return FilterOutput(out_t[:n_out], out_x[:n_out], out_P[:n_out])
+
+    def flush(self) -> FilterOutput:
+        """Process what waits for a next IMU sample and output the last state."""
+        if len(self._tail):
+            out = self.process(Events(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))), final=True)
+            last = self.flush()
+            return FilterOutput(np.concatenate([out.t, last.t]), np.vstack([out.x, last.x]), np.vstack([out.P_diag, last.P_diag]))
+        if not self._pending:
+            n = self.model.state_size
+            return FilterOutput(np.zeros(0), np.zeros((0, n)), np.zeros((0, n)))
+        self._pending = False
+        return FilterOutput(np.array([self.t]), self.x[None, :].copy(), np.diag(self.P)[None, :].copy())
+
+    def diagnostics(self) -> dict:
+        """Per aiding channel: accepted, rejected, mean NIS; degraded peripheral IMUs."""
+        channels = self.model.aiding_channels
+        per_channel = {
+            name: {
+                "accepted": int(self.accepted[i]),
+                "rejected": int(self.rejected[i]),
+                "mean_nis": float(self.nis_sum[i] / self.accepted[i]) if self.accepted[i] else None,
+            }
+            for i, name in enumerate(channels)
+        }
+        degraded = [
+            {"sensor": f"/imu/{name}", "silent_s": float(self.degraded_time[j]), "active": bool(self._active[j])}
+            for j, name in enumerate(self.model.selection.imus)
+            if self.degraded_time[j] > 0 or not self._active[j]
+        ]
+        return {"aiding": per_channel, "rejected": int(self.rejected.sum()), "degraded_imus": degraded}
+
+
+@dataclass(frozen=True)
+class EstimateResult:
+    """Estimates of one run at the D-IMU sample times, with what the model derives from them."""
+
+    model: ImmsModel
+    calibration: RestCalibration
+    t: np.ndarray
+    x: np.ndarray
+    P_diag: np.ndarray
+    var_e: np.ndarray
+    diagnostics: dict
+    filter_seconds: float
+
+    def _column(self, name: str) -> np.ndarray:
+        return self.x[:, self.model.state_names.index(name)]
+
+    @property
+    def d(self) -> np.ndarray:
+        return self._column("d")
+
+    @property
+    def h(self) -> np.ndarray:
+        return self._column("h")
+
+    @property
+    def phi(self) -> np.ndarray:
+        return self._column("phi")
+
+    @property
+    def b(self) -> np.ndarray:
+        return self.x[:, 5:5 + self.model.gamma]
+
+    @property
+    def e(self) -> np.ndarray:
+        """Tip deflection Δ(L) in the body frame (m)."""
+        return self.b @ self.model.tip_row()
+
+    def deflection(self, eta: np.ndarray | None = None) -> np.ndarray:
+        eta = self.model.stations if eta is None else np.asarray(eta, dtype=float)
+        return self.b @ self.model.units.shape(eta).T
+
+    def curvature(self, eta: np.ndarray | None = None) -> np.ndarray:
+        eta = self.model.stations if eta is None else np.asarray(eta, dtype=float)
+        return self.b @ self.model.units.curvature(eta).T
+
+
+def _var_e(model: ImmsModel, out: FilterOutput, P_full_e: np.ndarray | None = None) -> np.ndarray:
+    row = model.tip_row()
+    # Off-diagonal terms of P_bb are not kept per sample; the diagonal bound is exact for Γ = 1.
+    return out.P_diag[:, 5:5 + model.gamma] @ (row**2)
+
+
+def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = FilterConfig(), *, chunk_events: int = 500_000) -> EstimateResult:
+    """Calibrate on the rest phase and run the filter over all measurements."""
+    import time
+
+    calibration = calibrate_at_rest(meas, model, config)
+    events = build_events(meas, model)
+    filt = ImmsFilter(model, calibration, config, t0=meas.start)
+    outputs: list[FilterOutput] = []
+    started = time.perf_counter()
+    for lo in range(0, len(events), chunk_events):
+        outputs.append(filt.process(events.slice(lo, lo + chunk_events)))
+    outputs.append(filt.flush())
+    elapsed = time.perf_counter() - started
+    out = FilterOutput(
+        np.concatenate([o.t for o in outputs]),
+        np.concatenate([o.x for o in outputs]),
+        np.concatenate([o.P_diag for o in outputs]),
+    )
+    return EstimateResult(model, calibration, out.t, out.x, out.P_diag, _var_e(model, out), filt.diagnostics(), elapsed)
