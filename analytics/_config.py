@@ -1,0 +1,51 @@
+"""AnalysisConfig: every tunable of the modal analytics, typed, closed and documented."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+__all__ = ["AnalysisConfig"]
+
+
+class AnalysisConfig(BaseModel):
+    """Settings of :func:`analytics.analyze` and :class:`analytics.ModalMonitor` (defaults in brackets)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    window_s: float = Field(60.0, gt=0, description="analysis window length, s [60]")
+    overlap: float = Field(0.5, ge=0, lt=1, description="overlap of successive windows, fraction [0.5]")
+    pad_factor: int = Field(4, ge=1, le=64, description="zero padding factor of the spectra [4]")
+    window: str = Field("hamming", description="spectral window [hamming]")
+    search_rel: float = Field(0.08, gt=0, lt=0.5, description="peak search half-band around the tracked frequency, relative [0.08]")
+    min_prominence: float = Field(2.0, ge=1, description="minimum peak prominence, amplitude ratio [2]")
+    track_gain: float = Field(0.2, gt=0, le=1, description="gain of the tracked reference frequency update [0.2]")
+    min_confidence: float = Field(0.3, ge=0, le=1, description="estimates below this confidence are not used [0.3]")
+    forced_fraction: float = Field(0.05, ge=0, le=1, description="window is 'forced' if the bearing moves this fraction of it [0.05]")
+    bearing_threshold_m: float = Field(5e-4, gt=0, description="bearing displacement counted as motion, m [5e-4]")
+    decay_ratio: float = Field(0.6, gt=0, lt=1, description="RMS(last quarter)/RMS(first quarter) below this: 'free_decay' [0.6]")
+    quiet_rms: float = Field(1e-9, ge=0, description="RMS of b below this: 'quiet' window, untrusted [1e-9]")
+    bandpass_rel: float = Field(0.2, gt=0, lt=1, description="band-pass half width for damping, relative to f [0.2]")
+    decay_min_cycles: float = Field(8.0, gt=0, description="minimum cycles of a usable free decay [8]")
+    rd_cycles: float = Field(20.0, gt=0, description="random-decrement signature length, cycles [20]")
+    baseline_s: float = Field(480.0, gt=0, description="healthy period learnt as baseline from the first trusted window, s [480]")
+    baseline_min_windows: int = Field(8, ge=3, description="trusted windows a mode needs in the baseline [8]")
+    youngs_temperature_coefficient: float = Field(-3.0e-4, description="relative change of E per K (steel) [-3e-4]")
+    slope_prior_fraction: float = Field(0.5, ge=0, le=1, description="prior mean of df/f per K as a fraction of coefficient/2 [0.5]")
+    slope_prior_std_fraction: float = Field(0.5, gt=0, description="prior std of the slope, same unit [0.5]")
+    gravity_mode_below_hz: float = Field(0.5, gt=0, description="modes below this are gravity dominated: slope prior 0 [0.5]")
+    ewma_lambda: float = Field(0.2, gt=0, le=1, description="EWMA smoothing of the control charts [0.2]")
+    warning_sigma: float = Field(3.0, gt=0, description="warning level of the charts, σ of the EWMA [3]")
+    alarm_sigma: float = Field(5.0, gt=0, description="alarm level, σ of the EWMA [5]")
+    curvature_alarm_sigma: float = Field(10.0, gt=0, description="alarm level of the curvature-index chart, σ [10]: the index drifts more than the frequencies")
+    clear_sigma: float = Field(2.0, ge=0, description="an alarm clears below this level, σ of the EWMA [2]")
+    hold_windows: int = Field(3, ge=1, description="consecutive windows beyond a level to raise or clear [3]")
+    min_sigma_rel: float = Field(2e-4, gt=0, description="floor of a mode's frequency scatter, relative [2e-4]")
+    curvature_memory_windows: float = Field(10.0, ge=1, description="time constant of the curvature cross-spectra average, windows [10]")
+
+    @model_validator(mode="after")
+    def _levels(self) -> "AnalysisConfig":
+        if not self.clear_sigma < self.warning_sigma <= self.alarm_sigma:
+            raise ValueError(f"need clear_sigma < warning_sigma <= alarm_sigma, got {self.clear_sigma}, {self.warning_sigma}, {self.alarm_sigma}")
+        if self.window not in ("hamming", "hann", "boxcar", "blackman", "flattop"):
+            raise ValueError(f"window={self.window!r} is not a known window")
+        return self
