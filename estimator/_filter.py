@@ -23,6 +23,7 @@ from ._imms import (
     KIND_GYRO,
     run_events,
     state_size,
+    tip_variance,
 )
 from ._rig import RigDescription
 from ._selection import SensorSelection, select_sensors
@@ -58,13 +59,13 @@ class FilterConfig(BaseModel):
     rest_min_s: float = Field(2.0, gt=0, description="shortest rest phase accepted for calibration, s")
     accel_noise_floor: float = Field(0.005, ge=0, description="m/s²")
     gyro_noise_floor: float = Field(3e-4, ge=0, description="rad/s")
-    q_b: float = Field(1e-7, ge=0, description="model error of ḃ (truncated modes), 1/s")
+    q_b: float = Field(1e-8, ge=0, description="model error of ḃ (truncated modes), 1/s")
     q_v: float = Field(1e-4, ge=0, description="model error of b̈ (accelerometers), 1/s³")
     q_beta: float = Field(1e-11, ge=0, description="random walk of the gyro bias at D, rad²/s³")
     q_rigid: float = Field(1e-4, ge=0, description="model error of the bearing's acceleration, m²/s³")
     q_null: float = Field(1e-2, ge=0, description="random walk of unit deformations no sensor sees, 1/s")
     tof_model_std: float = Field(0.002, ge=0, description="ToF model error (higher modes, beam surface), m")
-    strain_model_std: float = Field(1e-6, ge=0, description="strain model error (higher modes), m/m")
+    strain_model_std: float = Field(3e-6, ge=0, description="strain model error (higher modes), m/m")
     bearing_std: float = Field(1e-4, gt=0, description="floor of the bearing sensor's noise, m")
     pseudo_h_std: float = Field(1e-4, gt=0, description="h = 0 pseudo-measurement, m")
     pseudo_h_rate_std: float = Field(1e-3, gt=0, description="ḣ = 0 pseudo-measurement, m/s")
@@ -364,11 +365,19 @@ def _concat_events(a: Events, b: Events) -> Events:
 
 @dataclass(frozen=True)
 class FilterOutput:
-    """Filter states at the D-IMU sample times: t (N,), x (N, n), P_diag (N, n)."""
+    """Filter states at the D-IMU sample times: t (N,), x (N, n), P_diag (N, n), var_e (N,)."""
 
     t: np.ndarray
     x: np.ndarray
     P_diag: np.ndarray
+    var_e: np.ndarray
+
+    @staticmethod
+    def concatenate(parts: list["FilterOutput"], n: int) -> "FilterOutput":
+        if not parts:
+            return FilterOutput(np.zeros(0), np.zeros((0, n)), np.zeros((0, n)), np.zeros(0))
+        return FilterOutput(np.concatenate([p.t for p in parts]), np.concatenate([p.x for p in parts]),
+                            np.concatenate([p.P_diag for p in parts]), np.concatenate([p.var_e for p in parts]))
 
 
 class ImmsFilter:
@@ -464,11 +473,8 @@ class ImmsFilter:
         out_t = np.empty(capacity)
         out_x = np.empty((capacity, n))
         out_P = np.empty((capacity, n))
-        n_out = 0
-        if self._pending and len(events) and events.t[0] > self.t:
-            out_t[0], out_x[0], out_P[0] = self.t, self.x, np.diag(self.P)
-            n_out = 1
-            self._pending = False
+        out_var_e = np.empty(capacity)
+        tip_row = self.model.tip_row()
         a = self._arrays
         x, P, t_now, n_out, pending = run_events(
             events.t, events.kind, events.index, events.values, next_d,
@@ -477,24 +483,24 @@ class ImmsFilter:
             a["iparams"], a["params"], a["bias_D"], a["bias_j"], a["imu_eta"], a["imu_S"], a["imu_S1"],
             a["sig_fj"], a["sig_wj"], a["tof_eta"], a["tof_S"], a["tof_S1"], a["tof_offset"], a["tof_var"],
             a["strain_K"], a["strain_offset"], a["strain_var"], a["aided"],
-            out_t, out_x, out_P, n_out,
+            tip_row, out_t, out_x, out_P, out_var_e, 0, self._pending,
             self.accepted, self.rejected, self.nis_sum, self.last_innovation, self.degraded_time,
         )
         self.x, self.P, self.t = x, P, float(t_now)
-        self._pending = self._pending or pending
-        return FilterOutput(out_t[:n_out], out_x[:n_out], out_P[:n_out])
+        self._pending = pending
+        return FilterOutput(out_t[:n_out], out_x[:n_out], out_P[:n_out], out_var_e[:n_out])
 
     def flush(self) -> FilterOutput:
         """Process what waits for a next IMU sample and output the last state."""
+        n = self.model.state_size
         if len(self._tail):
             out = self.process(Events(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))), final=True)
-            last = self.flush()
-            return FilterOutput(np.concatenate([out.t, last.t]), np.vstack([out.x, last.x]), np.vstack([out.P_diag, last.P_diag]))
+            return FilterOutput.concatenate([out, self.flush()], n)
         if not self._pending:
-            n = self.model.state_size
-            return FilterOutput(np.zeros(0), np.zeros((0, n)), np.zeros((0, n)))
+            return FilterOutput.concatenate([], n)
         self._pending = False
-        return FilterOutput(np.array([self.t]), self.x[None, :].copy(), np.diag(self.P)[None, :].copy())
+        var_e = np.array([tip_variance(self.P, self.model.tip_row())])
+        return FilterOutput(np.array([self.t]), self.x[None, :].copy(), np.diag(self.P)[None, :].copy(), var_e)
 
     def diagnostics(self) -> dict:
         """Per aiding channel: accepted, rejected, mean NIS; degraded peripheral IMUs."""
@@ -561,12 +567,6 @@ class EstimateResult:
         return self.b @ self.model.units.curvature(eta).T
 
 
-def _var_e(model: ImmsModel, out: FilterOutput, P_full_e: np.ndarray | None = None) -> np.ndarray:
-    row = model.tip_row()
-    # Off-diagonal terms of P_bb are not kept per sample; the diagonal bound is exact for Γ = 1.
-    return out.P_diag[:, 5:5 + model.gamma] @ (row**2)
-
-
 def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = FilterConfig(), *, chunk_events: int = 500_000) -> EstimateResult:
     """Calibrate on the rest phase and run the filter over all measurements."""
     import time
@@ -580,9 +580,5 @@ def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = Filter
         outputs.append(filt.process(events.slice(lo, lo + chunk_events)))
     outputs.append(filt.flush())
     elapsed = time.perf_counter() - started
-    out = FilterOutput(
-        np.concatenate([o.t for o in outputs]),
-        np.concatenate([o.x for o in outputs]),
-        np.concatenate([o.P_diag for o in outputs]),
-    )
-    return EstimateResult(model, calibration, out.t, out.x, out.P_diag, _var_e(model, out), filt.diagnostics(), elapsed)
+    out = FilterOutput.concatenate(outputs, model.state_size)
+    return EstimateResult(model, calibration, out.t, out.x, out.P_diag, out.var_e, filt.diagnostics(), elapsed)

@@ -36,6 +36,7 @@ __all__ = [
     "propagate",
     "run_events",
     "state_size",
+    "tip_variance",
     "tof_measurement",
 ]
 
@@ -199,6 +200,17 @@ def propagate(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, i
 
 
 @numba.njit(cache=True)
+def tip_variance(P, tip_row):
+    """Variance of e = Σ b_χ s_χ(L) from the full covariance (off-diagonal terms included)."""
+    gamma = tip_row.shape[0]
+    v = 0.0
+    for k in range(gamma):
+        for m in range(gamma):
+            v += tip_row[k] * P[5 + k, 5 + m] * tip_row[m]
+    return v
+
+
+@numba.njit(cache=True)
 def tof_measurement(x, eta, S_row, S1_row, d_ref):
     """Eq. (18): predicted distance ρ̂ (m) and its Jacobian row for a ToF at arc length ``eta``."""
     n = x.shape[0]
@@ -258,7 +270,7 @@ def run_events(
     bias_D, bias_j, imu_eta, imu_S, imu_S1, sig_fj, sig_wj,
     tof_eta, tof_S, tof_S1, tof_offset, tof_var,
     strain_K, strain_offset, strain_var, aided,
-    out_t, out_x, out_P, n_out_start,
+    tip_row, out_t, out_x, out_P, out_var_e, n_out_start, pending_in,
     counts_accepted, counts_rejected, nis_sum, last_innovation, degraded_time,
 ):
     """Process events in time order; returns (x, P, t_now, n_out, pending).
@@ -278,7 +290,7 @@ def run_events(
     n_tof = iparams[3]
     n_gauge = iparams[4]
     n_out = n_out_start
-    pending = False
+    pending = pending_in
     c_acc = np.zeros(gamma)
     S_map = imu_S1 if kind == KIND_GYRO else imu_S
     Pinv, null_proj = _least_squares_map(S_map, active, gamma)
@@ -303,6 +315,7 @@ def run_events(
                 out_x[n_out] = x
                 for i in range(n):
                     out_P[n_out, i] = P[i, i]
+                out_var_e[n_out] = tip_variance(P, tip_row)
                 n_out += 1
                 pending = False
             nd = next_d[e]

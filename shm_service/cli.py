@@ -105,6 +105,84 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- shm estimate ------------------------------------------------------------------------
+def _count_or_names(text: str | None, default: int) -> int | tuple[str, ...]:
+    """'4' → 4; 's1,s3' → ('s1', 's3')."""
+    if text is None:
+        return default
+    text = text.strip()
+    if text.isdigit():
+        return int(text)
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise CliError(f"sensor list {text!r} is empty")
+    return names
+
+
+def _model_from_args(rig, args: argparse.Namespace):
+    from estimator import build_model
+
+    aided = None
+    if args.aided:
+        try:
+            aided = tuple(int(a) for a in args.aided.split(","))
+        except ValueError:
+            raise CliError(f"--aided {args.aided!r} must list unit deformations, e.g. 2,3,4") from None
+    try:
+        return build_model(
+            rig, peripheral=args.peripheral, modes=args.modes, imus=_count_or_names(args.imus, 4),
+            tofs=_count_or_names(args.tofs, 4), gauges=_count_or_names(args.gauges, 4), aided=aided,
+        )
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _cmd_estimate(args: argparse.Namespace) -> int:
+    from estimator import estimate
+
+    from .estimation import measurements_from_recording, score_against_truth, truth_from_recording, write_estimates
+    from .recording import read_recording
+
+    rec = read_recording(args.recording, rig=args.rig)
+    model = _model_from_args(rec.rig, args)
+    try:
+        meas = measurements_from_recording(rec)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    result = estimate(meas, model)
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        write_estimates(args.out, rec, result)
+    summary = {
+        "samples": int(result.t.size),
+        "rejected": int(result.diagnostics["rejected"] + rec.report.as_dict().get("rejected_total", 0)),
+        "realtime_factor": round(float((result.t[-1] - result.t[0]) / max(result.filter_seconds, 1e-9)), 1),
+        "selection": result.model.selection.as_dict(),
+        "modes": result.model.gamma,
+        "rest_end_s": round(float(result.calibration.rest_end), 3),
+        "diagnostics": result.diagnostics,
+        "recording_problems": rec.report.problems,
+    }
+    truth = truth_from_recording(rec)
+    if truth is not None:
+        scores = score_against_truth(result, truth, after=result.calibration.rest_end)
+        summary = {"rmse": scores["rmse"], **summary, "nees": scores["nees"], "scored_samples": scores["scored_samples"]}
+    if args.json:
+        _print_json(summary)
+    else:
+        sel = result.model.selection
+        print(f"{sel.peripheral}, Γ = {result.model.gamma}: IMUs {','.join(sel.imus)}; ToFs {','.join(sel.tofs) or '-'}; "
+              f"gauges {','.join(sel.gauges) or '-'} (aiding b{','.join(map(str, sel.aided)) or '-'})")
+        print(f"{summary['samples']} samples, {summary['rejected']} rejected, {summary['realtime_factor']}x real time")
+        if "rmse" in summary:
+            r = summary["rmse"]
+            print(f"RMSE after the rest phase: phi {r['phi_deg']:.4f} deg, e {1000 * r['e_m']:.3f} mm, d {1000 * r['d_m']:.3f} mm, "
+                  f"deflection {1000 * r['deflection_m']:.3f} mm, curvature {r['curvature_per_m']:.2e} 1/m")
+        if args.out:
+            print(f"wrote {args.out}")
+    return 0
+
+
 # -- shm inspect -------------------------------------------------------------------------
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from .recording import format_inspection, inspect_recording
@@ -157,6 +235,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--temperature-mean", type=float, default=20.0, metavar="C")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("estimate", help="run the IMMS estimator over a recording")
+    p.add_argument("recording")
+    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
+    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
+    p.add_argument("--modes", type=int, default=4, choices=range(1, 6), metavar="Γ", help="unit deformations (1-5)")
+    p.add_argument("--imus", default=None, help="peripheral IMUs: a count (EfI) or names s1,s2,... (default 4)")
+    p.add_argument("--tofs", default=None, help="ToFs: a count (EfI) or names (default 4)")
+    p.add_argument("--gauges", default=None, help="strain gauges: a count (EfI) or names (default 4)")
+    p.add_argument("--aided", default=None, help="unit deformations aided by the gauges, e.g. 2,3,4 (Eq. 22)")
+    p.add_argument("--out", help="write the estimates to this .mcap")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_estimate)
 
     p = sub.add_parser("inspect", help="topics, counts, rates, gaps and problems of a recording")
     p.add_argument("recording")

@@ -10,7 +10,14 @@ from estimator import EstimateResult, Measurements, SensorSeries
 
 from .recording import Recording
 
-__all__ = ["TruthSeries", "measurements_from_recording", "truth_from_recording", "score_against_truth"]
+__all__ = [
+    "TruthSeries",
+    "estimate_payloads",
+    "measurements_from_recording",
+    "score_against_truth",
+    "truth_from_recording",
+    "write_estimates",
+]
 
 _NS = 1e-9
 
@@ -84,3 +91,47 @@ def score_against_truth(result: EstimateResult, truth: TruthSeries, *, after: fl
         },
         "scored_samples": int(match.sum()),
     }
+
+
+def estimate_payloads(result: EstimateResult) -> list[bytes]:
+    """``/estimate/state`` payloads (contract's shm.EstimateState) for every estimate sample."""
+    import orjson
+
+    deflection = result.deflection().tolist()
+    curvature = result.curvature().tolist()
+    b = result.b.tolist()
+    cov = result.P_diag.tolist()
+    return [
+        orjson.dumps({"d": d, "h": h, "phi": p, "e": e, "b": bb, "deflection": w, "curvature": k, "covariance_diagonal": c})
+        for d, h, p, e, bb, w, k, c in zip(result.d.tolist(), result.h.tolist(), result.phi.tolist(), result.e.tolist(),
+                                           b, deflection, curvature, cov)
+    ]
+
+
+def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metadata: dict[str, str] | None = None) -> int:
+    """Write the estimates (with rig.json, the truth metadata and the temperature and bearing
+    channels of the source) into a new recording; returns the number of estimate messages."""
+    import json
+
+    from .recording import ESTIMATE_TOPIC, RecordingWriter
+
+    metadata = {name: dict(values) for name, values in rec.metadata.items()}
+    metadata["estimator"] = {
+        "selection": json.dumps(result.model.selection.as_dict()),
+        "modes": str(result.model.gamma),
+        "state_names": json.dumps(result.model.state_names),
+        "calibration": json.dumps(result.calibration.as_dict()),
+        **(extra_metadata or {}),
+    }
+    stamps = rec.start_ns + np.round(result.t * 1e9).astype(np.int64)
+    with RecordingWriter(path, rec.rig, metadata=metadata) as writer:
+        for topic in ("/env/temperature", "/bearing/displacement"):
+            channel = rec.channels.get(topic)
+            if channel is None:
+                continue
+            key = "celsius" if topic == "/env/temperature" else "distance"
+            for lt, pt, value in zip(channel.log_time_ns.tolist(), channel.publish_time_ns.tolist(), channel.values[:, 0].tolist()):
+                writer.write(topic, lt, {key: value}, pt)
+        for stamp, payload in zip(stamps.tolist(), estimate_payloads(result)):
+            writer.write(ESTIMATE_TOPIC, stamp, payload)
+    return len(stamps)

@@ -79,7 +79,7 @@ def make_excitation(
     *,
     eigenfrequencies_hz: np.ndarray,
     rest_s: float = 60.0,
-    ambient_force_std: float = 0.4,
+    ambient_force_std: float = 0.05,
 ) -> Excitation:
     """The bearing motion and ambient load of one recording.
 
