@@ -455,11 +455,21 @@ class ImmsFilter:
         """
         if len(self._tail):
             events = _concat_events(self._tail, events)
+        if len(events) > 1 and np.any(np.diff(events.t) < 0):
+            # Batches that overlap in time (late deliveries) are merged into one time order.
+            order = np.lexsort((events.kind, events.t))
+            events = Events(events.t[order], events.kind[order], events.index[order], events.values[order])
         d_index = np.nonzero(events.kind == EVENT_IMU_D)[0]
-        if final or not d_index.size:
-            cut = len(events) if final else 0
+        if final:
+            cut = len(events)
+        elif d_index.size < 2:
+            cut = 0
         else:
-            cut = int(np.searchsorted(events.t, events.t[d_index[-1]], side="right"))
+            # The group of IMU samples at the last D time may be split across batches; the steps up
+            # to the one before it see complete groups for their input interpolation.
+            cut = int(np.searchsorted(events.t, events.t[d_index[-2]], side="right"))
+        if events.t.size and events.t[0] < self.t:
+            raise ValueError(f"events start at t={events.t[0]} before the filter's time {self.t}")
         self._tail = events.slice(cut, len(events))
         events = events.slice(0, cut)
         d_index = d_index[d_index < cut]

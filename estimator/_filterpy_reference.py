@@ -1,0 +1,145 @@
+"""The straightforward filterpy loop on the same model: the reference the project's filter is
+checked against (tests) and timed against (benchmarks).
+
+It walks the same events with filterpy's ``ExtendedKalmanFilter`` (predict with the model's
+propagation and Jacobian, Joseph-form ``update`` with the aiding equations), one event at a time
+in plain Python. It leaves out what the production loop adds for robustness (silent sensors);
+on complete data both must agree to numerical precision.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+from ._filter import Events, FilterConfig, FilterOutput, ImmsFilter, ImmsModel, RestCalibration
+from ._imms import (
+    EVENT_BEARING,
+    EVENT_IMU_D,
+    EVENT_IMU_PERIPHERAL,
+    EVENT_STRAIN,
+    EVENT_TOF,
+    KIND_ACC,
+    P_DREF,
+    P_GATE,
+    P_MAXSTEP,
+    P_RBEAR,
+    P_RH,
+    P_RHD,
+    _least_squares_map,
+    propagate,
+    tof_measurement,
+)
+
+__all__ = ["run_filterpy"]
+
+
+class _ModelEKF(ExtendedKalmanFilter):
+    """filterpy's EKF whose state prediction is the IMMS kinematics (filterpy's own is F·x)."""
+
+    def predict_x(self, u=0):
+        self.x = self._propagated
+
+
+def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration, config: FilterConfig = FilterConfig(), *, t0: float) -> FilterOutput:
+    """Run the reference loop over ``events`` (complete data) and return the states at the D samples."""
+    arrays = ImmsFilter(model, calibration, config, t0=t0)._arrays
+    params = arrays["params"]
+    gamma = model.gamma
+    n = model.state_size
+    nu = len(model.selection.imus)
+    kind = model.kind
+    ekf = _ModelEKF(dim_x=n, dim_z=1)
+    ekf.x = np.zeros(n)
+    ekf.P = np.eye(n) * config.initial_std**2
+    active = np.ones(nu, dtype=np.bool_)
+    S_map = arrays["imu_S1"] if kind == 0 else arrays["imu_S"]
+    Pinv, null_proj = _least_squares_map(S_map, active, gamma)
+    c_acc = Pinv @ arrays["imu_eta"] if kind == KIND_ACC else np.zeros(gamma)
+    bias_D, bias_j = arrays["bias_D"], arrays["bias_j"]
+    held_fD = np.array([-model.rig.gravity, 0.0])
+    held_wD = 0.0
+    held_fj = np.tile([-model.rig.gravity, 0.0], (nu, 1))
+    held_wj = np.zeros(nu)
+    held_t = t0
+    t_now = t0
+    pending = False
+    out_t, out_x, out_P = [], [], []
+    d_times = events.t[events.kind == EVENT_IMU_D]
+
+    def update(z_minus_h: float, H: np.ndarray, R: float, gate: float) -> None:
+        S = float(H @ ekf.P @ H) + R
+        if not z_minus_h * z_minus_h / S <= gate:
+            return
+        # filterpy computes y = z − Hx(x); pass the innovation as z with Hx ≡ 0.
+        ekf.update(np.array([z_minus_h]), lambda x: H[None, :], lambda x: np.zeros(1), R=np.array([[R]]))
+
+    for e in range(len(events)):
+        t = events.t[e]
+        if t > t_now:
+            if pending:
+                out_t.append(t_now)
+                out_x.append(ekf.x.copy())
+                out_P.append(np.diag(ekf.P).copy())
+                pending = False
+            later = np.searchsorted(d_times, t)
+            have_next = later < d_times.size and d_times[later] > held_t
+            if have_next:
+                t_next = d_times[later]
+                group = np.nonzero(events.t == t_next)[0]
+                next_fD, next_wD = held_fD.copy(), held_wD
+                next_fj, next_wj = held_fj.copy(), held_wj.copy()
+                for q in group:
+                    v = events.values[q]
+                    if events.kind[q] == EVENT_IMU_D:
+                        next_fD = v[:2] - bias_D[:2]
+                        next_wD = v[2] - bias_D[2]
+                    elif events.kind[q] == EVENT_IMU_PERIPHERAL:
+                        j = events.index[q]
+                        next_fj[j] = v[:2] - bias_j[j, :2]
+                        next_wj[j] = v[2] - bias_j[j, 2]
+            start, remaining = t_now, t - t_now
+            while remaining > 1e-12:
+                dt = min(remaining, params[P_MAXSTEP])
+                if have_next:
+                    w = min(max((start + 0.5 * dt - held_t) / (t_next - held_t), 0.0), 1.0)
+                    u = (held_fD + w * (next_fD - held_fD), held_wD + w * (next_wD - held_wD),
+                         held_fj + w * (next_fj - held_fj), held_wj + w * (next_wj - held_wj))
+                else:
+                    u = (held_fD, held_wD, held_fj, held_wj)
+                x_new, F, Q = propagate(ekf.x, dt, kind, gamma, u[0], u[1], u[2], u[3], active, Pinv, c_acc,
+                                        arrays["imu_S"], arrays["imu_S1"], arrays["sig_fj"], arrays["sig_wj"], params, null_proj)
+                ekf._propagated = x_new
+                ekf.F, ekf.Q = F, Q
+                ekf.predict()
+                start += dt
+                remaining -= dt
+            t_now = t
+        k, j, v = events.kind[e], events.index[e], events.values[e]
+        if k == EVENT_IMU_D:
+            held_fD, held_wD = v[:2] - bias_D[:2], v[2] - bias_D[2]
+            held_t = t
+            pending = True
+        elif k == EVENT_IMU_PERIPHERAL:
+            held_fj = held_fj.copy()
+            held_wj = held_wj.copy()
+            held_fj[j] = v[:2] - bias_j[j, :2]
+            held_wj[j] = v[2] - bias_j[j, 2]
+        elif k == EVENT_TOF:
+            rho, H = tof_measurement(ekf.x, arrays["tof_eta"][j], arrays["tof_S"][j], arrays["tof_S1"][j], params[P_DREF])
+            update(v[0] - arrays["tof_offset"][j] - rho, H, arrays["tof_var"][j], params[P_GATE])
+        elif k == EVENT_STRAIN:
+            K = arrays["strain_K"][j]
+            H = np.zeros(n)
+            H[5:5 + gamma] = K * arrays["aided"]
+            update(v[0] - arrays["strain_offset"][j] - K @ ekf.x[5:5 + gamma], H, arrays["strain_var"][j], params[P_GATE])
+        elif k == EVENT_BEARING:
+            for index, z, R, gate in ((0, v[0], params[P_RBEAR], params[P_GATE]), (1, 0.0, params[P_RH], np.inf), (3, 0.0, params[P_RHD], np.inf)):
+                H = np.zeros(n)
+                H[index] = 1.0
+                update(z - ekf.x[index], H, R, gate)
+    if pending:
+        out_t.append(t_now)
+        out_x.append(ekf.x.copy())
+        out_P.append(np.diag(ekf.P).copy())
+    return FilterOutput(np.array(out_t), np.array(out_x), np.array(out_P), np.full(len(out_t), np.nan))
