@@ -240,11 +240,11 @@ def _rest_end(meas: Measurements, config: FilterConfig) -> float:
         b = meas.bearing
         ref = b.values[b.times < start + 2.0, 0]
         if ref.size >= 5:
-            moving = np.nonzero((np.abs(b.values[:, 0] - np.median(ref)) > max(8 * np.std(ref), 1e-3)) & (b.times < limit))[0]
+            moving = np.nonzero((np.abs(b.values[:, 0] - np.median(ref)) > max(6 * np.std(ref), 2e-4)) & (b.times < limit))[0]
             if moving.size:
                 end = min(end, b.times[moving[0]])
-    # Motion builds up before it shows: keep a margin.
-    end = max(start, end - 1.0)
+    # Motion builds up before it shows (a smooth start needs ~1.5 s to pass the thresholds): keep a margin.
+    end = max(start, end - 2.0)
     return end
 
 

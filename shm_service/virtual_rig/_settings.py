@@ -40,6 +40,9 @@ class SensorErrors(_Closed):
     strain_delay: float = Field(0.003, ge=0, description="delivery delay of strain samples, s")
     tof_delay: float = Field(0.030, ge=0, description="delivery delay of ToF and bearing samples, s")
     delay_jitter: float = Field(0.002, ge=0, description="random part of the delivery delay, s")
+    tof_time_offset: float = Field(
+        0.0, ge=0, lt=0.005, description="ToF and bearing samples taken this long after the 200 Hz grid, s (another logger's clock)"
+    )
 
 
 class PlantSettings(_Closed):

@@ -252,9 +252,20 @@ class VirtualRig:
 
         slow = index % SLOW_DIVIDER == 0
         t_slow = t[slow]
-        theta_slow = y[slow, 0]
+        y_slow, yd_slow, ydd_slow = y[slow], yd[slow], ydd[slow]
+        d_slow, d_acc_slow = d[slow], d_acc[slow]
+        if e.tof_time_offset > 0:
+            # Off-grid samples: states by cubic Hermite interpolation to the next sample (O(dt⁴)).
+            k = np.nonzero(slow)[0]
+            k1 = np.minimum(k + 1, n - 1)
+            s = np.where(k1 > k, e.tof_time_offset / self.dt, 0.0)[:, None]
+            h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+            y_slow = h00 * y[k] + h10 * self.dt * yd[k] + h01 * y[k1] + h11 * self.dt * yd[k1]
+            t_slow = t_slow + s[:, 0] * self.dt
+            d_slow, _, d_acc_slow = self.excitation.bearing(t_slow)
+        theta_slow = y_slow[:, 0]
         for i, tof in enumerate(self.tofs):
-            motion = point_motion(self.basis, tof.position, y[slow], yd[slow], ydd[slow], d[slow], d_acc[slow], plant_g)
+            motion = point_motion(self.basis, tof.position, y_slow, yd_slow, ydd_slow, d_slow, d_acc_slow, plant_g)
             distance = (rig.reflector_distance - motion.inertial_zeta) / np.cos(theta_slow + motion.slope_angle)
             distance = distance + self._tof_offset[i] + e.tof_noise * rng.standard_normal(distance.size)
             if e.tof_resolution > 0:
@@ -262,7 +273,7 @@ class VirtualRig:
             meas[tof.topic] = (t_slow, distance[:, None])
             delays[tof.topic] = e.tof_delay + e.delay_jitter * rng.random(t_slow.size)
         if rig.sensors_of("bearing"):
-            bearing = d[slow] + e.bearing_noise * rng.standard_normal(t_slow.size)
+            bearing = d_slow + e.bearing_noise * rng.standard_normal(t_slow.size)
             meas["/bearing/displacement"] = (t_slow, bearing[:, None])
             delays["/bearing/displacement"] = e.tof_delay + e.delay_jitter * rng.random(t_slow.size)
         if rig.sensors_of("temperature"):
