@@ -1,10 +1,14 @@
-"""Extended Kalman filter steps as small pure functions (compiled with numba).
+"""Extended Kalman filter steps as small functions (compiled with numba).
 
-``predict`` takes the already propagated state and the Jacobian F of the propagation, so any
-(nonlinear) kinematic model fits; ``update_scalar`` is one scalar measurement in Joseph form,
-with an innovation gate. The same formulas as filterpy's ``ExtendedKalmanFilter`` (which the
+``predict_covariance`` takes the Jacobian F of an already computed (nonlinear) propagation, so
+any kinematic model fits; ``update_scalar`` is one scalar measurement in Joseph form with an
+innovation gate. They are the same formulas as filterpy's ``ExtendedKalmanFilter`` (which the
 tests use as the reference), written for scalar measurements because the aiding of this product
 arrives sensor by sensor at its own time.
+
+Each step has a pure form (returns new arrays) and an ``_into`` form that works in place on
+preallocated buffers: the event loop runs millions of steps, and allocations of small arrays
+cost more than the arithmetic.
 """
 
 from __future__ import annotations
@@ -12,44 +16,50 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["predict_covariance", "update_scalar"]
+__all__ = ["predict_covariance", "predict_covariance_into", "update_scalar", "update_scalar_into"]
 
 
 @numba.njit(cache=True)
-def predict_covariance(P: np.ndarray, F: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """P⁺ = F P Fᵀ + Q (n, n), symmetric by construction.
-
-    Explicit loops: for the ~10-state IMMS they beat BLAS calls, whose overhead dominates.
-    """
+def predict_covariance_into(P: np.ndarray, F: np.ndarray, Q: np.ndarray, work: np.ndarray) -> None:
+    """P ← F P Fᵀ + Q in place (n, n); ``work`` is an (n, n) scratch buffer."""
     n = P.shape[0]
-    FP = np.zeros((n, n))
     for i in range(n):
+        for j in range(n):
+            work[i, j] = 0.0
         for k in range(n):
             f = F[i, k]
             if f != 0.0:
                 for j in range(n):
-                    FP[i, j] += f * P[k, j]
-    Pn = np.empty((n, n))
+                    work[i, j] += f * P[k, j]
     for i in range(n):
         for j in range(i, n):
             acc = Q[i, j]
             for k in range(n):
-                acc += FP[i, k] * F[j, k]
-            Pn[i, j] = acc
-            Pn[j, i] = acc
-    return Pn
+                f = F[j, k]
+                if f != 0.0:
+                    acc += work[i, k] * f
+            P[i, j] = acc
+            P[j, i] = acc
 
 
 @numba.njit(cache=True)
-def update_scalar(x: np.ndarray, P: np.ndarray, innovation: float, H: np.ndarray, R: float, gate: float):
-    """One scalar measurement update.
+def predict_covariance(P: np.ndarray, F: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """P⁺ = F P Fᵀ + Q (n, n)."""
+    out = P.copy()
+    predict_covariance_into(out, F, Q, np.empty_like(P))
+    return out
 
-    ``innovation`` is z − h(x), ``H`` (n,) the measurement Jacobian row, ``R`` its variance.
-    Returns (x, P, S, d2, accepted): S the innovation variance, d2 = innovation² / S (the
-    squared Mahalanobis distance). With d2 > ``gate`` the update is skipped (x, P unchanged).
+
+@numba.njit(cache=True)
+def update_scalar_into(x: np.ndarray, P: np.ndarray, innovation: float, H: np.ndarray, R: float, gate: float,
+                       u: np.ndarray) -> tuple[float, float, bool]:
+    """One scalar measurement update of x (n,) and P (n, n) in place; ``u`` is an (n,) buffer.
+
+    ``innovation`` is z − h(x), ``H`` the Jacobian row, ``R`` the measurement variance.
+    Returns (S, d2, accepted): S the innovation variance and d2 = innovation²/S (the squared
+    Mahalanobis distance); with d2 > ``gate`` (or NaN) nothing changes.
     """
     n = x.shape[0]
-    u = np.zeros(n)  # P H
     for i in range(n):
         acc = 0.0
         for j in range(n):
@@ -61,16 +71,26 @@ def update_scalar(x: np.ndarray, P: np.ndarray, innovation: float, H: np.ndarray
     for j in range(n):
         S += H[j] * u[j]
     d2 = innovation * innovation / S
-    if not (d2 <= gate):  # also rejects NaN
-        return x, P, S, d2, False
-    K = u / S
-    x_new = x + K * innovation
-    # Joseph form for a scalar measurement, (I − K Hᵀ) P (I − H Kᵀ) + R K Kᵀ, expanded with
-    # u = P H: P − K uᵀ − u Kᵀ + (Hᵀ P H + R) K Kᵀ. O(n²) instead of O(n³), same numbers.
-    P_new = np.empty((n, n))
+    if not (d2 <= gate):
+        return S, d2, False
+    # Joseph form for a scalar measurement, (I − K Hᵀ) P (I − H Kᵀ) + R K Kᵀ with K = u/S,
+    # expanded with u = P H: P − K uᵀ − u Kᵀ + (Hᵀ P H + R) K Kᵀ. O(n²) instead of O(n³).
+    inv = 1.0 / S
     for i in range(n):
+        Ki = u[i] * inv
+        x[i] += Ki * innovation
         for j in range(i, n):
-            v = P[i, j] - K[i] * u[j] - u[i] * K[j] + S * K[i] * K[j]
-            P_new[i, j] = v
-            P_new[j, i] = v
-    return x_new, P_new, S, d2, True
+            Kj = u[j] * inv
+            v = P[i, j] - Ki * u[j] - u[i] * Kj + S * Ki * Kj
+            P[i, j] = v
+            P[j, i] = v
+    return S, d2, True
+
+
+@numba.njit(cache=True)
+def update_scalar(x: np.ndarray, P: np.ndarray, innovation: float, H: np.ndarray, R: float, gate: float):
+    """Pure form of ``update_scalar_into``: returns (x, P, S, d2, accepted) as new arrays."""
+    x_new = x.copy()
+    P_new = P.copy()
+    S, d2, ok = update_scalar_into(x_new, P_new, innovation, H, R, gate, np.empty_like(x))
+    return x_new, P_new, S, d2, ok

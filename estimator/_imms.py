@@ -21,7 +21,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from ._ekf import predict_covariance, update_scalar
+from ._ekf import predict_covariance_into, update_scalar_into
 
 __all__ = [
     "EVENT_BEARING",
@@ -34,10 +34,12 @@ __all__ = [
     "KIND_ACC",
     "KIND_GYRO",
     "propagate",
+    "propagate_into",
     "run_events",
     "state_size",
     "tip_variance",
     "tof_measurement",
+    "tof_measurement_into",
 ]
 
 KIND_GYRO = 0
@@ -59,12 +61,14 @@ def state_size(kind: int, gamma: int) -> int:
 
 
 @numba.njit(cache=True)
-def propagate(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, imu_S, imu_S1, sig_fj, sig_wj, params, null_proj):
-    """Propagate x over dt with the held inputs; returns (x⁺, F, Q).
+def propagate_into(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, imu_S, imu_S1, sig_fj, sig_wj,
+                   params, null_proj, xn, F, Q, Gm, sig, acc_ws):
+    """Propagate x over dt with the given inputs into the buffers xn (n,), F (n, n), Q (n, n).
 
     fD (2,), omegaD: bias-corrected inputs at D; fj (ν, 2), omegaj (ν,): bias-corrected
     peripheral inputs; ``Pinv`` (Γ, ν) the least-squares map of the active peripheral sensors
-    (zero columns for inactive ones); ``c_acc`` (Γ,) = S⁺η for accelerometers.
+    (zero columns for inactive ones); ``c_acc`` (Γ,) = S⁺η for accelerometers. Gm (n, n_in),
+    sig (n_in,) and acc_ws (Γ, Γ + 2) are scratch buffers.
     """
     n = x.shape[0]
     g = params[P_G]
@@ -72,13 +76,23 @@ def propagate(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, i
     phi = x[4]
     omega = omegaD - x[ib]
     cp, sp = np.cos(phi), np.sin(phi)
+    for i in range(n):
+        xn[i] = x[i]
+        for j in range(n):
+            F[i, j] = 0.0
+            Q[i, j] = 0.0
+        F[i, i] = 1.0
+    n_in = sig.shape[0]
+    for i in range(n):
+        for j in range(n_in):
+            Gm[i, j] = 0.0
+    for j in range(n_in):
+        sig[j] = 0.0
     # Rigid part: inertial acceleration of D from its specific force (η down, gravity +g).
     acc_h = cp * fD[0] - sp * fD[1] + g
     acc_d = sp * fD[0] + cp * fD[1]
     dacc_h = -sp * fD[0] - cp * fD[1]
     dacc_d = cp * fD[0] - sp * fD[1]
-    xn = x.copy()
-    F = np.eye(n)
     half = 0.5 * dt * dt
     xn[0] = x[0] + dt * x[2] + half * acc_d
     xn[1] = x[1] + dt * x[3] + half * acc_h
@@ -93,10 +107,6 @@ def propagate(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, i
     F[3, 4] = dt * dacc_h
     F[4, ib] = -dt
     nu = fj.shape[0]
-    # Input noise: [f_D,x, f_D,y, ω_D, then per peripheral sensor ω_j (gyro) or f_j,x, f_j,y (acc)].
-    n_in = 3 + (nu if kind == KIND_GYRO else 2 * nu)
-    Gm = np.zeros((n, n_in))
-    sig = np.zeros(n_in)
     sig[0] = params[P_SFX]
     sig[1] = params[P_SFY]
     sig[2] = params[P_SWD]
@@ -109,73 +119,68 @@ def propagate(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, i
     Gm[3, 0] = dt * cp
     Gm[3, 1] = -dt * sp
     Gm[4, 2] = dt
-    Q = np.zeros((n, n))
     if kind == KIND_GYRO:
-        # Eq. (9): ω_j − ω_D = Σ ḃ_χ s'_χ(η_j), solved in the least-squares sense.
-        rel = np.zeros(nu)
-        for j in range(nu):
-            if active[j]:
-                rel[j] = omegaj[j] - omega
-        bdot = Pinv @ rel
+        # Eq. (9): ω_j − ω_D = Σ ḃ s'_χ(η_j), solved in the least-squares sense.
         for k in range(gamma):
-            xn[5 + k] = x[5 + k] + dt * bdot[k]
-            s = 0.0
+            bdot = 0.0
+            row_sum = 0.0
             for j in range(nu):
-                s += Pinv[k, j]
-            F[5 + k, ib] = dt * s
-            Gm[5 + k, 2] = -dt * s
-            for j in range(nu):
+                if active[j]:
+                    bdot += Pinv[k, j] * (omegaj[j] - omega)
+                row_sum += Pinv[k, j]
                 Gm[5 + k, 3 + j] = dt * Pinv[k, j]
+            xn[5 + k] = x[5 + k] + dt * bdot
+            F[5 + k, ib] = dt * row_sum
+            Gm[5 + k, 2] = -dt * row_sum
+            Q[5 + k, 5 + k] += params[P_QB] * dt
         for j in range(nu):
             sig[3 + j] = sig_wj[j]
-        for k in range(gamma):
-            Q[5 + k, 5 + k] += params[P_QB] * dt
     else:
         # Eq. (8) per sensor: Δ̈_j = f_j,ζ − f_D,ζ − ω̇ η_j + ω² Δ_j with f_j,ζ = sin α_j f_j,x + cos α_j f_j,y.
         iv = 5 + gamma
-        b = x[5:5 + gamma]
-        ddelta = np.zeros(nu)
-        J = np.zeros((nu, gamma))  # ∂Δ̈_j/∂b
-        dbeta = np.zeros(nu)  # ∂Δ̈_j/∂β_D
+        for k in range(gamma):
+            for m in range(gamma + 2):
+                acc_ws[k, m] = 0.0  # [dB (Γ) | b̈ | ∂b̈/∂β_D]
+        w2 = omega * omega
         for j in range(nu):
             if not active[j]:
                 continue
             alpha = 0.0
             delta = 0.0
             for k in range(gamma):
-                alpha += imu_S1[j, k] * b[k]
-                delta += imu_S[j, k] * b[k]
+                alpha += imu_S1[j, k] * x[5 + k]
+                delta += imu_S[j, k] * x[5 + k]
             ca, sa = np.cos(alpha), np.sin(alpha)
-            ddelta[j] = sa * fj[j, 0] + ca * fj[j, 1] - fD[1] + omega * omega * delta
+            ddelta = sa * fj[j, 0] + ca * fj[j, 1] - fD[1] + w2 * delta
             tilt = ca * fj[j, 0] - sa * fj[j, 1]
-            for k in range(gamma):
-                J[j, k] = tilt * imu_S1[j, k] + omega * omega * imu_S[j, k]
-            dbeta[j] = -2.0 * omega * delta
+            dbeta = -2.0 * omega * delta
             sig[3 + 2 * j] = sig_fj[j, 0]
             sig[4 + 2 * j] = sig_fj[j, 1]
             for k in range(gamma):
-                Gm[iv + k, 3 + 2 * j] = dt * Pinv[k, j] * sa
-                Gm[iv + k, 4 + 2 * j] = dt * Pinv[k, j] * ca
-        bddot = Pinv @ ddelta
-        dB = Pinv @ J
-        dBeta = Pinv @ dbeta
+                pk = Pinv[k, j]
+                acc_ws[k, gamma] += pk * ddelta
+                acc_ws[k, gamma + 1] += pk * dbeta
+                for m in range(gamma):
+                    acc_ws[k, m] += pk * (tilt * imu_S1[j, m] + w2 * imu_S[j, m])
+                Gm[iv + k, 3 + 2 * j] = dt * pk * sa
+                Gm[iv + k, 4 + 2 * j] = dt * pk * ca
         for k in range(gamma):
             v = x[iv + k]
-            bdot = v - c_acc[k] * omega
-            xn[5 + k] = x[5 + k] + dt * bdot + half * bddot[k]
-            xn[iv + k] = v + dt * bddot[k]
+            bddot = acc_ws[k, gamma]
+            xn[5 + k] = x[5 + k] + dt * (v - c_acc[k] * omega) + half * bddot
+            xn[iv + k] = v + dt * bddot
             F[5 + k, iv + k] += dt
-            F[5 + k, ib] = dt * c_acc[k] + half * dBeta[k]
-            F[iv + k, ib] = dt * dBeta[k]
+            F[5 + k, ib] = dt * c_acc[k] + half * acc_ws[k, gamma + 1]
+            F[iv + k, ib] = dt * acc_ws[k, gamma + 1]
             for m in range(gamma):
-                F[5 + k, 5 + m] += half * dB[k, m]
-                F[iv + k, 5 + m] += dt * dB[k, m]
+                F[5 + k, 5 + m] += half * acc_ws[k, m]
+                F[iv + k, 5 + m] += dt * acc_ws[k, m]
             Gm[5 + k, 2] = -dt * c_acc[k]
-            s = 0.0
+            row_sum = 0.0
             for j in range(nu):
-                s += Pinv[k, j]
+                row_sum += Pinv[k, j]
             # f_D,y enters every Δ̈_j with −1.
-            Gm[iv + k, 1] += -dt * s
+            Gm[iv + k, 1] += -dt * row_sum
             Q[5 + k, 5 + k] += params[P_QB] * dt
             Q[iv + k, iv + k] += params[P_QV] * dt
     # Unobservable directions of b (fewer active sensors than Γ) random-walk instead of freezing.
@@ -196,6 +201,18 @@ def propagate(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, i
     Q[2, 2] += params[P_QRIGID] * dt
     Q[3, 3] += params[P_QRIGID] * dt
     Q[ib, ib] += params[P_QBETA] * dt
+
+
+@numba.njit(cache=True)
+def propagate(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, imu_S, imu_S1, sig_fj, sig_wj, params, null_proj):
+    """Pure form of ``propagate_into``: returns (x⁺, F, Q) as new arrays."""
+    n = x.shape[0]
+    n_in = 3 + (fj.shape[0] if kind == KIND_GYRO else 2 * fj.shape[0])
+    xn = np.empty(n)
+    F = np.empty((n, n))
+    Q = np.empty((n, n))
+    propagate_into(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, imu_S, imu_S1, sig_fj, sig_wj,
+                   params, null_proj, xn, F, Q, np.empty((n, n_in)), np.empty(n_in), np.empty((gamma, gamma + 2)))
     return xn, F, Q
 
 
@@ -211,9 +228,8 @@ def tip_variance(P, tip_row):
 
 
 @numba.njit(cache=True)
-def tof_measurement(x, eta, S_row, S1_row, d_ref):
-    """Eq. (18): predicted distance ρ̂ (m) and its Jacobian row for a ToF at arc length ``eta``."""
-    n = x.shape[0]
+def tof_measurement_into(x, eta, S_row, S1_row, d_ref, H):
+    """Eq. (18): predicted distance ρ̂ (m) of a ToF at arc length ``eta``; its Jacobian row into H (n,)."""
     gamma = S_row.shape[0]
     phi = x[4]
     delta = 0.0
@@ -226,12 +242,20 @@ def tof_measurement(x, eta, S_row, S1_row, d_ref):
     phij = phi + alpha
     cj, sj = np.cos(phij), np.sin(phij)
     gap = d_ref - zeta
-    rho = gap / cj
-    H = np.zeros(n)
+    for i in range(H.shape[0]):
+        H[i] = 0.0
     H[0] = -1.0 / cj
     H[4] = (-(cp * eta - sp * delta) * cj + gap * sj) / (cj * cj)
     for k in range(gamma):
         H[5 + k] = (-cp * S_row[k] * cj + gap * sj * S1_row[k]) / (cj * cj)
+    return gap / cj
+
+
+@numba.njit(cache=True)
+def tof_measurement(x, eta, S_row, S1_row, d_ref):
+    """Eq. (18): predicted distance ρ̂ (m) and its Jacobian row (pure form)."""
+    H = np.empty(x.shape[0])
+    rho = tof_measurement_into(x, eta, S_row, S1_row, d_ref, H)
     return rho, H
 
 
@@ -307,6 +331,17 @@ def run_events(
     u_fD = np.zeros(2)
     u_fj = np.zeros((nu, 2))
     u_wj = np.zeros(nu)
+    # Work buffers: the loop allocates nothing per event.
+    n_in = 3 + (nu if kind == KIND_GYRO else 2 * nu)
+    xn = np.empty(n)
+    F = np.empty((n, n))
+    Q = np.empty((n, n))
+    Gm = np.empty((n, n_in))
+    sig = np.empty(n_in)
+    acc_ws = np.empty((gamma, gamma + 2))
+    work = np.empty((n, n))
+    H = np.zeros(n)
+    ubuf = np.empty(n)
     for e in range(n_ev):
         t = t_ev[e]
         if t > t_now:
@@ -363,9 +398,10 @@ def run_events(
                     u_wD = held_wD[0]
                     u_fj[:, :] = held_fj
                     u_wj[:] = held_wj
-                x, F, Q = propagate(x, dt, kind, gamma, u_fD, u_wD, u_fj, u_wj, active, Pinv, c_acc,
-                                    imu_S, imu_S1, sig_fj, sig_wj, params, null_proj)
-                P = predict_covariance(P, F, Q)
+                propagate_into(x, dt, kind, gamma, u_fD, u_wD, u_fj, u_wj, active, Pinv, c_acc,
+                               imu_S, imu_S1, sig_fj, sig_wj, params, null_proj, xn, F, Q, Gm, sig, acc_ws)
+                x[:] = xn
+                predict_covariance_into(P, F, Q, work)
                 start += dt
                 remaining -= dt
             t_now = t
@@ -411,8 +447,8 @@ def run_events(
             if not np.isfinite(z):
                 counts_rejected[j] += 1
                 continue
-            rho, H = tof_measurement(x, tof_eta[j], tof_S[j], tof_S1[j], params[P_DREF])
-            x, P, S, d2, ok = update_scalar(x, P, z - rho, H, tof_var[j], params[P_GATE])
+            rho = tof_measurement_into(x, tof_eta[j], tof_S[j], tof_S1[j], params[P_DREF], H)
+            S, d2, ok = update_scalar_into(x, P, z - rho, H, tof_var[j], params[P_GATE], ubuf)
             last_innovation[j] = z - rho
             if ok:
                 counts_accepted[j] += 1
@@ -425,14 +461,14 @@ def run_events(
             if not np.isfinite(z):
                 counts_rejected[ch] += 1
                 continue
-            H = np.zeros(n)
+            H[:] = 0.0
             pred = 0.0
             for m in range(gamma):
                 if aided[m] > 0:
                     H[5 + m] = strain_K[j, m]
                 # Eq. (22): the strain of unaided unit deformations is subtracted at its estimate.
                 pred += strain_K[j, m] * x[5 + m]
-            x, P, S, d2, ok = update_scalar(x, P, z - pred, H, strain_var[j], params[P_GATE])
+            S, d2, ok = update_scalar_into(x, P, z - pred, H, strain_var[j], params[P_GATE], ubuf)
             last_innovation[ch] = z - pred
             if ok:
                 counts_accepted[ch] += 1
@@ -444,22 +480,22 @@ def run_events(
             if not np.isfinite(z):
                 counts_rejected[i_bear] += 1
                 continue
-            H = np.zeros(n)
+            H[:] = 0.0
             H[0] = 1.0
             last_innovation[i_bear] = z - x[0]
-            x, P, S, d2, ok = update_scalar(x, P, z - x[0], H, params[P_RBEAR], params[P_GATE])
+            S, d2, ok = update_scalar_into(x, P, z - x[0], H, params[P_RBEAR], params[P_GATE], ubuf)
             if ok:
                 counts_accepted[i_bear] += 1
                 nis_sum[i_bear] += d2
             else:
                 counts_rejected[i_bear] += 1
             # The bearing runs on a rail: h = 0 and ḣ = 0 as pseudo-measurements.
-            H = np.zeros(n)
+            H[:] = 0.0
             H[1] = 1.0
-            x, P, S, d2, ok = update_scalar(x, P, -x[1], H, params[P_RH], 1e300)
+            S, d2, ok = update_scalar_into(x, P, -x[1], H, params[P_RH], 1e300, ubuf)
             counts_accepted[i_bear + 1] += 1
-            H = np.zeros(n)
+            H[:] = 0.0
             H[3] = 1.0
-            x, P, S, d2, ok = update_scalar(x, P, -x[3], H, params[P_RHD], 1e300)
+            S, d2, ok = update_scalar_into(x, P, -x[3], H, params[P_RHD], 1e300, ubuf)
             counts_accepted[i_bear + 2] += 1
     return x, P, t_now, n_out, pending

@@ -1,0 +1,1 @@
+"""Benchmarks: figures for the issues' bars (``make bench``). Not tests: nothing here asserts times."""
