@@ -82,8 +82,8 @@ def flags(name, rec, res, damage_at=None):
               " σ_rel %:", [round(100 * m.sigma_rel, 3) for m in res.baseline.modes])
 
 
-def main() -> None:
-    quick = "--quick" in sys.argv
+def main(argv: list[str] | None = None) -> None:
+    quick = "--quick" in (sys.argv[1:] if argv is None else argv)
     dur = 900 if quick else 1800
     t = time.perf_counter()
     amb = record(duration=dur, excitation="ambient", temperature_swing=20.0, seed=1)

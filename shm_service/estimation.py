@@ -11,7 +11,9 @@ from estimator import EstimateResult, Measurements, SensorSeries
 from .recording import Recording
 
 __all__ = [
+    "DeformationRecord",
     "TruthSeries",
+    "deformation_record",
     "estimate_payloads",
     "measurements_from_recording",
     "score_against_truth",
@@ -137,3 +139,53 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
         for stamp, payload in zip(stamps.tolist(), estimate_payloads(result)):
             writer.write(ESTIMATE_TOPIC, stamp, payload)
     return len(stamps)
+
+
+@dataclass(frozen=True)
+class DeformationRecord:
+    """What the analytics need from a recording: b(t) and its context (times in s from the start)."""
+
+    times: np.ndarray
+    b: np.ndarray
+    units: object  # estimator.UnitDeformations
+    stations: np.ndarray
+    temperature: tuple[np.ndarray, np.ndarray] | None
+    bearing: np.ndarray | None
+    truth_metadata: dict[str, str] | None
+    estimated_here: bool
+
+
+def deformation_record(rec: Recording, *, model_args: dict | None = None) -> DeformationRecord:
+    """b(t) of a recording: from its ``/estimate/state`` if it has one, else by running the estimator.
+
+    ``model_args`` are passed to ``estimator.build_model`` when the estimator runs (and give Γ).
+    """
+    from estimator import assemble_beam, build_model, estimate, unit_deformations
+
+    from .recording import ESTIMATE_TOPIC
+
+    estimates = rec.channels.get(ESTIMATE_TOPIC)
+    if estimates is not None and len(estimates):
+        columns = [i for i, name in enumerate(estimates.fields) if name.startswith("b[")]
+        if not columns:
+            raise ValueError(f"{rec.path}: {ESTIMATE_TOPIC} carries no b")
+        times = (estimates.log_time_ns - rec.start_ns) * _NS
+        b = estimates.values[:, columns]
+        units = unit_deformations(assemble_beam(rec.rig), len(columns))
+        estimated_here = False
+    else:
+        model = build_model(rec.rig, **(model_args or {}))
+        result = estimate(measurements_from_recording(rec), model)
+        times, b, units = result.t, result.b, model.units
+        estimated_here = True
+    temperature = None
+    channel = rec.channels.get("/env/temperature")
+    if channel is not None and len(channel) >= 2:
+        temperature = ((channel.log_time_ns - rec.start_ns) * _NS, channel.values[:, 0])
+    bearing = None
+    channel = rec.channels.get("/bearing/displacement")
+    if channel is not None and len(channel) >= 2:
+        bearing = np.interp(times, (channel.log_time_ns - rec.start_ns) * _NS, channel.values[:, 0])
+    return DeformationRecord(times, b, units, np.asarray(rec.rig.truth_stations, dtype=float) if rec.rig.truth_stations
+                             else np.linspace(0.0, rec.rig.beam.length, 9)[1:], temperature, bearing,
+                             rec.metadata.get("truth"), estimated_here)
