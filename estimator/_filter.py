@@ -325,6 +325,10 @@ class Events:
     def __len__(self) -> int:
         return self.t.shape[0]
 
+    @staticmethod
+    def empty() -> "Events":
+        return Events.empty()
+
     def slice(self, lo: int, hi: int) -> "Events":
         return Events(self.t[lo:hi], self.kind[lo:hi], self.index[lo:hi], self.values[lo:hi])
 
@@ -349,7 +353,7 @@ def build_events(meas: Measurements, model: ImmsModel) -> Events:
         add(meas.strain.get(name), EVENT_STRAIN, i, 1)
     add(meas.bearing, EVENT_BEARING, 0, 1)
     if not parts:
-        return Events(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
+        return Events.empty()
     t = np.concatenate([p[0] for p in parts])
     kind = np.concatenate([np.full(p[0].size, p[1], dtype=np.int64) for p in parts])
     index = np.concatenate([np.full(p[0].size, p[2], dtype=np.int64) for p in parts])
@@ -400,7 +404,7 @@ class ImmsFilter:
         self._active = np.ones(nu, dtype=np.bool_)
         self._held_t = np.array([float(t0)])
         self._pending = False
-        self._tail = Events(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
+        self._tail = Events.empty()
         n_channels = len(model.aiding_channels)
         self.accepted = np.zeros(n_channels, dtype=np.int64)
         self.rejected = np.zeros(n_channels, dtype=np.int64)
@@ -504,7 +508,7 @@ class ImmsFilter:
         """Process what waits for a next IMU sample and output the last state."""
         n = self.model.state_size
         if len(self._tail):
-            out = self.process(Events(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))), final=True)
+            out = self.process(Events.empty(), final=True)
             return FilterOutput.concatenate([out, self.flush()], n)
         if not self._pending:
             return FilterOutput.concatenate([], n)
