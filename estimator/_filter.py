@@ -327,7 +327,7 @@ class Events:
 
     @staticmethod
     def empty() -> "Events":
-        return Events.empty()
+        return Events(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
 
     def slice(self, lo: int, hi: int) -> "Events":
         return Events(self.t[lo:hi], self.kind[lo:hi], self.index[lo:hi], self.values[lo:hi])
