@@ -12,8 +12,9 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m pip install --quiet -c constraints.txt -e '.[test]'
 	touch $(STAMP)
 
+# The simulated rig at 4x real time, the service (SQLite under var/) and the dashboard.
 demo: $(STAMP)
-	$(VENV)/bin/shm demo
+	$(VENV)/bin/shm serve --source sim --speed 4
 
 test: $(STAMP)
 	$(PY) -m pytest -q

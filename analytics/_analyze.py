@@ -57,6 +57,21 @@ class AnalysisResult:
         return {"modes": [m.as_dict() for m in self.modes], "windows": [w.as_dict() for w in self.windows], "flags": [dict(f) for f in self.flags]}
 
 
+def _above_floor(y: np.ndarray, s: int, e: int, fs: float, trim: float) -> int:
+    """End of the part of a decay [s, e) whose envelope stays above 1/30 of its start (about 3.4
+    time constants): a fit that runs into the noise floor flattens the decay and underrates the
+    damping of the faster modes."""
+    from scipy.signal import hilbert
+
+    env = np.abs(hilbert(y[s:e]))
+    k = max(1, int(trim * fs))
+    if env.size <= 3 * k:
+        return e
+    start = float(np.median(env[k : 2 * k]))
+    below = np.flatnonzero(env[2 * k :] < start / 30.0)
+    return e if below.size == 0 else min(e, s + 2 * k + int(below[0]) + k)
+
+
 def _damping(b: np.ndarray, fs: float, f: float, bearing: np.ndarray | None, free: bool, cfg: AnalysisConfig, start: int) -> DampingEstimate | None:
     x = b[start:]
     d = None if bearing is None else bearing[start:]
@@ -72,6 +87,7 @@ def _damping(b: np.ndarray, fs: float, f: float, bearing: np.ndarray | None, fre
             y = bandpass(x, fs, f, rel_half_width=cfg.bandpass_rel)
             trim = _edge_s(f, cfg.bandpass_rel)
             for s, e in segs:
+                e = _above_floor(y, s, e, fs, trim)
                 if (e - s) / fs - 2 * trim < cfg.decay_min_cycles / (2 * f):
                     continue
                 try:
@@ -82,7 +98,7 @@ def _damping(b: np.ndarray, fs: float, f: float, bearing: np.ndarray | None, fre
                     ests.append(est)
     if ests:
         return combine_estimates(ests)
-    if d is None and not free:
+    if not free:  # ambient: no usable free decay, so random decrement
         try:
             return random_decrement(x, fs, f, rel_half_width=cfg.bandpass_rel, duration_cycles=cfg.rd_cycles)
         except ValueError:
@@ -103,6 +119,7 @@ def analyze(
     baseline: Baseline | dict | None = None,
     config: AnalysisConfig | None = None,
     beam_length: float | None = None,
+    signatures: object | None = None,
 ) -> AnalysisResult:
     """Modal analytics of a record.
 
@@ -110,7 +127,10 @@ def analyze(
     at stations_eta (len(η),) m from the bearing; fs (Hz); temperature (times (M,) s, values (M,)
     °C) or None; bearing displacement (N,) m on the times of b, or None; expected_hz per unit
     deformation (Hz, e.g. UnitDeformations.frequencies_hz) or None (largest peak per unit);
-    baseline (Baseline or its dict) or None (learnt from the first config.baseline_s seconds).
+    baseline (Baseline or its dict) or None (learnt from the first config.baseline_s seconds);
+    signatures : predicted damage signatures at stations_eta (``estimator.damage_signatures(rig,
+    stations_eta)``, or an object/dict with eta, kind, frequency_shift, curvature_change) for the
+    model-assisted location of flags (see ``ModalMonitor``), or None.
     """
     cfg = config or AnalysisConfig()
     if not isinstance(cfg, AnalysisConfig):
@@ -137,7 +157,8 @@ def analyze(
     if n < 16 or n > B.shape[0]:
         raise ValueError(f"config.window_s={cfg.window_s} gives {n} samples; the record has {B.shape[0]} (needs 16 .. N)")
     step = max(1, int(round(n * (1 - cfg.overlap))))
-    mon = ModalMonitor(expected_hz, curvature_shapes, stations_eta, fs=fs, config=cfg, baseline=baseline, beam_length=beam_length)
+    mon = ModalMonitor(expected_hz, curvature_shapes, stations_eta, fs=fs, config=cfg, baseline=baseline, beam_length=beam_length,
+                      signatures=signatures)
     windows: list[WindowResult] = []
     starts = list(range(0, B.shape[0] - n + 1, step))
     flags: dict = {}

@@ -36,11 +36,13 @@ class AnalysisConfig(BaseModel):
     ewma_lambda: float = Field(0.2, gt=0, le=1, description="EWMA smoothing of the control charts [0.2]")
     warning_sigma: float = Field(3.0, gt=0, description="warning level of the charts, σ of the EWMA [3]")
     alarm_sigma: float = Field(5.0, gt=0, description="alarm level, σ of the EWMA [5]")
-    curvature_alarm_sigma: float = Field(10.0, gt=0, description="alarm level of the curvature-index chart, σ [10]: the index drifts more than the frequencies")
+    curvature_alarm_sigma: float = Field(10.0, gt=0, description="alarm level of the curvature chart, σ of its χ²/p statistic [10]: shape scatter is heavy-tailed")
     clear_sigma: float = Field(2.0, ge=0, description="an alarm clears below this level, σ of the EWMA [2]")
     hold_windows: int = Field(3, ge=1, description="consecutive windows beyond a level to raise or clear [3]")
     min_sigma_rel: float = Field(2e-4, gt=0, description="floor of a mode's frequency scatter, relative [2e-4]")
     curvature_memory_windows: float = Field(10.0, ge=1, description="time constant of the curvature cross-spectra average, windows [10]")
+    curvature_min_std: float = Field(0.005, gt=0, description="floor of one window's curvature-shape scatter (unit-RMS shape) [0.005]: a few high-SNR windows (free decays) underrate the scatter between events")
+    spectrum_memory_windows: float = Field(1.0, ge=1, description="time constant of the power-spectra average the per-window frequencies are read from, windows [1: each window alone]; > 1 smooths the estimates, which the baseline scatter then underrates")
 
     @model_validator(mode="after")
     def _levels(self) -> "AnalysisConfig":

@@ -11,9 +11,10 @@ from scipy.optimize import linear_sum_assignment
 from ._chart import EwmaChart
 from ._config import AnalysisConfig
 from ._curvature import CurvatureChange, curvature_change, curvature_shape
+from ._location import DamageLocation, locate_damage
 from ._damping import _moving
 from ._peaks import find_peaks
-from ._spectrum import amplitude_spectrum, cross_spectra
+from ._spectrum import Spectrum, amplitude_spectrum, cross_spectra
 from ._validate import as_signal, as_times, check_fs
 
 __all__ = ["Baseline", "BaselineMode", "ModeEstimate", "WindowResult", "ModalMonitor", "fit_temperature_model"]
@@ -59,8 +60,11 @@ class Baseline:
     """A healthy baseline; ``to_dict``/``from_dict`` give a JSON-safe round trip for storage.
 
     modes : per mode the temperature model; curvature_shapes : (modes, len(η)) normalised
-    operational curvature shapes (dimensionless); curvature_index_mean/std : the change index's
-    healthy level and scatter; start_s/end_s : the learnt period (s).
+    operational curvature shapes (dimensionless); curvature_index_mean/std : the curvature
+    statistic's healthy mean and std (1 and √(2/p) of the χ²/p statistic, p its degrees of
+    freedom); curvature_index_rho : lag-1 correlation of successive windows' shape deviations;
+    curvature_shape_std : (modes,) 1σ of one window's unit-RMS shape per station (pooled over
+    η); curvature_windows : windows behind the baseline shapes; start_s/end_s : the learnt period (s).
     """
 
     modes: tuple[BaselineMode, ...]
@@ -70,6 +74,8 @@ class Baseline:
     curvature_index_rho: float
     start_s: float
     end_s: float
+    curvature_shape_std: tuple[float, ...] = ()
+    curvature_windows: int = 0
 
     def to_dict(self) -> dict:
         return {
@@ -80,6 +86,8 @@ class Baseline:
             "curvature_index_rho": self.curvature_index_rho,
             "start_s": self.start_s,
             "end_s": self.end_s,
+            "curvature_shape_std": list(self.curvature_shape_std),
+            "curvature_windows": self.curvature_windows,
         }
 
     @classmethod
@@ -95,6 +103,8 @@ class Baseline:
                 float(d["curvature_index_rho"]),
                 float(d["start_s"]),
                 float(d["end_s"]),
+                tuple(float(x) for x in d.get("curvature_shape_std", ())),
+                int(d.get("curvature_windows", 0)),
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"baseline dict is malformed: {exc}") from exc
@@ -107,7 +117,9 @@ class WindowResult:
     start_s/end_s (s), kind ("forced" | "free_decay" | "ambient" | "quiet"), trusted (used for
     eigenfrequencies), temperature_c (°C or None), estimates per mode, frequency_scores (EWMA
     score in σ per mode, None before a baseline), curvature (change against the baseline or
-    None), curvature_score (σ), levels (chart name → "ok"/"warning"/"alarm"), flags (raised now).
+    None), curvature_score (σ), levels (chart name → "ok"/"warning"/"alarm"), flags (raised now),
+    location (the model-assisted damage location of the change since the baseline, when damage
+    signatures were given, else None).
     """
 
     start_s: float
@@ -121,6 +133,7 @@ class WindowResult:
     curvature_score: float | None
     levels: dict
     flags: tuple[dict, ...]
+    location: DamageLocation | None = None
 
     def as_dict(self) -> dict:
         return {
@@ -140,6 +153,7 @@ class WindowResult:
             "curvature_third": None if self.curvature is None else self.curvature.third,
             "levels": dict(self.levels),
             "flags": [dict(f) for f in self.flags],
+            "location": None if self.location is None else self.location.as_dict(),
         }
 
 
@@ -191,7 +205,20 @@ class ModalMonitor:
         ((0.301, 0.859), (1.906,), (3.49,), (5.6,)); modes are numbered 1.. in this order.
     curvature_shapes : (len(η), Γ) s''_χ at stations_eta (1/m²); stations_eta (len(η),) m from the bearing.
     fs : sample rate of b (Hz); baseline : a stored Baseline, else one is learnt from the first
-    ``config.baseline_s`` seconds of trusted windows; beam_length : m (default max(stations_eta)).
+    ``config.baseline_s`` seconds of trusted windows; beam_length : m (default max(stations_eta));
+    signatures : predicted damage signatures (``estimator.damage_signatures`` or an object/dict
+    with eta, kind, frequency_shift (M, modes), curvature_change (M, modes, len(η)) at
+    stations_eta) for the model-assisted location of a change; None: the model-free curvature
+    index locates it.
+
+    Per trusted window the mode frequencies are the peaks of the power spectra averaged over the
+    last ``config.spectrum_memory_windows`` windows (EWMA), curvature shapes come from the cross
+    spectra averaged over ``config.curvature_memory_windows``. The curvature chart watches
+    Q = mean over modes and stations of (Δshape/σ)², Δshape the averaged shapes' change against
+    the baseline's, σ its healthy scatter (a delete-one jackknife over the baseline's windows,
+    scaled to the average's memory, floored by ``config.curvature_min_std``): Q ~ χ²_p/p for a
+    healthy structure, charted as (Q − 1)/√(2/p) without further smoothing (hold and hysteresis
+    as the frequency charts). Curvature shapes use stationary ('ambient') windows only.
     """
 
     def __init__(
@@ -204,6 +231,7 @@ class ModalMonitor:
         config: AnalysisConfig | None = None,
         baseline: Baseline | None = None,
         beam_length: float | None = None,
+        signatures: object | None = None,
     ):
         self.fs = check_fs(fs)
         self.config = config or AnalysisConfig()
@@ -245,6 +273,12 @@ class ModalMonitor:
         self._charts: list[EwmaChart] = []
         self._ci_chart: EwmaChart | None = None
         self._alarms: dict = {}
+        self._power = None  # EWMA of the trusted windows' power spectra
+        self.signatures = signatures
+        if signatures is not None:
+            sc = signatures.get("curvature_change") if isinstance(signatures, dict) else getattr(signatures, "curvature_change", None)
+            if sc is not None and np.shape(sc)[-1] != self.eta.size:
+                raise ValueError(f"signatures.curvature_change has {np.shape(sc)[-1]} stations, stations_eta {self.eta.size}")
         if baseline is not None:
             self._arm(baseline)
 
@@ -263,9 +297,9 @@ class ModalMonitor:
             self.f0 = [m.f_ref_hz for m in baseline.modes]
             self.ref = list(self.f0)
         self._charts = [self._chart(math.sqrt((1 + m.rho) / (1 - m.rho))) for m in baseline.modes]
-        r = baseline.curvature_index_rho
         c = self.config
-        self._ci_chart = EwmaChart(c.ewma_lambda, c.warning_sigma, max(c.curvature_alarm_sigma, c.warning_sigma), c.clear_sigma, c.hold_windows, math.sqrt((1 + r) / (1 - r)))
+        # the statistic already averages (cross spectra over curvature_memory_windows): no second EWMA
+        self._ci_chart = EwmaChart(1.0, c.warning_sigma, max(c.curvature_alarm_sigma, c.warning_sigma), c.clear_sigma, c.hold_windows, 1.0)
 
     def _init_modes(self, spec) -> None:
         for u in range(self.gamma):
@@ -333,6 +367,12 @@ class ModalMonitor:
         kind = self._classify(B, d)
         trusted = kind in ("free_decay", "ambient")
         spec = amplitude_spectrum(B, self.fs, pad_factor=c.pad_factor, window=c.window)
+        if trusted and c.spectrum_memory_windows > 1:
+            p = spec.amplitude**2
+            a = 1.0 / c.spectrum_memory_windows
+            self._power = p if self._power is None or self._power.shape != p.shape else (1 - a) * self._power + a * p
+            spec = Spectrum(spec.frequencies, np.sqrt(self._power), spec.resolution_hz, spec.bin_spacing_hz, spec.coherent_gain,
+                            spec.enbw_bins, spec.enbw_hz, spec.window, spec.n_samples, spec.pad_factor, spec.averages)
         if trusted and not self.ref:
             self._init_modes(spec)
         est = self._estimate(spec) if (trusted and self.ref) else [ModeEstimate(i + 1, self.units[i] + 1, None, None, 0.0) for i in range(self.n_modes)]
@@ -343,13 +383,17 @@ class ModalMonitor:
                 self.ref[i] += c.track_gain * (e.frequency_hz - self.ref[i])
         # curvature cross spectra at the tracked frequencies
         change = None
-        if trusted and self.ref:
+        # curvature shapes from stationary (ambient) windows only: a free decay's modal mix and
+        # amplitude change within the window, so its cross spectra are not comparable
+        G = None
+        if kind == "ambient" and self.ref:
             C = cross_spectra(B, self.fs, self.ref, window=c.window)  # (modes, Γ)
             G = np.array([C[i] * np.conj(C[i, self.units[i]]) for i in range(self.n_modes)])
             a = 1.0 / c.curvature_memory_windows
             self._cross = G if self._cross is None else (1 - a) * self._cross + a * G
             self._cross_sum = G if self._cross_sum is None else self._cross_sum + G
         flags: list[dict] = []
+        location = None
         scores: list[float | None] = [None] * self.n_modes
         ci_score = None
         levels: dict = {}
@@ -357,19 +401,26 @@ class ModalMonitor:
             self._first_trusted = t0
         if self.baseline is None and trusted and self.ref:
             self._records.append(_Record(tmid, T, [e.frequency_hz for e in est], [e.confidence for e in est]))
-            if self._cross is not None:
-                self._ci_hist.append(self._cross.copy())
+            if G is not None:
+                self._ci_hist.append(G.copy())
             if t1 - self._first_trusted >= c.baseline_s:
                 self.baseline = self._fit_baseline(t1)
                 if self.baseline is not None:
                     self._arm(self.baseline)
         elif self.baseline is not None and trusted:
             bl = self.baseline
-            shapes = self._shapes(self._cross)
+            shapes = self._shapes(self._cross) if kind == "ambient" else None
+            delta = dsd = None
             if shapes is not None:
                 change = curvature_change(shapes, bl.curvature_shapes, self.eta, self.length)
-                ci_score, lvl = self._ci_chart.update((change.total - bl.curvature_index_mean) / bl.curvature_index_std, tmid)
-                levels["curvature"] = lvl
+                sign = np.sign(np.sum(shapes * bl.curvature_shapes, axis=1, keepdims=True))
+                sign[sign == 0] = 1
+                delta = shapes * sign - bl.curvature_shapes
+                dsd = self._shape_change_std()
+                if dsd is not None:
+                    q = float(np.mean((delta / dsd[:, None]) ** 2))
+                    ci_score, lvl = self._ci_chart.update((q - bl.curvature_index_mean) / bl.curvature_index_std, tmid)
+                    levels["curvature"] = lvl
             for i, (e, m) in enumerate(zip(est, bl.modes)):
                 if e.frequency_hz is None or e.confidence < c.min_confidence or m.windows < c.baseline_min_windows:
                     continue
@@ -377,8 +428,9 @@ class ModalMonitor:
                 expected = m.f_ref_hz * (1 + m.slope_per_k * (Tw - m.temperature_ref_c))
                 rel = e.frequency_hz / expected - 1
                 scores[i], levels[f"mode{m.mode}"] = self._charts[i].update(rel / m.sigma_rel, tmid)
-            flags = self._flags(change, scores, ci_score)
-        return WindowResult(t0, t1, kind, trusted, T, tuple(est), tuple(scores), change, ci_score, levels, tuple(flags))
+            location = self._locate(delta, dsd)
+            flags = self._flags(change, scores, ci_score, location)
+        return WindowResult(t0, t1, kind, trusted, T, tuple(est), tuple(scores), change, ci_score, levels, tuple(flags), location)
 
     def _shapes(self, G: np.ndarray | None) -> np.ndarray | None:
         if G is None:
@@ -388,9 +440,51 @@ class ModalMonitor:
         except ValueError:
             return None
 
-    def _flags(self, change: CurvatureChange | None, scores: list, ci_score: float | None) -> list[dict]:
+    def _model_slope(self, i: int) -> float | None:
+        sig = self.signatures
+        slope = None if sig is None else (sig.get("temperature_slope") if isinstance(sig, dict) else getattr(sig, "temperature_slope", None))
+        if slope is None or i >= len(slope) or not math.isfinite(float(slope[i])):
+            return None
+        return float(slope[i])
+
+    def _shape_change_std(self) -> np.ndarray | None:
+        """1σ per mode of (averaged shape − baseline shape) per station for a healthy structure."""
+        bl = self.baseline
+        if not bl.curvature_shape_std or len(bl.curvature_shape_std) != self.n_modes:
+            return None
+        a = 1.0 / self.config.curvature_memory_windows
+        r = min(max(bl.curvature_index_rho, 0.0), 0.95)
+        ewma = a / (2 - a) * (1 + r * (1 - a)) / (1 - r * (1 - a))
+        n_eff = max(1.0, bl.curvature_windows * (1 - r) / (1 + r))
+        std = np.maximum(np.asarray(bl.curvature_shape_std), self.config.curvature_min_std)
+        return std * math.sqrt(ewma + 1.0 / n_eff)
+
+    def _locate(self, delta: np.ndarray | None, dsd: np.ndarray | None) -> DamageLocation | None:
+        """Model-assisted location of the present change (EWMA of the charts) against the signatures."""
+        if self.signatures is None or not self._charts:
+            return None
+        bl = self.baseline
+        shift = np.zeros(self.n_modes)
+        std = np.full(self.n_modes, np.inf)
+        for i, (ch, m) in enumerate(zip(self._charts, bl.modes)):
+            if ch.state.n > 0 and m.windows >= self.config.baseline_min_windows:
+                shift[i] = ch.state.ewma * m.sigma_rel
+                std[i] = ch.sigma() * m.sigma_rel
+        if not np.any(np.isfinite(std)):
+            return None
+        try:
+            return locate_damage(shift, std, self.signatures, shape_change=None if dsd is None else delta,
+                                 shape_std=dsd, length=self.length)
+        except ValueError:
+            return None
+
+    def _flags(self, change: CurvatureChange | None, scores: list, ci_score: float | None, location: DamageLocation | None = None) -> list[dict]:
         out = []
-        where = {"eta_m": None, "third": None} if change is None else {"eta_m": change.eta_m, "third": change.third}
+        if location is not None:
+            where = {"eta_m": location.eta_m, "third": location.third, "damage_kind": location.kind_best,
+                     "location_match": round(location.best_match, 3), "located_by": "signatures"}
+        else:
+            where = {"eta_m": None, "third": None} if change is None else {"eta_m": change.eta_m, "third": change.third, "located_by": "curvature"}
         for i, ch in enumerate(self._charts):
             st = ch.state
             if st.level == "alarm":
@@ -407,7 +501,7 @@ class ModalMonitor:
             out.append({
                 "kind": "curvature", "mode": None, "unit": None, "level": "alarm",
                 "sigma": None if ci_score is None else round(float(ci_score), 2),
-                "percent": round(100 * (change.total - bl.curvature_index_mean) / max(bl.curvature_index_mean, 1e-12), 2),
+                "percent": round(100 * change.total, 2),
                 "since_s": st.since_s, **where,
             })
         return out
@@ -428,22 +522,41 @@ class ModalMonitor:
             half = 0.5 * c.youngs_temperature_coefficient
             prior = 0.0 if gravity else half * c.slope_prior_fraction
             prior_std = abs(half) * c.slope_prior_std_fraction * (0.3 if gravity else 1.0) or 1e-9
+            model_slope = self._model_slope(i)
+            if model_slope is not None:  # the FE model's d ln f/dT: a tight prior (E(T) is known, the rest is not)
+                prior, prior_std = model_slope, max(0.2 * abs(model_slope), 0.05 * abs(half), 1e-9)
             a, slope, tm, sig = fit_temperature_model(f / fref0 - 1, T, prior, prior_std)
             res = f / (fref0 * (1 + a)) - 1 - slope * (T - tm)
             modes.append(BaselineMode(i + 1, self.units[i], fref0 * (1 + a), tm, slope, max(sig, c.min_sigma_rel), _lag1(res), len(sel)))
         base_shapes = self._shapes(self._cross_sum)
         if base_shapes is None:
             return None
-        warm = int(c.curvature_memory_windows)
-        totals = []
-        for G in self._ci_hist[warm:]:
-            sh = self._shapes(G)
-            if sh is not None:
-                totals.append(curvature_change(sh, base_shapes, self.eta, self.length).total)
-        totals = np.array(totals) if len(totals) >= 3 else np.array([0.0, 0.0, 0.0])
-        mean = float(totals.mean())
-        std = max(float(totals.std(ddof=1)), 0.5 * mean, 1e-6)
-        return Baseline(tuple(modes), base_shapes, mean, std, _lag1(totals), float(self._first_trusted), float(t_end))
+        # the baseline shape is the normalised sum of n windows' cross spectra: its scatter comes
+        # from a delete-one jackknife over those windows, expressed per window (× n)
+        hist = list(self._ci_hist)
+        n = len(hist)
+        shape_std, rho = (), 0.0
+        if n >= 4:
+            total = np.sum(hist, axis=0)
+            jack = []
+            for G in hist:
+                sh = self._shapes(total - G)
+                if sh is None:
+                    jack = []
+                    break
+                sign = np.sign(np.sum(sh * base_shapes, axis=1, keepdims=True))
+                sign[sign == 0] = 1
+                jack.append(sh * sign)
+            if jack:
+                J = np.array(jack)  # (n, modes, η)
+                var_mean = (n - 1) / n * np.sum((J - J.mean(axis=0)) ** 2, axis=0)  # variance of the n-window shape
+                shape_std = tuple(float(x) for x in np.sqrt(n * np.mean(var_mean, axis=1)))
+                x = (J - J.mean(axis=0)).reshape(n, -1)  # influence of each window (sign flipped)
+                den = float(np.sum(x[:-1] ** 2))
+                rho = float(np.clip(np.sum(x[:-1] * x[1:]) / den, 0.0, 0.95)) if den > 0 else 0.0
+        # Q = mean (Δ/σ)² is ~χ²_p/p; p: the shape of a mode spans Γ − 1 directions once normalised
+        p = max(1, self.n_modes * min(self.gamma - 1, self.eta.size))
+        return Baseline(tuple(modes), base_shapes, 1.0, math.sqrt(2.0 / p), rho, float(self._first_trusted), float(t_end), shape_std, n)
 
     # -- persistence -----------------------------------------------------------------------
     def state_dict(self) -> dict:
@@ -455,6 +568,7 @@ class ModalMonitor:
             "baseline": None if self.baseline is None else self.baseline.to_dict(),
             "records": [vars(r) for r in self._records], "first_trusted": self._first_trusted,
             "cross": cx(self._cross), "cross_sum": cx(self._cross_sum), "ci_hist": [cx(G) for G in self._ci_hist],
+            "power": None if self._power is None else self._power.tolist(),
             "charts": [ch.state_dict() for ch in self._charts],
             "ci_chart": None if self._ci_chart is None else self._ci_chart.state_dict(),
         }
@@ -472,6 +586,7 @@ class ModalMonitor:
             m._first_trusted = d["first_trusted"]
             m._cross, m._cross_sum = ux(d["cross"]), ux(d["cross_sum"])
             m._ci_hist = [ux(g) for g in d["ci_hist"]]
+            m._power = None if d.get("power") is None else np.asarray(d["power"], dtype=float)
             m._charts = [EwmaChart.from_state_dict(c) for c in d["charts"]]
             m._ci_chart = None if d["ci_chart"] is None else EwmaChart.from_state_dict(d["ci_chart"])
         except KeyError as exc:

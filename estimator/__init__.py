@@ -5,6 +5,7 @@ Lower layer: knows nothing of the service or the web.
 
 from ._beam import BeamModel, NaturalModes, NodalShapes, assemble_beam, natural_modes
 from ._calibration import TABLE1_HZ, CalibrationParameter, CalibrationResult, calibrate, modal_frequencies
+from ._damage_signatures import DamageSignatures, damage_signatures
 from ._filter import (
     EstimateResult,
     Events,
@@ -48,6 +49,7 @@ __all__ = [
     "BeamModel",
     "CalibrationParameter",
     "CalibrationResult",
+    "DamageSignatures",
     "NaturalModes",
     "NodalShapes",
     "PointMass",
@@ -58,6 +60,7 @@ __all__ = [
     "UnitDeformations",
     "assemble_beam",
     "calibrate",
+    "damage_signatures",
     "load_rig",
     "modal_frequencies",
     "natural_modes",

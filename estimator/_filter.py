@@ -60,8 +60,15 @@ class FilterConfig(BaseModel):
     accel_noise_floor: float = Field(0.005, ge=0, description="m/s²")
     gyro_noise_floor: float = Field(3e-4, ge=0, description="rad/s")
     q_b: float = Field(1e-8, ge=0, description="model error of ḃ (truncated modes), 1/s")
-    q_v: float = Field(1e-4, ge=0, description="model error of b̈ (accelerometers), 1/s³")
+    q_v: float | None = Field(
+        None, ge=0,
+        description="model error of b̈ (accelerometers), 1/s³; None: 1e-4 with strain gauges, 1e-3 without "
+        "(nothing then corrects b̈ at 200 Hz, and with 1e-4 the NEES of φ shows the filter overconfident by ~2)",
+    )
     q_beta: float = Field(1e-11, ge=0, description="random walk of the gyro bias at D, rad²/s³")
+    q_beta_peripheral: float = Field(
+        5e-11, ge=0, description="random walk of the peripheral gyro biases, rad²/s³ (≈ 2σ²/τ of a 1e-4 rad/s, 300 s wander)"
+    )
     q_rigid: float = Field(1e-4, ge=0, description="model error of the bearing's acceleration, m²/s³")
     q_null: float = Field(1e-2, ge=0, description="random walk of unit deformations no sensor sees, 1/s")
     tof_model_std: float = Field(0.002, ge=0, description="ToF model error (higher modes, beam surface), m")
@@ -138,13 +145,15 @@ class ImmsModel:
 
     @property
     def state_size(self) -> int:
-        return int(state_size(self.kind, self.gamma))
+        return int(state_size(self.kind, self.gamma, len(self.selection.imus)))
 
     @property
     def state_names(self) -> list[str]:
         names = ["d", "h", "d_rate", "h_rate", "phi"] + [f"b{k + 1}" for k in range(self.gamma)]
         if self.kind == KIND_ACC:
             names += [f"v{k + 1}" for k in range(self.gamma)]
+        else:
+            names += [f"gyro_bias_{name}" for name in self.selection.imus]
         return names + ["gyro_bias_D"]
 
     @property
@@ -422,9 +431,9 @@ class ImmsFilter:
         params.update(
             gravity=m.rig.gravity, reflector_distance=m.rig.reflector_distance, gate=cfg.gate,
             stale_after=cfg.stale_after_s, sigma_f_d_x=noise_D[0], sigma_f_d_y=noise_D[1], sigma_omega_d=noise_D[2],
-            q_b=cfg.q_b, q_v=cfg.q_v, q_beta=cfg.q_beta, q_rigid=cfg.q_rigid, bearing_var=bearing_std**2,
+            q_b=cfg.q_b, q_v=cfg.q_v if cfg.q_v is not None else (1e-4 if m.selection.gauges else 1e-3), q_beta=cfg.q_beta, q_rigid=cfg.q_rigid, bearing_var=bearing_std**2,
             pseudo_h_var=cfg.pseudo_h_std**2, pseudo_h_rate_var=cfg.pseudo_h_rate_std**2, max_step=cfg.max_step_s,
-            q_null=cfg.q_null,
+            q_null=cfg.q_null, q_beta_peripheral=cfg.q_beta_peripheral,
         )
         gamma = m.gamma
         empty = np.zeros((0, gamma))

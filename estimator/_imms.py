@@ -4,9 +4,10 @@ Everything here is compiled with numba and works on plain arrays; ``_filter.py``
 Python-facing class. Frames and signs follow the recording contract (see planar-imms.md).
 
 State layout (``x``)
-    gyro: [d, h, ḋ, ḣ, φ, b_1..b_Γ, β_D]
+    gyro: [d, h, ḋ, ḣ, φ, b_1..b_Γ, β_1..β_ν, β_D]
     acc:  [d, h, ḋ, ḣ, φ, b_1..b_Γ, v_1..v_Γ, β_D]
-β_D is the bias of the gyroscope at D (a random walk). For accelerometers the velocity state is
+β_D is the bias of the gyroscope at D and β_j those of the peripheral gyroscopes (random walks:
+what the rest phase cannot calibrate, the wander of low-cost MEMS, goes straight into ḃ). For accelerometers the velocity state is
 v = ḃ + c·ω_D with c = S⁺η: Eq. (8) contains ω̇·η_j with ω̇ the numerical derivative of ω_D,
 and integrating that term once gives exactly c·(ω_D,k − ω_D,k−1). Carrying v keeps the
 differentiated gyro noise what it is — a difference of two samples, not white noise of
@@ -50,14 +51,16 @@ EVENT_IMU_D, EVENT_IMU_PERIPHERAL, EVENT_TOF, EVENT_STRAIN, EVENT_BEARING = 0, 1
 FLOAT_PARAMS = (
     "gravity", "reflector_distance", "gate", "stale_after", "sigma_f_d_x", "sigma_f_d_y", "sigma_omega_d",
     "q_b", "q_v", "q_beta", "q_rigid", "bearing_var", "pseudo_h_var", "pseudo_h_rate_var", "max_step", "q_null",
+    "q_beta_peripheral",
 )
 INT_PARAMS = ("kind", "gamma", "nu", "n_tof", "n_gauge")
-P_G, P_DREF, P_GATE, P_STALE, P_SFX, P_SFY, P_SWD, P_QB, P_QV, P_QBETA, P_QRIGID, P_RBEAR, P_RH, P_RHD, P_MAXSTEP, P_QNULL = range(16)
+(P_G, P_DREF, P_GATE, P_STALE, P_SFX, P_SFY, P_SWD, P_QB, P_QV, P_QBETA, P_QRIGID, P_RBEAR, P_RH, P_RHD, P_MAXSTEP, P_QNULL,
+ P_QBETAJ) = range(17)
 
 
 @numba.njit(cache=True)
-def state_size(kind: int, gamma: int) -> int:
-    return 5 + gamma + 1 if kind == KIND_GYRO else 5 + 2 * gamma + 1
+def state_size(kind: int, gamma: int, nu: int) -> int:
+    return 5 + gamma + nu + 1 if kind == KIND_GYRO else 5 + 2 * gamma + 1
 
 
 @numba.njit(cache=True)
@@ -121,20 +124,23 @@ def propagate_into(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_a
     Gm[4, 2] = dt
     if kind == KIND_GYRO:
         # Eq. (9): ω_j − ω_D = Σ ḃ s'_χ(η_j), solved in the least-squares sense.
+        ibj = 5 + gamma
         for k in range(gamma):
             bdot = 0.0
             row_sum = 0.0
             for j in range(nu):
                 if active[j]:
-                    bdot += Pinv[k, j] * (omegaj[j] - omega)
+                    bdot += Pinv[k, j] * (omegaj[j] - x[ibj + j] - omega)
                 row_sum += Pinv[k, j]
                 Gm[5 + k, 3 + j] = dt * Pinv[k, j]
+                F[5 + k, ibj + j] = -dt * Pinv[k, j]
             xn[5 + k] = x[5 + k] + dt * bdot
             F[5 + k, ib] = dt * row_sum
             Gm[5 + k, 2] = -dt * row_sum
             Q[5 + k, 5 + k] += params[P_QB] * dt
         for j in range(nu):
             sig[3 + j] = sig_wj[j]
+            Q[ibj + j, ibj + j] += params[P_QBETAJ] * dt
     else:
         # Eq. (8) per sensor: Δ̈_j = f_j,ζ − f_D,ζ − ω̇ η_j + ω² Δ_j with f_j,ζ = sin α_j f_j,x + cos α_j f_j,y.
         iv = 5 + gamma

@@ -1,4 +1,4 @@
-"""The ``shm`` command line: simulate, inspect, modes, demo."""
+"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, study, serve."""
 
 from __future__ import annotations
 
@@ -183,6 +183,111 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- shm study ---------------------------------------------------------------------------
+def _int_list(text: str, option: str) -> tuple[int, ...]:
+    """'1,2,3' or '4-13' (or a mix) → integers."""
+    values: list[int] = []
+    try:
+        for part in text.split(","):
+            part = part.strip()
+            if "-" in part[1:]:
+                lo, hi = part.split("-", 1)
+                values.extend(range(int(lo), int(hi) + 1))
+            elif part:
+                values.append(int(part))
+    except ValueError:
+        raise CliError(f"{option} {text!r} must list integers, e.g. 1,2,3 or 4-13") from None
+    return tuple(values)
+
+
+def _cmd_study(args: argparse.Namespace) -> int:
+    from pydantic import ValidationError
+
+    from .study import DesignTargets, StudyError, StudySettings, run_command
+
+    fields = {
+        "seeds": _int_list(args.seeds, "--seeds") if args.seeds else None,
+        "duration": args.duration, "rest": args.rest, "ideal": args.ideal or None, "workers": args.workers,
+        "tofs": _int_list(args.tofs, "--tofs") if args.tofs else None,
+    }
+    fields = {k: v for k, v in fields.items() if v is not None}
+    targets = None
+    try:
+        settings = StudySettings.quick(**fields) if args.quick else StudySettings(**fields)
+        if args.target_phi_deg is not None or args.target_e_m is not None:
+            targets = DesignTargets(phi_deg=args.target_phi_deg, e_m=args.target_e_m)
+    except ValidationError as exc:
+        raise CliError(_pydantic_message(exc)) from None
+    try:
+        return run_command(settings, args.out, targets=targets, keep_recordings=args.keep_recordings)
+    except StudyError as exc:
+        raise CliError(str(exc)) from None
+
+
+# -- shm analyze -------------------------------------------------------------------------
+def _analysis_of(path: str, args: argparse.Namespace, baseline=None):
+    from analytics import analyze
+
+    from .estimation import deformation_record
+    from .recording import read_recording
+
+    rec = read_recording(path, rig=args.rig)
+    model_args = dict(peripheral=args.peripheral, modes=args.modes, imus=_count_or_names(args.imus, 4),
+                      tofs=_count_or_names(args.tofs, 4), gauges=_count_or_names(args.gauges, 4))
+    try:
+        data = deformation_record(rec, model_args=model_args)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    from estimator import damage_signatures
+
+    # FE-predicted damage signatures of the rig: the model-assisted location of flags
+    signatures = damage_signatures(rec.rig, data.stations, gamma=data.b.shape[1])
+    result = analyze(
+        data.times, data.b, data.units.curvature(data.stations), data.stations,
+        temperature=data.temperature, bearing=data.bearing, expected_hz=data.units.frequencies_hz,
+        baseline=baseline, beam_length=rec.rig.beam.length, signatures=signatures,
+    )
+    return rec, data, result
+
+
+def _cmd_analyze(args: argparse.Namespace) -> int:
+    baseline = None
+    if args.baseline:
+        _, _, healthy = _analysis_of(args.baseline, args)
+        if healthy.baseline is None:
+            raise CliError(f"{args.baseline}: too short to learn a baseline from")
+        baseline = healthy.baseline
+    rec, data, result = _analysis_of(args.recording, args, baseline)
+    output = result.as_dict()
+    if data.truth_metadata and "eigenfrequencies_hz" in data.truth_metadata:
+        exact = json.loads(data.truth_metadata["eigenfrequencies_hz"])
+        output["truth"] = {
+            "eigenfrequencies_hz": exact,
+            "relative_error": {
+                str(m["mode"]): (m["frequency_hz"] / exact[m["mode"] - 1] - 1 if m.get("frequency_hz") else None)
+                for m in output["modes"] if m.get("mode") and m["mode"] <= len(exact)
+            },
+            **({"damping_ratios": json.loads(data.truth_metadata["modal_damping_ratios"])}
+               if "modal_damping_ratios" in data.truth_metadata else {}),
+        }
+    if args.json:
+        _print_json(output)
+    else:
+        print(f"{rec.path}: {data.times[-1] - data.times[0]:.0f} s of b1..b{data.b.shape[1]}"
+              f"{' (estimated here)' if data.estimated_here else ''}, {len(output['windows'])} windows")
+        print(f"{'unit':>4} {'mode':>4} {'f [Hz]':>9} {'± [Hz]':>8} {'zeta [%]':>9}")
+        for m in output["modes"]:
+            f = m.get("frequency_hz")
+            z = m.get("damping_ratio")
+            print(f"{m['unit']:4d} {m.get('mode') or '-':>4} {f if f is None else round(f, 4)!s:>9} "
+                  f"{m.get('frequency_std_hz') if m.get('frequency_std_hz') is None else round(m['frequency_std_hz'], 4)!s:>8} "
+                  f"{'-' if z is None else round(100 * z, 3)!s:>9}")
+        print(f"flags: {len(output['flags'])}")
+        for flag in output["flags"]:
+            print("  " + ", ".join(f"{k}={v}" for k, v in flag.items()))
+    return 0
+
+
 # -- shm inspect -------------------------------------------------------------------------
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from .recording import format_inspection, inspect_recording
@@ -193,21 +298,6 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     else:
         print(format_inspection(report))
     return 0
-
-
-# -- shm demo ----------------------------------------------------------------------------
-def _cmd_demo(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    print("== simulating the benchmark rig (paper excitation) ==")
-    sim_args = argparse.Namespace(
-        duration=args.duration, seed=1, excitation="paper", layout="benchmark", ideal=False, damage=None,
-        damage_at=None, temperature_swing=0.0, temperature_mean=20.0, out=str(out), json=False,
-    )
-    _cmd_simulate(sim_args)
-    print("\n== recording ==")
-    _cmd_inspect(argparse.Namespace(recording=str(out), rig=None, json=False))
-    print("\n== model eigenfrequencies (nominal rig.json) ==")
-    return _cmd_modes(argparse.Namespace(rig=None, layout="benchmark", temperature=None, count=6, json=False))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -249,16 +339,42 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_estimate)
 
+    p = sub.add_parser("study", help="the paper's sensor-configuration study; design mode with --target-*")
+    p.add_argument("--out", default="study", help="output folder (default study/)")
+    p.add_argument("--seeds", default=None, help="seeds, one simulated recording each (default 1,2,3)")
+    p.add_argument("--duration", type=float, default=None, help="recording length, s (default 300)")
+    p.add_argument("--rest", type=float, default=None, help="initial rest phase, s (default 60)")
+    p.add_argument("--tofs", default=None, help="ν_ρ swept, e.g. 4-13 (default)")
+    p.add_argument("--ideal", action="store_true", help="idealised plant (the drift without gauges disappears)")
+    p.add_argument("--quick", action="store_true", help="small study: 2 seeds of 240 s, ν_ρ = 4, 5, ν_ε = 0, 2, 4")
+    p.add_argument("--workers", type=int, default=None, help="worker processes (default: the cores)")
+    p.add_argument("--keep-recordings", action="store_true", help="keep the simulated recordings in OUT/recordings/")
+    p.add_argument("--target-phi-deg", type=float, default=None, metavar="X", help="design mode: RMSE target of φ, degrees")
+    p.add_argument("--target-e-m", type=float, default=None, metavar="Y", help="design mode: RMSE target of e, m")
+    p.set_defaults(func=_cmd_study)
+
+    p = sub.add_parser("analyze", help="modal analytics of the deformation variables (runs the estimator on raw recordings)")
+    p.add_argument("recording", help="an estimates recording (shm estimate --out) or a raw recording")
+    p.add_argument("--baseline", help="a healthy recording to compare against")
+    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
+    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
+    p.add_argument("--modes", type=int, default=4, choices=range(1, 6), metavar="Γ")
+    p.add_argument("--imus", default=None)
+    p.add_argument("--tofs", default=None)
+    p.add_argument("--gauges", default=None)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_analyze)
+
     p = sub.add_parser("inspect", help="topics, counts, rates, gaps and problems of a recording")
     p.add_argument("recording")
     p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_inspect)
 
-    p = sub.add_parser("demo", help="the main job on the embedded defaults")
-    p.add_argument("--out", default="var/demo.mcap")
-    p.add_argument("--duration", type=float, default=300.0)
-    p.set_defaults(func=_cmd_demo)
+    from .service._cli import add_serve_parser  # shm serve (issue 6)
+
+    add_serve_parser(sub)
+
     return parser
 
 

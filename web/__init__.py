@@ -1,0 +1,23 @@
+"""The live SHM dashboard (viser): deformed beam in 3D, spectra, trends, alarms and status.
+
+The service constructs one :class:`Dashboard` and feeds it (``push_estimate``, ``push_spectra``,
+``push_window``, ``push_alarm``); the dashboard reads the rest through a ``DashboardService``
+(duck typed: ``status``, ``trends``, ``alarms``, ``acknowledge``, ``set_paused``). Upper layer:
+imports ``estimator``-level objects only through the arguments it is given, never the service.
+"""
+
+from ._dashboard import SENSOR_STATES, Dashboard
+from ._geometry import BeamState, centreline, parse_state, ribbon, ribbon_faces, tangent_angle, to_world, tof_rays
+
+__all__ = [
+    "BeamState",
+    "Dashboard",
+    "SENSOR_STATES",
+    "centreline",
+    "parse_state",
+    "ribbon",
+    "ribbon_faces",
+    "tangent_angle",
+    "to_world",
+    "tof_rays",
+]

@@ -6,6 +6,7 @@ JSON messages, a ``rig.json`` attachment and optional ``truth`` metadata.
 ``format_inspection`` summarise a file for ``shm inspect``.
 """
 
+from ._follow import FollowBlock, RecordingFollower
 from ._inspect import format_inspection, inspect_recording
 from ._reader import Channel, ReadReport, Recording, RecordingError, TopicReport, read_recording
 from ._schemas import ESTIMATE_TOPIC, PAYLOAD_FIELDS, SCHEMAS, TRUTH_TOPIC, classify_topic
@@ -17,9 +18,11 @@ __all__ = [
     "SCHEMAS",
     "TRUTH_TOPIC",
     "Channel",
+    "FollowBlock",
     "ReadReport",
     "Recording",
     "RecordingError",
+    "RecordingFollower",
     "RecordingWriter",
     "TopicReport",
     "classify_topic",

@@ -24,7 +24,9 @@ class SensorErrors(_Closed):
     accel_bias: float = Field(0.03, ge=0, description="constant bias per axis, m/s²")
     gyro_bias: float = Field(5e-3, ge=0, description="constant bias per axis, rad/s (≈0.3 °/s)")
     accel_bias_instability: float = Field(2e-3, ge=0, description="wandering bias (Gauss–Markov), m/s²")
-    gyro_bias_instability: float = Field(3e-5, ge=0, description="wandering bias (Gauss–Markov), rad/s")
+    gyro_bias_instability: float = Field(
+        1e-4, ge=0, description="wandering bias (Gauss–Markov), rad/s (≈20 °/h, low-cost MEMS of the MPU-6050 class)"
+    )
     bias_correlation_time: float = Field(300.0, gt=0, description="correlation time of the wander, s")
     accel_scale_factor: float = Field(0.01, ge=0, description="scale-factor error, relative (realistic only)")
     gyro_scale_factor: float = Field(0.01, ge=0, description="scale-factor error, relative (realistic only)")

@@ -45,7 +45,7 @@ def _model_params(model, kind):
     active = np.ones(len(model.imu_eta), dtype=np.bool_)
     Pinv, null = _least_squares_map(S1 if kind == KIND_GYRO else S, active, gamma)
     c = Pinv @ model.imu_eta
-    params = np.zeros(16)
+    params = np.zeros(17)
     params[0] = model.rig.gravity
     params[14] = 1.0
     nu = len(model.imu_eta)

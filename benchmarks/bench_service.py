@@ -1,0 +1,100 @@
+"""Bars of issue 6 (``shm serve``): end-to-end replay speed of a one-hour recording and flat
+memory over a long simulated run at maximum speed.
+
+Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_service [--replay FILE] [--hours H] [--skip-replay] [--skip-sim]
+(``main()`` is the entry for ``python -m benchmarks``.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+
+def bench_replay(recording: Path) -> dict:
+    """``shm serve --source replay:FILE --speed max --no-dashboard`` as a subprocess, timed."""
+    if not recording.exists():
+        print(f"simulating {recording} (one hour, ambient) ...", flush=True)
+        subprocess.run([sys.executable, "-m", "shm_service.cli", "simulate", "--duration", "3600", "--excitation", "ambient",
+                        "--out", str(recording)], check=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--source", f"replay:{recording}", "--speed", "max",
+               "--no-dashboard", "--port", "0", "--db", f"{tmp}/shm.sqlite", "--recordings", f"{tmp}/rec", "--json"]
+        started = time.perf_counter()
+        out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+        wall = time.perf_counter() - started
+    summary = json.loads(out.strip().splitlines()[-1])
+    result = {"wall_s": round(wall, 1), "messages": summary["messages"], "estimates": summary["estimates"],
+              "windows": summary["windows"], "trend_rows": summary["trend_rows"],
+              "realtime_factor": round(summary["processed_data_s"] / wall, 1)}
+    print(f"[replay] {recording}: {result}", flush=True)
+    return result
+
+
+def bench_memory(hours: float, sample_s: float = 30.0) -> dict:
+    """The sim source at max speed for ``hours`` of simulated time, in process; RSS sampled."""
+    import psutil
+
+    from shm_service.service._config import load_settings
+    from shm_service.service._service import MonitoringService
+
+    proc = psutil.Process()
+    with tempfile.TemporaryDirectory() as tmp:
+        settings = load_settings(None, {
+            "db": f"{tmp}/shm.sqlite", "source": {"spec": "sim", "speed": "max"},
+            "sim": {"duration_s": hours * 3600.0}, "dashboard": {"enabled": False},
+            "archive": {"directory": f"{tmp}/rec"},
+        })
+        service = MonitoringService(settings, environ={})
+        samples: list[tuple[float, float, float]] = []
+        started = time.perf_counter()
+        service.start()
+        done = threading.Event()
+
+        def sample() -> None:
+            while not done.wait(sample_s):
+                st = service.pipeline.status()
+                data_h = (st["processed_data_s"] or 0.0) / 3600
+                rss = proc.memory_info().rss / 2**20
+                samples.append((round(time.perf_counter() - started, 1), round(data_h, 3), round(rss, 1)))
+                print(f"[memory] wall {samples[-1][0]:8.1f} s  data {data_h:7.3f} h  RSS {rss:7.1f} MiB", flush=True)
+
+        thread = threading.Thread(target=sample, daemon=True)
+        thread.start()
+        service.wait()
+        done.set()
+        st = service.status()
+        service.stop(drain_s=0)
+    wall = time.perf_counter() - started
+    rss = [s[2] for s in samples]
+    later = rss[len(rss) // 4:] or rss
+    result = {"simulated_h": hours, "wall_s": round(wall, 1), "samples": samples,
+              "rss_first_mib": rss[0] if rss else None, "rss_max_mib": max(rss) if rss else None,
+              "rss_growth_after_first_quarter_mib": round(max(later) - min(later), 1) if later else None,
+              "windows": st["pipeline"]["windows"], "trend_rows": st["storage"]["trend_rows"]}
+    print(f"[memory] {json.dumps({k: v for k, v in result.items() if k != 'samples'})}", flush=True)
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--replay", default="/tmp/hour.mcap", help="one-hour recording (simulated if missing)")
+    p.add_argument("--hours", type=float, default=24.0, help="simulated hours of the memory run")
+    p.add_argument("--skip-replay", action="store_true")
+    p.add_argument("--skip-sim", action="store_true")
+    args = p.parse_args(argv)
+    if not args.skip_replay:
+        bench_replay(Path(args.replay))
+    if not args.skip_sim:
+        bench_memory(args.hours)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,311 @@
+"""The HTTP API (FastAPI), built by ``create_app(service)``. Handlers are thin: they validate
+parameters and call the service (storage, analytics). Errors are HTTPExceptions with a detail.
+
+Authentication: ``Authorization: Bearer <token>`` (or ``X-SHM-Token``). Ingest, acknowledge
+and baseline changes always need the token (403 when none is configured, 401 when missing or
+wrong); on a non-loopback address every request needs it. Request bodies are size-limited
+(413).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from datetime import datetime
+from typing import Any, Literal, Protocol
+
+from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
+from fastapi.responses import JSONResponse, PlainTextResponse, Response
+
+from ._ingest import IngestError, parse_body
+
+__all__ = ["ApiService", "create_app"]
+
+
+class ApiService(Protocol):
+    """What the API needs from the service (``MonitoringService`` implements it)."""
+
+    token: str | None
+
+    def check_token(self, token: str | None) -> None: ...
+    def status(self) -> dict[str, Any]: ...
+    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+               limit: int = 100_000) -> list[dict[str, Any]]: ...
+    def alarms(self, state: str | None = None) -> list[dict[str, Any]]: ...
+    def acknowledge(self, alarm_id: int, token: str, by: str = "api") -> dict[str, Any]: ...
+    def request_baseline(self) -> dict[str, Any]: ...
+    def spectra(self) -> dict[str, Any] | None: ...
+    def ingest(self, document: Any) -> dict[str, Any] | None: ...
+
+
+_TREND_FIELDS = ("source", "window_start_s", "window_end_s", "mode", "unit", "kind", "frequency_hz", "damping_ratio",
+                 "amplitude", "confidence", "temperature_c", "curvature_index", "score_sigma", "level")
+
+
+class _BodyLimit:
+    """ASGI middleware: refuses bodies over the limit (413) by Content-Length and while streaming."""
+
+    def __init__(self, app: Any, default: int, ingest: int) -> None:
+        self.app = app
+        self.default = default
+        self.ingest = ingest
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        limit = self.ingest if scope.get("path") == "/api/ingest" else self.default
+        for name, value in scope.get("headers", []):
+            if name == b"content-length":
+                try:
+                    length = int(value)
+                except ValueError:
+                    await _reject(send, 400, "Content-Length is not a number")
+                    return
+                if length > limit:
+                    await _reject(send, 413, f"request body of {length} bytes exceeds the limit of {limit} bytes")
+                    return
+        seen = 0
+        sent_error = False
+
+        async def limited() -> dict:
+            nonlocal seen, sent_error
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > limit:
+                    raise _TooLarge()
+            return message
+
+        try:
+            await self.app(scope, limited, send)
+        except _TooLarge:
+            if not sent_error:
+                sent_error = True
+                await _reject(send, 413, f"request body exceeds the limit of {limit} bytes")
+
+
+class _TooLarge(Exception):
+    pass
+
+
+async def _reject(send: Any, status: int, detail: str) -> None:
+    import json
+
+    body = json.dumps({"detail": detail}).encode()
+    await send({"type": "http.response.start", "status": status,
+                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+    await send({"type": "http.response.body", "body": body})
+
+
+def _token_of(request: Request) -> str | None:
+    auth = request.headers.get("authorization")
+    if auth:
+        scheme, _, value = auth.partition(" ")
+        if scheme.lower() == "bearer" and value.strip():
+            return value.strip()
+    return request.headers.get("x-shm-token") or None
+
+
+def _parse_time(name: str, value: str | None) -> float | None:
+    if value is None or value == "":
+        return None
+    try:
+        x = float(value)
+    except ValueError:
+        try:
+            dt = datetime.fromisoformat(value.replace("Z", "+00:00"))
+        except ValueError:
+            raise HTTPException(422, f"'{name}' must be UNIX seconds or an ISO 8601 time, got {value[:40]!r}") from None
+        if dt.tzinfo is None:
+            raise HTTPException(422, f"'{name}' needs a time zone (e.g. 2026-01-01T00:00:00Z)")
+        x = dt.timestamp()
+    if not math.isfinite(x) or not -1e11 < x < 1e11:
+        raise HTTPException(422, f"'{name}' = {value[:40]!r} is out of range")
+    return x
+
+
+def _json_safe(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    return value
+
+
+_AUTH_RESPONSES: dict[int | str, dict[str, Any]] = {
+    401: {"description": "missing or wrong token"},
+    403: {"description": "no token is configured: the action is disabled"},
+}
+
+
+def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: int = 64 * 1024,
+               max_ingest_bytes: int = 8 * 1024 * 1024) -> FastAPI:
+    """The API of ``service``. ``loopback=False`` requires the token for every request."""
+
+    def authorize(request: Request) -> None:
+        try:
+            service.check_token(_token_of(request))
+        except PermissionError as exc:
+            if service.token is None:
+                raise HTTPException(403, str(exc)) from None
+            raise HTTPException(401, str(exc), headers={"WWW-Authenticate": "Bearer"}) from None
+
+    def everyone(request: Request) -> None:
+        if not loopback:
+            authorize(request)
+
+    app = FastAPI(
+        title="shm serve",
+        version="0.1.0",
+        description="Structural health monitoring service: status, modal trends, alarms, spectra, ingest.",
+        dependencies=[Depends(everyone)],
+    )
+
+    @app.get("/healthz", summary="liveness", responses=_AUTH_RESPONSES)
+    def healthz() -> dict[str, Any]:
+        st = service.status()["service"]
+        return {"status": "ok" if st.get("pipeline_error") is None else "degraded", "uptime_s": st["uptime_s"]}
+
+    @app.get("/api/status", summary="sources, rates, latency, dropped and rejected samples, degraded sensors",
+             responses=_AUTH_RESPONSES)
+    def status() -> dict[str, Any]:
+        return _json_safe(service.status())
+
+    @app.get("/api/trends", summary="the modal trend export (one row per window and mode)",
+             responses={**_AUTH_RESPONSES, 200: {"content": {"application/json": {}, "text/csv": {}}}})
+    def trends(
+        from_: str | None = Query(None, alias="from", max_length=64, description="UNIX s or ISO 8601 (inclusive)"),
+        to: str | None = Query(None, max_length=64, description="UNIX s or ISO 8601 (exclusive)"),
+        mode: int | None = Query(None, ge=1, le=20, description="mode number (1-based)"),
+        source: str | None = Query(None, min_length=1, max_length=200, description="source id"),
+        format: Literal["json", "csv"] = Query("json", description="json or csv"),
+        limit: int = Query(100_000, ge=1, le=1_000_000, description="most rows returned"),
+    ) -> Any:
+        lo, hi = _parse_time("from", from_), _parse_time("to", to)
+        if lo is not None and hi is not None and lo > hi:
+            raise HTTPException(422, f"'from' ({lo}) is after 'to' ({hi})")
+        rows = service.trends(lo, hi, mode=mode, source=source, limit=limit)
+        if format == "csv":
+            buf = io.StringIO()
+            writer = csv.DictWriter(buf, fieldnames=_TREND_FIELDS, extrasaction="ignore", lineterminator="\n")
+            writer.writeheader()
+            writer.writerows(rows)
+            return Response(buf.getvalue(), media_type="text/csv",
+                            headers={"Content-Disposition": 'attachment; filename="trends.csv"'})
+        return {"rows": _json_safe(rows), "count": len(rows)}
+
+    @app.get("/api/alarms", summary="alarms, newest first", responses=_AUTH_RESPONSES)
+    def alarms(state: Literal["active", "cleared"] | None = Query(None, description="only alarms in this state")) -> dict[str, Any]:
+        items = service.alarms(state)
+        return {"alarms": _json_safe(items), "count": len(items)}
+
+    @app.post("/api/alarms/{alarm_id}/ack", summary="acknowledge an alarm (token required)",
+              responses={**_AUTH_RESPONSES, 404: {"description": "no such alarm"}})
+    def acknowledge(request: Request, alarm_id: int = Path(..., ge=1, le=2**62)) -> dict[str, Any]:
+        authorize(request)
+        try:
+            return _json_safe(service.acknowledge(alarm_id, _token_of(request) or "", by="api"))
+        except KeyError:
+            raise HTTPException(404, f"alarm {alarm_id} does not exist") from None
+        except PermissionError as exc:
+            raise HTTPException(401, str(exc)) from None
+
+    @app.get("/api/spectra/latest", summary="amplitude spectra of b of the latest window",
+             responses={**_AUTH_RESPONSES, 404: {"description": "no window analysed yet"}})
+    def spectra() -> dict[str, Any]:
+        spec = service.spectra()
+        if spec is None:
+            raise HTTPException(404, "no analysis window yet")
+        return _json_safe(spec)
+
+    @app.post("/api/baseline", summary="start learning a new baseline (token required)", status_code=202,
+              responses=_AUTH_RESPONSES)
+    def baseline(request: Request) -> dict[str, Any]:
+        authorize(request)
+        return service.request_baseline()
+
+    @app.post(
+        "/api/ingest", summary="ingest a batch of samples in the recording format (token required)",
+        responses={**_AUTH_RESPONSES, 400: {"description": "body is not a valid batch"}, 409: {"description": "source is not ingest"},
+                   413: {"description": "body too large"}, 503: {"description": "pipeline full, retry later"}},
+        openapi_extra={"requestBody": {"required": True, "content": {"application/json": {"schema": {
+            "type": "object", "required": ["messages"], "additionalProperties": False,
+            "properties": {"messages": {"type": "array", "items": {
+                "type": "object", "required": ["topic", "log_time_ns", "payload"],
+                "properties": {"topic": {"type": "string", "examples": ["/imu/D"]},
+                               "log_time_ns": {"type": "integer", "minimum": 0},
+                               "publish_time_ns": {"type": "integer", "minimum": 0},
+                               "payload": {"type": "object"}}}}}}}}}},
+    )
+    async def ingest(request: Request) -> Any:
+        authorize(request)
+        body = await request.body()
+        try:
+            document = parse_body(body)
+        except IngestError as exc:
+            raise HTTPException(400, str(exc)) from None
+        from starlette.concurrency import run_in_threadpool
+
+        try:
+            result = await run_in_threadpool(service.ingest, document)
+        except IngestError as exc:
+            raise HTTPException(400, str(exc)) from None
+        except LookupError as exc:
+            raise HTTPException(409, str(exc)) from None
+        if result is None:
+            return JSONResponse({"detail": "the pipeline is full; retry later (nothing of this request was taken)"},
+                                status_code=503, headers={"Retry-After": "1"})
+        return result
+
+    @app.get("/metrics", summary="Prometheus metrics (text format)", response_class=PlainTextResponse,
+             responses=_AUTH_RESPONSES)
+    def metrics() -> PlainTextResponse:
+        return PlainTextResponse(_metrics(service.status()), media_type="text/plain; version=0.0.4; charset=utf-8")
+
+    app.add_middleware(_BodyLimit, default=max_body_bytes, ingest=max_ingest_bytes)
+    return app
+
+
+def _label(value: Any) -> str:
+    return str(value).replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+
+
+def _metrics(st: dict[str, Any]) -> str:
+    lines: list[str] = []
+
+    def metric(name: str, kind: str, help_text: str, samples: list[tuple[dict[str, Any], Any]]) -> None:
+        lines.append(f"# HELP {name} {help_text}")
+        lines.append(f"# TYPE {name} {kind}")
+        for labels, value in samples:
+            if value is None:
+                continue
+            text = ",".join(f'{k}="{_label(v)}"' for k, v in labels.items())
+            lines.append(f"{name}{{{text}}} {float(value):.17g}" if text else f"{name} {float(value):.17g}")
+
+    p = st["pipeline"]
+    srcs = st["sources"]
+    metric("shm_uptime_seconds", "gauge", "seconds since the service started", [({}, st["service"]["uptime_s"])])
+    metric("shm_source_messages_total", "counter", "samples accepted from the source",
+           [({"source": s["id"], "kind": s["kind"]}, s["messages"]) for s in srcs])
+    metric("shm_source_rejected_total", "counter", "samples rejected by reason",
+           [({"source": s["id"], "reason": r}, n) for s in srcs for r, n in s["rejected_by_reason"].items()])
+    metric("shm_source_dropped_total", "counter", "samples dropped (late, or without the reference IMU)",
+           [({"source": s["id"]}, s["dropped"]) for s in srcs])
+    metric("shm_source_rate_hz", "gauge", "incoming samples per second", [({"source": s["id"]}, s["rate_hz"]) for s in srcs])
+    metric("shm_source_data_time_seconds", "gauge", "newest sample time (UNIX s)", [({"source": s["id"]}, s["data_time_s"]) for s in srcs])
+    metric("shm_pipeline_latency_seconds", "gauge", "time from a batch's arrival to its processing", [({}, p["pipeline_latency_s"])])
+    metric("shm_queue_depth", "gauge", "batches waiting in the pipeline queue", [({}, p["queue_depth"])])
+    metric("shm_estimates_total", "counter", "estimator outputs", [({}, p["estimates"])])
+    metric("shm_windows_total", "counter", "analysis windows processed", [({}, p["windows"])])
+    metric("shm_windows_skipped_total", "counter", "windows skipped for incomplete data", [({}, p["windows_skipped_incomplete"])])
+    metric("shm_sensor_degraded", "gauge", "1 when a sensor is degraded or silent",
+           [({"topic": t}, 0 if s == "ok" else 1) for t, s in st["sensors"].items()])
+    metric("shm_alarms_active", "gauge", "active alarms by level", [({"level": k}, v) for k, v in st["alarms"]["active"].items()])
+    metric("shm_notifications", "gauge", "notifications in the outbox by status",
+           [({"status": k}, v) for k, v in st["notifications"].items() if k in ("pending", "sent", "failed")])
+    metric("shm_trend_rows", "gauge", "trend rows stored", [({}, st["storage"]["trend_rows"])])
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,146 @@
+"""``shm serve``: the command-line entry (argument parser and handler)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import sys
+import threading
+import time
+from collections.abc import Mapping
+from typing import Any
+
+from ._config import SettingsError, load_settings, render_toml
+
+__all__ = ["add_serve_parser", "run_serve"]
+
+
+def add_serve_parser(sub: Any) -> argparse.ArgumentParser:
+    p = sub.add_parser("serve", help="run the continuous monitoring service (sources, trends, alarms, HTTP API)")
+    p.add_argument("--config", metavar="FILE", help="TOML configuration (see --print-config for every key and default)")
+    p.add_argument("--print-config", action="store_true", help="print the effective configuration as TOML and exit")
+    p.add_argument("--source", help="sim | replay:FILE.mcap | follow:FILE.mcap | ingest (default sim)")
+    p.add_argument("--speed", help="sim/replay pace: factor of real time or 'max' (default 1)")
+    p.add_argument("--keep-running", action="store_true", default=None, help="keep serving after a replay ends")
+    p.add_argument("--db", help="SQLite database (default ./var/shm.sqlite)")
+    p.add_argument("--host", help="API address (default 127.0.0.1; others need a token)")
+    p.add_argument("--port", type=int, help="API port (default 8600; 0 = a free port)")
+    p.add_argument("--dashboard-port", type=int, help="dashboard port (default 8080)")
+    p.add_argument("--no-dashboard", action="store_true", default=None, help="do not start the dashboard")
+    p.add_argument("--token-file", help="file with the API token (else env SHM_TOKEN)")
+    p.add_argument("--rig", help="rig description (.json/.toml) for ingest or to replace a recording's rig.json")
+    p.add_argument("--source-id", help="source id of the trend rows")
+    p.add_argument("--webhook", action="append", metavar="URL", help="webhook for alarm notifications (repeatable)")
+    p.add_argument("--recordings", metavar="DIR", help="directory of the rotating recordings (default var/recordings)")
+    p.add_argument("--no-archive", action="store_true", default=None, help="do not write recordings")
+    p.add_argument("--json", action="store_true", help="print the final summary as JSON")
+    p.set_defaults(func=run_serve)
+    return p
+
+
+def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    o: dict[str, Any] = {}
+
+    def put(path: str, value: Any) -> None:
+        if value is None:
+            return
+        node = o
+        *parents, leaf = path.split(".")
+        for key in parents:
+            node = node.setdefault(key, {})
+        node[leaf] = value
+
+    put("source.spec", args.source)
+    put("source.speed", args.speed)
+    put("source.keep_running", args.keep_running)
+    put("source.rig", args.rig)
+    put("source.id", args.source_id)
+    put("db", args.db)
+    put("server.host", args.host)
+    put("server.port", args.port)
+    put("server.token_file", args.token_file)
+    put("dashboard.port", args.dashboard_port)
+    put("dashboard.enabled", False if args.no_dashboard else None)
+    put("archive.directory", args.recordings)
+    put("archive.enabled", False if args.no_archive else None)
+    if args.webhook:
+        put("notify.webhooks", tuple(args.webhook))
+    return o
+
+
+def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
+    from ._api import create_app
+    from ._server import ApiServer
+    from ._service import MonitoringService, ServiceError
+
+    try:
+        settings = load_settings(args.config, overrides_from_args(args))
+    except SettingsError as exc:
+        print(f"shm serve: error: {exc}", file=sys.stderr)
+        return 2
+    if args.print_config:
+        print(render_toml(settings))
+        return 0
+    logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+                        stream=sys.stderr)
+    log = logging.getLogger("shm.serve")
+    try:
+        service = MonitoringService(settings, environ=environ)
+    except (ServiceError, SettingsError, OSError) as exc:
+        print(f"shm serve: error: {exc}", file=sys.stderr)
+        return 2
+    s = settings.server
+    app = create_app(service, loopback=s.loopback, max_body_bytes=s.max_body_bytes, max_ingest_bytes=s.max_ingest_bytes)
+    try:
+        api = ApiServer(app, s.host, s.port).start()
+    except (OSError, TimeoutError) as exc:
+        print(f"shm serve: error: HTTP API on {s.host}:{s.port}: {exc}", file=sys.stderr)
+        service.stop()
+        return 2
+    print(f"shm serve: API at {api.url} (docs {api.url}/docs); source {settings.source.spec} as '{service.source.id}'; "
+          f"db {settings.db}", flush=True)
+    if service.dashboard is not None:
+        print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: Any) -> None:
+        stop.set()
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, on_signal)
+        signal.signal(signal.SIGTERM, on_signal)
+    started = time.monotonic()
+    service.start()
+    code = 0
+    try:
+        while not stop.is_set():
+            if service.wait(0.2) and not settings.source.keep_running:
+                break
+    finally:
+        elapsed = time.monotonic() - started
+        if not service.done:
+            log.info("stopping")
+        status = service.status()
+        service.stop(drain_s=5.0 if service.done else 1.0)
+        api.stop()
+    p = status["pipeline"]
+    src = status["sources"][0]
+    if src["state"] == "failed" or status["service"]["pipeline_error"]:
+        code = 1
+    summary = {
+        "source": src["id"], "state": src["state"], "error": src["error"], "messages": src["messages"],
+        "rejected": src["rejected"], "dropped": src["dropped"], "estimates": p["estimates"], "windows": p["windows"],
+        "trend_rows": status["storage"]["trend_rows"], "processed_data_s": p["processed_data_s"],
+        "wall_s": round(elapsed, 2),
+        "realtime_factor": None if not p["processed_data_s"] else round(p["processed_data_s"] / max(elapsed, 1e-9), 1),
+        "active_alarms": status["alarms"]["active"], "problems": src["problems"][-5:],
+    }
+    if args.json:
+        print(json.dumps(summary), flush=True)
+    else:
+        print(f"shm serve: {summary['state']}: {summary['messages']} samples, {summary['estimates']} estimates, "
+              f"{summary['windows']} windows, {summary['trend_rows']} trend rows in {summary['wall_s']} s "
+              f"({summary['realtime_factor']}x real time)", flush=True)
+    return code

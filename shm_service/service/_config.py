@@ -1,0 +1,305 @@
+"""Settings of ``shm serve``: one typed, closed model, read from one TOML file and overridden
+by command-line flags. Secrets (the API token) come from a file or from the environment, which
+is injectable (tests pass a dict)."""
+
+from __future__ import annotations
+
+import ipaddress
+import os
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from analytics import AnalysisConfig
+
+__all__ = [
+    "AlarmSettings",
+    "ArchiveSettings",
+    "DashboardSettings",
+    "EstimatorSettings",
+    "NotifySettings",
+    "ServerSettings",
+    "ServiceSettings",
+    "SettingsError",
+    "SimSettings",
+    "SourceSettings",
+    "load_settings",
+    "render_toml",
+    "resolve_token",
+]
+
+TOKEN_ENV = "SHM_TOKEN"
+
+
+class SettingsError(ValueError):
+    """Invalid configuration (the message names the key)."""
+
+
+class _Closed(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ServerSettings(_Closed):
+    """The HTTP API."""
+
+    host: str = Field("127.0.0.1", description="address to bind; any other than loopback requires a token for every request")
+    port: int = Field(8600, ge=0, le=65535, description="HTTP API port (0: a free port)")
+    token_file: str | None = Field(None, description="file holding the API token (first line); else the environment variable SHM_TOKEN")
+    max_body_bytes: int = Field(64 * 1024, ge=1024, description="largest request body, bytes, except ingest")
+    max_ingest_bytes: int = Field(8 * 1024 * 1024, ge=1024, description="largest ingest request body, bytes")
+    max_ingest_messages: int = Field(100_000, ge=1, description="most messages in one ingest request")
+    ingest_wait_s: float = Field(5.0, gt=0, description="how long an ingest request waits for room in the pipeline before 503")
+
+    @field_validator("host")
+    @classmethod
+    def _host(cls, value: str) -> str:
+        if value in ("localhost", ""):
+            return "127.0.0.1"
+        try:
+            ipaddress.ip_address(value)
+        except ValueError:
+            raise ValueError(f"host {value!r} must be an IP address (e.g. 127.0.0.1 or 0.0.0.0)") from None
+        return value
+
+    @property
+    def loopback(self) -> bool:
+        return ipaddress.ip_address(self.host).is_loopback
+
+
+class DashboardSettings(_Closed):
+    """The live 3-D dashboard (package ``web``), in the same process."""
+
+    enabled: bool = Field(True, description="start the dashboard")
+    host: str = Field("127.0.0.1", description="address of the dashboard")
+    port: int = Field(8080, ge=0, le=65535, description="dashboard port (0: a free port)")
+    estimate_hz: float = Field(15.0, ge=1, le=100, description="rate of estimate pushes, Hz (decimated)")
+
+
+class SimSettings(_Closed):
+    """The virtual rig as a live source (``--source sim``)."""
+
+    duration_s: float = Field(7 * 24 * 3600.0, gt=0, le=7 * 24 * 3600, description="simulated run length, s (the run ends then)")
+    seed: int = Field(1, ge=0, description="random seed of the simulation")
+    layout: Literal["benchmark", "dense"] = Field("benchmark", description="sensor layout")
+    excitation: Literal["paper", "ambient", "decay"] = Field("ambient", description="excitation of the rig")
+    damage: tuple[str, ...] = Field(("mass:0.126@4.0",), description="damage specs (mass:KG@POS, stiffness:FACTOR@A-B)")
+    damage_at_s: float | None = Field(
+        900.0, ge=0,
+        description="simulated time the damage appears, s (None: never); after rest (60 s), warm-up and the baseline (analytics.baseline_s)")
+    temperature_mean_c: float = Field(20.0, description="mean temperature, degC")
+    temperature_swing_k: float = Field(40.0, ge=0, description="peak-to-peak temperature swing over the whole run, K")
+    block_s: float = Field(1.0, gt=0, le=60, description="simulated seconds per block handed to the pipeline")
+
+
+class SourceSettings(_Closed):
+    """Where the data comes from."""
+
+    spec: str = Field("sim", description="sim | replay:FILE.mcap | follow:FILE.mcap | ingest")
+    id: str | None = Field(None, description="source id of the trend rows (default: sim, ingest, or the recording's file stem)")
+    speed: float | Literal["max"] = Field(1.0, description="sim/replay pace: a factor of real time, or max")
+    keep_running: bool = Field(False, description="keep serving the API after a replay (or sim run) ends")
+    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest, or to replace a recording's rig.json")
+    layout: Literal["benchmark", "dense"] = Field("benchmark", description="rig layout for ingest when no rig file is given")
+    follow_poll_s: float = Field(0.2, gt=0, description="how often a followed file is checked for new data, s")
+    follow_idle_s: float | None = Field(None, gt=0, description="stop following after this long without growth, s (None: never)")
+    lateness_s: float = Field(1.0, gt=0, le=60, description="how long the merge waits for a late sensor before moving on, s")
+    silent_after_s: float = Field(2.0, gt=0, description="a sensor without data this long is reported degraded, s")
+
+    @field_validator("speed", mode="before")
+    @classmethod
+    def _speed(cls, value: Any) -> Any:
+        if isinstance(value, str) and value != "max":
+            try:
+                value = float(value)
+            except ValueError:
+                raise ValueError(f"speed {value!r} must be a number > 0 or 'max'") from None
+        if isinstance(value, (int, float)) and not (value > 0 and value < 1e6):
+            raise ValueError(f"speed {value!r} must be > 0 (or 'max')")
+        return value
+
+    @field_validator("spec")
+    @classmethod
+    def _spec(cls, value: str) -> str:
+        kind, _, arg = value.partition(":")
+        if kind in ("sim", "ingest") and not arg:
+            return value
+        if kind in ("replay", "follow") and arg:
+            return value
+        raise ValueError(f"source {value!r} must be sim, ingest, replay:FILE.mcap or follow:FILE.mcap")
+
+    @property
+    def kind(self) -> str:
+        return self.spec.partition(":")[0]
+
+    @property
+    def path(self) -> str | None:
+        return self.spec.partition(":")[2] or None
+
+
+class EstimatorSettings(_Closed):
+    """The IMMS estimator (model from the rig description)."""
+
+    peripheral: Literal["gyro", "acc"] = Field("gyro", description="kinematic model of the peripheral IMUs")
+    modes: int = Field(4, ge=1, le=5, description="unit deformations, Γ")
+    imus: int = Field(4, ge=0, le=16, description="peripheral IMUs (chosen by effective independence)")
+    tofs: int = Field(4, ge=0, le=16, description="ToF sensors")
+    gauges: int = Field(4, ge=0, le=16, description="strain gauges")
+    calibration_s: float = Field(60.0, ge=5, le=600, description="data gathered for the rest calibration before filtering, s")
+    warmup_s: float = Field(120.0, ge=0, le=3600, description="windows starting less than this after the rest phase are not analysed (the filter converges), s")
+    chunk_s: float = Field(2.0, gt=0, le=60, description="data per estimator call, s")
+
+
+class ArchiveSettings(_Closed):
+    """Rotating MCAP recordings of everything incoming and of the estimates."""
+
+    enabled: bool = Field(True, description="write recordings")
+    directory: str = Field("var/recordings", description="where the recordings go")
+    raw: Literal["auto", "always", "never"] = Field("auto", description="record incoming samples: auto = not for replay/follow (already a file)")
+    estimates: bool = Field(True, description="record /estimate/state")
+    estimate_decimation: int = Field(1, ge=1, le=200, description="record every n-th estimate")
+    rotate_mb: float = Field(256.0, gt=0, description="start a new file after this many MB")
+    rotate_s: float = Field(3600.0, gt=0, description="start a new file after this much data time, s")
+    flush_s: float = Field(2.0, gt=0, description="flush (end a chunk) at least this often, wall-clock s")
+
+
+class AlarmSettings(_Closed):
+    """Alarms from the analytics' control charts, with hysteresis on top of the charts'."""
+
+    raise_windows: int = Field(2, ge=1, le=100, description="consecutive windows at a level before it is raised")
+    clear_windows: int = Field(3, ge=1, le=100, description="consecutive windows below warning before an alarm clears")
+    notify_levels: tuple[Literal["warning", "alarm"], ...] = Field(("warning", "alarm"), description="levels that notify")
+    notify_cleared: bool = Field(True, description="notify when an alarm clears")
+
+
+class NotifySettings(_Closed):
+    """Notifications of alarm events: webhooks and e-mail, through a persistent outbox."""
+
+    webhooks: tuple[str, ...] = Field((), description="URLs that receive a JSON POST per alarm event")
+    webhook_timeout_s: float = Field(5.0, gt=0, description="timeout of one webhook attempt, s")
+    retry_initial_s: float = Field(1.0, gt=0, description="first retry delay, s (doubles each attempt)")
+    retry_max_s: float = Field(600.0, gt=0, description="longest retry delay, s")
+    max_attempts: int = Field(20, ge=1, description="attempts before a notification is given up (logged as failed)")
+    smtp_host: str | None = Field(None, description="SMTP server for e-mail (None: no e-mail)")
+    smtp_port: int = Field(25, ge=1, le=65535, description="SMTP port")
+    smtp_starttls: bool = Field(False, description="use STARTTLS")
+    smtp_user: str | None = Field(None, description="SMTP user (password from env SHM_SMTP_PASSWORD)")
+    mail_from: str = Field("shm@localhost", description="sender address")
+    mail_to: tuple[str, ...] = Field((), description="recipients")
+
+    @field_validator("webhooks")
+    @classmethod
+    def _urls(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        for url in value:
+            if not url.startswith(("http://", "https://")):
+                raise ValueError(f"webhook {url!r} must be an http:// or https:// URL")
+        return value
+
+
+class ServiceSettings(_Closed):
+    """Everything ``shm serve`` reads. Every key has a default; a TOML file sets some of them."""
+
+    db: str = Field("var/shm.sqlite", description="SQLite database (trends, baseline, alarms, outbox)")
+    server: ServerSettings = ServerSettings()
+    dashboard: DashboardSettings = DashboardSettings()
+    source: SourceSettings = SourceSettings()
+    sim: SimSettings = SimSettings()
+    estimator: EstimatorSettings = EstimatorSettings()
+    analytics: AnalysisConfig = AnalysisConfig()
+    archive: ArchiveSettings = ArchiveSettings()
+    alarms: AlarmSettings = AlarmSettings()
+    notify: NotifySettings = NotifySettings()
+    storage_sync: Literal["normal", "full"] = Field("normal", description="SQLite synchronous mode: normal survives a process crash, full also a power loss")
+    queue_batches: int = Field(8, ge=2, le=10_000, description="bounded queue between source and pipeline, batches (a batch is at most ~10 s of data or 2 MB of a file)")
+    log_level: Literal["debug", "info", "warning", "error"] = Field("info", description="log level")
+
+
+def _merge(base: dict[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in override.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = _merge(dict(out[key]), value)
+        else:
+            out[key] = value
+    return out
+
+
+def _message(exc: ValidationError) -> str:
+    return "; ".join(f"{'.'.join(str(p) for p in e['loc']) or '(top)'}: {e['msg']}" for e in exc.errors())
+
+
+def load_settings(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> ServiceSettings:
+    """Settings from the TOML file ``path`` (optional), then ``overrides`` (nested dict, e.g.
+    from flags). Raises ``SettingsError`` naming the offending key."""
+    data: dict[str, Any] = {}
+    if path is not None:
+        try:
+            data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise SettingsError(f"config file {path} does not exist") from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise SettingsError(f"config file {path}: {exc}") from None
+    if overrides:
+        data = _merge(data, overrides)
+    try:
+        return ServiceSettings.model_validate(data)
+    except ValidationError as exc:
+        raise SettingsError(_message(exc)) from None
+
+
+def resolve_token(settings: ServiceSettings, environ: Mapping[str, str] | None = None) -> str | None:
+    """The API token: the first line of ``server.token_file``, else ``SHM_TOKEN`` of the
+    environment (``environ``, default ``os.environ``). ``None`` when neither is set."""
+    env = os.environ if environ is None else environ
+    if settings.server.token_file:
+        try:
+            text = Path(settings.server.token_file).read_text(encoding="utf-8")
+        except OSError as exc:
+            raise SettingsError(f"server.token_file: cannot read {settings.server.token_file}: {exc}") from None
+        token = text.strip().splitlines()[0].strip() if text.strip() else ""
+        if len(token) < 8:
+            raise SettingsError("server.token_file: the token must have at least 8 characters")
+        return token
+    token = env.get(TOKEN_ENV, "").strip()
+    if token and len(token) < 8:
+        raise SettingsError(f"{TOKEN_ENV}: the token must have at least 8 characters")
+    return token or None
+
+
+def _toml_value(value: Any) -> str:
+    import tomli_w
+
+    return tomli_w.dumps({"v": value}).partition("=")[2].strip()
+
+
+def render_toml(settings: ServiceSettings | None = None) -> str:
+    """The settings as a commented TOML file (every key with its description); keys whose value
+    is None are shown commented out."""
+    settings = settings or ServiceSettings()
+    lines = ["# shm serve configuration: every key, its default and what it means.", ""]
+
+    def section(model: BaseModel, name: str | None) -> None:
+        scalars, tables = [], []
+        for key, info in type(model).model_fields.items():
+            value = getattr(model, key)
+            (tables if isinstance(value, BaseModel) else scalars).append((key, info, value))
+        if name is not None:
+            doc = (type(model).__doc__ or "").strip().splitlines()
+            lines.append(f"[{name}]" + (f"  # {doc[0]}" if doc else ""))
+        for key, info, value in scalars:
+            if info.description:
+                lines.append(f"# {info.description}")
+            if value is None:
+                lines.append(f"# {key} = ")
+            else:
+                if isinstance(value, tuple):
+                    value = list(value)
+                lines.append(f"{key} = {_toml_value(value)}")
+        lines.append("")
+        for key, _, value in tables:
+            section(value, key if name is None else f"{name}.{key}")
+
+    section(settings, None)
+    return "\n".join(lines)

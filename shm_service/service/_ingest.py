@@ -1,0 +1,166 @@
+"""Validation of ingested messages (``POST /api/ingest``) against the recording contract.
+
+A request body is ``{"messages": [{"topic": ..., "log_time_ns": ..., "publish_time_ns": ...
+(optional), "payload": {...}}]}`` with payloads as in recordings. A body that is not such a
+document is refused as a whole; within it, each message that breaks the contract is rejected
+and counted with its reason, and every valid one is kept.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import orjson
+
+from estimator import RigDescription
+
+from ..recording import PAYLOAD_FIELDS, FollowBlock, classify_topic
+
+__all__ = ["IngestError", "IngestResult", "IngestValidator"]
+
+_MAX_NS = 2**63 - 1
+_SENSOR_KINDS = ("imu", "tof", "strain", "bearing", "temperature")
+
+
+class IngestError(ValueError):
+    """The request body as a whole is unusable (the message says why)."""
+
+
+@dataclass
+class IngestResult:
+    blocks: list[FollowBlock]
+    raw: list[tuple[str, int, bytes, int]]
+    accepted: int = 0
+    rejected: Counter = field(default_factory=Counter)
+    errors: list[dict[str, Any]] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"accepted": self.accepted, "rejected": sum(self.rejected.values()),
+                "rejected_by_reason": dict(self.rejected), "errors": self.errors}
+
+
+def parse_body(body: bytes) -> Any:
+    """JSON (orjson, with the stdlib as fallback for NaN/Infinity tokens, which are then
+    rejected per message)."""
+    try:
+        return orjson.loads(body)
+    except orjson.JSONDecodeError as exc:
+        try:
+            return json.loads(body)
+        except (ValueError, RecursionError, UnicodeDecodeError):
+            raise IngestError(f"body is not valid JSON: {exc}") from None
+
+
+class IngestValidator:
+    """Checks messages of the rig's topics; keeps the last accepted time per topic so a sample
+    stamped at or before the previous one is rejected (``backwards``/``duplicate``)."""
+
+    def __init__(self, rig: RigDescription, *, max_messages: int) -> None:
+        self.rig = rig
+        self.sensors = rig.sensor_by_topic()
+        self.max_messages = max_messages
+        self.last: dict[str, int] = {}
+        self.max_errors = 20
+
+    def validate(self, document: Any) -> IngestResult:
+        if not isinstance(document, dict) or "messages" not in document:
+            raise IngestError('body must be a JSON object {"messages": [...]}')
+        extra = set(document) - {"messages"}
+        if extra:
+            raise IngestError(f"unknown key(s) {sorted(extra)} in the body; only 'messages' is allowed")
+        messages = document["messages"]
+        if not isinstance(messages, list):
+            raise IngestError("'messages' must be a list")
+        if len(messages) > self.max_messages:
+            raise IngestError(f"{len(messages)} messages in one request; at most {self.max_messages}")
+        result = IngestResult([], [])
+        rows: dict[str, tuple[list[int], list[int], list[list[float]]]] = {}
+        for index, message in enumerate(messages):
+            try:
+                topic, log_ns, pub_ns, row, payload = self._message(message)
+            except _Reject as exc:
+                result.rejected[exc.reason] += 1
+                if len(result.errors) < self.max_errors:
+                    result.errors.append({"index": index, "reason": exc.reason, "detail": str(exc)})
+                continue
+            t, p, v = rows.setdefault(topic, ([], [], []))
+            t.append(log_ns)
+            p.append(pub_ns)
+            v.append(row)
+            result.raw.append((topic, log_ns, payload, pub_ns))
+            result.accepted += 1
+        for topic, (t, p, v) in rows.items():
+            sensor = self.sensors[topic]
+            info = classify_topic(topic)
+            result.blocks.append(FollowBlock(topic, info.kind, sensor.name, np.array(t, dtype=np.int64),
+                                             np.array(p, dtype=np.int64), np.array(v, dtype=np.float64)))
+        return result
+
+    def _message(self, message: Any) -> tuple[str, int, int, list[float], bytes]:
+        if not isinstance(message, dict):
+            raise _Reject("malformed", f"a message must be an object, got {type(message).__name__}")
+        unknown = set(message) - {"topic", "log_time_ns", "publish_time_ns", "payload"}
+        if unknown:
+            raise _Reject("malformed", f"unknown key(s) {sorted(unknown)}")
+        topic = message.get("topic")
+        if not isinstance(topic, str):
+            raise _Reject("malformed", "'topic' must be a string")
+        info = classify_topic(topic)
+        if info is None or info.kind not in _SENSOR_KINDS:
+            raise _Reject("unknown_topic", f"topic {topic!r} is not a sensor topic of the recording contract")
+        if topic not in self.sensors:
+            raise _Reject("unknown_topic", f"topic {topic!r}: rig.json has no such sensor")
+        log_ns = message.get("log_time_ns")
+        if isinstance(log_ns, bool) or not isinstance(log_ns, int) or not 0 <= log_ns <= _MAX_NS:
+            raise _Reject("malformed", f"{topic}: 'log_time_ns' must be an integer in [0, 2**63)")
+        pub_ns = message.get("publish_time_ns", log_ns)
+        if isinstance(pub_ns, bool) or not isinstance(pub_ns, int) or not log_ns <= pub_ns <= _MAX_NS:
+            raise _Reject("malformed", f"{topic}: 'publish_time_ns' must be an integer >= log_time_ns")
+        payload = message.get("payload")
+        if not isinstance(payload, dict):
+            raise _Reject("wrong_schema", f"{topic}: 'payload' must be an object ({info.title})")
+        row: list[float] = []
+        fields = PAYLOAD_FIELDS[info.title]
+        extra = set(payload) - {f.name for f in fields}
+        if extra:
+            raise _Reject("wrong_schema", f"{topic}: payload key(s) {sorted(extra)} are not in {info.title}")
+        for spec in fields:
+            if spec.name not in payload:
+                raise _Reject("wrong_schema", f"{topic}: payload lacks {spec.name!r} ({info.title})")
+            value = payload[spec.name]
+            if spec.size == 0:
+                row.append(_number(topic, spec.name, value))
+            else:
+                if not isinstance(value, list) or len(value) != spec.size:
+                    raise _Reject("wrong_schema", f"{topic}: {spec.name!r} must be a list of {spec.size} numbers")
+                row.extend(_number(topic, f"{spec.name}[{i}]", x) for i, x in enumerate(value))
+        if not all(math.isfinite(x) for x in row):
+            raise _Reject("nonfinite", f"{topic}: NaN or infinite value at log_time_ns {log_ns}")
+        last = self.last.get(topic)
+        if last is not None and log_ns <= last:
+            reason = "duplicate" if log_ns == last else "backwards"
+            raise _Reject(reason, f"{topic}: log_time_ns {log_ns} is not after the previous sample's {last}")
+        self.last[topic] = log_ns
+        return topic, log_ns, pub_ns, row, orjson.dumps(payload)
+
+
+def _number(topic: str, name: str, value: Any) -> float:
+    if value is None:
+        raise _Reject("nonfinite", f"{topic}: {name!r} is null (NaN?)")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _Reject("wrong_schema", f"{topic}: {name!r} must be a number")
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf
+
+
+class _Reject(ValueError):
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(detail)
+        self.reason = reason

@@ -1,0 +1,316 @@
+"""The monitoring service: wires a source, the pipeline, storage, notifications, the HTTP API
+and the dashboard, and implements the dashboard's ``DashboardService`` port."""
+
+from __future__ import annotations
+
+import hmac
+import logging
+import math
+import queue
+import threading
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from estimator import RigDescription, build_model, load_rig
+
+from ..recording import RecordingError
+from ._archive import Archive
+from ._config import ServiceSettings, SettingsError, resolve_token
+from ._notify import Notifier, notify_targets
+from ._pipeline import Pipeline
+from ._sources import END, FileSource, IngestSource, SimSource, Source
+from ._storage import Storage
+
+__all__ = ["MonitoringService", "ServiceError"]
+
+log = logging.getLogger("shm.serve")
+VERSION = "0.1.0"
+
+
+class ServiceError(RuntimeError):
+    """The service cannot start (the message says why)."""
+
+
+class _DashboardSink:
+    """Adapts the pipeline's pushes to ``web.Dashboard``; a failing dashboard never stops the
+    monitoring (errors are counted and logged once)."""
+
+    def __init__(self, dashboard: Any, service: "MonitoringService") -> None:
+        self.dashboard = dashboard
+        self.service = service
+        self.errors = 0
+
+    def _call(self, name: str, *args: Any) -> None:
+        if self.service.paused:
+            return
+        try:
+            getattr(self.dashboard, name)(*args)
+        except Exception as exc:
+            self.errors += 1
+            if self.errors <= 3:
+                log.warning("dashboard %s failed: %s", name, exc)
+
+    def estimate(self, t_s: float, x: np.ndarray, truth: np.ndarray | None) -> None:
+        pipeline = self.service.pipeline
+        states = pipeline.sensor_states() if pipeline is not None else {}
+        self._call("push_estimate", t_s, x, states, truth)
+
+    def spectra(self, f, a, tracked, baseline) -> None:
+        if f is not None and a is not None:
+            self._call("push_spectra", f, a, list(tracked), list(baseline))
+
+    def window(self, window: dict) -> None:
+        self._call("push_window", window)
+
+    def alarm(self, alarm: dict) -> None:
+        self._call("push_alarm", alarm)
+
+
+class MonitoringService:
+    """One running ``shm serve``. ``environ`` is the environment the token is read from
+    (default ``os.environ``; tests pass a dict)."""
+
+    def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None) -> None:
+        self.settings = settings
+        self.token = resolve_token(settings, environ)
+        if not settings.server.loopback and self.token is None:
+            raise ServiceError(f"server.host {settings.server.host} is not loopback: a token is required "
+                               "(server.token_file or SHM_TOKEN)")
+        self.started_at = time.time()
+        self.paused = False
+        self.queue: queue.Queue = queue.Queue(maxsize=settings.queue_batches)
+        src = settings.source
+        self.source = self._make_source()
+        self.rig: RigDescription = self.source.rig  # type: ignore[assignment]
+        est = settings.estimator
+        try:
+            self.model = build_model(self.rig, peripheral=est.peripheral, modes=est.modes, imus=est.imus, tofs=est.tofs,
+                                     gauges=est.gauges)
+        except ValueError as exc:
+            raise ServiceError(f"estimator model: {exc}") from None
+        self.storage = Storage(settings.db, notify_targets=notify_targets(settings.notify),
+                               notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared, sync=settings.storage_sync)
+        self.storage.touch_source(self.source.id, self.source.kind, src.spec, time.time())
+        archive = None
+        if settings.archive.enabled:
+            archive = Archive(settings.archive, self.rig, self.source.id, getattr(self.source, "metadata", None))
+        raw = settings.archive.raw == "always" or (settings.archive.raw == "auto" and self.source.kind in ("sim", "ingest"))
+        self.dashboard = None
+        sink = None
+        if settings.dashboard.enabled:
+            self.dashboard = self._start_dashboard()
+            if self.dashboard is not None:
+                sink = _DashboardSink(self.dashboard, self)
+        self.pipeline = Pipeline(
+            model=self.model, source_id=self.source.id, storage=self.storage, analysis=settings.analytics,
+            calibration_s=est.calibration_s, chunk_s=est.chunk_s, lateness_s=src.lateness_s,
+            silent_after_s=src.silent_after_s, raise_windows=settings.alarms.raise_windows,
+            clear_windows=settings.alarms.clear_windows, archive=archive, archive_raw=raw,
+            archive_estimates=settings.archive.estimates, estimate_decimation=settings.archive.estimate_decimation,
+            sink=sink, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
+        )
+        self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
+        self._lock = threading.Lock()
+        self._done = threading.Event()
+        self._stopping = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.pipeline_error: str | None = None
+        self.api = None
+
+    # -- construction -----------------------------------------------------------------------
+
+    def _make_source(self) -> Source:
+        s = self.settings
+        src = s.source
+        kind = src.kind
+        truth = s.dashboard.enabled
+        rig_override = None
+        if src.rig:
+            try:
+                rig_override = load_rig(src.rig)
+            except (OSError, ValueError) as exc:
+                raise ServiceError(f"source.rig: {exc}") from None
+        try:
+            if kind == "sim":
+                return SimSource(src.id or "sim", self.queue, s, raw=s.archive.enabled and s.archive.raw != "never", truth=truth)
+            if kind in ("replay", "follow"):
+                path = Path(src.path or "")
+                source = FileSource(src.id or path.stem, self.queue, s, follow=kind == "follow", rig=rig_override, truth=truth)
+                if source.rig is None:
+                    if kind == "follow":
+                        log.info("waiting for %s and its rig.json", path)
+                        if source.wait_for_rig(timeout=3600.0 * 24) is None:
+                            raise ServiceError(f"follow: no readable rig.json in {path}")
+                    else:
+                        raise ServiceError(f"{path}: no rig.json")
+                return source
+            if kind == "ingest":
+                from ..rig_layouts import default_rig
+
+                rig = rig_override or default_rig(src.layout)
+                return IngestSource(src.id or "ingest", self.queue, rig, max_messages=s.server.max_ingest_messages,
+                                    wait_s=s.server.ingest_wait_s, raw=s.archive.enabled and s.archive.raw != "never")
+        except (RecordingError, FileNotFoundError, ValueError) as exc:
+            raise ServiceError(str(exc)) from None
+        raise ServiceError(f"unknown source {src.spec!r}")
+
+    def _start_dashboard(self) -> Any:
+        try:
+            import web
+
+            Dashboard = getattr(web, "Dashboard")
+        except (ImportError, AttributeError):
+            log.warning("dashboard: web.Dashboard is not available; running without the dashboard")
+            return None
+        d = self.settings.dashboard
+        try:
+            dashboard = Dashboard(host=d.host, port=d.port, rig=self.rig, units=self.model.units,
+                                  stations=self.model.stations, service=self)
+        except Exception as exc:
+            log.warning("dashboard failed to start (%s); running without it", exc)
+            return None
+        log.info("dashboard at %s", getattr(dashboard, "url", "?"))
+        return dashboard
+
+    # -- running ----------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self.notifier.start()
+        self._thread = threading.Thread(target=self._pipeline_loop, name="pipeline", daemon=True)
+        self._thread.start()
+        self.source.start()
+
+    def _pipeline_loop(self) -> None:
+        try:
+            while True:
+                item = self.queue.get()
+                if item is END:
+                    break
+                try:
+                    self.pipeline.process(item)
+                except Exception as exc:
+                    log.exception("pipeline error on a batch; batch skipped")
+                    self.pipeline_error = f"{type(exc).__name__}: {exc}"
+                self.notifier.wake()
+            self.pipeline.finish()
+        except Exception as exc:
+            log.exception("pipeline failed")
+            self.pipeline_error = f"{type(exc).__name__}: {exc}"
+        finally:
+            self.notifier.wake()
+            self._done.set()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait until the source ended and everything was processed and stored."""
+        return self._done.wait(timeout)
+
+    @property
+    def done(self) -> bool:
+        return self._done.is_set()
+
+    def stop(self, *, drain_s: float = 2.0) -> None:
+        if self._stopping.is_set():
+            return
+        self._stopping.set()
+        self.source.stop()
+        if self._thread is not None:
+            self._done.wait(30.0)
+        self.notifier.stop(drain_s=drain_s)
+        if self.dashboard is not None:
+            try:
+                self.dashboard.stop()
+            except Exception as exc:
+                log.warning("dashboard stop failed: %s", exc)
+        self.storage.close()
+
+    # -- DashboardService and API -----------------------------------------------------------
+
+    def check_token(self, token: str | None) -> None:
+        """Raise PermissionError unless ``token`` is the configured one."""
+        if self.token is None:
+            raise PermissionError("no API token is configured (server.token_file or SHM_TOKEN); this action is disabled")
+        if not token or not hmac.compare_digest(token.encode(), self.token.encode()):
+            raise PermissionError("missing or wrong token")
+
+    def status(self) -> dict[str, Any]:
+        p = self.pipeline.status()
+        src = self.source.status()
+        src["dropped"] = src["dropped"] + p["late_samples"] + p["estimator"].get("dropped_samples", 0)
+        src["latency_s"] = p["pipeline_latency_s"]
+        states = self.pipeline.sensor_states()
+        active = self.storage.alarms(state="active")
+        counts = {"warning": 0, "alarm": 0}
+        for a in active:
+            counts[a["level"]] += 1
+        return {
+            "service": {"version": VERSION, "started_at": self.started_at, "uptime_s": round(time.time() - self.started_at, 1),
+                        "paused": self.paused, "done": self.done, "pipeline_error": self.pipeline_error},
+            "sources": [src],
+            "pipeline": {"queue_depth": self.queue.qsize(), "queue_capacity": self.queue.maxsize, **p},
+            "degraded_sensors": sorted(t for t, s in states.items() if s != "ok"),
+            "sensors": states,
+            "baseline": {"state": p["baseline"], "modes": self._baseline_modes()},
+            "alarms": {"active": counts},
+            "notifications": {**self.storage.outbox_counts(), "sent_this_run": self.notifier.sent,
+                              "failed_attempts_this_run": self.notifier.failed_attempts},
+            "storage": {"db": str(self.settings.db), "schema_version": self.storage.schema_version,
+                        "trend_rows": self.storage.count("trends"),
+                        "archive": None if self.pipeline.archive is None else self.pipeline.archive.status()},
+        }
+
+    def _baseline_modes(self) -> list[dict] | None:
+        bl = self.pipeline.analytics.monitor.baseline
+        if bl is None:
+            return None
+        return [{"mode": m.mode, "unit": m.unit + 1, "f_ref_hz": m.f_ref_hz, "temperature_ref_c": m.temperature_ref_c,
+                 "slope_per_k": m.slope_per_k, "sigma_rel": m.sigma_rel} for m in bl.modes]
+
+    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+               limit: int = 100_000) -> list[dict[str, Any]]:
+        return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit)
+
+    def alarms(self, state: str | None = None) -> list[dict[str, Any]]:
+        return self.storage.alarms(state=state)
+
+    def acknowledge(self, alarm_id: int, token: str, by: str = "api") -> dict[str, Any]:
+        self.check_token(token)
+        alarm = self.storage.acknowledge(alarm_id, by)
+        if alarm is None:
+            raise KeyError(f"alarm {alarm_id} does not exist")
+        return alarm
+
+    def set_paused(self, paused: bool) -> None:
+        self.paused = bool(paused)
+
+    def request_baseline(self) -> dict[str, Any]:
+        baseline_id = self.storage.request_baseline(self.source.id)
+        self.pipeline.request_baseline()
+        return {"baseline_id": baseline_id, "state": "learning", "source": self.source.id,
+                "learn_s": self.settings.analytics.baseline_s}
+
+    def spectra(self) -> dict[str, Any] | None:
+        spec = self.pipeline.analytics.latest_spectrum
+        if spec is None:
+            return None
+        amps = np.asarray(spec["amplitudes"])
+        return {
+            "source": self.source.id, "window_start_s": spec["window_start_s"], "window_end_s": spec["window_end_s"],
+            "frequencies_hz": np.asarray(spec["frequencies_hz"]).tolist(),
+            "amplitudes": [[a if math.isfinite(a) else None for a in row] for row in amps.tolist()],
+            "tracked_hz": spec["tracked_hz"], "baseline_hz": spec["baseline_hz"],
+        }
+
+    def ingest(self, document: Any) -> dict[str, Any] | None:
+        if not isinstance(self.source, IngestSource):
+            raise LookupError(f"the service's source is {self.source.kind}, not ingest")
+        result = self.source.submit(document)
+        return None if result is None else result.as_dict()
+
+
+def _check(settings: ServiceSettings) -> None:
+    if settings.source.kind == "replay" and not Path(settings.source.path or "").is_file():
+        raise SettingsError(f"replay: {settings.source.path} does not exist")

@@ -1,0 +1,368 @@
+"""Data sources of the service. Each runs in its own thread and puts ``Batch`` objects into the
+pipeline's bounded queue; ``put`` blocks when the queue is full (back-pressure: a replay slows
+down to the pipeline's pace, a simulation too). The HTTP ingest source has no thread: requests
+put their batches directly, waiting a bounded time for room.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from estimator import RigDescription
+
+from ..recording import FollowBlock, RecordingError, RecordingFollower, classify_topic
+from ._config import ServiceSettings
+from ._ingest import IngestResult, IngestValidator
+from ._pipeline import Batch
+
+__all__ = ["FileSource", "IngestSource", "SimSource", "Source", "END"]
+
+log = logging.getLogger("shm.serve.source")
+
+END = object()  # put into the queue when a source has ended
+_NS = 1_000_000_000
+
+
+class Source:
+    """Common state: counters and a stop flag. ``state``: starting, running, finished, failed."""
+
+    kind = "source"
+
+    def __init__(self, source_id: str, out: queue.Queue) -> None:
+        self.id = source_id
+        self.out = out
+        self.state = "starting"
+        self.error: str | None = None
+        self.messages = 0
+        self.rejected: Counter = Counter()
+        self.dropped = 0
+        self.problems: list[str] = []
+        self.data_time_ns: int | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._rate: list[tuple[float, int]] = []
+        self.rig: RigDescription | None = None
+
+    # -- lifecycle ------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._main, name=f"source-{self.kind}", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def join(self, timeout: float | None = None) -> None:
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def _main(self) -> None:
+        try:
+            self.state = "running"
+            self.run()
+            if self.state == "running":
+                self.state = "finished"
+        except Exception as exc:  # a source failing must not take the service down
+            log.exception("source %s failed", self.id)
+            self.state = "failed"
+            self.error = f"{type(exc).__name__}: {exc}"
+        finally:
+            self._put(END)
+
+    def run(self) -> None:
+        raise NotImplementedError
+
+    def _put(self, item: Any) -> bool:
+        """Blocking put that still notices ``stop()``."""
+        while True:
+            try:
+                self.out.put(item, timeout=0.2)
+                return True
+            except queue.Full:
+                if self._stop.is_set() and item is not END:
+                    return False
+
+    def _count(self, blocks: list[FollowBlock]) -> None:
+        n = sum(len(b) for b in blocks)
+        self.messages += n
+        for b in blocks:
+            if len(b):
+                last = int(b.log_time_ns[-1])
+                self.data_time_ns = last if self.data_time_ns is None else max(self.data_time_ns, last)
+        now = time.monotonic()
+        self._rate.append((now, self.messages))
+        while len(self._rate) > 2 and now - self._rate[0][0] > 10.0:
+            self._rate.pop(0)
+
+    @property
+    def rate_hz(self) -> float:
+        if len(self._rate) < 2:
+            return 0.0
+        (t0, n0), (t1, n1) = self._rate[0], self._rate[-1]
+        if time.monotonic() - t1 > 5.0:
+            return 0.0
+        return (n1 - n0) / max(t1 - t0, 1e-9)
+
+    def status(self) -> dict[str, Any]:
+        now = time.time()
+        return {
+            "id": self.id, "kind": self.kind, "state": self.state, "error": self.error, "messages": self.messages,
+            "rate_hz": round(self.rate_hz, 1),
+            "data_time_s": None if self.data_time_ns is None else self.data_time_ns / _NS,
+            "lag_s": None if self.data_time_ns is None else round(now - self.data_time_ns / _NS, 3),
+            "rejected": sum(self.rejected.values()), "rejected_by_reason": dict(self.rejected),
+            "dropped": self.dropped, "problems": self.problems[-20:],
+        }
+
+
+class _Pacer:
+    """Holds data time to ``speed`` × wall time (None: as fast as the pipeline takes it)."""
+
+    def __init__(self, speed: float | None, stop: threading.Event) -> None:
+        self.speed = speed
+        self.stop = stop
+        self.origin: tuple[float, int] | None = None
+
+    def wait(self, data_ns: int) -> None:
+        if self.speed is None:
+            return
+        if self.origin is None:
+            self.origin = (time.monotonic(), data_ns)
+            return
+        wall0, data0 = self.origin
+        due = wall0 + (data_ns - data0) / _NS / self.speed
+        delay = due - time.monotonic()
+        if delay > 0:
+            self.stop.wait(delay)
+
+
+class SimSource(Source):
+    """The virtual rig, live."""
+
+    kind = "sim"
+
+    def __init__(self, source_id: str, out: queue.Queue, settings: ServiceSettings, *, raw: bool, truth: bool) -> None:
+        super().__init__(source_id, out)
+        from ..virtual_rig import SimulationSettings, VirtualRig
+
+        s = settings.sim
+        self.settings = SimulationSettings(
+            duration=s.duration_s, seed=s.seed, excitation=s.excitation, layout=s.layout,
+            damage=tuple(s.damage) if s.damage_at_s is not None else (), damage_at=s.damage_at_s,
+            temperature_mean=s.temperature_mean_c, temperature_swing=s.temperature_swing_k,
+        )
+        self.rigsim = VirtualRig(self.settings)
+        self.rig = self.rigsim.nominal_rig
+        self.block_s = s.block_s
+        speed = settings.source.speed
+        self.speed = None if speed == "max" else float(speed)
+        self.raw = raw
+        self.truth = truth
+        self.metadata = {"truth": self.rigsim.truth_metadata()}
+
+    def run(self) -> None:
+        from ..virtual_rig._record import encode_payloads
+
+        start_ns = self.settings.start_time_ns
+        pacer = _Pacer(self.speed, self._stop)
+        block_s = self.block_s if self.speed is not None else max(self.block_s, 10.0)  # bigger blocks at max speed
+        for block in self.rigsim.blocks(block_s):
+            if self._stop.is_set():
+                self.state = "stopped"
+                return
+            blocks, raw = [], [] if self.raw else None
+            for topic, (times, values) in block.measurements.items():
+                stamps = start_ns + np.round(times * _NS).astype(np.int64)
+                delays = np.round(block.delays[topic] * _NS).astype(np.int64)
+                info = classify_topic(topic)
+                sensor = self.rig.sensor_by_topic().get(topic)
+                blocks.append(FollowBlock(topic, info.kind, sensor.name if sensor else topic, stamps, stamps + delays,
+                                          np.asarray(values, dtype=float)))
+                if raw is not None:
+                    raw.extend(zip([topic] * len(stamps), stamps.tolist(), encode_payloads(topic, values), (stamps + delays).tolist()))
+            if raw is not None:
+                raw.sort(key=lambda m: m[3])
+            truth = None
+            if self.truth:
+                truth = (start_ns + np.round(block.times * _NS).astype(np.int64), block.truth["deflection"])
+            pacer.wait(int(start_ns + block.times[-1] * _NS))
+            self._count(blocks)
+            if not self._put(Batch(blocks, raw, truth)):
+                self.state = "stopped"
+                return
+
+
+class FileSource(Source):
+    """``replay:FILE`` (read to the end, paced or at max speed) or ``follow:FILE`` (a file being
+    written; new chunks are read as the writer flushes them)."""
+
+    def __init__(self, source_id: str, out: queue.Queue, settings: ServiceSettings, *, follow: bool,
+                 rig: RigDescription | None, truth: bool) -> None:
+        super().__init__(source_id, out)
+        self.kind = "follow" if follow else "replay"
+        self.path = Path(settings.source.path or "")
+        self.follow = follow
+        speed = settings.source.speed
+        self.speed = None if (follow or speed == "max") else float(speed)
+        self.poll_s = settings.source.follow_poll_s
+        self.idle_s = settings.source.follow_idle_s
+        self.truth = truth
+        topics = {s.topic for s in rig.sensors} if rig is not None else None
+        self._rig_override = rig
+        self._topics = topics
+        self.follower: RecordingFollower | None = None
+        self._counted_rejects: dict[str, int] = {}
+        self._early: list[FollowBlock] = []
+        if not follow:
+            if not self.path.is_file():
+                raise FileNotFoundError(f"replay: {self.path} does not exist")
+            self._open()
+
+    def _open(self) -> None:
+        self.follower = RecordingFollower(self.path, rig=self._rig_override)
+        self._early = self.follower.poll(max_bytes=1 << 16)  # rig.json comes with the first records
+        self.rig = self.follower.rig
+        if self.rig is None and not self.follow:
+            raise RecordingError(f"{self.path}: rig.json is missing: no 'rig.json' attachment at the start of the file")
+
+    def wait_for_rig(self, timeout: float) -> RigDescription | None:
+        """Follow: wait until the file exists and its rig.json is readable."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.path.is_file():
+                try:
+                    self._open()
+                except RecordingError:
+                    raise
+                if self.rig is not None:
+                    return self.rig
+            time.sleep(self.poll_s)
+        return None
+
+    def _update_rejects(self) -> None:
+        f = self.follower
+        for topic, r in f.topic_reports.items():
+            for reason in ("malformed", "nonfinite", "duplicate", "backwards"):
+                key = f"{topic}:{reason}"
+                value = getattr(r, reason)
+                before = self._counted_rejects.get(key, 0)
+                if value > before:
+                    self.rejected[reason] += value - before
+                    self._counted_rejects[key] = value
+        self.problems = list(f.report.problems)
+
+    def _emit(self, blocks: list[FollowBlock], pacer: _Pacer) -> bool:
+        self._update_rejects()
+        blocks = [b for b in blocks if len(b)]
+        if not blocks:
+            return True
+        truth_block = None
+        data_blocks = []
+        for b in blocks:
+            if b.kind == "truth":
+                truth_block = b
+            elif b.kind != "estimate":
+                data_blocks.append(b)
+        if not data_blocks:
+            return True
+        pacer.wait(max(int(b.log_time_ns[-1]) for b in data_blocks))
+        self._count(data_blocks)
+        truth = None
+        if truth_block is not None and self.truth:
+            n = (truth_block.values.shape[1] - 4) // 2
+            truth = (truth_block.log_time_ns, truth_block.values[:, 4:4 + n])
+        return self._put(Batch(data_blocks, None, truth))
+
+    def run(self) -> None:
+        if self.follower is None:
+            self.state = "waiting for the file"
+            while not self._stop.is_set() and self.wait_for_rig(1.0) is None:
+                pass
+            if self._stop.is_set():
+                return
+            self.state = "running"
+        f = self.follower
+        pacer = _Pacer(self.speed, self._stop)
+        if not self._emit(self._early, pacer):
+            return
+        idle_since = time.monotonic()
+        while not self._stop.is_set():
+            before = f.bytes_read
+            blocks = f.poll(max_bytes=2 << 20)
+            if blocks and not self._emit(blocks, pacer):
+                return
+            if f.finished:
+                break
+            if f.damaged:
+                self.state = "failed"
+                self.error = f.report.problems[-1] if f.report.problems else "file damaged"
+                break
+            if f.bytes_read == before:  # at the end of what exists now
+                if not self.follow:
+                    self._emit(f.finish(), pacer)
+                    break
+                if self.idle_s is not None and time.monotonic() - idle_since > self.idle_s:
+                    self._emit(f.finish(), pacer)
+                    break
+                self._stop.wait(self.poll_s)
+            else:
+                idle_since = time.monotonic()
+        self._update_rejects()
+        if self._stop.is_set():
+            self.state = "stopped"
+
+
+class IngestSource(Source):
+    """``POST /api/ingest``: validated messages go straight into the queue."""
+
+    kind = "ingest"
+
+    def __init__(self, source_id: str, out: queue.Queue, rig: RigDescription, *, max_messages: int, wait_s: float,
+                 raw: bool) -> None:
+        super().__init__(source_id, out)
+        self.rig = rig
+        self.validator = IngestValidator(rig, max_messages=max_messages)
+        self.wait_s = wait_s
+        self.raw = raw
+        self._lock = threading.Lock()
+        self.requests = 0
+        self.refused = 0
+
+    def start(self) -> None:
+        self.state = "running"
+
+    def stop(self) -> None:
+        super().stop()
+        if self.state == "running":
+            self.state = "finished"
+            try:
+                self.out.put(END, timeout=1.0)
+            except queue.Full:
+                pass
+
+    def submit(self, document: Any) -> IngestResult | None:
+        """Validate and enqueue; returns the result, or None when the pipeline had no room
+        within ``wait_s`` (nothing of the request was taken: the client retries)."""
+        with self._lock:  # one request at a time keeps each topic's time order
+            self.requests += 1
+            saved = dict(self.validator.last)
+            result = self.validator.validate(document)
+            batch = Batch(result.blocks, result.raw if self.raw else None)
+            try:
+                if result.blocks:
+                    self.out.put(batch, timeout=self.wait_s)
+            except queue.Full:
+                self.validator.last = saved
+                self.refused += 1
+                return None
+            self._count(result.blocks)
+            self.rejected.update(result.rejected)
+            return result

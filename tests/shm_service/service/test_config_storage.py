@@ -1,0 +1,90 @@
+"""Configuration (typed, closed, documented) and storage (migrations, idempotent windows,
+atomic outbox)."""
+
+from __future__ import annotations
+
+import sqlite3
+import tomllib
+
+import pytest
+
+from shm_service.service._config import ServiceSettings, SettingsError, load_settings, render_toml, resolve_token
+from shm_service.service._storage import SCHEMA_VERSION, AlarmChange, Storage, TrendRow, WindowCommit
+
+
+def test_rendered_defaults_parse_back_to_the_defaults():
+    text = render_toml()
+    assert ServiceSettings.model_validate(tomllib.loads(text)) == ServiceSettings()
+    assert "# SQLite database" in text and "[analytics]" in text
+
+
+def test_config_is_closed_and_flags_override(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('db = "a.sqlite"\n[server]\nport = 9000\n')
+    s = load_settings(cfg, {"server": {"port": 9001}})
+    assert s.db == "a.sqlite" and s.server.port == 9001
+    cfg.write_text("[server]\nportt = 1\n")
+    with pytest.raises(SettingsError, match="server.portt"):
+        load_settings(cfg)
+    with pytest.raises(SettingsError, match="speed"):
+        load_settings(None, {"source": {"speed": "fast"}})
+    with pytest.raises(SettingsError, match="source"):
+        load_settings(None, {"source": {"spec": "replay:"}})
+    with pytest.raises(SettingsError, match="host"):
+        load_settings(None, {"server": {"host": "example.org"}})
+
+
+def test_token_from_environment_or_file(tmp_path):
+    s = load_settings(None)
+    assert resolve_token(s, {}) is None
+    assert resolve_token(s, {"SHM_TOKEN": "secret-123"}) == "secret-123"
+    f = tmp_path / "token"
+    f.write_text("file-token-1\n")
+    s = load_settings(None, {"server": {"token_file": str(f)}})
+    assert resolve_token(s, {"SHM_TOKEN": "other-token"}) == "file-token-1"
+    f.write_text("short\n")
+    with pytest.raises(SettingsError, match="8 characters"):
+        resolve_token(s, {})
+
+
+def _row(start, mode, f=1.0):
+    return TrendRow(start, start + 20, mode, mode, "ambient", f, 0.01, 1e-3, 0.9, 20.0, 0.1, 0.5, "ok")
+
+
+def test_migrations_and_idempotent_windows(tmp_path):
+    db = tmp_path / "s.sqlite"
+    st = Storage(db, notify_targets=[("webhook", "http://127.0.0.1:1/x")])
+    assert st.schema_version == SCHEMA_VERSION
+    raise_ = AlarmChange("raise", "mode2", "frequency", 2, "warning", 120.0, 3.1, 3.0, "m")
+    commit = WindowCommit("src", 100.0, 120.0, [_row(100.0, 1), _row(100.0, 2)], {"monitor": None}, None, [raise_])
+    st.commit_window(commit)
+    st.commit_window(commit)  # a replay of the same window
+    assert st.count("trends") == 2
+    assert len(st.alarms()) == 1 and len(st.outbox()) == 1
+    st.close()
+    st = Storage(db)  # reopening does not migrate again
+    assert st.schema_version == SCHEMA_VERSION and st.count("trends") == 2
+    assert st.load_state("src")["last_window_start_s"] == 100.0
+    acked = st.acknowledge(1, "op")
+    assert acked["acknowledged_by"] == "op"
+    assert st.acknowledge(1, "other")["acknowledged_by"] == "op"
+    assert st.acknowledge(99, "op") is None
+
+
+def test_a_failing_window_commit_leaves_nothing(tmp_path):
+    st = Storage(tmp_path / "s.sqlite", notify_targets=[("webhook", "http://127.0.0.1:1/x")])
+    bad = AlarmChange("explode", "mode1", "frequency", 1, "alarm", 1.0, None, None, "m")
+    with pytest.raises(ValueError):
+        st.commit_window(WindowCommit("src", 0.0, 20.0, [_row(0.0, 1)], None, None,
+                                      [AlarmChange("raise", "mode1", "frequency", 1, "alarm", 1.0, 6.0, 5.0, "m"), bad]))
+    assert st.count("trends") == 0 and st.alarms() == [] and st.outbox() == []
+
+
+def test_newer_schema_is_refused(tmp_path):
+    db = tmp_path / "s.sqlite"
+    Storage(db).close()
+    con = sqlite3.connect(db)
+    con.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
+    con.close()
+    with pytest.raises(RuntimeError, match="newer"):
+        Storage(db)

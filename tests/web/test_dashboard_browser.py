@@ -1,0 +1,218 @@
+"""The dashboard in a real browser: headless Chromium (Debian's package, software WebGL).
+
+Starts the dashboard on a free port, feeds it the virtual rig (truth as estimates, spectra,
+windows, an alarm), opens the page with Playwright driving /usr/bin/chromium, and checks that
+the beam and the plots are drawn, that it updates live at >= 10 frames/s without growing memory,
+that a raised alarm shows up, and that acknowledging needs the token. The screenshot goes to
+``docs/dashboard.png`` (or to ``$SHM_DASHBOARD_SCREENSHOT``) for the README.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dashboard_feeder import TOKEN, DemoFeeder, FakeService, history_rows, simulated_estimates
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+SCREENSHOT = Path(os.environ.get("SHM_DASHBOARD_SCREENSHOT", Path(__file__).resolve().parents[2] / "docs" / "dashboard.png"))
+VIEWPORT = {"width": 1600, "height": 1000}
+
+
+@pytest.fixture(scope="session")
+def chromium() -> str:
+    """Debian's chromium, installed with apt-get when missing (CI runs as root on a fresh machine)."""
+    if not os.path.exists(CHROMIUM):
+        problem = "apt-get is not available"
+        if shutil.which("apt-get") and hasattr(os, "geteuid") and os.geteuid() == 0:
+            env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+            problem = ""
+            for cmd in (["apt-get", "update"], ["apt-get", "install", "-y", "--no-install-recommends", "chromium"]):
+                result = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=env)
+                if result.returncode != 0:
+                    problem = f"{' '.join(cmd)} failed: {result.stderr.strip()[-500:]}"
+                    break
+        elif shutil.which("apt-get"):
+            problem = "installing needs root"
+        if not os.path.exists(CHROMIUM):
+            pytest.skip(f"cannot install Debian's chromium ({problem}); the browser test needs {CHROMIUM}")
+    return CHROMIUM
+
+
+@pytest.fixture(scope="module")
+def live_dashboard():
+    from web import Dashboard
+
+    rig, units, stations, times, states, truth = simulated_estimates(20.0)
+    sensor_states = {s.topic: "ok" for s in rig.sensors}
+    sensor_states["/tof/s3"] = "degraded"
+    sensor_states["/strain/g2"] = "rejected"
+    service = FakeService(history=history_rows(40, units.count, stations, t0=-40 * 30.0), sensors=sensor_states)
+    dash = Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, stations=stations, service=service)
+    feeder = DemoFeeder(dash, times, states, truth, sensor_states, rate_hz=20.0)
+    feeder.push_spectra(len(times) - 1)
+    dash.push_window({
+        "start_s": 0.0, "end_s": 30.0, "kind": "ambient", "trusted": True, "temperature_c": 20.5,
+        "modes": [{"mode": m, "frequency_hz": f, "damping_ratio": 0.004, "confidence": 0.9}
+                  for m, f in zip(range(1, 5), (0.861, 1.885, 3.507, 5.645))],
+        "frequency_scores_sigma": [0.4, -6.2, 0.1, -0.3],
+        "curvature_index": np.linspace(0.02, 0.35, stations.size).tolist(),
+        "curvature_eta_m": float(stations[-1]), "curvature_third": "lower",
+        "levels": {"mode1": "ok", "mode2": "alarm", "mode3": "ok", "mode4": "ok"},
+    })
+    feeder.start()
+    yield dash, service, feeder
+    feeder.stop()
+    dash.stop()
+
+
+def _visible(page, text: str, **kwargs):
+    """The first visible element with ``text`` (notifications and tabs keep hidden copies)."""
+    return page.get_by_text(text, **kwargs).filter(visible=True).first
+
+
+def _rss_bytes() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def _image(png: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
+
+
+@pytest.mark.timeout(180)
+def test_dashboard_in_headless_chromium(chromium, live_dashboard, tmp_path):
+    from playwright.sync_api import sync_playwright
+
+    dash, service, feeder = live_dashboard
+    with sync_playwright() as p:
+        context = p.chromium.launch_persistent_context(
+            str(tmp_path / "profile"),  # a fresh --user-data-dir
+            executable_path=chromium, headless=True, args=CHROMIUM_ARGS, viewport=VIEWPORT,
+        )
+        try:
+            page = context.pages[0] if context.pages else context.new_page()
+            t_start = time.monotonic()
+            page.goto(dash.url)
+            page.wait_for_selector("canvas", timeout=30_000)
+            _visible(page, "Pause live view").wait_for(timeout=30_000)
+            _visible(page, "b1 · mode 1+2", exact=False).wait_for(timeout=15_000)
+
+            print(f"page ready after {time.monotonic() - t_start:.1f} s")
+            # Live: frames keep coming at >= 10 per second and memory stays flat.
+            time.sleep(2.0)
+            rss0, frames0, pushed0, t0 = _rss_bytes(), dash.frames, feeder.pushed, time.monotonic()
+            time.sleep(3.0)
+            dt = time.monotonic() - t0
+            assert (dash.frames - frames0) / dt >= 10.0
+            assert (feeder.pushed - pushed0) / dt >= 10.0
+            assert dash.client_count == 1
+            assert _rss_bytes() - rss0 < 30 * 2**20
+
+            # An alarm raised by the service shows up as a notification and in the header.
+            alarm = {"id": 42, "level": "alarm", "state": "raised", "mode": 2,
+                     "message": "mode 2 frequency 1.1 % below baseline (6.2 σ)", "since_s": 25.0}
+            service.add_alarm({**alarm, "state": "active"})
+            dash.push_alarm(alarm)
+            _visible(page, "ALARM #42 raised").wait_for(timeout=10_000)
+            _visible(page, "1 ALARM").wait_for(timeout=10_000)
+            try:  # the browser's own notice about software WebGL only hides the picture
+                page.locator(".mantine-Notification-root", has_text="Software WebGL").locator("button").first.click(timeout=2_000)
+            except Exception:
+                pass
+            time.sleep(1.0)
+
+            png = page.screenshot()
+            SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+            SCREENSHOT.write_bytes(png)
+
+            # The beam: blue pixels in a tall vertical strip of the 3D canvas (left of the panel).
+            box = page.evaluate(
+                "() => { const c = [...document.querySelectorAll('canvas')]"
+                ".sort((a, b) => b.width * b.height - a.width * a.height)[0];"
+                " const r = c.getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; }"
+            )
+            img = _image(png)
+            x0, y0, w, h = (int(round(v)) for v in box)
+            scene = img[y0 : y0 + h, x0 : x0 + int(0.62 * w)]
+            r, g, b = scene[..., 0], scene[..., 1], scene[..., 2]
+            blue = (b > 120) & (b - r > 70) & (b - g > 30)
+            rows = np.flatnonzero(blue.any(axis=1))
+            assert blue.sum() > 400, f"beam not drawn: {blue.sum()} blue pixels"
+            assert rows[-1] - rows[0] > 0.3 * h, "the beam should hang as a tall vertical ribbon"
+            background = np.all(np.abs(scene - scene[5, 5]) < 8, axis=-1)
+            assert background.mean() < 0.97, "the scene looks blank"
+
+            # The plots: uPlot charts in the DOM, the first spectrum visible and drawn.
+            assert page.locator(".uplot").count() >= dash.gamma
+            first = page.locator(".uplot canvas").first
+            assert first.is_visible()
+            chart = _image(first.screenshot())
+            assert (np.abs(chart - 255).sum(axis=-1) > 60).sum() > 300, "the spectrum canvas is blank"
+
+            # The beam moves: two pictures of the scene differ.
+            shot_a = _image(page.screenshot(clip={"x": x0, "y": y0, "width": int(0.62 * w), "height": h}))
+            time.sleep(0.6)
+            shot_b = _image(page.screenshot(clip={"x": x0, "y": y0, "width": int(0.62 * w), "height": h}))
+            assert np.any(np.abs(shot_a - shot_b) > 30), "the beam did not move between frames"
+
+            # Acknowledge needs the token: wrong token refused, right token accepted.
+            page.get_by_text("Alarms", exact=True).first.click()
+            _visible(page, "mode 2 frequency 1.1 % below baseline").wait_for(timeout=10_000)
+            token = (
+                page.locator(".mantine-Flex-root", has=page.get_by_text("Operator token", exact=True))
+                .locator("input").filter(visible=True).first
+            )
+            (view,) = dash._views.values()
+
+            def type_token(value: str) -> None:
+                token.fill(value)
+                deadline = time.monotonic() + 10
+                while view.token.value != value and time.monotonic() < deadline:
+                    time.sleep(0.05)
+                assert view.token.value == value
+
+            type_token("wrong")
+            page.get_by_role("button", name="Acknowledge").click()
+            _visible(page, "Not acknowledged").wait_for(timeout=10_000)
+            assert service.alarms()[0].get("acknowledged_at_s") is None
+            type_token(TOKEN)
+            page.get_by_role("button", name="Acknowledge").click()
+            _visible(page, "Alarm #42 acknowledged").wait_for(timeout=10_000)
+            assert service.alarms()[0]["acknowledged_at_s"] is not None
+
+            # Pause freezes this browser's view and, with no live browser left, the pushes.
+            page.get_by_text("Spectra", exact=True).first.click()
+            page.get_by_text("Pause live view").first.click()
+            deadline = time.monotonic() + 10
+            while service.paused is not True and time.monotonic() < deadline:
+                time.sleep(0.1)
+            assert service.paused is True
+            _visible(page, "PAUSED").wait_for(timeout=10_000)
+        except BaseException:
+            page.screenshot(path=str(tmp_path / "failure.png"))
+            print("failure screenshot:", tmp_path / "failure.png")
+            raise
+        finally:
+            context.close()
+    deadline = time.monotonic() + 10
+    while dash.client_count and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert dash.client_count == 0
+    assert service.paused is False  # no browser left: pushes resume

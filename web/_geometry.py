@@ -1,0 +1,205 @@
+"""Geometry of the live beam: pure numpy, no viser (unit-testable).
+
+Frames (recording contract): the inertial frame has η down along gravity and ζ horizontal
+towards the reflector, origin at the bearing's rest position. The body frame sits at the bearing
+D = (h, d) (h along η, d along ζ) and is turned by φ (positive φ turns η towards ζ). A point at arc
+length η with elastic deflection Δ(η) = Σ b_χ s_χ(η) (body frame, across the beam) sits at
+
+    r = D + R(φ) [η, Δ]    i.e.    η_I = h + cos φ·η − sin φ·Δ,   ζ_I = d + sin φ·η + cos φ·Δ.
+
+World (viewer) coordinates: x = ζ, y = across the sheet's width, z = −η (up). Overscaling
+multiplies the elastic part Δ (and the slope Δ′) by ``elastic_scale`` and the rigid motion
+(h, d, φ) by ``rigid_scale``, like the paper's Figure 15.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+__all__ = [
+    "BeamState",
+    "UnitShapes",
+    "centreline",
+    "parse_state",
+    "ribbon",
+    "ribbon_faces",
+    "segments",
+    "state_size_options",
+    "tangent_angle",
+    "tof_rays",
+    "to_world",
+]
+
+#: Rays are drawn at most this long (m) when a ToF's axis is nearly parallel to the reflector.
+MAX_RAY_LENGTH = 5.0
+
+
+class UnitShapes(Protocol):
+    """What the geometry needs of ``estimator.UnitDeformations``."""
+
+    @property
+    def count(self) -> int: ...
+
+    def shape(self, eta: np.ndarray | float) -> np.ndarray: ...
+
+    def slope(self, eta: np.ndarray | float) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class BeamState:
+    """The part of the estimator state the picture needs: d, h (m), φ (rad), b (Γ,)."""
+
+    d: float
+    h: float
+    phi: float
+    b: np.ndarray
+
+
+def state_size_options(gamma: int) -> tuple[int, int]:
+    """Valid state lengths for Γ unit deformations: gyro (5 + Γ + 1) and acc (5 + 2Γ + 1)."""
+    return 5 + gamma + 1, 5 + 2 * gamma + 1
+
+
+def parse_state(x: object, gamma: int) -> BeamState:
+    """Validate a state vector [d, h, ḋ, ḣ, φ, b1..bΓ, (v1..vΓ), β_D] and pick the beam part.
+
+    Raises ValueError (naming the problem) for a non-1-D, wrong-length or non-finite vector.
+    """
+    if not isinstance(gamma, (int, np.integer)) or gamma < 1:
+        raise ValueError(f"gamma={gamma!r} must be a positive integer")
+    try:
+        arr = np.asarray(x, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"state vector x must be numeric: {exc}") from None
+    if arr.ndim != 1:
+        raise ValueError(f"state vector x must be 1-D, got shape {arr.shape}")
+    sizes = state_size_options(int(gamma))
+    if arr.size not in sizes:
+        raise ValueError(
+            f"state vector x has {arr.size} entries; with Γ={gamma} unit deformations it needs "
+            f"{sizes[0]} (gyro: d, h, d_rate, h_rate, phi, b1..b{gamma}, gyro_bias_D) or {sizes[1]} (acc: plus v1..v{gamma})"
+        )
+    if not np.all(np.isfinite(arr[: 5 + gamma])):
+        raise ValueError("state vector x has NaN or infinite values in d, h, phi or b")
+    return BeamState(d=float(arr[0]), h=float(arr[1]), phi=float(arr[4]), b=arr[5 : 5 + gamma].copy())
+
+
+def _place(state: BeamState, eta: np.ndarray, delta: np.ndarray, rigid_scale: float) -> np.ndarray:
+    phi = rigid_scale * state.phi
+    cp, sp = np.cos(phi), np.sin(phi)
+    out = np.empty((eta.size, 2))
+    out[:, 0] = rigid_scale * state.h + cp * eta - sp * delta
+    out[:, 1] = rigid_scale * state.d + sp * eta + cp * delta
+    return out
+
+
+def _check_scales(elastic_scale: float, rigid_scale: float) -> None:
+    for name, value in (("elastic_scale", elastic_scale), ("rigid_scale", rigid_scale)):
+        if not np.isfinite(value) or value < 0:
+            raise ValueError(f"{name}={value!r} must be finite and >= 0")
+
+
+def centreline(
+    state: BeamState,
+    units: UnitShapes,
+    eta: np.ndarray,
+    *,
+    elastic_scale: float = 1.0,
+    rigid_scale: float = 1.0,
+    deflection: np.ndarray | None = None,
+) -> np.ndarray:
+    """Inertial (η_I, ζ_I) of the beam's centre line at arc lengths ``eta``: shape (len(eta), 2).
+
+    ``deflection`` (len(eta),) replaces Σ b s(η) (used for the truth shape, which comes as Δ at
+    stations); the rigid motion is the state's either way.
+    """
+    _check_scales(elastic_scale, rigid_scale)
+    eta = np.atleast_1d(np.asarray(eta, dtype=float))
+    if eta.ndim != 1:
+        raise ValueError(f"eta must be 1-D, got shape {eta.shape}")
+    if deflection is None:
+        delta = units.shape(eta) @ state.b
+    else:
+        delta = np.asarray(deflection, dtype=float)
+        if delta.shape != eta.shape:
+            raise ValueError(f"deflection has shape {delta.shape}, expected {eta.shape} (one value per station)")
+    return _place(state, eta, elastic_scale * delta, rigid_scale)
+
+
+def tangent_angle(
+    state: BeamState, units: UnitShapes, eta: np.ndarray, *, elastic_scale: float = 1.0, rigid_scale: float = 1.0
+) -> np.ndarray:
+    """Angle of the beam's tangent from the inertial η axis (rad, positive towards ζ) at ``eta``."""
+    _check_scales(elastic_scale, rigid_scale)
+    eta = np.atleast_1d(np.asarray(eta, dtype=float))
+    return rigid_scale * state.phi + elastic_scale * (units.slope(eta) @ state.b)
+
+
+def to_world(plane: np.ndarray, y: float | np.ndarray = 0.0) -> np.ndarray:
+    """(N, 2) inertial (η, ζ) → (N, 3) world (x = ζ, y, z = −η), float32."""
+    plane = np.asarray(plane, dtype=float)
+    if plane.ndim != 2 or plane.shape[1] != 2:
+        raise ValueError(f"plane points must have shape (N, 2), got {plane.shape}")
+    out = np.empty((plane.shape[0], 3), dtype=np.float32)
+    out[:, 0] = plane[:, 1]
+    out[:, 1] = y
+    out[:, 2] = -plane[:, 0]
+    return out
+
+
+def ribbon_faces(n: int) -> np.ndarray:
+    """Triangles of a ribbon over ``n`` centre-line points (vertex 2i: y = −w/2, 2i+1: y = +w/2)."""
+    if n < 2:
+        raise ValueError(f"a ribbon needs at least 2 centre-line points, got {n}")
+    i = np.arange(n - 1, dtype=np.uint32)
+    a, b, c, d = 2 * i, 2 * i + 1, 2 * i + 2, 2 * i + 3
+    return np.concatenate([np.stack([a, c, b], axis=1), np.stack([b, c, d], axis=1)]).astype(np.uint32)
+
+
+def ribbon(plane: np.ndarray, width: float) -> np.ndarray:
+    """Vertices (2N, 3) of the sheet: each centre-line point at y = −w/2 and y = +w/2 (world)."""
+    if not np.isfinite(width) or width <= 0:
+        raise ValueError(f"width={width!r} must be finite and > 0")
+    centre = to_world(plane)
+    verts = np.repeat(centre, 2, axis=0)
+    verts[0::2, 1] = -0.5 * width
+    verts[1::2, 1] = 0.5 * width
+    return verts
+
+
+def segments(points: np.ndarray) -> np.ndarray:
+    """A polyline (N, 3) as line segments (N−1, 2, 3) for ``add_line_segments``."""
+    points = np.asarray(points, dtype=np.float32)
+    return np.stack([points[:-1], points[1:]], axis=1)
+
+
+def tof_rays(
+    state: BeamState,
+    units: UnitShapes,
+    eta: np.ndarray,
+    reflector_distance: float,
+    *,
+    elastic_scale: float = 1.0,
+    rigid_scale: float = 1.0,
+) -> np.ndarray:
+    """World segments (n, 2, 3) from each ToF at ``eta`` along its +y axis to the reflector plane.
+
+    The sensor's y axis is the beam normal (−sin α, cos α) in (η, ζ), α the tangent angle; the
+    ray ends where it meets ζ = reflector_distance (length (ζ_ref − ζ)/cos α, Eq. (18)), capped at
+    ``MAX_RAY_LENGTH`` and never negative.
+    """
+    eta = np.atleast_1d(np.asarray(eta, dtype=float))
+    if eta.size == 0:
+        return np.zeros((0, 2, 3), dtype=np.float32)
+    start = centreline(state, units, eta, elastic_scale=elastic_scale, rigid_scale=rigid_scale)
+    alpha = tangent_angle(state, units, eta, elastic_scale=elastic_scale, rigid_scale=rigid_scale)
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    gap = reflector_distance - start[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        length = np.where(ca > 1e-6, gap / np.where(ca > 1e-6, ca, 1.0), MAX_RAY_LENGTH)
+    length = np.clip(length, 0.0, MAX_RAY_LENGTH)
+    end = start + length[:, None] * np.stack([-sa, ca], axis=1)
+    return np.stack([to_world(start), to_world(end)], axis=1)

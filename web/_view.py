@@ -1,0 +1,811 @@
+"""One browser's view: its live scene nodes and its GUI (controls, spectra, trends, alarms, status)."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import html
+import logging
+import math
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import viser
+
+from ._data import AlarmRecord, WindowRecord, frequencies_of, spectrum_plot
+from ._geometry import (
+    BeamState,
+    centreline,
+    ribbon,
+    ribbon_faces,
+    segments,
+    tangent_angle,
+    to_world,
+    tof_rays,
+)
+
+if TYPE_CHECKING:
+    from ._dashboard import Dashboard, Snapshot
+
+log = logging.getLogger(__name__)
+
+#: Sensor marker colours by state (RGB).
+STATE_COLOURS = {
+    "ok": (40, 167, 69),
+    "degraded": (255, 170, 0),
+    "rejected": (220, 38, 38),
+    "unknown": (140, 140, 140),
+}
+MODE_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
+BEAM_COLOUR = (30, 100, 200)
+GHOST_COLOUR = (150, 150, 150)
+TRUTH_COLOUR = (235, 120, 20)
+N_BEAM_POINTS = 121
+TREND_WINDOWS = {"10 min": 600.0, "1 h": 3600.0, "6 h": 6 * 3600.0, "24 h": 86400.0, "7 days": 7 * 86400.0, "all": math.inf}
+SPECTRA_MIN_PERIOD_S = 0.5
+MAX_OVERSCALE = 500.0
+AUTO_TARGET_FRACTION = 0.1  # auto overscale: largest drawn elastic deflection ≈ 10 % of L
+AUTO_DECAY_PER_FRAME = 0.995  # envelope of |Δ| forgets over ~10 s at 20 frames/s
+TEXT_MIN_PERIOD_S = 0.25
+ALARM_ROWS = 30
+#: uPlot draws NaN as missing points (canvas ignores non-finite coordinates).
+NAN = float("nan")
+
+
+def fmt_time(t: float | None) -> str:
+    """UNIX seconds as UTC clock time; small values (seconds since the start) as seconds."""
+    if t is None or not math.isfinite(t):
+        return "–"
+    if t > 1e9:
+        return _dt.datetime.fromtimestamp(t, tz=_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    return f"{t:.1f} s"
+
+
+def _fmt(v: Any, fmt: str = "{:.3g}", none: str = "–") -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return none
+    if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool):
+        return fmt.format(v)
+    return html.escape(str(v))
+
+
+def _arr(values: list[float | None]) -> np.ndarray:
+    return np.array([NAN if v is None else v for v in values], dtype=float)
+
+
+class ClientView:
+    """Scene nodes and GUI of one connected browser, updated by the dashboard's render thread."""
+
+    # ------------------------------------------------------------------ shared (all clients)
+    @staticmethod
+    def setup_shared(dash: "Dashboard") -> None:
+        server = dash.server
+        L, refl = dash.length, dash.reflector_distance
+        server.gui.configure_theme(
+            control_width="large", show_logo=False, show_share_button=False, brand_color=(30, 100, 200)
+        )
+        server.scene.set_up_direction("+z")
+        # Shadows and the HDR environment cost a software-rendered browser (no GPU) 10× its frame
+        # rate, and a hanging sheet needs neither: plain default lights.
+        server.scene.configure_default_lights(enabled=True, cast_shadow=False)
+        server.scene.configure_environment_map(None)
+        server.scene.add_light_ambient("/lights/ambient", intensity=1.6)
+        server.scene.add_light_hemisphere("/lights/sky", sky_color=(255, 255, 255), ground_color=(200, 205, 215), intensity=1.2)
+        # A front view of the beam's plane (ζ to the right, up = −η), slightly from the side; the
+        # look-at point sits right of the beam so the beam is not hidden behind the GUI panel.
+        look_x = 0.55 + 0.6 * refl
+        server.initial_camera.position = (look_x + 0.9, -0.95 * L, -0.40 * L)
+        server.initial_camera.look_at = (look_x, 0.0, -0.5 * L)
+        rail_lo, rail_hi = min(-0.6, refl - 1.2), refl + 0.05
+        server.scene.add_box(
+            "/rig/rail", color=(90, 90, 100), dimensions=(rail_hi - rail_lo, 0.08, 0.04),
+            position=(0.5 * (rail_lo + rail_hi), 0.0, 0.09), cast_shadow=False,
+        )
+        server.scene.add_label("/rig/rail_label", "bearing rail", position=(rail_lo, 0.0, 0.16), font_screen_scale=0.8)
+        server.scene.add_box(
+            "/rig/reflector", color=(150, 175, 205), dimensions=(0.01, 0.9, L + 0.4),
+            position=(refl + 0.005, 0.0, -0.5 * L), opacity=0.35, side="double", cast_shadow=False,
+        )
+        server.scene.add_label("/rig/reflector_label", f"reflector ζ = {refl:g} m", position=(refl, 0.45, 0.1), font_screen_scale=0.8)
+        server.scene.add_grid(
+            "/rig/grid", width=max(2.0, 2 * refl + 1.5), height=L + 1.0, plane="xz",
+            cell_size=0.1, section_size=0.5, position=(0.5 * refl, 0.45, -0.5 * L), shadow_opacity=0.0,
+        )
+        server.scene.add_line_segments(
+            "/rig/plumb", np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -L]]]), (160, 160, 160), thickness=0.004,
+        )
+
+    # ------------------------------------------------------------------ per client
+    def __init__(self, dash: "Dashboard", client: viser.ClientHandle) -> None:
+        self.dash = dash
+        self.client = client
+        self.closed = False
+        self.paused = False
+        self.elastic_scale = 20.0
+        self.rigid_scale = 1.0
+        self.modes_shown = set(range(1, dash.gamma + 1))
+        self.trend_window_s = TREND_WINDOWS["1 h"]
+        self.dirty_scene = True
+        self.dirty_trends = True
+        self._drawn_estimate: Any = None
+        self._est_version = -1
+        self._spec_version = -1
+        self._win_version = -1
+        self._alarm_version = -1
+        self._status_version = -1
+        self._last_spectra = -math.inf
+        self._last_text = -math.inf
+        self._time_axis: bool | None = None
+        self._envelope = 0.0
+        self._eta = np.linspace(0.0, dash.length, N_BEAM_POINTS)
+        self._faces = ribbon_faces(N_BEAM_POINTS)
+        self._shape_eta = np.asarray(dash.units.shape(self._eta), dtype=float)
+        self._build_scene_groups()
+        with client.atomic():
+            self._build_scene()
+            self._build_gui()
+
+    def _build_scene_groups(self) -> None:
+        """Sensors on the beam, by kind, and one label per board/gauge name."""
+        groups: dict[str, list[tuple[str, float]]] = {"imu": [], "tof": [], "strain": []}
+        for topic, sensor in self.dash.sensor_topics.items():
+            if sensor.kind in groups:
+                groups[sensor.kind].append((topic, float(sensor.position)))
+        self.sensor_groups = {k: v for k, v in groups.items() if v}
+        labels: dict[str, float] = {}
+        for sensor in self.dash.rig.sensors:
+            if sensor.kind in groups and sensor.name not in labels:
+                labels[sensor.name] = float(sensor.position)
+        self.label_names = list(labels)
+        self.label_eta = np.array(list(labels.values()), dtype=float)
+        self.bearing_topic = next((t for t, s in self.dash.sensor_topics.items() if s.kind == "bearing"), None)
+
+    def _build_scene(self) -> None:
+        scene, dash = self.client.scene, self.dash
+        rest = BeamState(0.0, 0.0, 0.0, np.zeros(dash.gamma))
+        verts = ribbon(centreline(rest, dash.units, self._eta), dash.width)
+        self.ghost = scene.add_mesh_simple(
+            "/live/ghost", verts, self._faces, color=GHOST_COLOUR, opacity=0.28, side="double", cast_shadow=False
+        )
+        self.beam = scene.add_mesh_simple(
+            "/live/beam", verts, self._faces, color=BEAM_COLOUR, side="double", cast_shadow=False
+        )
+        self.truth = scene.add_line_segments(
+            "/live/truth", segments(to_world(np.zeros((2, 2)))), TRUTH_COLOUR, thickness=0.015, visible=False
+        )
+        self.bearing = scene.add_cylinder(
+            "/live/bearing", radius=0.045, height=dash.width + 0.12, color=(20, 20, 20),
+            wxyz=(math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0), cast_shadow=False,
+        )
+        self.bearing_marker = scene.add_point_cloud(
+            "/live/sensors/bearing", np.zeros((1, 3), dtype=np.float32), np.array([STATE_COLOURS["unknown"]], dtype=np.uint8),
+            point_size=0.07, point_shape="circle", precision="float32", point_shading="flat",
+            visible=self.bearing_topic is not None,
+        )
+        self.tangent = scene.add_line_segments(
+            "/live/tangent", np.zeros((1, 2, 3)), (20, 20, 20), thickness=0.006
+        )
+        self.markers: dict[str, Any] = {}
+        shapes = {"imu": ("circle", -0.5 * dash.width - 0.03), "tof": ("square", 0.5 * dash.width + 0.03), "strain": ("diamond", 0.0)}
+        for kind, items in self.sensor_groups.items():
+            shape, _ = shapes[kind]
+            self.markers[kind] = scene.add_point_cloud(
+                f"/live/sensors/{kind}", np.zeros((len(items), 3), dtype=np.float32),
+                np.tile(np.array(STATE_COLOURS["unknown"], dtype=np.uint8), (len(items), 1)),
+                point_size=0.07, point_shape=shape, precision="float32", point_shading="flat",
+            )
+        self.marker_offsets = {k: v[1] for k, v in shapes.items()}
+        tof = self.sensor_groups.get("tof", [])
+        self.rays = None
+        if tof:
+            self.rays = scene.add_line_segments(
+                "/live/tof_rays", np.zeros((len(tof), 2, 3), dtype=np.float32),
+                np.tile(np.array((255, 80, 80), dtype=np.uint8), (len(tof), 2, 1)), thickness=0.006,
+            )
+        self.labels = [
+            scene.add_label(f"/live/labels/{i}", name, font_screen_scale=0.75, anchor="center-left")
+            for i, name in enumerate(self.label_names)
+        ]
+        self.tip_label = scene.add_label("/live/tip_label", "", font_screen_scale=0.8, anchor="top-center")
+
+    # ------------------------------------------------------------------ GUI
+    def _build_gui(self) -> None:
+        gui, dash = self.client.gui, self.dash
+        self.header = gui.add_html(self._header_html(None), order=0)
+        self.pause = gui.add_checkbox(
+            "Pause live view", False, order=1,
+            hint="Freezes this browser's beam, spectra and trends (alarms and status stay live). Never changes data.",
+        )
+        self.overscale = gui.add_slider(
+            "Overscale (elastic)", 1.0, MAX_OVERSCALE, 1.0, self.elastic_scale, order=2,
+            hint="Multiplies the elastic deflection Σ b s(η) drawn, like the paper's Figure 15",
+        )
+        self.auto_scale = gui.add_checkbox(
+            "Auto overscale", True, order=2.5,
+            hint=f"Keeps the largest drawn elastic deflection of the last seconds near {AUTO_TARGET_FRACTION:.0%} of the beam length",
+        )
+
+        @self.pause.on_update
+        def _(_: Any) -> None:
+            self.paused = bool(self.pause.value)
+            self.dirty_scene = self.dirty_trends = True
+            dash.set_view_paused()
+
+        @self.overscale.on_update
+        def _(event: Any) -> None:
+            self.elastic_scale = float(self.overscale.value)
+            if event.client is not None:  # moved by the operator (not by auto overscale)
+                self.auto_scale.value = False
+            self.dirty_scene = True
+
+        @self.auto_scale.on_update
+        def _(_: Any) -> None:
+            self._envelope = 0.0
+            self.dirty_scene = True
+
+        tabs = gui.add_tab_group(order=3)
+        with tabs.add_tab("Spectra", viser.Icon.WAVE_SINE):
+            self._build_spectra(gui)
+        with tabs.add_tab("Trends", viser.Icon.CHART_LINE):
+            self._build_trends(gui)
+        with tabs.add_tab("Alarms", viser.Icon.ALERT_TRIANGLE):
+            self._build_alarms(gui)
+        with tabs.add_tab("Status", viser.Icon.HEART_RATE_MONITOR):
+            self.status_html = gui.add_html("<p>Waiting for the service status…</p>")
+        with tabs.add_tab("View", viser.Icon.SETTINGS):
+            self._build_settings(gui)
+
+    def _mode_label(self, mode: int) -> str:
+        units = self.dash.units
+        try:
+            modes = units.modes[mode - 1]
+            freqs = units.frequencies_hz[mode - 1]
+            return f"b{mode} · mode {'+'.join(str(m) for m in modes)} ({', '.join(f'{f:.2f}' for f in freqs)} Hz model)"
+        except (AttributeError, IndexError, TypeError):
+            return f"b{mode}"
+
+    def _model_hz(self, mode: int) -> float | None:
+        try:
+            return float(self.dash.units.frequencies_hz[mode - 1][-1])
+        except (AttributeError, IndexError, TypeError, ValueError):
+            return None
+
+    def _f_max(self) -> float:
+        freqs = [self._model_hz(m) for m in range(1, self.dash.gamma + 1)]
+        freqs = [f for f in freqs if f]
+        return 1.4 * max(freqs) if freqs else 10.0
+
+    def _build_spectra(self, gui: Any) -> None:
+        gui.add_markdown(
+            "Amplitude spectra of the deformation variables b<sub>χ</sub> (latest window, µm, log scale). "
+            "Solid spike: tracked eigenfrequency; dashed spike: baseline."
+        )
+        self.spectra_plots = {}
+        f_max = self._f_max()
+        f = np.linspace(0.0, f_max, 200)
+        for mode in range(1, self.dash.gamma + 1):
+            colour = MODE_COLOURS[(mode - 1) % len(MODE_COLOURS)]
+            x, y, tr, bl = spectrum_plot(f, np.ones(f.size), None, self._model_hz(mode))
+            self.spectra_plots[mode] = gui.add_uplot(
+                data=(x, y, tr, bl),
+                series=self._spectrum_series(mode, None, self._model_hz(mode)),
+                scales={"x": {"time": False}, "y": {"distr": 3}},
+                title=self._mode_label(mode),
+                height=150,
+                padding=(12, 16, 0, 0),
+                axes=({"ticks": {"show": False}}, {"size": 52, "ticks": {"show": False}}),
+                legend={"show": True, "live": False},
+            )
+
+    def _spectrum_series(self, mode: int, tracked: object, baseline: object) -> tuple:
+        colour = MODE_COLOURS[(mode - 1) % len(MODE_COLOURS)]
+
+        def label(values: object) -> str:
+            fs = frequencies_of(values)
+            return " / ".join(f"{f:.3f}" for f in fs) if fs else "–"
+
+        return (
+            {"label": "Hz"},
+            {"label": f"|b{mode}| µm", "stroke": colour, "width": 1.5, "fill": colour + "22"},
+            {"label": f"tracked {label(tracked)} Hz", "stroke": "#111111", "width": 1.5, "points": {"show": False}},
+            {"label": f"baseline {label(baseline)} Hz", "stroke": "#2e8b57", "width": 1.5, "dash": (5, 4), "points": {"show": False}},
+        )
+
+    def _build_trends(self, gui: Any) -> None:
+        self.trend_info = gui.add_html("<p>Waiting for the first analysis window…</p>")
+        self.freq_plots = {}
+        x0 = np.array([0.0, 1.0])
+        z = np.zeros(2)
+        for mode in range(1, self.dash.gamma + 1):
+            colour = MODE_COLOURS[(mode - 1) % len(MODE_COLOURS)]
+            self.freq_plots[mode] = gui.add_uplot(
+                data=(x0, z, z, z, z),
+                series=(
+                    {"label": "time"},
+                    {"label": f"f{mode} Hz", "stroke": colour, "width": 2, "points": {"show": True, "size": 4}},
+                    {"label": "expected", "stroke": "#2e8b57", "width": 1, "dash": (6, 4)},
+                    {"label": "band −", "stroke": "rgba(46,139,87,0.4)", "width": 1},
+                    {"label": "band +", "stroke": "rgba(46,139,87,0.4)", "width": 1},
+                ),
+                bands=({"series": (4, 3), "fill": "rgba(46,139,87,0.15)"},),
+                scales={"x": {"time": False}},
+                title=f"b{mode} eigenfrequency (Hz) with baseline band",
+                height=140, visible=False, legend={"live": False},
+            )
+        g = self.dash.gamma
+        self.damping_plot = gui.add_uplot(
+            data=(x0,) + (z,) * g,
+            series=({"label": "time"},) + tuple(
+                {"label": f"ζ{m} %", "stroke": MODE_COLOURS[(m - 1) % 5], "width": 1.5, "points": {"show": True, "size": 4}}
+                for m in range(1, g + 1)
+            ),
+            scales={"x": {"time": False}}, title="Damping ratio (%)", height=150, visible=False, legend={"live": False},
+        )
+        self.score_plot = gui.add_uplot(
+            data=(x0,) + (z,) * (g + 4),
+            series=({"label": "time"},) + tuple(
+                {"label": f"b{m} σ", "stroke": MODE_COLOURS[(m - 1) % 5], "width": 1.5}
+                for m in range(1, g + 1)
+            ) + (
+                {"label": "warning +", "stroke": "#ffaa00", "dash": (6, 4), "width": 1},
+                {"label": "warning −", "stroke": "#ffaa00", "dash": (6, 4), "width": 1},
+                {"label": "alarm +", "stroke": "#dc2626", "dash": (6, 4), "width": 1.5},
+                {"label": "alarm −", "stroke": "#dc2626", "dash": (6, 4), "width": 1.5},
+            ),
+            scales={"x": {"time": False}}, title="Frequency control charts: EWMA score (σ) and alarm thresholds",
+            height=170, visible=False, legend={"live": False},
+        )
+        self.temperature_plot = gui.add_uplot(
+            data=(x0, z),
+            series=({"label": "time"}, {"label": "T °C", "stroke": "#b45309", "width": 1.5}),
+            scales={"x": {"time": False}}, title="Temperature (°C)", height=120, visible=False, legend={"live": False},
+        )
+        st = self.dash.stations
+        self.curv_profile_plot = gui.add_uplot(
+            data=(st, np.zeros(st.size), np.zeros(st.size)),
+            series=(
+                {"label": "η m"},
+                {"label": "latest", "stroke": "#7c3aed", "width": 2, "points": {"show": True, "size": 5}},
+                {"label": "max in range", "stroke": "#a78bfa", "width": 1, "dash": (4, 3)},
+            ),
+            scales={"x": {"time": False}}, title="Curvature-change index along the beam (η from the bearing, m)",
+            height=150, visible=False, legend={"live": False},
+        )
+        self.curv_trend_plot = gui.add_uplot(
+            data=(x0, z),
+            series=({"label": "time"}, {"label": "index (RMS)", "stroke": "#7c3aed", "width": 1.5, "points": {"show": True, "size": 4}}),
+            scales={"x": {"time": False}}, title="Curvature-change index over time", height=120, visible=False, legend={"live": False},
+        )
+
+    def _build_alarms(self, gui: Any) -> None:
+        self.alarm_html = gui.add_html("<p>No alarms.</p>")
+        self.alarm_choice = gui.add_dropdown("Alarm", ("(none)",), initial_value="(none)")
+        self.token = gui.add_text("Operator token", "", hint="Required to acknowledge (same rules as the HTTP API)")
+        self.ack_button = gui.add_button("Acknowledge", icon=viser.Icon.CHECK, color="red")
+        self.ack_result = gui.add_html("")
+
+        @self.ack_button.on_click
+        def _(_: Any) -> None:
+            self._acknowledge()
+
+    def _acknowledge(self) -> None:
+        choice = str(self.alarm_choice.value)
+        if not choice.startswith("#"):
+            self.ack_result.content = "<p style='color:#b45309'>Choose an alarm first.</p>"
+            return
+        alarm_id = int(choice[1:].split()[0])
+        token = str(self.token.value)
+        try:
+            result = self.dash.service.acknowledge(alarm_id, token)
+        except PermissionError as exc:
+            self.ack_result.content = f"<p style='color:#dc2626'>Not acknowledged: {html.escape(str(exc) or 'token missing or wrong')}</p>"
+            return
+        except KeyError:
+            self.ack_result.content = f"<p style='color:#dc2626'>Alarm #{alarm_id} does not exist.</p>"
+            return
+        except Exception as exc:
+            log.exception("acknowledge(%s) failed", alarm_id)
+            self.ack_result.content = f"<p style='color:#dc2626'>Acknowledge failed: {html.escape(type(exc).__name__)}: {html.escape(str(exc))}</p>"
+            return
+        if isinstance(result, dict):
+            try:
+                self.dash.push_alarm(result)
+            except ValueError:
+                pass
+        self.ack_result.content = f"<p style='color:#15803d'>Alarm #{alarm_id} acknowledged.</p>"
+
+    def _build_settings(self, gui: Any) -> None:
+        self.rigid = gui.add_slider(
+            "Overscale (rigid d, h, φ)", 1.0, 50.0, 1.0, 1.0, hint="Multiplies the bearing motion and the attitude drawn"
+        )
+        self.show_ghost = gui.add_checkbox("Show baseline ghost", True)
+        self.ghost_mode = gui.add_dropdown(
+            "Ghost shape", ("rest (undeformed)", "running mean (60 s)"), initial_value="rest (undeformed)"
+        )
+        self.show_truth = gui.add_checkbox("Show truth shape (simulation)", True)
+        self.show_rays = gui.add_checkbox("Show ToF rays", True)
+        self.show_labels = gui.add_checkbox("Show sensor labels", True)
+        gui.add_markdown("**Modes shown** (spectra and trends)")
+        self.mode_boxes = {m: gui.add_checkbox(self._mode_label(m), True) for m in range(1, self.dash.gamma + 1)}
+        self.trend_window = gui.add_dropdown("Trend window", tuple(TREND_WINDOWS), initial_value="1 h")
+        gui.add_markdown(
+            "Marker colours: <span style='color:#28a745'>●</span> ok, <span style='color:#ffaa00'>●</span> degraded, "
+            "<span style='color:#dc2626'>●</span> rejected samples. Circles: IMUs, squares: ToFs, diamonds: strain gauges."
+        )
+
+        def scene_changed(_: Any) -> None:
+            self.rigid_scale = float(self.rigid.value)
+            self.dirty_scene = True
+
+        for handle in (self.rigid, self.show_ghost, self.ghost_mode, self.show_truth, self.show_rays, self.show_labels):
+            handle.on_update(scene_changed)
+
+        def modes_changed(_: Any) -> None:
+            self.modes_shown = {m for m, box in self.mode_boxes.items() if box.value}
+            self.trend_window_s = TREND_WINDOWS.get(str(self.trend_window.value), math.inf)
+            for m, plot in self.spectra_plots.items():
+                plot.visible = m in self.modes_shown
+            self.dirty_trends = True
+            self._spec_version = -1
+
+        for handle in (*self.mode_boxes.values(), self.trend_window):
+            handle.on_update(modes_changed)
+
+    # ------------------------------------------------------------------ rendering
+    def render(self, snap: "Snapshot") -> None:
+        if self.closed:
+            return
+        now = time.monotonic()
+        with self.client.atomic():
+            if not self.paused and snap.estimate is not None and snap.estimate_version != self._est_version:
+                self._drawn_estimate = (snap.estimate, snap.mean_state)
+                self._est_version = snap.estimate_version
+                self.dirty_scene = True
+            if self.dirty_scene and self._drawn_estimate is not None:
+                self.dirty_scene = False
+                self._render_scene(*self._drawn_estimate, texts=self.paused or now - self._last_text >= TEXT_MIN_PERIOD_S)
+            if not self.paused and snap.spectra is not None and snap.spectra_version != self._spec_version and now - self._last_spectra >= SPECTRA_MIN_PERIOD_S:
+                self._spec_version = snap.spectra_version
+                self._last_spectra = now
+                self._render_spectra(snap)
+            if (not self.paused and snap.windows_version != self._win_version) or (self.dirty_trends and snap.windows):
+                self._win_version = snap.windows_version
+                self.dirty_trends = False
+                self._render_trends(snap)
+            if snap.alarms_version != self._alarm_version:
+                self._alarm_version = snap.alarms_version
+                self._render_alarms(snap)
+            if snap.status_version != self._status_version:
+                self._status_version = snap.status_version
+                self._render_status(snap)
+            if now - self._last_text >= TEXT_MIN_PERIOD_S:
+                self._last_text = now
+                self.header.content = self._header_html(snap)
+
+    def _render_scene(self, est: Any, mean: BeamState | None, *, texts: bool) -> None:
+        dash = self.dash
+        state: BeamState = est.state
+        if self.auto_scale.value:
+            self._auto_overscale(state)
+        es, rs = self.elastic_scale, self.rigid_scale
+        line = centreline(state, dash.units, self._eta, elastic_scale=es, rigid_scale=rs)
+        self.beam.vertices = ribbon(line, dash.width)
+        ghost_on = bool(self.show_ghost.value)
+        self.ghost.visible = ghost_on
+        if ghost_on:
+            if str(self.ghost_mode.value).startswith("running") and mean is not None:
+                ghost = centreline(mean, dash.units, self._eta, elastic_scale=es, rigid_scale=rs)
+            else:
+                ghost = centreline(BeamState(0.0, 0.0, 0.0, np.zeros(dash.gamma)), dash.units, self._eta)
+            self.ghost.vertices = ribbon(ghost, dash.width)
+        truth_on = est.truth_deflection is not None and bool(self.show_truth.value)
+        self.truth.visible = truth_on
+        if truth_on:
+            eta = np.concatenate([[0.0], dash.stations]) if dash.stations[0] > 0 else dash.stations
+            delta = np.concatenate([[0.0], est.truth_deflection]) if dash.stations[0] > 0 else est.truth_deflection
+            tline = centreline(state, dash.units, eta, elastic_scale=es, rigid_scale=rs, deflection=delta)
+            pts = to_world(tline, y=0.5 * dash.width + 0.01)
+            self.truth.points = segments(pts)
+        d_world = np.array([rs * state.d, 0.0, -rs * state.h], dtype=np.float32)
+        self.bearing.position = tuple(float(v) for v in d_world)
+        phi = rs * state.phi
+        self.tangent.points = np.array([[d_world, d_world + 1.0 * np.array([math.sin(phi), 0.0, -math.cos(phi)])]], dtype=np.float32)
+        states = est.sensor_states
+        if self.bearing_topic is not None:
+            self.bearing_marker.points = (d_world + np.array([0.0, 0.0, 0.13], dtype=np.float32))[None, :]
+            self.bearing_marker.colors = np.array([STATE_COLOURS.get(states.get(self.bearing_topic, "unknown"), STATE_COLOURS["unknown"])], dtype=np.uint8)
+        for kind, items in self.sensor_groups.items():
+            eta = np.array([e for _, e in items])
+            pos = to_world(centreline(state, dash.units, eta, elastic_scale=es, rigid_scale=rs), y=self.marker_offsets[kind])
+            if kind == "strain":  # on the +ζ face
+                pos[:, 0] += 0.01
+            self.markers[kind].points = pos
+            self.markers[kind].colors = np.array(
+                [STATE_COLOURS.get(states.get(topic, "unknown"), STATE_COLOURS["unknown"]) for topic, _ in items], dtype=np.uint8
+            )
+        if self.rays is not None:
+            rays_on = bool(self.show_rays.value)
+            self.rays.visible = rays_on
+            if rays_on:
+                items = self.sensor_groups["tof"]
+                eta = np.array([e for _, e in items])
+                rays = tof_rays(state, dash.units, eta, dash.reflector_distance, elastic_scale=es, rigid_scale=rs)
+                rays[:, :, 1] = self.marker_offsets["tof"]
+                self.rays.points = rays
+                ray_colours = {"ok": (255, 70, 70), "degraded": (255, 170, 0), "rejected": (150, 150, 150)}
+                cols = np.array([ray_colours.get(states.get(t, "ok"), (255, 70, 70)) for t, _ in items], dtype=np.uint8)
+                self.rays.colors = np.repeat(cols[:, None, :], 2, axis=1)
+        labels_on = bool(self.show_labels.value)
+        if self.labels and texts:  # HTML labels are costly for the browser: at the text rate
+            pos = to_world(centreline(state, dash.units, self.label_eta, elastic_scale=es, rigid_scale=rs), y=0.5 * dash.width + 0.1)
+            for handle, p in zip(self.labels, pos):
+                handle.visible = labels_on
+                if labels_on:
+                    handle.position = (float(p[0]), float(p[1]), float(p[2]))
+        tip = line[-1]
+        if texts:
+            self.tip_label.position = (float(tip[1]), 0.0, float(-tip[0] - 0.08))
+            delta_tip = float(dash.units.shape(np.array([dash.length]))[0] @ state.b)
+            self.tip_label.text = f"tip Δ = {1e3 * delta_tip:+.1f} mm  (×{es:g})"
+
+    def _auto_overscale(self, state: BeamState) -> None:
+        peak = float(np.max(np.abs(self._shape_eta @ state.b)))
+        self._envelope = max(peak, self._envelope * AUTO_DECAY_PER_FRAME)
+        if self._envelope <= 0:
+            return
+        wanted = AUTO_TARGET_FRACTION * self.dash.length / self._envelope
+        drawn = self.elastic_scale * self._envelope / (AUTO_TARGET_FRACTION * self.dash.length)
+        if 0.4 <= drawn <= 1.6:  # hysteresis: keep a steady factor while the picture is readable
+            return
+        nice = _nice(min(max(wanted, 1.0), MAX_OVERSCALE))
+        if nice != self.elastic_scale:
+            self.elastic_scale = nice
+            self.overscale.value = nice
+
+    def _render_spectra(self, snap: "Snapshot") -> None:
+        spec = snap.spectra
+        f_max = max(self._f_max(), 1.2 * max([f for fs in (*spec.tracked_hz, *spec.baseline_hz) for f in fs] or [0.0]))
+        for mode, plot in self.spectra_plots.items():
+            if mode not in self.modes_shown:
+                continue
+            tracked, baseline = spec.tracked_hz[mode - 1], spec.baseline_hz[mode - 1]
+            plot.data = spectrum_plot(spec.frequencies_hz, 1e6 * spec.amplitudes[:, mode - 1], tracked, baseline, f_max=f_max)
+            series = self._spectrum_series(mode, tracked, baseline)
+            if plot.series != series:
+                plot.series = series
+
+    def _x(self, times: np.ndarray, plots: list[Any]) -> np.ndarray:
+        """Trend x: UNIX seconds on a date axis; seconds since start on a plain axis."""
+        time_axis = bool(times.size and times[-1] > 1e9)
+        if time_axis != self._time_axis:
+            self._time_axis = time_axis
+            for p in plots:
+                p.scales = {"x": {"time": time_axis}}
+        return times
+
+    def _render_trends(self, snap: "Snapshot") -> None:
+        dash = self.dash
+        windows = snap.windows
+        if not windows:
+            return
+        t_end = windows[-1].t_s
+        shown = [w for w in windows if w.t_s >= t_end - self.trend_window_s]
+        if len(shown) > 2000:  # keep the browser fast: thin evenly
+            shown = shown[:: math.ceil(len(shown) / 2000)]
+        trend_plots = [*self.freq_plots.values(), self.damping_plot, self.score_plot, self.temperature_plot, self.curv_trend_plot]
+        x = self._x(np.array([w.t_s for w in shown]), trend_plots)
+        if x.size == 1:  # uPlot needs two x values to draw a range
+            x = np.array([x[0] - 1.0, x[0]])
+            shown = [shown[0], shown[0]]
+        for mode, plot in self.freq_plots.items():
+            visible = mode in self.modes_shown
+            plot.visible = visible
+            if not visible:
+                continue
+            f = _arr([w.frequency_hz.get(mode) for w in shown])
+            bands = [dash.band(snap, w, mode) for w in shown]
+            plot.data = (x, f, _arr([b[0] for b in bands]), _arr([b[1] for b in bands]), _arr([b[2] for b in bands]))
+        g = dash.gamma
+        damping = [_arr([None if w.damping_ratio.get(m) is None else 100 * w.damping_ratio[m] for w in shown]) for m in range(1, g + 1)]
+        self.damping_plot.data = (x, *damping)
+        self.damping_plot.visible = any(np.isfinite(d).any() for d in damping)
+        th = dash.thresholds(snap)
+        scores = [_arr([w.score_sigma.get(m) for w in shown]) for m in range(1, g + 1)]
+        ones = np.ones(x.size)
+        self.score_plot.data = (x, *scores, th["warning_sigma"] * ones, -th["warning_sigma"] * ones, th["alarm_sigma"] * ones, -th["alarm_sigma"] * ones)
+        self.score_plot.visible = any(np.isfinite(s).any() for s in scores)
+        series = list(self.damping_plot.series)
+        changed = False
+        for m in range(1, g + 1):
+            want = m in self.modes_shown
+            if series[m].get("show", True) != want:
+                series[m] = {**series[m], "show": want}
+                changed = True
+        if changed:
+            self.damping_plot.series = tuple(series)
+            score_series = list(self.score_plot.series)
+            for m in range(1, g + 1):
+                score_series[m] = {**score_series[m], "show": m in self.modes_shown}
+            self.score_plot.series = tuple(score_series)
+        temps = _arr([w.temperature_c for w in shown])
+        self.temperature_plot.data = (x, temps)
+        self.temperature_plot.visible = bool(np.isfinite(temps).any())
+        totals = _arr([w.curvature_total for w in shown])
+        self.curv_trend_plot.data = (x, totals)
+        self.curv_trend_plot.visible = bool(np.isfinite(totals).any())
+        profiles = [w.curvature_profile for w in shown if w.curvature_profile is not None]
+        if profiles:
+            stack = np.array(profiles)
+            self.curv_profile_plot.data = (dash.stations, profiles[-1], np.nanmax(stack, axis=0))
+            self.curv_profile_plot.visible = True
+        self.trend_info.content = self._trend_info_html(windows[-1], len(windows))
+
+    def _trend_info_html(self, w: WindowRecord, count: int) -> str:
+        cells = []
+        for m in sorted(w.frequency_hz):
+            level = w.levels.get(f"mode{m}", "ok")
+            cells.append(
+                f"<tr><td>b{m}</td><td>{_fmt(w.frequency_hz.get(m), '{:.4f}')}</td>"
+                f"<td>{_fmt(None if w.damping_ratio.get(m) is None else 100 * w.damping_ratio[m], '{:.2f}')}</td>"
+                f"<td>{_fmt(w.score_sigma.get(m), '{:+.1f}')}</td><td>{_level_badge(level)}</td></tr>"
+            )
+        where = ""
+        if w.curvature_eta_m is not None:
+            where = f" — largest change at η = {w.curvature_eta_m:.2f} m ({html.escape(w.curvature_third or '')} third)"
+        return (
+            f"<div style='font-size:12px'><b>Latest window</b> {fmt_time(w.start_s)} → {fmt_time(w.end_s)} "
+            f"({html.escape(w.kind or '–')}{'' if w.trusted is None else (', trusted' if w.trusted else ', untrusted')}), "
+            f"T = {_fmt(w.temperature_c, '{:.1f}')} °C, {count} windows stored."
+            f"<table style='width:100%;font-size:12px'><tr><th>mode</th><th>f Hz</th><th>ζ %</th><th>score σ</th><th>chart</th></tr>"
+            + "".join(cells)
+            + f"</table>Curvature-change index {_fmt(w.curvature_total, '{:.3g}')}"
+            f" (score {_fmt(w.curvature_score_sigma, '{:+.1f}')} σ){where}</div>"
+        )
+
+    def _render_alarms(self, snap: "Snapshot") -> None:
+        alarms = snap.alarms
+        if not alarms:
+            self.alarm_html.content = "<p>No alarms.</p>"
+        else:
+            rows = []
+            for a in alarms[:ALARM_ROWS]:
+                state = "active" if a.active else "cleared"
+                if a.acknowledged:
+                    state += ", ack"
+                rows.append(
+                    f"<tr style='{_alarm_style(a)}'><td>#{a.id}</td><td>{_level_badge(a.level)}</td>"
+                    f"<td>{_fmt(a.mode)}</td><td>{state}</td><td>{fmt_time(a.since_s)}</td>"
+                    f"<td>{html.escape(a.message)}</td></tr>"
+                )
+            active = sum(1 for a in alarms if a.active)
+            self.alarm_html.content = (
+                f"<div style='font-size:12px'><b>{active} active</b>, {len(alarms)} in the list."
+                "<table style='width:100%;font-size:12px;border-collapse:collapse'>"
+                "<tr><th>id</th><th>level</th><th>mode</th><th>state</th><th>since</th><th>message</th></tr>"
+                + "".join(rows) + "</table></div>"
+            )
+        options = tuple(
+            f"#{a.id} {a.level} mode {a.mode if a.mode is not None else '-'}"
+            for a in alarms if not a.acknowledged
+        ) or ("(none)",)
+        if tuple(self.alarm_choice.options) != options:
+            current = self.alarm_choice.value
+            self.alarm_choice.options = options
+            if current in options:
+                self.alarm_choice.value = current
+
+    def _render_status(self, snap: "Snapshot") -> None:
+        self.status_html.content = _status_html(snap, self.dash)
+
+    def _header_html(self, snap: "Snapshot | None") -> str:
+        dash = self.dash
+        if snap is None:
+            return f"<div style='font-size:13px'><b>{html.escape(dash.label)}</b><br>Connecting to the data…</div>"
+        live = "<span style='color:#b45309;font-weight:bold'>■ PAUSED</span>" if self.paused else "<span style='color:#15803d;font-weight:bold'>● LIVE</span>"
+        est = snap.estimate if not self.paused or self._drawn_estimate is None else self._drawn_estimate[0]
+        if est is None:
+            motion = "waiting for estimates"
+        else:
+            s = est.state
+            motion = (
+                f"t = {fmt_time(est.t_s)} · d = {1e3 * s.d:+.1f} mm · φ = {1e3 * s.phi:+.2f} mrad · "
+                f"b = [{', '.join(f'{v:+.2e}' for v in s.b)}]"
+            )
+        active = [a for a in snap.alarms if a.active]
+        n_alarm = sum(1 for a in active if a.level == "alarm")
+        n_warn = len(active) - n_alarm
+        if n_alarm:
+            badge = f"<span style='background:#dc2626;color:white;padding:1px 6px;border-radius:4px'>{n_alarm} ALARM</span>"
+        elif n_warn:
+            badge = f"<span style='background:#ffaa00;color:black;padding:1px 6px;border-radius:4px'>{n_warn} warning</span>"
+        else:
+            badge = "<span style='background:#15803d;color:white;padding:1px 6px;border-radius:4px'>no active alarms</span>"
+        if n_alarm and n_warn:
+            badge += f" <span style='background:#ffaa00;color:black;padding:1px 6px;border-radius:4px'>{n_warn} warning</span>"
+        degraded = []
+        if isinstance(snap.status, dict) and isinstance(snap.status.get("degraded_sensors"), list):
+            degraded = [str(t) for t in snap.status["degraded_sensors"]]
+        elif snap.estimate is not None:
+            degraded = [t for t, v in snap.estimate.sensor_states.items() if v != "ok"]
+        sensors = (
+            f"<span style='color:#b45309'>degraded/rejected: {html.escape(', '.join(degraded))}</span>" if degraded else "all sensors ok"
+        )
+        error = f"<br><span style='color:#dc2626'>service: {html.escape(snap.status_error)}</span>" if snap.status_error else ""
+        return (
+            f"<div style='font-size:12.5px;line-height:1.45'><b>{html.escape(dash.label)}</b> {live} {badge}<br>"
+            f"{motion}<br>estimates {snap.estimate_rate_hz:.0f} Hz · {sensors}{error}</div>"
+        )
+
+
+def _nice(x: float) -> float:
+    """Round down to 1, 2 or 5 × 10^k (a steady overscale factor that does not flicker)."""
+    k = math.floor(math.log10(x))
+    for m in (5.0, 2.0, 1.0):
+        if m * 10**k <= x:
+            return m * 10**k
+    return 10.0**k
+
+
+def _level_badge(level: str) -> str:
+    colours = {"alarm": ("#dc2626", "white"), "warning": ("#ffaa00", "black"), "ok": ("#15803d", "white")}
+    bg, fg = colours.get(level, ("#888", "white"))
+    return f"<span style='background:{bg};color:{fg};padding:0 5px;border-radius:3px'>{html.escape(level)}</span>"
+
+
+def _alarm_style(a: AlarmRecord) -> str:
+    if not a.active:
+        return "color:#777"
+    return "background:#fee2e2" if a.level == "alarm" else "background:#fef3c7"
+
+
+def _status_html(snap: "Snapshot", dash: "Dashboard") -> str:
+    parts = []
+    status = snap.status if isinstance(snap.status, dict) else None
+    if snap.status_error:
+        parts.append(f"<p style='color:#dc2626'>Service status unavailable: {html.escape(snap.status_error)}</p>")
+    if status is None:
+        parts.append("<p>No status from the service yet.</p>")
+    else:
+        service = status.get("service") if isinstance(status.get("service"), dict) else {}
+        parts.append(
+            f"<p><b>Service</b> {html.escape(str(service.get('version', '')))} · up {_fmt(service.get('uptime_s'), '{:.0f}')} s · "
+            f"pushes {'paused' if service.get('paused') else 'live'}</p>"
+        )
+        sources = status.get("sources") if isinstance(status.get("sources"), list) else []
+        if sources:
+            rows = "".join(
+                f"<tr><td>{html.escape(str(s.get('id', '?')))}</td><td>{html.escape(str(s.get('kind', '')))}</td>"
+                f"<td>{html.escape(str(s.get('state', '')))}</td><td>{_fmt(s.get('rate_hz'), '{:.0f}')}</td>"
+                f"<td>{_fmt(s.get('latency_s'), '{:.3f}')}</td><td>{_fmt(s.get('messages'), '{:.0f}')}</td>"
+                f"<td>{_fmt(s.get('dropped'), '{:.0f}')}</td><td>{_fmt(s.get('rejected'), '{:.0f}')}</td></tr>"
+                for s in sources if isinstance(s, dict)
+            )
+            parts.append(
+                "<table style='width:100%;font-size:12px'><tr><th>source</th><th>kind</th><th>state</th><th>msg/s</th>"
+                "<th>latency s</th><th>messages</th><th>dropped</th><th>rejected</th></tr>" + rows + "</table>"
+            )
+        pipeline = status.get("pipeline")
+        if isinstance(pipeline, dict) and pipeline:
+            parts.append("<p><b>Pipeline</b> " + " · ".join(f"{html.escape(str(k))}: {_fmt(v)}" for k, v in pipeline.items()) + "</p>")
+        sensors = status.get("sensors")
+        if isinstance(sensors, dict) and sensors:
+            cells = " ".join(
+                f"<span style='color:{_rgb(v)}'>●</span>&nbsp;{html.escape(str(t))}" for t, v in sorted(sensors.items())
+            )
+            parts.append(f"<p><b>Sensors</b> {cells}</p>")
+        baseline = status.get("baseline")
+        if isinstance(baseline, dict):
+            parts.append(f"<p><b>Baseline</b> {html.escape(str(baseline.get('state', '')))}</p>")
+        storage = status.get("storage")
+        if isinstance(storage, dict) and storage:
+            parts.append("<p><b>Storage</b> " + " · ".join(f"{html.escape(str(k))}: {_fmt(v)}" for k, v in storage.items()) + "</p>")
+    parts.append(
+        f"<p style='color:#666'>Dashboard: {dash.client_count} browser(s), {1 / max(dash.last_frame_s, 1e-3):.0f} frames/s possible "
+        f"(last frame {1e3 * dash.last_frame_s:.1f} ms), estimates arriving at {snap.estimate_rate_hz:.0f} Hz.</p>"
+    )
+    return "<div style='font-size:12px'>" + "".join(parts) + "</div>"
+
+
+def _rgb(state: Any) -> str:
+    r, g, b = STATE_COLOURS.get(str(state), STATE_COLOURS["unknown"])
+    return f"rgb({r},{g},{b})"
