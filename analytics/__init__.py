@@ -6,8 +6,8 @@ from ._analyze import AnalysisResult, ModeSummary, analyze
 from ._chart import EwmaChart
 from ._config import AnalysisConfig
 from ._curvature import CurvatureChange, beam_third, curvature_change, curvature_field, curvature_shape
-from ._location import DamageLocation, locate_damage
 from ._damping import DampingEstimate, bandpass, combine_estimates, envelope_decay, find_decay_segments, log_decrement, random_decrement
+from ._location import DamageLocation, locate_damage
 from ._monitor import Baseline, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model
 from ._peaks import Peak, find_peaks, interpolate_peak
 from ._spectrum import Spectrum, amplitude_spectrum, averaged_spectrum, cross_spectra

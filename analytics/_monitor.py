@@ -450,13 +450,15 @@ class ModalMonitor:
     def _shape_change_std(self) -> np.ndarray | None:
         """1σ per mode of (averaged shape − baseline shape) per station for a healthy structure."""
         bl = self.baseline
-        if not bl.curvature_shape_std or len(bl.curvature_shape_std) != self.n_modes:
+        if bl.curvature_windows < 1:  # a baseline stored before this statistic existed
             return None
+        # too few baseline windows for a jackknife: the floor alone (a very short baseline)
+        own = bl.curvature_shape_std if len(bl.curvature_shape_std) == self.n_modes else (0.0,) * self.n_modes
         a = 1.0 / self.config.curvature_memory_windows
         r = min(max(bl.curvature_index_rho, 0.0), 0.95)
         ewma = a / (2 - a) * (1 + r * (1 - a)) / (1 - r * (1 - a))
         n_eff = max(1.0, bl.curvature_windows * (1 - r) / (1 + r))
-        std = np.maximum(np.asarray(bl.curvature_shape_std), self.config.curvature_min_std)
+        std = np.maximum(np.asarray(own, dtype=float), self.config.curvature_min_std)
         return std * math.sqrt(ewma + 1.0 / n_eff)
 
     def _locate(self, delta: np.ndarray | None, dsd: np.ndarray | None) -> DamageLocation | None:
@@ -536,7 +538,7 @@ class ModalMonitor:
         hist = list(self._ci_hist)
         n = len(hist)
         shape_std, rho = (), 0.0
-        if n >= 4:
+        if n >= 3:
             total = np.sum(hist, axis=0)
             jack = []
             for G in hist:

@@ -151,8 +151,8 @@ def damage_signatures(
     if st.ndim != 1 or st.size < 2 or not np.all(np.isfinite(st)) or st.min() < 0 or st.max() > L:
         raise ValueError(f"stations must be >= 2 finite positions on [0, {L}] m")
     half = 0.5 * segment_length
-    n_st = int(np.floor((L - 2 * half) / step + 1e-9)) + 1
-    centres = {"stiffness": half + step * np.arange(n_st), "mass": L - step * np.arange(int(np.floor(L / step + 1e-9)))[::-1]}
+    n_stiff = int(np.floor((L - 2 * half) / step + 1e-9)) + 1
+    centres = {"stiffness": half + step * np.arange(n_stiff), "mass": L - step * np.arange(int(np.floor(L / step + 1e-9)))[::-1]}
     extra = set()
     if "stiffness" in kinds:
         extra.update(np.round(np.concatenate([centres["stiffness"] - half, centres["stiffness"] + half]), 12).tolist())

@@ -29,6 +29,7 @@ from estimator import (
     SensorSeries,
     build_events,
     calibrate_at_rest,
+    damage_signatures,
 )
 
 from ..recording import FollowBlock
@@ -298,6 +299,7 @@ class _Analytics:
         self.step_s = config.window_s * (1 - config.overlap)
         self.n = int(round(self.window_s * FS))
         self.min_coverage = min_coverage
+        self.signatures = None
         self.monitor = self._monitor(monitor_state)
         self.b = _Chunks()
         self.temperature = _Chunks()
@@ -311,14 +313,19 @@ class _Analytics:
         self.learning_baseline = self.monitor.baseline is None
 
     def _monitor(self, state: dict | None) -> ModalMonitor:
+        m = self.model
+        if self.signatures is None:
+            # FE-predicted damage signatures of the rig: where along the beam a flag points.
+            self.signatures = damage_signatures(m.rig, m.stations, gamma=m.gamma)
         if state is not None:
             try:
-                return ModalMonitor.from_state_dict(state)
+                monitor = ModalMonitor.from_state_dict(state)
+                monitor.signatures = self.signatures  # model-derived, not part of the stored state
+                return monitor
             except (ValueError, TypeError) as exc:
                 log.warning("stored monitor state unusable (%s); starting a new monitor", exc)
-        m = self.model
         return ModalMonitor(m.units.frequencies_hz, m.units.curvature(m.stations), m.stations, fs=FS, config=self.config,
-                            beam_length=m.rig.beam.length)
+                            beam_length=m.rig.beam.length, signatures=self.signatures)
 
     def reset(self) -> None:
         self.monitor = self._monitor(None)
