@@ -88,7 +88,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hours", type=float, default=24.0, help="simulated hours of the memory run")
     p.add_argument("--skip-replay", action="store_true")
     p.add_argument("--skip-sim", action="store_true")
-    args = p.parse_args(argv)
+    p.add_argument("--quick", action="store_true", help="a 2-hour memory run instead of --hours")
+    # `python -m benchmarks` passes the same arguments to every benchmark: ignore the others' flags.
+    args, _ = p.parse_known_args(argv)
+    if args.quick:
+        args.hours = min(args.hours, 2.0)
     if not args.skip_replay:
         bench_replay(Path(args.replay))
     if not args.skip_sim:
