@@ -153,3 +153,17 @@ def test_sigkill_mid_run_loses_nothing_and_sends_no_duplicate(tmp_path, short_re
     logged = con.execute("SELECT COUNT(*) FROM notification_log WHERE ok=1").fetchone()[0]
     con.close()
     assert dict(outbox) == {"sent": len(receiver.keys)} and logged == len(receiver.keys)
+
+
+def test_replay_of_a_recording_written_channel_after_channel(tmp_path):
+    # The contract lets another tool write one channel after the other (not interleaved in time):
+    # the replay merges by log_time and loses nothing.
+    from benchmarks.other_tool import write_other_tool_recording
+    from shm_service.virtual_rig import SimulationSettings
+
+    path = tmp_path / "other.mcap"
+    write_other_tool_recording(path, SimulationSettings(duration=60.0, rest=10.0, excitation="ambient", seed=4, ideal=True))
+    st = _replay(tmp_path, path)
+    src = st["sources"][0]
+    assert src["state"] == "finished" and src["dropped"] == 0 and src["rejected"] == 0
+    assert st["pipeline"]["estimates"] > 59 * 200
