@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -264,7 +264,6 @@ class ModalMonitor:
         self.baseline = baseline
         if baseline is not None and expected_hz is not None and len(baseline.modes) != len(self.f0):
             raise ValueError(f"baseline has {len(baseline.modes)} modes, expected_hz gives {len(self.f0)}")
-        c = self.config
         self._records: list[_Record] = []
         self._first_trusted: float | None = None
         self._cross = None  # (modes, Γ) complex EWMA of cross spectra
@@ -498,7 +497,6 @@ class ModalMonitor:
                     "since_s": st.since_s, **where,
                 })
         if self._ci_chart is not None and self._ci_chart.state.level == "alarm" and change is not None:
-            bl = self.baseline
             st = self._ci_chart.state
             out.append({
                 "kind": "curvature", "mode": None, "unit": None, "level": "alarm",

@@ -19,7 +19,6 @@ from ._geometry import (
     ribbon,
     ribbon_faces,
     segments,
-    tangent_angle,
     to_world,
     tof_rays,
 )
@@ -284,7 +283,6 @@ class ClientView:
         f_max = self._f_max()
         f = np.linspace(0.0, f_max, 200)
         for mode in range(1, self.dash.gamma + 1):
-            colour = MODE_COLOURS[(mode - 1) % len(MODE_COLOURS)]
             x, y, tr, bl = spectrum_plot(f, np.ones(f.size), None, self._model_hz(mode))
             self.spectra_plots[mode] = gui.add_uplot(
                 data=(x, y, tr, bl),
