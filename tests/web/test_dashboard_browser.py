@@ -219,3 +219,54 @@ def test_dashboard_in_headless_chromium(chromium, live_dashboard, tmp_path):
         time.sleep(0.1)
     assert dash.client_count == 0
     assert service.paused is False  # no browser left: pushes resume
+
+
+def _service_test_helpers():
+    """The service tests' fast analytics settings (small windows, sensitive charts)."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "shm_service" / "service" / "svc_helpers.py"
+    spec = importlib.util.spec_from_file_location("svc_helpers_for_web", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.timeout(300)
+def test_alarm_raised_by_the_service_shows_on_the_page(chromium, tmp_path):
+    """End to end: shm serve (replay of a damaged recording) with its dashboard on free ports."""
+    import re
+
+    from playwright.sync_api import sync_playwright
+
+    from shm_service.service._config import load_settings
+    from shm_service.service._service import MonitoringService
+    from shm_service.virtual_rig import SimulationSettings, simulate
+
+    recording = tmp_path / "damaged.mcap"
+    simulate(SimulationSettings(duration=150.0, rest=10.0, excitation="ambient", seed=3,
+                                damage=("mass:0.126@4.0",), damage_at=90.0), recording)
+    overrides = _service_test_helpers().fast_overrides(tmp_path, **{
+        "source.spec": f"replay:{recording}", "source.speed": "2", "source.keep_running": True,
+        "dashboard.enabled": True, "dashboard.port": 0,
+    })
+    service = MonitoringService(load_settings(None, overrides), environ={})
+    service.start()
+    try:
+        assert service.dashboard is not None
+        with sync_playwright() as p:
+            context = p.chromium.launch_persistent_context(
+                str(tmp_path / "profile"), executable_path=chromium, headless=True, args=CHROMIUM_ARGS, viewport=VIEWPORT,
+            )
+            try:
+                page = context.pages[0] if context.pages else context.new_page()
+                page.goto(service.dashboard.url)
+                page.wait_for_selector("canvas", timeout=30_000)
+                _visible(page, "Pause live view").wait_for(timeout=30_000)
+                # The pipeline raises the alarm from the data; the page shows its notification.
+                page.get_by_text(re.compile(r"ALARM #\d+ raised")).filter(visible=True).first.wait_for(timeout=150_000)
+                assert any(a["level"] == "alarm" for a in service.alarms())
+            finally:
+                context.close()
+    finally:
+        service.stop(drain_s=0)
