@@ -268,6 +268,7 @@ class ModalMonitor:
         self._first_trusted: float | None = None
         self._cross = None  # (modes, Γ) complex EWMA of cross spectra
         self._cross_sum = None
+        self._cross_windows = 0  # ambient windows in the EWMA (its scatter settles after the memory)
         self._ci_hist: list[float] = []
         self._charts: list[EwmaChart] = []
         self._ci_chart: EwmaChart | None = None
@@ -391,6 +392,7 @@ class ModalMonitor:
             a = 1.0 / c.curvature_memory_windows
             self._cross = G if self._cross is None else (1 - a) * self._cross + a * G
             self._cross_sum = G if self._cross_sum is None else self._cross_sum + G
+            self._cross_windows += 1
         flags: list[dict] = []
         location = None
         scores: list[float | None] = [None] * self.n_modes
@@ -416,9 +418,13 @@ class ModalMonitor:
                 sign[sign == 0] = 1
                 delta = shapes * sign - bl.curvature_shapes
                 dsd = self._shape_change_std()
-                if dsd is not None:
+                # The baseline's scatter is that of a settled average: with a baseline given from
+                # another record, the first windows' average is noisier and would look like change.
+                if dsd is not None and self._cross_windows >= c.curvature_memory_windows:
                     q = float(np.mean((delta / dsd[:, None]) ** 2))
-                    ci_score, lvl = self._ci_chart.update((q - bl.curvature_index_mean) / bl.curvature_index_std, tmid)
+                    # One-sided: less shape change than in the healthy period is no damage.
+                    z = max((q - bl.curvature_index_mean) / bl.curvature_index_std, 0.0)
+                    ci_score, lvl = self._ci_chart.update(z, tmid)
                     levels["curvature"] = lvl
             for i, (e, m) in enumerate(zip(est, bl.modes)):
                 if e.frequency_hz is None or e.confidence < c.min_confidence or m.windows < c.baseline_min_windows:
@@ -567,7 +573,8 @@ class ModalMonitor:
             "length": self.length, "units": self.units, "f0": self.f0, "ref": self.ref,
             "baseline": None if self.baseline is None else self.baseline.to_dict(),
             "records": [vars(r) for r in self._records], "first_trusted": self._first_trusted,
-            "cross": cx(self._cross), "cross_sum": cx(self._cross_sum), "ci_hist": [cx(G) for G in self._ci_hist],
+            "cross": cx(self._cross), "cross_sum": cx(self._cross_sum), "cross_windows": self._cross_windows,
+            "ci_hist": [cx(G) for G in self._ci_hist],
             "power": None if self._power is None else self._power.tolist(),
             "charts": [ch.state_dict() for ch in self._charts],
             "ci_chart": None if self._ci_chart is None else self._ci_chart.state_dict(),
@@ -585,6 +592,8 @@ class ModalMonitor:
             m._records = [_Record(**r) for r in d["records"]]
             m._first_trusted = d["first_trusted"]
             m._cross, m._cross_sum = ux(d["cross"]), ux(d["cross_sum"])
+            # States stored before the counter existed had a settled average.
+            m._cross_windows = int(d.get("cross_windows", m.config.curvature_memory_windows))
             m._ci_hist = [ux(g) for g in d["ci_hist"]]
             m._power = None if d.get("power") is None else np.asarray(d["power"], dtype=float)
             m._charts = [EwmaChart.from_state_dict(c) for c in d["charts"]]

@@ -12,7 +12,8 @@ from pathlib import Path
 #: a baseline and alarms within seconds of data.
 FAST = {
     "analytics": {"window_s": 20.0, "overlap": 0.5, "baseline_s": 40.0, "baseline_min_windows": 3, "hold_windows": 1,
-                  "warning_sigma": 0.5, "alarm_sigma": 1.0, "clear_sigma": 0.2, "curvature_alarm_sigma": 1.0},
+                  "warning_sigma": 0.5, "alarm_sigma": 1.0, "clear_sigma": 0.2, "curvature_alarm_sigma": 1.0,
+                  "curvature_memory_windows": 2.0},
     "estimator": {"calibration_s": 10.0, "warmup_s": 5.0, "chunk_s": 1.0},
     "alarms": {"raise_windows": 1, "clear_windows": 2},
     "dashboard": {"enabled": False},
