@@ -293,6 +293,18 @@ def _least_squares_map(S, active, gamma):
 
 
 @numba.njit(cache=True)
+def _aid(x, P, innovation, H, R, gate, ubuf, channel, counts_accepted, counts_rejected, nis_sum, last_innovation):
+    """One gated aiding update of channel ``channel`` with its counters."""
+    S, d2, ok = update_scalar_into(x, P, innovation, H, R, gate, ubuf)
+    last_innovation[channel] = innovation
+    if ok:
+        counts_accepted[channel] += 1
+        nis_sum[channel] += d2
+    else:
+        counts_rejected[channel] += 1
+
+
+@numba.njit(cache=True)
 def run_events(
     t_ev, kind_ev, index_ev, values_ev, next_d,
     x, P, t_now, held_t, held_fD, held_wD, held_fj, held_wj, last_seen, active,
@@ -454,13 +466,7 @@ def run_events(
                 counts_rejected[j] += 1
                 continue
             rho = tof_measurement_into(x, tof_eta[j], tof_S[j], tof_S1[j], params[P_DREF], H)
-            S, d2, ok = update_scalar_into(x, P, z - rho, H, tof_var[j], params[P_GATE], ubuf)
-            last_innovation[j] = z - rho
-            if ok:
-                counts_accepted[j] += 1
-                nis_sum[j] += d2
-            else:
-                counts_rejected[j] += 1
+            _aid(x, P, z - rho, H, tof_var[j], params[P_GATE], ubuf, j, counts_accepted, counts_rejected, nis_sum, last_innovation)
         elif k == EVENT_STRAIN:
             ch = n_tof + j
             z = values_ev[e, 0] - strain_offset[j]
@@ -474,13 +480,8 @@ def run_events(
                     H[5 + m] = strain_K[j, m]
                 # Eq. (22): the strain of unaided unit deformations is subtracted at its estimate.
                 pred += strain_K[j, m] * x[5 + m]
-            S, d2, ok = update_scalar_into(x, P, z - pred, H, strain_var[j], params[P_GATE], ubuf)
-            last_innovation[ch] = z - pred
-            if ok:
-                counts_accepted[ch] += 1
-                nis_sum[ch] += d2
-            else:
-                counts_rejected[ch] += 1
+            _aid(x, P, z - pred, H, strain_var[j], params[P_GATE], ubuf, ch, counts_accepted, counts_rejected, nis_sum,
+                 last_innovation)
         elif k == EVENT_BEARING:
             z = values_ev[e, 0]
             if not np.isfinite(z):
@@ -488,13 +489,8 @@ def run_events(
                 continue
             H[:] = 0.0
             H[0] = 1.0
-            last_innovation[i_bear] = z - x[0]
-            S, d2, ok = update_scalar_into(x, P, z - x[0], H, params[P_RBEAR], params[P_GATE], ubuf)
-            if ok:
-                counts_accepted[i_bear] += 1
-                nis_sum[i_bear] += d2
-            else:
-                counts_rejected[i_bear] += 1
+            _aid(x, P, z - x[0], H, params[P_RBEAR], params[P_GATE], ubuf, i_bear, counts_accepted, counts_rejected,
+                 nis_sum, last_innovation)
             # The bearing runs on a rail: h = 0 and ḣ = 0 as pseudo-measurements.
             H[:] = 0.0
             H[1] = 1.0
