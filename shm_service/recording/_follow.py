@@ -18,7 +18,6 @@ import numpy as np
 from estimator._rig import RigDescription
 
 from ._reader import (
-    _OP_CHUNK,
     _RECORD_HEAD,
     ReadReport,
     RecordingError,
@@ -165,18 +164,7 @@ class RecordingFollower:
                     rest = f.read()
             except OSError:
                 rest = b""
-            detail = "no DataEnd record (the writer did not finish)"
-            if rest:
-                detail = f"the record at byte {self._position} is incomplete"
-                try:
-                    opcode, _ = _RECORD_HEAD.unpack_from(rest, 0)
-                    if opcode == _OP_CHUNK:
-                        salvaged = self._reader._salvage_chunk(rest, _RECORD_HEAD.size)
-                        detail += f" (a chunk; {salvaged} complete messages recovered from it)"
-                except RecordingError:
-                    raise
-                except Exception as exc:
-                    detail += f" ({exc!r})"
+            detail = self._reader._describe_cut(rest, 0, len(rest), self._position)
             self.report.problems.append(f"file is cut off at byte {self._position + len(rest)}: {detail}")
             self._reader._flush()
             blocks.extend(self._collect())

@@ -481,19 +481,24 @@ class _Reader:
             self.report.problems.append(f"file is damaged near byte {position} of {size}: {exc!r}; reading stopped")
             return
         self.report.truncated = True
-        detail = "no DataEnd record (the writer did not finish)"
-        if position < size:
-            detail = f"the record at byte {position} is incomplete"
-            try:
-                opcode, _ = _RECORD_HEAD.unpack_from(data, position)
-                if opcode == _OP_CHUNK:
-                    salvaged = self._salvage_chunk(data, position + _RECORD_HEAD.size)
-                    detail += f" (a chunk; {salvaged} complete messages recovered from it)"
-            except RecordingError:
-                raise
-            except Exception as exc:
-                detail += f" ({exc!r})"
-        self.report.problems.append(f"file is cut off at byte {size}: {detail}")
+        self.report.problems.append(f"file is cut off at byte {size}: {self._describe_cut(data, position, size)}")
+
+    def _describe_cut(self, data: bytes, position: int, size: int, offset: int = 0) -> str:
+        """What stops the data at ``position`` of ``data[:size]`` (``data`` starts at byte ``offset``
+        of the file); salvages the complete messages of a partly written chunk."""
+        if position >= size:
+            return "no DataEnd record (the writer did not finish)"
+        detail = f"the record at byte {offset + position} is incomplete"
+        try:
+            opcode, _ = _RECORD_HEAD.unpack_from(data, position)
+            if opcode == _OP_CHUNK:
+                salvaged = self._salvage_chunk(data, position + _RECORD_HEAD.size)
+                detail += f" (a chunk; {salvaged} complete messages recovered from it)"
+        except RecordingError:
+            raise
+        except Exception as exc:
+            detail += f" ({exc!r})"
+        return detail
 
     def _scan(self, buf: bytes, pos: int, end: int) -> int:
         """Parse the records in ``buf[pos:end]``; returns where an incomplete record starts (or
