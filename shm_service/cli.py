@@ -155,7 +155,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         write_estimates(args.out, rec, result)
     summary = {
         "samples": int(result.t.size),
-        "rejected": int(result.diagnostics["rejected"] + rec.report.as_dict().get("rejected_total", 0)),
+        # Samples the reader refused (NaN, malformed, duplicate, backwards) plus the filter's gate.
+        "rejected": int(result.diagnostics["rejected"] + sum(r.rejected for r in rec.report.topics.values())),
         "realtime_factor": round(float((result.t[-1] - result.t[0]) / max(result.filter_seconds, 1e-9)), 1),
         "selection": result.model.selection.as_dict(),
         "modes": result.model.gamma,
