@@ -164,9 +164,16 @@ def test_dashboard_in_headless_chromium(chromium, live_dashboard, tmp_path):
 
             # The plots: uPlot charts in the DOM, the first spectrum visible and drawn.
             assert page.locator(".uplot").count() >= dash.gamma
-            first = page.locator(".uplot canvas").first
-            assert first.is_visible()
-            chart = _image(first.screenshot())
+            assert page.locator(".uplot canvas").first.is_visible()
+            # viser re-creates a uPlot canvas when its data changes, so an element screenshot can
+            # race a live update ("not attached"); a page screenshot clipped to where the first
+            # canvas is cannot.
+            chart_box = page.evaluate(
+                "() => { const r = document.querySelector('.uplot canvas').getBoundingClientRect();"
+                " return [r.x, r.y, r.width, r.height]; }"
+            )
+            assert chart_box[2] > 50 and chart_box[3] > 50, f"spectrum canvas too small: {chart_box}"
+            chart = _image(page.screenshot(clip=dict(zip(("x", "y", "width", "height"), chart_box))))
             assert (np.abs(chart - 255).sum(axis=-1) > 60).sum() > 300, "the spectrum canvas is blank"
 
             # The beam moves: two pictures of the scene differ.
