@@ -31,11 +31,17 @@ def _errors(result, truth, after):
 def accuracy(workdir: Path, seeds, duration: float) -> None:
     print(f"\n== accuracy: paper excitation, {duration:.0f} s, benchmark layout, Γ = 4, seeds {list(seeds)} ==")
     print(f"{'plant':10} {'periph':6} {'RMSE phi [deg]':>22} {'RMSE e [mm]':>20} {'NEES phi':>9} {'NEES e':>8} {'in band':>8}")
-    for plant in ("ideal", "realistic", "other-tool"):
+    plants = {
+        "ideal": dict(ideal=True),
+        "realistic": dict(ideal=False),
+        "+friction": dict(ideal=False, plant={"friction_torque": 0.03}),  # the study's plant
+        "other-tool": dict(ideal=True),
+    }
+    for plant, options in plants.items():
         recs = []
         for seed in seeds:
             path = workdir / f"{plant}-{seed}.mcap"
-            settings = SimulationSettings(duration=duration, seed=seed, ideal=plant != "realistic")
+            settings = SimulationSettings(duration=duration, seed=seed, **options)
             if plant == "other-tool":
                 write_other_tool_recording(path, settings.model_copy(update={"errors": settings.errors.model_copy(update={"tof_time_offset": 0.003})}))
             else:

@@ -76,6 +76,8 @@ class StudySettings(_Closed):
     layout: Literal["benchmark", "dense"] = "dense"
     excitation: Literal["paper", "ambient", "decay"] = "paper"
     ideal: bool = Field(False, description="idealised plant: no mismatch, friction, scale/misalignment errors")
+    friction_torque: float = Field(0.03, ge=0, description="Coulomb friction of the bearing on the realistic plant, N·m [0.03]: "
+                                   "one of the error sources behind the drift without gauges")
     peripherals: tuple[Peripheral, ...] = ("gyro", "acc")
     tofs: tuple[int, ...] = Field(tuple(range(4, 14)), min_length=1, description="ν_ρ swept without and with reduced gauges")
     imus: tuple[int, ...] = Field((4, 5), min_length=1, description="ν_s swept without gauges")

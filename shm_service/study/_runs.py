@@ -46,11 +46,11 @@ class RunOutcome:
 
 
 def simulate_seed(task: SimulationTask) -> str:
-    from ..virtual_rig import SimulationSettings, simulate
+    from ..virtual_rig import PlantSettings, SimulationSettings, simulate
 
     s = task.settings
     settings = SimulationSettings(duration=s.duration, seed=task.seed, layout=s.layout, excitation=s.excitation,
-                                  ideal=s.ideal, rest=s.rest)
+                                  ideal=s.ideal, rest=s.rest, plant=PlantSettings(friction_torque=s.friction_torque))
     simulate(settings, task.path)
     return task.path
 

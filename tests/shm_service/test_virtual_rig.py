@@ -117,7 +117,11 @@ def test_realistic_plant_differs_from_nominal_and_ideal_does_not():
     real = VirtualRig(SimulationSettings(duration=1, ideal=False, seed=2))
     assert ideal.plant_rig.beam.youngs_modulus == ideal.nominal_rig.beam.youngs_modulus
     assert real.plant_rig.beam.youngs_modulus != real.nominal_rig.beam.youngs_modulus
-    assert real.plants[0].friction_torque > 0 and ideal.plants[0].friction_torque == 0
+    # Bearing friction is opt-in (it makes the modal figures amplitude dependent); --ideal drops it.
+    assert real.plants[0].friction_torque == 0
+    rubbing = dict(duration=1, seed=2, plant={"friction_torque": 0.03})
+    assert VirtualRig(SimulationSettings(**rubbing)).plants[0].friction_torque == 0.03
+    assert VirtualRig(SimulationSettings(**rubbing, ideal=True)).plants[0].friction_torque == 0
 
 
 @pytest.mark.parametrize("spec", ["mass:-1@2", "mass:1", "stiffness:0.8@2-1", "crack:1@2", "stiffness:x@1-2"])
