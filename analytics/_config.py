@@ -36,9 +36,14 @@ class AnalysisConfig(BaseModel):
     ewma_lambda: float = Field(0.2, gt=0, le=1, description="EWMA smoothing of the control charts [0.2]")
     warning_sigma: float = Field(3.0, gt=0, description="warning level of the charts, σ of the EWMA [3]")
     alarm_sigma: float = Field(5.0, gt=0, description="alarm level, σ of the EWMA [5]")
-    curvature_alarm_sigma: float = Field(10.0, gt=0, description="alarm level of the curvature chart, σ of its χ²/p statistic [10]: shape scatter is heavy-tailed")
+    curvature_alarm_sigma: float = Field(6.0, gt=0, description="alarm level of the curvature chart, σ of its χ²/p statistic [6]: above the "
+                                         "frequency charts' 5 because the statistic's upper tail is longer than a normal one (healthy simulated "
+                                         "30 min runs, ideal and realistic: at most 3.6)")
     clear_sigma: float = Field(2.0, ge=0, description="an alarm clears below this level, σ of the EWMA [2]")
     hold_windows: int = Field(3, ge=1, description="consecutive windows beyond a level to raise or clear [3]")
+    chart_min_cycles: float = Field(30.0, ge=0, description="a mode enters its frequency chart only if a window holds this many of its cycles [30]: "
+                                    "with fewer (the 0.3 Hz pendulum mode in a 60 s window: 18) the peak is biased by the window's low-frequency "
+                                    "leakage and its scatter heavy-tailed; the mode is still tracked and reported")
     min_sigma_rel: float = Field(2e-4, gt=0, description="floor of a mode's frequency scatter, relative [2e-4]")
     curvature_memory_windows: float = Field(10.0, ge=1, description="time constant of the curvature cross-spectra average, windows [10]")
     curvature_min_std: float = Field(0.005, gt=0, description="floor of one window's curvature-shape scatter (unit-RMS shape) [0.005]: a few high-SNR windows (free decays) underrate the scatter between events")

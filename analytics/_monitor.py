@@ -429,6 +429,8 @@ class ModalMonitor:
             for i, (e, m) in enumerate(zip(est, bl.modes)):
                 if e.frequency_hz is None or e.confidence < c.min_confidence or m.windows < c.baseline_min_windows:
                     continue
+                if m.f_ref_hz * (t1 - t0) < c.chart_min_cycles:
+                    continue
                 Tw = m.temperature_ref_c if T is None else T
                 expected = m.f_ref_hz * (1 + m.slope_per_k * (Tw - m.temperature_ref_c))
                 rel = e.frequency_hz / expected - 1

@@ -14,6 +14,8 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from analytics import AnalysisConfig
+
 __all__ = [
     "AlarmRecord",
     "DEFAULT_THRESHOLDS",
@@ -28,7 +30,7 @@ __all__ = [
 ]
 
 #: EWMA chart levels (σ of the EWMA) of ``analytics.AnalysisConfig`` when the service sends none.
-DEFAULT_THRESHOLDS = {"warning_sigma": 3.0, "alarm_sigma": 5.0, "curvature_alarm_sigma": 10.0}
+DEFAULT_THRESHOLDS = {k: getattr(AnalysisConfig(), k) for k in ("warning_sigma", "alarm_sigma", "curvature_alarm_sigma")}
 #: Width of the baseline band drawn around the expected frequency, in σ of one window's estimate.
 BAND_SIGMA = 2.0
 

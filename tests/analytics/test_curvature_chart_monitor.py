@@ -123,6 +123,15 @@ def test_frequency_drop_flagged_and_monitor_restart():
     assert {1, 2, 3} <= set(raised)
 
 
+def test_modes_with_too_few_cycles_per_window_are_tracked_but_not_charted():
+    # 60 s windows hold 60 cycles of the 1 Hz mode, 150 and 240 of the others
+    t, b, temp, exp = synthetic(drop_at=900.0, drop=0.01)
+    res = analyze(t, b, S2, ETA, fs=FS, temperature=temp, expected_hz=exp, config=AnalysisConfig(chart_min_cycles=61.0))
+    assert {f["mode"] for f in res.flags if f["kind"] == "frequency"} == {2, 3}
+    assert all(w.frequency_scores[0] is None for w in res.windows)
+    assert res.modes[0].frequency_hz == pytest.approx(1.0, rel=0.02)
+
+
 @pytest.mark.parametrize(
     "call, match",
     [
