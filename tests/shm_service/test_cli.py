@@ -22,6 +22,17 @@ def test_modes_json_has_the_contracted_keys(capsys):
     assert all(abs(r) <= 0.02 for r in data["relative_error"][:4])
 
 
+def test_simulate_friction_is_opt_in_and_recorded(capsys, tmp_path):
+    from shm_service.recording import read_recording
+
+    for argv, torque in (([], 0.0), (["--friction", "0.03"], 0.03)):
+        path = tmp_path / f"run{torque}.mcap"
+        assert main(["simulate", "--duration", "2", "--out", str(path), *argv]) == 0
+        truth = json.loads(read_recording(path).metadata["truth"]["friction_torque_nm"])
+        assert truth == torque
+    capsys.readouterr()
+
+
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     path = tmp_path_factory.mktemp("cli") / "run.mcap"
@@ -66,6 +77,7 @@ def test_estimate_with_named_sensors_and_restricted_aiding(capsys, recording):
         (["estimate", "{rec}", "--aided", "x"], "--aided"),
         (["simulate", "--duration", "-1", "--out", "x.mcap"], "duration"),
         (["simulate", "--damage", "mass:abc", "--out", "x.mcap"], "damage"),
+        (["simulate", "--friction", "-0.1", "--out", "x.mcap"], "friction_torque"),
     ],
 )
 def test_bad_input_gives_one_clear_error(capsys, recording, argv, message):
