@@ -32,7 +32,11 @@ import numpy as np
 
 from analytics import analyze
 from estimator import damage_signatures, parse_rig
+from shm_service.study import StudySettings
 from shm_service.virtual_rig import SimulationSettings
+
+#: the study's bearing friction (N·m), whose effect the benchmark shows for information
+STUDY_FRICTION = StudySettings.model_fields["friction_torque"].default
 
 PEER_PACKAGE = "pyOMA-2"  # import name pyoma2
 
@@ -237,16 +241,17 @@ def damage_row(name: str, res, damage_at: float | None, truth_third: str | None)
             f"{None if last is None else last.third}; truth {truth_third}{'' if ok else '  <-- FAILS'}"), ok
 
 
+def _seeds(args: list[str], flag: str, default: list[int]) -> list[int]:
+    """The comma-separated seeds after ``flag`` in ``args``, else ``default``."""
+    return [int(s) for s in args[args.index(flag) + 1].split(",")] if flag in args else default
+
+
 def main(argv: list[str] | None = None) -> None:
     args = list(sys.argv[1:] if argv is None else argv)
     quick = "--quick" in args
     peer_on = "--no-peer" not in args
-    seeds = [3]
-    if "--seeds" in args:
-        seeds = [int(s) for s in args[args.index("--seeds") + 1].split(",")]
-    healthy_seeds = [2] if quick else [2, 5, 6]
-    if "--healthy-seeds" in args:
-        healthy_seeds = [int(s) for s in args[args.index("--healthy-seeds") + 1].split(",")]
+    seeds = _seeds(args, "--seeds", [3])
+    healthy_seeds = _seeds(args, "--healthy-seeds", [2] if quick else [2, 5, 6])
     dur = 900.0 if quick else 1800.0
     ideal = "--ideal" in args
     base = dict(duration=dur, ideal=ideal)
@@ -278,10 +283,10 @@ def main(argv: list[str] | None = None) -> None:
 
     if not ideal and not quick:  # information: what bearing friction does to the same runs
         for excitation in ("ambient", "decay"):
-            s = SimulationSettings(excitation=excitation, seed=1, plant={"friction_torque": 0.03}, **base)
+            s = SimulationSettings(excitation=excitation, seed=1, plant={"friction_torque": STUDY_FRICTION}, **base)
             d = deformations(s)
             res, dt = analysis(d)
-            report += modal_table(f"{excitation} {dur:.0f} s, seed 1, bearing friction 0.03 N·m (information, not a bar)",
+            report += modal_table(f"{excitation} {dur:.0f} s, seed 1, bearing friction {STUDY_FRICTION} N·m (information, not a bar)",
                                   d, res, dt, None, damping=excitation == "decay")
 
     # damage and healthy ±10 K

@@ -19,6 +19,7 @@ from estimator import FilterConfig, ImmsFilter, build_events, build_model, calib
 from estimator._filterpy_reference import run_filterpy
 from shm_service.estimation import measurements_from_recording, truth_from_recording
 from shm_service.recording import read_recording
+from shm_service.study import StudySettings
 from shm_service.virtual_rig import SimulationSettings, simulate
 
 
@@ -34,7 +35,7 @@ def accuracy(workdir: Path, seeds, duration: float) -> None:
     plants = {
         "ideal": dict(ideal=True),
         "realistic": dict(ideal=False),
-        "+friction": dict(ideal=False, plant={"friction_torque": 0.03}),  # the study's plant
+        "+friction": dict(ideal=False, plant={"friction_torque": StudySettings.model_fields["friction_torque"].default}),  # the study's plant
         "other-tool": dict(ideal=True),
     }
     for plant, options in plants.items():

@@ -30,7 +30,7 @@ __all__ = [
 ]
 
 #: EWMA chart levels (σ of the EWMA) of ``analytics.AnalysisConfig`` when the service sends none.
-DEFAULT_THRESHOLDS = {k: getattr(AnalysisConfig(), k) for k in ("warning_sigma", "alarm_sigma", "curvature_alarm_sigma")}
+DEFAULT_THRESHOLDS = AnalysisConfig().model_dump(include={"warning_sigma", "alarm_sigma", "curvature_alarm_sigma"})
 #: Width of the baseline band drawn around the expected frequency, in σ of one window's estimate.
 BAND_SIGMA = 2.0
 
