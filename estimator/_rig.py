@@ -27,6 +27,8 @@ __all__ = [
 ]
 
 SensorKind = Literal["imu", "tof", "strain", "bearing", "temperature"]
+Support = Literal["pinned", "clamped"]
+Orientation = Literal["hanging", "standing"]
 
 # Kinds whose sensors sit on the beam and therefore need a position.
 _POSITIONED_KINDS = ("imu", "tof", "strain")
@@ -124,9 +126,15 @@ class Sensor(_ContractModel):
 
 
 class RigDescription(_ContractModel):
+    """The rig: beam, support at D (``pinned``: the paper's plain bearing, φ a state; ``clamped``: the
+    fixed bearing of Section 3.5, φ ≡ 0), orientation (``hanging`` below D, gravity along +η;
+    ``standing`` above D, gravity along −η, self-weight compresses the beam), attached masses and sensors."""
+
     beam: Beam
-    gravity: float = Field(gt=0.0)
+    gravity: float = Field(ge=0.0)
     reflector_distance: float
+    support: Support = "pinned"
+    orientation: Orientation = "hanging"
     point_masses: tuple[PointMass, ...] = ()
     sensors: tuple[Sensor, ...]
     truth_stations: tuple[float, ...] = ()
@@ -134,6 +142,11 @@ class RigDescription(_ContractModel):
     @model_validator(mode="after")
     def _consistent(self) -> "RigDescription":
         length = self.beam.length
+        if self.support == "pinned" and self.orientation == "standing":
+            raise ValueError(
+                "support='pinned' with orientation='standing' is an inverted pendulum, unstable at any length: "
+                "a standing beam needs support='clamped'"
+            )
         seen: set[tuple[str, str]] = set()
         for index, sensor in enumerate(self.sensors):
             key = (sensor.kind, sensor.name)
