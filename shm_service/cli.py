@@ -97,6 +97,9 @@ def _simulation_settings(args: argparse.Namespace):
             seed=args.seed,
             excitation=args.excitation,
             layout=args.layout,
+            support=args.support or "pinned",
+            orientation=args.orientation or "hanging",
+            length=4.0 if args.length is None else args.length,
             ideal=args.ideal,
             damage=tuple(args.damage or ()),
             damage_at=args.damage_at,
@@ -109,7 +112,7 @@ def _simulation_settings(args: argparse.Namespace):
 
 
 def _pydantic_message(exc) -> str:
-    return "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors())
+    return "; ".join(f"{'.'.join(str(p) for p in e['loc']) or 'settings'}: {e['msg']}" for e in exc.errors())
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
@@ -357,6 +360,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output .mcap")
     p.add_argument("--excitation", choices=("paper", "ambient", "decay"), default="paper")
     p.add_argument("--layout", choices=("benchmark", "dense"), default="benchmark")
+    _add_configuration_arguments(p, rig_file=False)
     p.add_argument("--ideal", action="store_true", help="plant = nominal rig (no mismatch, friction, scale/misalignment)")
     p.add_argument("--damage", action="append", metavar="SPEC", help="mass:KG@POS or stiffness:FACTOR@A-B (repeatable)")
     p.add_argument("--damage-at", type=float, default=None, metavar="SECONDS", help="damage appears at this time")

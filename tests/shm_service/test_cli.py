@@ -103,6 +103,31 @@ def test_simulate_friction_is_opt_in_and_recorded(capsys, tmp_path):
     capsys.readouterr()
 
 
+@pytest.mark.parametrize("excitation", ["paper", "ambient", "decay"])
+def test_simulate_a_clamped_standing_mast_with_truth(capsys, tmp_path, excitation):
+    from shm_service.recording import read_recording
+
+    path = tmp_path / f"mast-{excitation}.mcap"
+    code = main(["simulate", "--duration", "3", "--out", str(path), "--excitation", excitation, "--support", "clamped",
+                 "--orientation", "standing", "--length", "1.5", "--json"])
+    summary = json.loads(capsys.readouterr().out)
+    assert code == 0 and summary["eigenfrequencies_hz"][0] < 0.6  # compression softens mode 1 (0.87 Hz hanging)
+    rec = read_recording(path)
+    assert (rec.rig.support, rec.rig.orientation, rec.rig.beam.length) == ("clamped", "standing", 1.5)
+    truth = rec.metadata["truth"]
+    assert truth["support"] == "clamped" and json.loads(truth["critical_load_factor"]) > 1
+
+
+def test_simulate_refuses_a_mast_that_buckles_and_a_pinned_standing_beam(capsys, tmp_path):
+    path = tmp_path / "mast.mcap"
+    code, _, err = run(capsys, "simulate", "--duration", "2", "--out", str(path), "--support", "clamped", "--orientation", "standing")
+    assert code == 2 and "buckles" in err and "L_cr" in err and not path.exists()
+    code, _, err = run(capsys, "simulate", "--duration", "2", "--out", str(path), "--orientation", "standing")
+    assert code == 2 and "inverted pendulum" in err and not path.exists()
+    code, _, err = run(capsys, "simulate", "--duration", "2", "--out", str(path), "--support", "clamped", "--friction", "0.03")
+    assert code == 2 and "clamped support has none" in err
+
+
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     path = tmp_path_factory.mktemp("cli") / "run.mcap"
