@@ -369,8 +369,9 @@ def assemble_beam(
     if factor <= 1.0:
         bare = greenhill_length(EI, mu, rig.gravity)
         at = "" if temperature_c is None else f" at {temperature_c:g} °C"
+        load = "its own weight and attached masses" if any(m.mass > 0 and m.position > 0 for m in rig.point_masses) else "its own weight"
         raise BucklingError(
-            f"the standing beam buckles under its own weight and attached masses{at}: its critical load factor is "
+            f"the standing beam buckles under {load}{at}: its critical load factor is "
             f"λ_cr = {factor:.4g} (it would stand only up to {factor * rig.gravity:.4g} m/s² of the {rig.gravity:g} m/s² "
             f"gravity); a bare standing beam of this section (EI = {EI:.4g} N·m², ρA = {mu:.4g} kg/m) buckles under "
             f"its own weight above the critical length L_cr = {bare:.4g} m (Greenhill), this one is {length:g} m long",

@@ -143,7 +143,7 @@ class VirtualRig:
             settings.excitation, settings.duration, self._rng_excitation,
             eigenfrequencies_hz=nominal_freqs, rest_s=settings.rest, ambient_force_std=settings.plant.ambient_force,
         )
-        # Ambient loads act on the lateral DOF of every node below D.
+        # Ambient loads act on the lateral DOF of every node beyond D (below it hanging, above it standing).
         n_nodes = len(basis.nodes)
         rigid = np.zeros((2 * n_nodes,))
         rigid[0::2] = basis.nodes
