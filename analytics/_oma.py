@@ -1,0 +1,535 @@
+"""Operational modal identification of one window (or a record and its windows).
+
+The engine behind ``shm oma`` (and, next, ``shm analyze``/``shm serve``): SSI-cov over model
+orders (:mod:`._ssi`), stabilisation and clustering (:mod:`._stabilisation`), segment-jackknife
+uncertainties, harmonic rejection, MPC and MAC against reference shapes; with a measured input,
+the excitation class of the window (:mod:`._frf`).
+
+Layering as pyOMA-2: pure functions; :class:`OperationalModalAnalysis` holds a configuration and
+its ``run()`` only calls them and returns an :class:`OmaResult`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+from scipy import signal, stats
+
+from ._damping import DampingEstimate
+from ._frf import ExcitationClass, classify_excitation
+from ._ssi import SsiModel, modal_assurance, perturbed_poles, ssi_poles, toeplitz_from_data
+from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, stabilisation_diagram
+from ._validate import as_signal, check_fs, positive
+
+__all__ = [
+    "IdentifiedMode",
+    "ModalIdentification",
+    "OmaConfig",
+    "OmaResult",
+    "OmaWindow",
+    "OperationalModalAnalysis",
+    "identify_modes",
+    "identify_windows",
+    "prepare_band",
+    "subspace_damping",
+]
+
+
+class OmaConfig(BaseModel):
+    """Settings of the SSI-cov identification (defaults in brackets)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    fmin_hz: float = Field(0.0, ge=0, description="lower edge of the analysed band, Hz [0]")
+    fmax_hz: float | None = Field(None, gt=0, description="upper edge of the analysed band, Hz [None: 0.4·fs]; the data are decimated to ≈ 3·fmax")
+    block_rows: int | None = Field(None, ge=2, description="block rows i [None: the lags span 1/f_low, at least 2·max_order/l]")
+    max_order: int | None = Field(None, ge=2, description="largest model order [None: 40, at most (i-1)·l]")
+    min_cycles: float = Field(8.0, gt=0, description="the lowest frequency resolved is min_cycles/T of a window of T s [8]")
+    segments: int = Field(8, ge=3, le=64, description="data segments of the jackknife uncertainty [8, fewer if the window is short]")
+    freq_rel: float = Field(0.01, gt=0, le=1, description="stability: relative frequency change between orders [0.01]")
+    damping_rel: float = Field(0.3, gt=0, le=10, description="stability: relative damping change between orders [0.3]")
+    mac_min: float = Field(0.95, gt=0, le=1, description="stability: MAC between orders [0.95]")
+    max_damping: float = Field(0.2, gt=0, le=1, description="poles damped more are numerical [0.2]")
+    min_damping: float = Field(-0.01, gt=-1, le=0, description="apparent damping of a mode building up in a short window, down to this, is admitted [-0.01]")
+    cluster_distance: float = Field(0.02, gt=0, le=1, description="clustering cut-off in |Δf|/f + (1 − MAC) [0.02]")
+    min_orders: float = Field(0.3, gt=0, le=1, description="a mode holds poles of this fraction of the orders [0.3]")
+    taper: Literal["none", "hann"] = Field("none", description="weighting of the time steps: 'hann' centres the estimate in a window whose structure drifts [none]")
+    harmonic_kurtosis: float = Field(2.0, gt=1.5, lt=3, description="band-passed kurtosis below this with ζ < harmonic_damping: a harmonic [2.0]")
+    harmonic_damping: float = Field(0.002, ge=0, lt=1, description="see harmonic_kurtosis [0.002]")
+
+    @model_validator(mode="after")
+    def _band(self) -> "OmaConfig":
+        if self.fmax_hz is not None and self.fmax_hz <= self.fmin_hz:
+            raise ValueError(f"fmax_hz={self.fmax_hz} must exceed fmin_hz={self.fmin_hz}")
+        return self
+
+
+@dataclass(frozen=True)
+class IdentifiedMode:
+    """One mode of one window.
+
+    frequency_hz : undamped natural frequency (Hz); frequency_std_hz its 1σ (Hz).
+    damping_ratio : ζ (0.01 = 1 %); damping_std its 1σ.
+    mpc : modal phase collinearity 0 … 1 of the shape.
+    shape : (l,) real mode shape over the channels (unit norm, largest component positive).
+    mac : MAC of the shape against the best-matching reference shape (None without references);
+        reference : that reference's index.
+    contribution : share of the modes' summed correlation amplitude (0 … 1): which mode dominates.
+    orders : model orders the mode was stable at; order : the representative pole's order.
+    statistical_std_hz, order_spread_hz : the two parts of frequency_std_hz (segment jackknife,
+        scatter across model orders), combined in quadrature.
+    damping_method : "ssi" (the subspace pole).
+    """
+
+    frequency_hz: float
+    damping_ratio: float
+    frequency_std_hz: float
+    damping_std: float
+    mpc: float
+    shape: tuple[float, ...]
+    mac: float | None
+    reference: int | None
+    contribution: float
+    orders: int
+    order: int
+    statistical_std_hz: float
+    order_spread_hz: float
+    damping_method: str = "ssi"
+
+    def as_dict(self) -> dict:
+        return {
+            "frequency_hz": self.frequency_hz, "damping_ratio": self.damping_ratio,
+            "frequency_std_hz": self.frequency_std_hz, "damping_std": self.damping_std,
+            "mpc": self.mpc, "shape": list(self.shape), "mac": self.mac, "contribution": self.contribution,
+            "orders": self.orders, "damping_method": self.damping_method,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class ModalIdentification:
+    """The modes of one window and how they were found.
+
+    modes : physical modes, lowest frequency first.
+    rejected : clusters dropped as harmonics (a line, not a resonance), with their frequency (Hz) and reason.
+    diagram : the stabilisation diagram (poles of every order and their flags).
+    clusters : the pole clusters behind ``modes``.
+    fs_hz : rate the identification ran at (after decimation); block_rows, orders as used.
+    excitation : class of the measured input (None without one).
+    """
+
+    modes: tuple[IdentifiedMode, ...]
+    rejected: tuple[tuple[float, str], ...]
+    diagram: StabilisationDiagram
+    clusters: tuple[PoleCluster, ...]
+    fs_hz: float
+    block_rows: int
+    orders: tuple[int, ...]
+    excitation: ExcitationClass | None = None
+
+
+def _stages(q: int) -> list[int]:
+    """Split a decimation factor into stages of at most 10 (each with its own anti-alias filter)."""
+    out = []
+    while q > 10:
+        for d in range(10, 1, -1):
+            if q % d == 0:
+                out.append(d)
+                q //= d
+                break
+        else:
+            out.append(10)
+            q = int(math.ceil(q / 10))
+    if q > 1:
+        out.append(q)
+    return out
+
+
+def prepare_band(y: object, fs: float, *, fmin_hz: float = 0.0, fmax_hz: float | None = None) -> tuple[np.ndarray, float]:
+    """Decimate y to about 3·fmax (an anti-aliased, zero-phase IIR per stage of ≤ 10) and remove
+    content below fmin/2 (zero-phase Butterworth); SSI is then fitted to the band of interest.
+
+    Parameters
+    ----------
+    y : array_like, shape (N,) or (N, l)
+    fs : float
+        Sample rate (Hz).
+    fmin_hz, fmax_hz : float
+        Band of interest (Hz); fmax None keeps the rate.
+
+    Returns
+    -------
+    (y_band, fs_band) : ndarray (M, l), float (Hz)
+
+    Raises
+    ------
+    ValueError
+        If fmax is above 0.45·fs or the record is too short to filter.
+    """
+    fs = check_fs(fs)
+    a = as_signal("y", y, min_len=8)
+    a = a.reshape(a.shape[0], -1)
+    positive("fmin_hz", fmin_hz, allow_zero=True)
+    if fmax_hz is not None:
+        positive("fmax_hz", fmax_hz)
+        if fmax_hz > 0.45 * fs:
+            raise ValueError(f"{fmax_hz=} must be at most 0.45·fs = {0.45 * fs} Hz")
+        q = int(fs // (3.0 * fmax_hz))
+        for d in _stages(q):
+            if a.shape[0] < 30 * d:
+                raise ValueError(f"y has {a.shape[0]} samples at this stage, too few to decimate by {d} (fmax_hz={fmax_hz})")
+            a = signal.decimate(a, d, axis=0, zero_phase=True)
+            fs = fs / d
+    if fmin_hz > 0:
+        if fmin_hz / 2 >= fs / 2:
+            raise ValueError(f"{fmin_hz=} is above the Nyquist frequency {fs / 2} Hz")
+        sos = signal.butter(2, fmin_hz / 2, btype="highpass", fs=fs, output="sos")
+        if a.shape[0] > 15:
+            a = signal.sosfiltfilt(sos, a, axis=0)
+    return a - a.mean(axis=0), float(fs)
+
+
+def _auto_block_rows(n: int, l: int, fs: float, f_low: float, max_order: int) -> int:
+    # lags spanning about one period of the lowest frequency of interest, at least enough block
+    # rows for the largest order, and short against the record (N ≥ 10·2i)
+    i = int(math.ceil(fs / f_low))
+    i = max(i, int(math.ceil(max_order / l)) + 2, 4)
+    return int(min(i, max(4, n // 5)))
+
+
+def identify_modes(
+    y: object,
+    fs: float,
+    *,
+    config: OmaConfig | None = None,
+    inputs: object | None = None,
+    reference_shapes: object | None = None,
+    tracked_hz: object | None = None,
+    band_ready: bool = False,
+) -> ModalIdentification:
+    """Modes of one window of outputs y by SSI-cov with automated pole selection.
+
+    Parameters
+    ----------
+    y : array_like, shape (N,) or (N, l)
+        Output channels (deformation variables b, accelerations, strains …), sampled at fs.
+    fs : float
+        Sample rate (Hz).
+    config : OmaConfig, optional
+        Band, orders and criteria.
+    inputs : array_like, shape (N,) or (N, m), optional
+        Measured excitation (support acceleration) at fs: classified (:func:`classify_excitation`).
+    reference_shapes : array_like, shape (k, l), optional
+        Reference mode shapes (a baseline): each mode reports its best MAC.
+    tracked_hz : sequence of float, optional
+        Frequencies (Hz) the excitation classifier checks lines against (default: the modes found).
+    band_ready : bool
+        y is already decimated/filtered to the band (:func:`prepare_band`), skip that step.
+
+    Returns
+    -------
+    ModalIdentification
+
+    Raises
+    ------
+    ValueError
+        If y is not finite, too short for the band, or an argument is invalid.
+    """
+    cfg = OmaConfig() if config is None else config
+    if not isinstance(cfg, OmaConfig):
+        raise ValueError(f"config must be an OmaConfig, got {type(cfg).__name__}")
+    fs = check_fs(fs)
+    raw = as_signal("y", y, min_len=16)
+    raw = raw.reshape(raw.shape[0], -1)
+    if band_ready:
+        yb, fsb = raw - raw.mean(axis=0), fs
+    else:
+        yb, fsb = prepare_band(raw, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)
+    n, l = yb.shape
+    if np.all(yb.std(axis=0) == 0):
+        raise ValueError("y is constant in every channel: nothing to identify")
+    T = n / fsb
+    fmax = cfg.fmax_hz if cfg.fmax_hz is not None else 0.4 * fs
+    f_low = max(cfg.fmin_hz, cfg.min_cycles / T)
+    max_order = cfg.max_order or 40
+    i = cfg.block_rows or _auto_block_rows(n, l, fsb, f_low, max_order)
+    max_order = min(max_order, (i - 1) * l)
+    if max_order < 2:
+        raise ValueError(f"{l} channel(s) with block_rows={i} allow no model order")
+    if n <= 4 * i + 2:
+        raise ValueError(f"the window has {n} samples at {fsb:g} Hz, too short for block_rows={i}: lengthen it")
+    segs = int(max(1, min(cfg.segments, (n - 2 * i) // (4 * i))))
+    if cfg.taper == "hann":
+        weights = signal.get_window("hann", n - 2 * i + 1 + 2, fftbins=False)[1:-1]
+    elif cfg.taper == "none":
+        weights = None
+    else:
+        raise ValueError(f"taper={cfg.taper!r} must be 'none' or 'hann'")
+    Tm, Tsegs = toeplitz_from_data(yb, i, segments=segs, weights=weights)
+    orders = np.arange(2, max_order + 1, 2)
+    model = ssi_poles(Tm, l, fsb, orders)
+    diag = stabilisation_diagram(model.poles, fmin_hz=max(cfg.fmin_hz, 0.0), fmax_hz=min(fmax, 0.49 * fsb), freq_rel=cfg.freq_rel,
+                                 damping_rel=cfg.damping_rel, mac_min=cfg.mac_min, max_damping=cfg.max_damping,
+                                 min_damping=cfg.min_damping)
+    clusters = cluster_poles(diag, distance=cfg.cluster_distance, min_orders=cfg.min_orders)
+    jack = _jackknife(Tm, Tsegs) if segs >= 3 else None
+    modes, kept, rejected = [], [], []
+    contrib = _contributions(model, clusters)
+    refs = None if reference_shapes is None else np.atleast_2d(np.asarray(reference_shapes, dtype=float))
+    if refs is not None and refs.shape[1] != l:
+        raise ValueError(f"reference_shapes has {refs.shape[1]} components, y has {l} channels")
+    for c, share in zip(clusters, contrib):
+        f, z = c.frequency_hz, c.damping_ratio
+        # a steady line and a lightly damped mode look alike until the window spans many of the
+        # mode's correlation times 1/(ζω): test only windows that long (Brincker et al. 2000)
+        if abs(z) < cfg.harmonic_damping and 2 * np.pi * f * cfg.harmonic_damping * T >= 20 and _kurtosis_near(yb, fsb, f, T) < cfg.harmonic_kurtosis:
+            rejected.append((f, "harmonic: a steady line (band-passed kurtosis ≈ 1.5), not a resonance"))
+            continue
+        sf, sz = _pole_std(model, c, jack) if jack is not None else (float("nan"), float("nan"))
+        spread_f = c.frequency_spread_hz if c.orders > 1 else 0.0
+        spread_z = c.damping_spread if c.orders > 1 else 0.0
+        fstd = math.hypot(sf, spread_f) if math.isfinite(sf) else spread_f
+        zstd = math.hypot(sz, spread_z) if math.isfinite(sz) else spread_z
+        shape_c = model.poles.shapes[c.representative]
+        shape = _real_shape(shape_c)
+        mac = ref = None
+        if refs is not None:
+            m = modal_assurance(shape_c[None], refs)[0]
+            ref = int(np.argmax(m))
+            mac = float(m[ref])
+        modes.append(IdentifiedMode(f, z, fstd, zstd, float(model.poles.mpc[c.representative]), tuple(float(v) for v in shape), mac, ref,
+                                    float(share), c.orders, int(model.poles.order[c.representative]), sf, spread_f))
+        kept.append(c)
+    exc = None
+    if inputs is not None:
+        u = as_signal("inputs", inputs, min_len=16)
+        if u.shape[0] != raw.shape[0]:
+            raise ValueError(f"inputs has {u.shape[0]} samples, y has {raw.shape[0]}")
+        track = [m.frequency_hz for m in modes] if tracked_hz is None else list(np.atleast_1d(tracked_hz))
+        exc = classify_excitation(u, fs, track)
+    return ModalIdentification(tuple(modes), tuple(rejected), diag, tuple(kept), fsb, i, tuple(int(o) for o in orders), exc)
+
+
+def _real_shape(s: np.ndarray) -> np.ndarray:
+    # the real shape nearest the complex one: rotate so the largest component is real, take Re
+    k = int(np.argmax(np.abs(s)))
+    r = np.real(s * np.exp(-1j * np.angle(s[k])))
+    nrm = np.linalg.norm(r)
+    return r / nrm if nrm > 0 else r
+
+
+@dataclass
+class _Jackknife:
+    """Leave-one-segment-out Toeplitz matrices, as perturbations of the full record's."""
+
+    T: np.ndarray  # (S, il, ir)
+    segments: int
+    cache: dict = field(default_factory=dict)
+
+
+def _jackknife(Tfull: np.ndarray, Ts: np.ndarray) -> _Jackknife:
+    segs = Ts.shape[0]
+    total = Ts.sum(axis=0)
+    loo = (total[None] - Ts) / (segs - 1)
+    return _Jackknife(Tfull[None] + (loo - Tfull[None]), segs)
+
+
+def _pole_std(model: SsiModel, c: PoleCluster, jack: _Jackknife) -> tuple[float, float]:
+    """Jackknife 1σ of the representative pole's frequency (Hz) and damping ratio."""
+    order = int(model.poles.order[c.representative])
+    if order not in jack.cache:
+        jack.cache[order] = perturbed_poles(model, jack.T, order)
+    lams, phis = jack.cache[order]
+    lam0 = model.poles.eigenvalue[c.representative]
+    phi0 = model.poles.shapes[c.representative]
+    fs_, zs = [], []
+    for lam, phi in zip(lams, phis):
+        if lam.size == 0:
+            return float("nan"), float("nan")
+        d = np.abs(lam - lam0) / abs(lam0) + (1 - modal_assurance(phi, phi0[None])[:, 0])
+        k = int(np.argmin(d))
+        fs_.append(abs(lam[k]) / (2 * np.pi))
+        zs.append(-lam[k].real / abs(lam[k]))
+    S = jack.segments
+    fs_, zs = np.array(fs_), np.array(zs)
+    var_f = (S - 1) / S * np.sum((fs_ - fs_.mean()) ** 2)
+    var_z = (S - 1) / S * np.sum((zs - zs.mean()) ** 2)
+    return float(np.sqrt(var_f)), float(np.sqrt(var_z))
+
+
+def _contributions(model: SsiModel, clusters: tuple[PoleCluster, ...]) -> list[float]:
+    """Each cluster's share of the correlation amplitude: |φ|·|g| of its representative pole,
+    g = ψ⁻¹G from the controllability part of the SVD (T = O·[A^{i-1}G … G])."""
+    if not clusters:
+        return []
+    l = model.channels
+    vals = []
+    for c in clusters:
+        n = int(model.poles.order[c.representative])
+        O = model.observability[:, :n]
+        A = np.linalg.lstsq(O[:-l], O[l:], rcond=None)[0]
+        mu, psi = np.linalg.eig(A)
+        lam = np.log(mu.astype(complex)) * model.fs_hz
+        k = int(np.argmin(np.abs(lam - model.poles.eigenvalue[c.representative])))
+        G = (np.sqrt(model.singular_values[:n])[:, None] * model.right_vectors[:, :n].T)[:, -(model.right_vectors.shape[0] // model.block_rows):]
+        g = np.linalg.solve(psi, G)[k]
+        phi = O[:l] @ psi[:, k]
+        vals.append(float(np.linalg.norm(phi) * np.linalg.norm(g)))
+    tot = sum(vals)
+    return [v / tot if tot > 0 else 0.0 for v in vals]
+
+
+def _kurtosis_near(yb: np.ndarray, fs: float, f: float, T: float) -> float:
+    """Kurtosis (Pearson, normal = 3, sinusoid = 1.5) of the channels' band-passed response near f."""
+    half = max(3.0 / T, 0.05 * f)
+    lo, hi = f - half, f + half
+    if lo <= 0 or hi >= fs / 2 or yb.shape[0] < 30:
+        return 3.0
+    sos = signal.butter(2, [lo, hi], btype="bandpass", fs=fs, output="sos")
+    x = signal.sosfiltfilt(sos, yb, axis=0)
+    edge = min(x.shape[0] // 10, int(2 * fs / half))
+    x = x[edge: x.shape[0] - edge] if x.shape[0] > 2 * edge + 10 else x
+    k = stats.kurtosis(x, axis=0, fisher=False)
+    w = x.std(axis=0)
+    return float(np.sum(k * w) / np.sum(w)) if np.sum(w) > 0 else 3.0
+
+
+def subspace_damping(mode: IdentifiedMode) -> DampingEstimate:
+    """The damping of an identified mode as a :class:`DampingEstimate` (method "ssi").
+
+    Parameters
+    ----------
+    mode : IdentifiedMode
+
+    Returns
+    -------
+    DampingEstimate
+        damping_ratio and damping_std of the subspace pole, its frequency (Hz), cycles = 0.
+
+    Raises
+    ------
+    ValueError
+        If mode is not an IdentifiedMode.
+    """
+    if not isinstance(mode, IdentifiedMode):
+        raise ValueError(f"mode must be an IdentifiedMode, got {type(mode).__name__}")
+    return DampingEstimate(mode.damping_ratio, mode.damping_std, mode.frequency_hz, "ssi", 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class OmaWindow:
+    """The identification of one window: start_s, end_s (s from the first sample) and its modes."""
+
+    start_s: float
+    end_s: float
+    identification: ModalIdentification
+
+    @property
+    def modes(self) -> tuple[IdentifiedMode, ...]:
+        return self.identification.modes
+
+
+@dataclass(frozen=True, eq=False)
+class OmaResult:
+    """Modes of the whole record (``record``, None if not asked) and of each window."""
+
+    fs_hz: float
+    record: ModalIdentification | None
+    windows: tuple[OmaWindow, ...]
+
+
+def identify_windows(
+    y: object,
+    fs: float,
+    window_s: float,
+    step_s: float,
+    *,
+    config: OmaConfig | None = None,
+    inputs: object | None = None,
+    reference_shapes: object | None = None,
+) -> tuple[OmaWindow, ...]:
+    """Modes of consecutive windows of y (window_s long, every step_s seconds).
+
+    The band is prepared once for the whole record (no filter edges inside windows), then each
+    window is identified by :func:`identify_modes`.
+
+    Parameters
+    ----------
+    y : array_like, shape (N,) or (N, l)
+    fs : float
+        Sample rate (Hz).
+    window_s, step_s : float
+        Window length and step (s), both > 0; the record must hold one window.
+    config, inputs, reference_shapes
+        As :func:`identify_modes`.
+
+    Returns
+    -------
+    tuple of OmaWindow
+
+    Raises
+    ------
+    ValueError
+        If the record is shorter than one window, or an argument is invalid.
+    """
+    cfg = OmaConfig() if config is None else config
+    fs = check_fs(fs)
+    positive("window_s", window_s)
+    positive("step_s", step_s)
+    raw = as_signal("y", y, min_len=2)
+    raw = raw.reshape(raw.shape[0], -1)
+    if raw.shape[0] < int(round(window_s * fs)):
+        raise ValueError(f"the record is {raw.shape[0] / fs:g} s long, shorter than one window ({window_s=} s)")
+    u = None if inputs is None else as_signal("inputs", inputs, min_len=2).reshape(raw.shape[0], -1)
+    yb, fsb = prepare_band(raw, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)
+    q = fs / fsb
+    nw = int(round(window_s * fsb))
+    step = step_s * fsb
+    out = []
+    k = 0
+    while True:
+        a = int(round(k * step))
+        if a + nw > yb.shape[0]:
+            break
+        ua = None if u is None else u[int(round(a * q)): int(round((a + nw) * q))]
+        ident = identify_modes(yb[a: a + nw], fsb, config=cfg, reference_shapes=reference_shapes, band_ready=True,
+                               inputs=None)
+        if ua is not None:
+            exc = classify_excitation(ua, fs, [m.frequency_hz for m in ident.modes])
+            ident = ModalIdentification(ident.modes, ident.rejected, ident.diagram, ident.clusters, ident.fs_hz, ident.block_rows, ident.orders, exc)
+        out.append(OmaWindow(a / fsb, (a + nw) / fsb, ident))
+        k += 1
+    return tuple(out)
+
+
+class OperationalModalAnalysis:
+    """The SSI-cov identification as an algorithm object: configure once, ``run()`` per record.
+
+    Parameters
+    ----------
+    config : OmaConfig, optional
+    window_s, step_s : float, optional
+        With both: the modes of each window as well as of the whole record.
+    whole_record : bool
+        Identify the whole record too [True].
+    """
+
+    def __init__(self, config: OmaConfig | None = None, *, window_s: float | None = None, step_s: float | None = None,
+                 whole_record: bool = True) -> None:
+        self.config = OmaConfig() if config is None else config
+        if not isinstance(self.config, OmaConfig):
+            raise ValueError(f"config must be an OmaConfig, got {type(self.config).__name__}")
+        if (window_s is None) != (step_s is None):
+            raise ValueError(f"{window_s=} and {step_s=} must be given together")
+        self.window_s, self.step_s, self.whole_record = window_s, step_s, whole_record
+
+    def run(self, y: object, fs: float, *, inputs: object | None = None, reference_shapes: object | None = None) -> OmaResult:
+        """Identify the record y (N, l) sampled at fs Hz; see :func:`identify_modes`."""
+        record = identify_modes(y, fs, config=self.config, inputs=inputs, reference_shapes=reference_shapes) if self.whole_record else None
+        windows = () if self.window_s is None else identify_windows(y, fs, self.window_s, self.step_s, config=self.config, inputs=inputs,
+                                                                    reference_shapes=reference_shapes)
+        fsb = record.fs_hz if record is not None else (windows[0].identification.fs_hz if windows else float(fs))
+        return OmaResult(fsb, record, windows)
