@@ -36,6 +36,7 @@ __all__ = [
     "identify_windows",
     "prepare_band",
     "subspace_damping",
+    "tracked_frequency",
 ]
 
 
@@ -192,11 +193,17 @@ def prepare_band(y: object, fs: float, *, fmin_hz: float = 0.0, fmax_hz: float |
     return a - a.mean(axis=0), float(fs)
 
 
+#: largest Toeplitz dimension i·l chosen automatically: its SVD is the cost (≈ 5 ms at 200 on one core)
+_AUTO_ROWS_CAP = 200
+
+
 def _auto_block_rows(n: int, l: int, fs: float, f_low: float, max_order: int) -> int:
-    # lags spanning about one period of the lowest frequency of interest, at least enough block
-    # rows for the largest order, and short against the record (N ≥ 10·2i)
-    i = int(math.ceil(fs / f_low))
+    # lags spanning half a period of the lowest frequency of interest (Rainieri & Fabbrocino),
+    # at least enough block rows for the largest order, within the SVD budget and short
+    # against the record (N ≥ 5·i)
+    i = int(math.ceil(fs / (2 * f_low)))
     i = max(i, int(math.ceil(max_order / l)) + 2, 4)
+    i = min(i, max(4, _AUTO_ROWS_CAP // l, int(math.ceil(max_order / l)) + 2))
     return int(min(i, max(4, n // 5)))
 
 
@@ -417,6 +424,33 @@ def subspace_damping(mode: IdentifiedMode) -> DampingEstimate:
     if not isinstance(mode, IdentifiedMode):
         raise ValueError(f"mode must be an IdentifiedMode, got {type(mode).__name__}")
     return DampingEstimate(mode.damping_ratio, mode.damping_std, mode.frequency_hz, "ssi", 0.0)
+
+
+def tracked_frequency(modes: tuple[IdentifiedMode, ...], fmin_hz: float, fmax_hz: float) -> float | None:
+    """The frequency (Hz) of the mode tracked in a band of one window, None if none is there.
+
+    The contribution-weighted mean of the modes in [fmin_hz, fmax_hz]: one mode gives its own
+    frequency; a mode that drifts within the window (a structure changing, a support moving)
+    splits into poles on either side of its mean frequency, and their weighted mean follows it.
+
+    Parameters
+    ----------
+    modes : tuple of IdentifiedMode
+    fmin_hz, fmax_hz : float
+        The tracked mode's band (Hz).
+
+    Raises
+    ------
+    ValueError
+        If the band is empty or negative.
+    """
+    if not (0 <= fmin_hz < fmax_hz):
+        raise ValueError(f"{fmin_hz=} and {fmax_hz=} must satisfy 0 <= fmin_hz < fmax_hz")
+    inband = [m for m in modes if fmin_hz <= m.frequency_hz <= fmax_hz]
+    if not inband:
+        return None
+    w = np.array([max(m.contribution, 1e-12) for m in inband])
+    return float(np.sum(w * np.array([m.frequency_hz for m in inband])) / w.sum())
 
 
 @dataclass(frozen=True, eq=False)

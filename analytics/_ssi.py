@@ -378,11 +378,14 @@ def ssi_poles(T: object, channels: int, fs: float, orders: object) -> SsiModel:
     O = U[:, :nmax] * np.sqrt(s[:nmax])
     # shift structure: O_up A = O_down. One QR of the largest O_up gives every order's
     # least-squares solution A_n = R[:n,:n]⁻¹ (Qᵀ O_down)[:n,:n].
+    # The leading block of an upper-triangular matrix's inverse is the inverse of its leading block.
     Q, Rq = np.linalg.qr(O[:-l])
+    RS = linalg.solve_triangular(Rq, Q.T @ O[l:], check_finite=False)
+    Rinv = linalg.solve_triangular(Rq, np.eye(nmax), check_finite=False)
     S = Q.T @ O[l:]
     parts = {k: [] for k in ("order", "lam", "phi")}
     for n in ords:
-        A = linalg.solve_triangular(Rq[:n, :n], S[:n, :n], check_finite=False)
+        A = RS[:n, :n] if n == nmax else Rinv[:n, :n] @ S[:n, :n]
         _, lam, phi = _poles_of(A, O[:l, :n], fs)
         parts["order"].append(np.full(lam.size, n))
         parts["lam"].append(lam)
