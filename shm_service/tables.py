@@ -190,7 +190,9 @@ def _from_arrays(arrays: dict[str, np.ndarray], fs: float | None, path: Path, fm
     for key in ("fs", "fs_hz", "sample_rate", "samplerate", "sampling_frequency", "rate"):
         if key in scalars and fs is None:
             fs = float(np.asarray(scalars[key]).ravel()[0])
-    series = {k: np.asarray(v) for k, v in arrays.items() if np.ndim(v) >= 1 and np.size(v) > 1 and np.issubdtype(np.asarray(v).dtype, np.number)}
+    # MATLAB keeps vectors as 1 × N or N × 1 matrices
+    series = {k: (np.asarray(v).ravel() if 1 in np.shape(v) else np.asarray(v)) for k, v in arrays.items()
+              if np.ndim(v) >= 1 and np.size(v) > 1 and np.issubdtype(np.asarray(v).dtype, np.number)}
     time = None
     for k in list(series):
         if _is_time(k) and series[k].ndim == 1:
