@@ -58,6 +58,8 @@ class OmaConfig(BaseModel):
     min_damping: float = Field(-0.01, gt=-1, le=0, description="apparent damping of a mode building up in a short window, down to this, is admitted [-0.01]")
     cluster_distance: float = Field(0.02, gt=0, le=1, description="clustering cut-off in |Δf|/f + (1 − MAC) [0.02]")
     min_orders: float = Field(0.3, gt=0, le=1, description="a mode holds poles of this fraction of the orders [0.3]")
+    sure_orders: float = Field(0.5, gt=0, le=1, description="a cluster with poles at fewer than this fraction of the orders is a mode only if it carries min_contribution of the response [0.5]")
+    min_contribution: float = Field(0.05, ge=0, le=1, description="see sure_orders: a drifting mode split in two carries a large share, a noise pole next to nothing [0.05]")
     taper: Literal["none", "hann"] = Field("none", description="weighting of the time steps: 'hann' centres the estimate in a window whose structure drifts [none]")
     harmonic_kurtosis: float = Field(2.0, gt=1.5, lt=3, description="band-passed kurtosis below this with ζ < harmonic_damping: a harmonic [2.0]")
     harmonic_damping: float = Field(0.002, ge=0, lt=1, description="see harmonic_kurtosis [0.002]")
@@ -79,7 +81,7 @@ class IdentifiedMode:
     shape : (l,) real mode shape over the channels (unit norm, largest component positive).
     mac : MAC of the shape against the best-matching reference shape (None without references);
         reference : that reference's index.
-    contribution : share of the modes' summed correlation amplitude (0 … 1): which mode dominates.
+    contribution : share of all pole clusters' summed correlation amplitude (0 … 1): which mode dominates.
     orders : model orders the mode was stable at; order : the representative pole's order.
     statistical_std_hz, order_spread_hz : the two parts of frequency_std_hz (segment jackknife,
         scatter across model orders), combined in quadrature.
@@ -256,8 +258,13 @@ def identify_modes(
     else:
         yb, fsb = prepare_band(raw, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)
     n, l = yb.shape
-    if np.all(yb.std(axis=0) == 0):
+    scale = yb.std(axis=0)
+    if np.all(scale == 0):
         raise ValueError("y is constant in every channel: nothing to identify")
+    # channels of different kinds (accelerations, strains, volts) enter with unit RMS, else the
+    # largest-valued channel alone would shape the SVD; shapes are returned in the input units
+    scale = np.where(scale > 0, scale, 1.0)
+    yb = yb / scale
     T = n / fsb
     fmax = cfg.fmax_hz if cfg.fmax_hz is not None else 0.4 * fs
     f_low = max(cfg.fmin_hz, cfg.min_cycles / T)
@@ -288,8 +295,12 @@ def identify_modes(
     refs = None if reference_shapes is None else np.atleast_2d(np.asarray(reference_shapes, dtype=float))
     if refs is not None and refs.shape[1] != l:
         raise ValueError(f"reference_shapes has {refs.shape[1]} components, y has {l} channels")
+    n_orders = len(orders)
     for c, share in zip(clusters, contrib):
         f, z = c.frequency_hz, c.damping_ratio
+        if c.orders < cfg.sure_orders * n_orders and share < cfg.min_contribution:
+            rejected.append((f, f"noise: stable at {c.orders} of {n_orders} orders and {100 * share:.1f} % of the response"))
+            continue
         # a steady line and a lightly damped mode look alike until the window spans many of the
         # mode's correlation times 1/(ζω): test only windows that long (Brincker et al. 2000)
         if abs(z) < cfg.harmonic_damping and 2 * np.pi * f * cfg.harmonic_damping * T >= 20 and _kurtosis_near(yb, fsb, f, T) < cfg.harmonic_kurtosis:
@@ -300,7 +311,8 @@ def identify_modes(
         spread_z = c.damping_spread if c.orders > 1 else 0.0
         fstd = math.hypot(sf, spread_f) if math.isfinite(sf) else spread_f
         zstd = math.hypot(sz, spread_z) if math.isfinite(sz) else spread_z
-        shape_c = model.poles.shapes[c.representative]
+        shape_c = model.poles.shapes[c.representative] * scale
+        shape_c = shape_c / np.linalg.norm(shape_c)
         shape = _real_shape(shape_c)
         mac = ref = None
         if refs is not None:

@@ -186,7 +186,7 @@ def cluster_poles(diagram: StabilisationDiagram, *, distance: float = 0.02, min_
     _check_rel("distance", distance)
     _check_rel("min_orders", min_orders)
     poles = diagram.poles
-    idx = np.flatnonzero(diagram.stable)
+    idx = np.flatnonzero(diagram.admissible & diagram.stable_shape)
     n_orders = np.unique(poles.order).size
     need = max(3, int(np.ceil(min_orders * n_orders)))
     if idx.size < need:

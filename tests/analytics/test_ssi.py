@@ -66,7 +66,7 @@ def test_identify_modes_lists_the_three_modes_and_nothing_else():
         assert abs(m.damping_ratio - s.damping[k]) < 4 * m.damping_std + 1e-3
         d = subspace_damping(m)
         assert d.method == "ssi" and d.damping_ratio == m.damping_ratio and d.damping_std == m.damping_std
-    assert sum(m.contribution for m in ident.modes) == pytest.approx(1.0)
+    assert 0.95 < sum(m.contribution for m in ident.modes) <= 1.0 + 1e-12  # the rest: the noise clusters rejected
 
 
 @pytest.mark.slow
