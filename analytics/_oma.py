@@ -11,17 +11,17 @@ its ``run()`` only calls them and returns an :class:`OmaResult`.
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass, field
-from typing import Literal
+from dataclasses import dataclass
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
-from scipy import signal, stats
+from scipy import linalg, signal, stats
 
 from ._damping import DampingEstimate
 from ._frf import ExcitationClass, classify_excitation
-from ._ssi import SsiModel, modal_assurance, perturbed_poles, ssi_poles, toeplitz_from_data
+from ._ssi import SsiModel, modal_assurance, ssi_poles, toeplitz_from_data
 from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, stabilisation_diagram
 from ._validate import as_signal, check_fs, positive
 
@@ -60,7 +60,6 @@ class OmaConfig(BaseModel):
     min_orders: float = Field(0.3, gt=0, le=1, description="a mode holds poles of this fraction of the orders [0.3]")
     sure_orders: float = Field(0.5, gt=0, le=1, description="a cluster with poles at fewer than this fraction of the orders is a mode only if it carries min_contribution of the response [0.5]")
     min_contribution: float = Field(0.05, ge=0, le=1, description="see sure_orders: a drifting mode split in two carries a large share, a noise pole next to nothing [0.05]")
-    taper: Literal["none", "hann"] = Field("none", description="weighting of the time steps: 'hann' centres the estimate in a window whose structure drifts [none]")
     harmonic_kurtosis: float = Field(2.0, gt=1.5, lt=3, description="band-passed kurtosis below this with ζ < harmonic_damping: a harmonic [2.0]")
     harmonic_damping: float = Field(0.002, ge=0, lt=1, description="see harmonic_kurtosis [0.002]")
 
@@ -151,6 +150,18 @@ def _stages(q: int) -> list[int]:
     return out
 
 
+@functools.lru_cache(maxsize=32)
+def _antialias(q: int) -> np.ndarray:
+    # scipy.signal.decimate's default: Chebyshev I, order 8, 0.05 dB ripple, edge at 0.8·Nyquist/q
+    return signal.cheby1(8, 0.05, 0.8 / q, output="sos")
+
+
+@functools.lru_cache(maxsize=32)
+def _highpass(edge: float) -> np.ndarray:
+    # 2nd-order Butterworth at ``edge`` cycles per sample
+    return signal.butter(2, 2 * edge, btype="highpass", output="sos")
+
+
 def prepare_band(y: object, fs: float, *, fmin_hz: float = 0.0, fmax_hz: float | None = None) -> tuple[np.ndarray, float]:
     """Decimate y to about 3·fmax (an anti-aliased, zero-phase IIR per stage of ≤ 10) and remove
     content below fmin/2 (zero-phase Butterworth); SSI is then fitted to the band of interest.
@@ -184,12 +195,12 @@ def prepare_band(y: object, fs: float, *, fmin_hz: float = 0.0, fmax_hz: float |
         for d in _stages(q):
             if a.shape[0] < 30 * d:
                 raise ValueError(f"y has {a.shape[0]} samples at this stage, too few to decimate by {d} (fmax_hz={fmax_hz})")
-            a = signal.decimate(a, d, axis=0, zero_phase=True)
+            a = signal.sosfiltfilt(_antialias(d), a, axis=0)[::d]
             fs = fs / d
     if fmin_hz > 0:
         if fmin_hz / 2 >= fs / 2:
             raise ValueError(f"{fmin_hz=} is above the Nyquist frequency {fs / 2} Hz")
-        sos = signal.butter(2, fmin_hz / 2, btype="highpass", fs=fs, output="sos")
+        sos = _highpass(round(fmin_hz / 2 / fs, 12))
         if a.shape[0] > 15:
             a = signal.sosfiltfilt(sos, a, axis=0)
     return a - a.mean(axis=0), float(fs)
@@ -276,22 +287,17 @@ def identify_modes(
     if n <= 4 * i + 2:
         raise ValueError(f"the window has {n} samples at {fsb:g} Hz, too short for block_rows={i}: lengthen it")
     segs = int(max(1, min(cfg.segments, (n - 2 * i) // (4 * i))))
-    if cfg.taper == "hann":
-        weights = signal.get_window("hann", n - 2 * i + 1 + 2, fftbins=False)[1:-1]
-    elif cfg.taper == "none":
-        weights = None
-    else:
-        raise ValueError(f"taper={cfg.taper!r} must be 'none' or 'hann'")
-    Tm, Tsegs = toeplitz_from_data(yb, i, segments=segs, weights=weights)
+    Tm, Tsegs = toeplitz_from_data(yb, i, segments=segs)
     orders = np.arange(2, max_order + 1, 2)
     model = ssi_poles(Tm, l, fsb, orders)
     diag = stabilisation_diagram(model.poles, fmin_hz=max(cfg.fmin_hz, 0.0), fmax_hz=min(fmax, 0.49 * fsb), freq_rel=cfg.freq_rel,
                                  damping_rel=cfg.damping_rel, mac_min=cfg.mac_min, max_damping=cfg.max_damping,
                                  min_damping=cfg.min_damping)
     clusters = cluster_poles(diag, distance=cfg.cluster_distance, min_orders=cfg.min_orders)
-    jack = _jackknife(Tm, Tsegs) if segs >= 3 else None
+    jack = _jackknife(model, Tm, Tsegs) if segs >= 3 else None
     modes, kept, rejected = [], [], []
-    contrib = _contributions(model, clusters)
+    orders_cache: dict = {}
+    contrib = _contributions(model, clusters, orders_cache)
     refs = None if reference_shapes is None else np.atleast_2d(np.asarray(reference_shapes, dtype=float))
     if refs is not None and refs.shape[1] != l:
         raise ValueError(f"reference_shapes has {refs.shape[1]} components, y has {l} channels")
@@ -306,7 +312,7 @@ def identify_modes(
         if abs(z) < cfg.harmonic_damping and 2 * np.pi * f * cfg.harmonic_damping * T >= 20 and _kurtosis_near(yb, fsb, f, T) < cfg.harmonic_kurtosis:
             rejected.append((f, "harmonic: a steady line (band-passed kurtosis ≈ 1.5), not a resonance"))
             continue
-        sf, sz = _pole_std(model, c, jack) if jack is not None else (float("nan"), float("nan"))
+        sf, sz = _pole_std(model, c, jack, orders_cache) if jack is not None else (float("nan"), float("nan"))
         spread_f = c.frequency_spread_hz if c.orders > 1 else 0.0
         spread_z = c.damping_spread if c.orders > 1 else 0.0
         fstd = math.hypot(sf, spread_f) if math.isfinite(sf) else spread_f
@@ -341,61 +347,90 @@ def _real_shape(s: np.ndarray) -> np.ndarray:
 
 
 @dataclass
+class _OrderModel:
+    """One model order's state matrix, its eigen-decomposition (left and right) and what the
+    first-order perturbation of its poles needs."""
+
+    A: np.ndarray
+    mu: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    lam: np.ndarray
+    Oup_pinv: np.ndarray
+    gram_inv: np.ndarray
+    residual: np.ndarray
+
+
+def _order_model(model: SsiModel, n: int, cache: dict) -> _OrderModel:
+    if n in cache:
+        return cache[n]
+    l = model.channels
+    O = model.observability[:, :n]
+    Oup, Odown = O[:-l], O[l:]
+    Oup_pinv = np.linalg.pinv(Oup)
+    A = Oup_pinv @ Odown
+    mu, W, V = linalg.eig(A, left=True, right=True)
+    om = _OrderModel(A, mu, W, V, np.log(mu.astype(complex)) * model.fs_hz, Oup_pinv, np.linalg.inv(Oup.T @ Oup), Odown - Oup @ A)
+    cache[n] = om
+    return om
+
+
+@dataclass
 class _Jackknife:
-    """Leave-one-segment-out Toeplitz matrices, as perturbations of the full record's."""
+    """Leave-one-segment-out perturbations of the observability matrix, δO_j = (T_j − T) V S^{-1/2}
+    for the largest order (each order takes its first columns)."""
 
-    T: np.ndarray  # (S, il, ir)
+    dO: np.ndarray  # (S, il, n_max)
     segments: int
-    cache: dict = field(default_factory=dict)
 
 
-def _jackknife(Tfull: np.ndarray, Ts: np.ndarray) -> _Jackknife:
+def _jackknife(model: SsiModel, Tfull: np.ndarray, Ts: np.ndarray) -> _Jackknife:
     segs = Ts.shape[0]
     total = Ts.sum(axis=0)
     loo = (total[None] - Ts) / (segs - 1)
-    return _Jackknife(Tfull[None] + (loo - Tfull[None]), segs)
+    W = model.right_vectors / np.sqrt(model.singular_values[: model.right_vectors.shape[1]])[None, :]
+    return _Jackknife(np.matmul(loo - Tfull[None], W), segs)
 
 
-def _pole_std(model: SsiModel, c: PoleCluster, jack: _Jackknife) -> tuple[float, float]:
-    """Jackknife 1σ of the representative pole's frequency (Hz) and damping ratio."""
-    order = int(model.poles.order[c.representative])
-    if order not in jack.cache:
-        jack.cache[order] = perturbed_poles(model, jack.T, order)
-    lams, phis = jack.cache[order]
-    lam0 = model.poles.eigenvalue[c.representative]
-    phi0 = model.poles.shapes[c.representative]
-    fs_, zs = [], []
-    for lam, phi in zip(lams, phis):
-        if lam.size == 0:
-            return float("nan"), float("nan")
-        d = np.abs(lam - lam0) / abs(lam0) + (1 - modal_assurance(phi, phi0[None])[:, 0])
-        k = int(np.argmin(d))
-        fs_.append(abs(lam[k]) / (2 * np.pi))
-        zs.append(-lam[k].real / abs(lam[k]))
+def _pole_std(model: SsiModel, c: PoleCluster, jack: _Jackknife, cache: dict) -> tuple[float, float]:
+    """Jackknife 1σ of the representative pole's frequency (Hz) and damping ratio.
+
+    Each leave-one-out matrix moves the pole to first order by δμ = wᴴ δA v / (wᴴ v) with
+    δA = O_up⁺ (δO_down − δO_up A) + (O_upᵀ O_up)⁻¹ δO_upᵀ (O_down − O_up A): no eigenproblem
+    per segment and no pole matching (Reynders, Pintelon & De Roeck 2008)."""
+    n = int(model.poles.order[c.representative])
+    om = _order_model(model, n, cache)
+    l = model.channels
+    k = int(np.argmin(np.abs(om.lam - model.poles.eigenvalue[c.representative])))
+    dO = jack.dO[:, :, :n]
+    dA = om.Oup_pinv[None] @ (dO[:, l:] - dO[:, :-l] @ om.A[None]) + om.gram_inv[None] @ np.swapaxes(dO[:, :-l], 1, 2) @ om.residual[None]
+    w, v = om.left[:, k], om.right[:, k]
+    dmu = np.einsum("i,sij,j->s", np.conj(w), dA, v) / (np.conj(w) @ v)
+    lam = np.log(om.mu[k] + dmu) * model.fs_hz
+    fj = np.abs(lam) / (2 * np.pi)
+    zj = -lam.real / np.abs(lam)
     S = jack.segments
-    fs_, zs = np.array(fs_), np.array(zs)
-    var_f = (S - 1) / S * np.sum((fs_ - fs_.mean()) ** 2)
-    var_z = (S - 1) / S * np.sum((zs - zs.mean()) ** 2)
+    var_f = (S - 1) / S * np.sum((fj - fj.mean()) ** 2)
+    var_z = (S - 1) / S * np.sum((zj - zj.mean()) ** 2)
     return float(np.sqrt(var_f)), float(np.sqrt(var_z))
 
 
-def _contributions(model: SsiModel, clusters: tuple[PoleCluster, ...]) -> list[float]:
+def _contributions(model: SsiModel, clusters: tuple[PoleCluster, ...], cache: dict) -> list[float]:
     """Each cluster's share of the correlation amplitude: |φ|·|g| of its representative pole,
     g = ψ⁻¹G from the controllability part of the SVD (T = O·[A^{i-1}G … G])."""
     if not clusters:
         return []
     l = model.channels
+    r = model.right_vectors.shape[0] // model.block_rows
     vals = []
     for c in clusters:
         n = int(model.poles.order[c.representative])
-        O = model.observability[:, :n]
-        A = np.linalg.lstsq(O[:-l], O[l:], rcond=None)[0]
-        mu, psi = np.linalg.eig(A)
-        lam = np.log(mu.astype(complex)) * model.fs_hz
-        k = int(np.argmin(np.abs(lam - model.poles.eigenvalue[c.representative])))
-        G = (np.sqrt(model.singular_values[:n])[:, None] * model.right_vectors[:, :n].T)[:, -(model.right_vectors.shape[0] // model.block_rows):]
-        g = np.linalg.solve(psi, G)[k]
-        phi = O[:l] @ psi[:, k]
+        om = _order_model(model, n, cache)
+        k = int(np.argmin(np.abs(om.lam - model.poles.eigenvalue[c.representative])))
+        G = (np.sqrt(model.singular_values[:n])[:, None] * model.right_vectors[:, :n].T)[:, -r:]
+        w, v = om.left[:, k], om.right[:, k]
+        g = (np.conj(w) @ G) / (np.conj(w) @ v)  # the k-th row of ψ⁻¹G
+        phi = model.observability[:l, :n] @ v
         vals.append(float(np.linalg.norm(phi) * np.linalg.norm(g)))
     tot = sum(vals)
     return [v / tot if tot > 0 else 0.0 for v in vals]
@@ -438,31 +473,43 @@ def subspace_damping(mode: IdentifiedMode) -> DampingEstimate:
     return DampingEstimate(mode.damping_ratio, mode.damping_std, mode.frequency_hz, "ssi", 0.0)
 
 
-def tracked_frequency(modes: tuple[IdentifiedMode, ...], fmin_hz: float, fmax_hz: float) -> float | None:
+def tracked_frequency(modes: tuple[IdentifiedMode, ...], fmin_hz: float, fmax_hz: float, *, mac_min: float = 0.9) -> float | None:
     """The frequency (Hz) of the mode tracked in a band of one window, None if none is there.
 
-    The contribution-weighted mean of the modes in [fmin_hz, fmax_hz]: one mode gives its own
-    frequency; a mode that drifts within the window (a structure changing, a support moving)
-    splits into poles on either side of its mean frequency, and their weighted mean follows it.
+    The mode carrying the largest share of the response in [fmin_hz, fmax_hz], merged with the
+    other modes of the band whose shape matches it (MAC >= mac_min), weighted by their shares:
+    a mode that drifts within the window (a structure changing, a support moving) splits into
+    poles on either side of its mean frequency with the same shape, and their weighted mean
+    follows it; a different mode in the band has another shape and is left out. With one
+    channel shapes cannot tell modes apart, so the dominant mode alone is tracked.
 
     Parameters
     ----------
     modes : tuple of IdentifiedMode
     fmin_hz, fmax_hz : float
         The tracked mode's band (Hz).
+    mac_min : float
+        Shapes this alike are one mode [0.9].
 
     Raises
     ------
     ValueError
-        If the band is empty or negative.
+        If the band is empty or negative, or mac_min is not in (0, 1].
     """
     if not (0 <= fmin_hz < fmax_hz):
         raise ValueError(f"{fmin_hz=} and {fmax_hz=} must satisfy 0 <= fmin_hz < fmax_hz")
+    if not (0 < mac_min <= 1):
+        raise ValueError(f"{mac_min=} must be in (0, 1]")
     inband = [m for m in modes if fmin_hz <= m.frequency_hz <= fmax_hz]
     if not inband:
         return None
-    w = np.array([max(m.contribution, 1e-12) for m in inband])
-    return float(np.sum(w * np.array([m.frequency_hz for m in inband])) / w.sum())
+    top = max(inband, key=lambda m: m.contribution)
+    if len(top.shape) < 2:
+        return top.frequency_hz
+    ref = np.array(top.shape)[None]
+    same = [m for m in inband if modal_assurance(np.array(m.shape)[None], ref)[0, 0] >= mac_min]
+    w = np.array([max(m.contribution, 1e-12) for m in same])
+    return float(np.sum(w * np.array([m.frequency_hz for m in same])) / w.sum())
 
 
 @dataclass(frozen=True, eq=False)

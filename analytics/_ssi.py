@@ -219,8 +219,10 @@ def toeplitz_from_data(y: object, block_rows: int, *, segments: int = 1, refs: o
     Yp = np.swapaxes(Yp, 1, 2).reshape(nc, i * r)
     bounds = np.linspace(0, nc, segments + 1).astype(int)
     if weights is None:
-        Ts = np.stack([Yf[s:e].T @ Yp[s:e] / (e - s) for s, e in zip(bounds[:-1], bounds[1:])])
-        w = np.diff(bounds) / nc
+        # equal groups (one batched product); the < segments columns left over are dropped
+        m = nc // segments
+        Ts = np.matmul(np.swapaxes(Yf[: m * segments].reshape(segments, m, i * l), 1, 2), Yp[: m * segments].reshape(segments, m, i * r)) / m
+        w = np.full(segments, 1.0 / segments)
     else:
         c = np.asarray(weights, dtype=float)
         if c.shape != (nc,) or np.any(c < 0) or not np.any(c > 0):
@@ -265,7 +267,8 @@ class SsiModel:
     fs_hz : sample rate of the identified data (Hz).
     block_rows : i of the block Toeplitz matrix.
     channels : l, number of outputs.
-    singular_values : (i·l,) of the Toeplitz matrix (u²), falling.
+    singular_values : the leading singular values of the Toeplitz matrix (u²), falling (all of
+        them for a small matrix, the first max order + 20 for a large one).
     orders : (n_orders,) model orders evaluated (even).
     poles : every order's poles (:class:`PoleSet`).
     observability : (i·l, max order) U·S^{1/2}, kept to propagate segment perturbations.
@@ -338,6 +341,28 @@ def _poles_of(A: np.ndarray, C: np.ndarray, fs: float) -> tuple[np.ndarray, np.n
     return mu, lam, C @ psi
 
 
+def _leading_svd(H: np.ndarray, k: int, *, oversample: int = 20, power: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The leading singular triplets of H, at least k of them.
+
+    Only the first k matter to SSI: above a few times k columns a randomized range finder with
+    power iterations (Halko, Martinsson & Tropp 2011; a fixed seed, so results repeat) gives
+    them at a fraction of a full SVD's cost; its subspace error falls as (σ_{k+p}/σ_n)^(2q+1),
+    negligible for the orders that hold the physical modes. Smaller matrices get the full SVD.
+    """
+    m = min(H.shape)
+    if m <= 2 * (k + oversample):
+        return linalg.svd(H, full_matrices=False, check_finite=False)
+    rng = np.random.default_rng(0)
+    Y = H @ rng.standard_normal((H.shape[1], k + oversample))
+    for _ in range(power):
+        Y, _ = np.linalg.qr(Y)
+        Y, _ = np.linalg.qr(H.T @ Y)
+        Y = H @ Y
+    Q, _ = np.linalg.qr(Y)
+    Ub, s, Vt = linalg.svd(Q.T @ H, full_matrices=False, check_finite=False)
+    return Q @ Ub, s, Vt
+
+
 def ssi_poles(T: object, channels: int, fs: float, orders: object) -> SsiModel:
     """Poles of every model order from a block Toeplitz matrix (one SVD, one QR).
 
@@ -374,7 +399,7 @@ def ssi_poles(T: object, channels: int, fs: float, orders: object) -> SsiModel:
     if ords.size == 0 or ords[0] < 2 or ords[-1] > min((i - 1) * l, H.shape[1]):
         raise ValueError(f"orders={orders!r} must lie in 2 … {min((i - 1) * l, H.shape[1])} (block_rows={i}, {channels=})")
     nmax = int(ords[-1])
-    U, s, Vt = linalg.svd(H, full_matrices=False, check_finite=False)
+    U, s, Vt = _leading_svd(H, nmax)
     O = U[:, :nmax] * np.sqrt(s[:nmax])
     # shift structure: O_up A = O_down. One QR of the largest O_up gives every order's
     # least-squares solution A_n = R[:n,:n]⁻¹ (Qᵀ O_down)[:n,:n].
@@ -433,24 +458,3 @@ def ssi_cov(y: object, fs: float, *, block_rows: int, orders: object, refs: obje
         raise ValueError(f"y has {a.shape[0]} samples; {block_rows=} needs more than {4 * i}")
     R = output_correlations(a, 2 * i, refs=refs)
     return ssi_poles(block_toeplitz(R, i), a.shape[1], fs, orders)
-
-
-def perturbed_poles(model: SsiModel, T_perturbed: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
-    """Poles λ (continuous, Im > 0) and shapes (m, l) of ``order`` for Toeplitz matrices near
-    the model's, to first order: O_j = T_j V_n S_n^{-1/2} spans T_j's perturbed column space.
-
-    T_perturbed : (S, i·l, i·r). Returns λ (S, m) and shapes (S, m, l), ordered as the nominal
-    order's poles are matched later by the caller.
-    """
-    n = int(order)
-    l = model.channels
-    s = model.singular_values[:n]
-    V = model.right_vectors[:, :n]
-    Oj = np.einsum("sab,bn->san", T_perturbed, V / np.sqrt(s)[None, :])
-    out_lam, out_phi = [], []
-    for O in Oj:
-        A = np.linalg.lstsq(O[:-l], O[l:], rcond=None)[0]
-        _, lam, phi = _poles_of(A, O[:l], model.fs_hz)
-        out_lam.append(lam)
-        out_phi.append(_normalise_shapes(phi) if lam.size else np.zeros((0, l), complex))
-    return out_lam, out_phi
