@@ -206,8 +206,10 @@ def prepare_band(y: object, fs: float, *, fmin_hz: float = 0.0, fmax_hz: float |
     return a - a.mean(axis=0), float(fs)
 
 
-#: largest Toeplitz dimension i·l chosen automatically: its SVD is the cost (≈ 5 ms at 200 on one core)
-_AUTO_ROWS_CAP = 200
+#: largest Toeplitz dimension i·l chosen automatically: the data product and the SVD grow as (i·l)²
+#: and (i·l)³; on 60 s windows of the rig-like benchmark 120 lost no accuracy against 200 (the
+#: statistical error of a window dominates), see benchmarks/bench_oma.py
+_AUTO_ROWS_CAP = 120
 
 
 def _auto_block_rows(n: int, l: int, fs: float, f_low: float, max_order: int) -> int:
