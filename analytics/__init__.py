@@ -11,7 +11,7 @@ from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, fr
 from ._location import DamageLocation, locate_damage
 from ._monitor import Baseline, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model
 from ._oma import (
-    IdentifiedMode, ModalIdentification, OmaConfig, OmaResult, OmaWindow, OperationalModalAnalysis, identify_modes,
+    IdentifiedMode, ModalIdentification, OmaConfig, OmaResult, OmaWindow, OperationalModalAnalysis, damping_estimates, identify_modes,
     identify_windows, prepare_band, subspace_damping, tracked_frequency,
 )
 from ._peaks import Peak, find_peaks, interpolate_peak
@@ -32,7 +32,7 @@ __all__ = [
     # operational modal analysis (SSI-cov, stabilisation, clustering, FRFs)
     "ExcitationClass", "Frf", "FrfMode", "IdentifiedMode", "ModalIdentification", "OmaConfig", "OmaResult", "OmaWindow",
     "OperationalModalAnalysis", "PoleCluster", "PoleSet", "SsiModel", "StabilisationDiagram", "block_toeplitz",
-    "classify_excitation", "cluster_poles", "frf_h1", "frf_modes", "identify_modes", "identify_windows", "modal_assurance",
+    "classify_excitation", "cluster_poles", "damping_estimates", "frf_h1", "frf_modes", "identify_modes", "identify_windows", "modal_assurance",
     "modal_phase_collinearity", "output_correlations", "prepare_band", "segment_correlations", "ssi_cov", "ssi_poles",
     "stabilisation_diagram", "subspace_damping", "toeplitz_from_data", "tracked_frequency",
 ]

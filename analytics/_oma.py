@@ -35,6 +35,7 @@ __all__ = [
     "identify_modes",
     "identify_windows",
     "prepare_band",
+    "damping_estimates",
     "subspace_damping",
     "tracked_frequency",
 ]
@@ -512,6 +513,50 @@ def tracked_frequency(modes: tuple[IdentifiedMode, ...], fmin_hz: float, fmax_hz
     same = [m for m in inband if modal_assurance(np.array(m.shape)[None], ref)[0, 0] >= mac_min]
     w = np.array([max(m.contribution, 1e-12) for m in same])
     return float(np.sum(w * np.array([m.frequency_hz for m in same])) / w.sum())
+
+
+def damping_estimates(y: object, fs: float, mode: IdentifiedMode, *, rd_cycles: float = 20.0) -> tuple[DampingEstimate, ...]:
+    """The damping of one identified mode by every method the record allows.
+
+    "ssi": the subspace pole (:func:`subspace_damping`); "random_decrement": the random
+    decrement signature (:func:`analytics.random_decrement`) of the channels projected on the
+    mode's shape (a spatial filter that favours the mode before the band-pass). A method the
+    record cannot serve (too few triggers, a band beyond Nyquist) is left out.
+
+    Parameters
+    ----------
+    y : array_like, shape (N,) or (N, l)
+        The outputs the mode was identified from, at fs.
+    fs : float
+        Sample rate (Hz).
+    mode : IdentifiedMode
+    rd_cycles : float
+        Length of the random decrement signature in periods [20].
+
+    Returns
+    -------
+    tuple of DampingEstimate, each with its method and 1σ.
+
+    Raises
+    ------
+    ValueError
+        If y does not have the mode's channels, or an argument is invalid.
+    """
+    from ._damping import random_decrement
+
+    fs = check_fs(fs)
+    a = as_signal("y", y, min_len=16)
+    a = a.reshape(a.shape[0], -1)
+    if not isinstance(mode, IdentifiedMode):
+        raise ValueError(f"mode must be an IdentifiedMode, got {type(mode).__name__}")
+    if a.shape[1] != len(mode.shape):
+        raise ValueError(f"y has {a.shape[1]} channels, the mode shape {len(mode.shape)}")
+    out = [subspace_damping(mode)]
+    try:
+        out.append(random_decrement((a - a.mean(axis=0)) @ np.array(mode.shape), fs, mode.frequency_hz, duration_cycles=rd_cycles))
+    except ValueError:
+        pass
+    return tuple(out)
 
 
 @dataclass(frozen=True, eq=False)

@@ -41,6 +41,17 @@ def _check_int(name: str, value: object, lo: int) -> int:
     return int(value)
 
 
+def _outputs_and_refs(y: object, refs: object | None) -> tuple[np.ndarray, np.ndarray]:
+    """y as (N, l) and the references as (N, r) (y itself without refs), both finite."""
+    a = as_signal("y", y, min_len=3)
+    a = a.reshape(a.shape[0], -1)
+    b = a if refs is None else as_signal("refs", refs, min_len=3)
+    b = b.reshape(b.shape[0], -1)
+    if b.shape[0] != a.shape[0]:
+        raise ValueError(f"refs has {b.shape[0]} samples, y has {a.shape[0]}")
+    return a, b
+
+
 def output_correlations(y: object, max_lag: int, *, refs: object | None = None) -> np.ndarray:
     """Unbiased output correlation matrices R_k = E[y(t+k) y_ref(t)ᵀ], k = 0 … max_lag.
 
@@ -63,11 +74,7 @@ def output_correlations(y: object, max_lag: int, *, refs: object | None = None) 
     ValueError
         If y or refs is not a finite numeric array, their lengths differ, or max_lag is out of range.
     """
-    a = as_signal("y", y, min_len=3)
-    a = a.reshape(a.shape[0], -1)
-    b = a if refs is None else as_signal("refs", refs, min_len=3).reshape(-1, 1 if np.ndim(refs) == 1 else np.shape(refs)[1])
-    if b.shape[0] != a.shape[0]:
-        raise ValueError(f"refs has {b.shape[0]} samples, y has {a.shape[0]}")
+    a, b = _outputs_and_refs(y, refs)
     max_lag = _check_int("max_lag", max_lag, 1)
     if max_lag >= a.shape[0]:
         raise ValueError(f"{max_lag=} must be below the record length {a.shape[0]}")
@@ -112,12 +119,7 @@ def segment_correlations(y: object, max_lag: int, segments: int, *, refs: object
     ValueError
         If the parts are too short for max_lag, or an argument is invalid.
     """
-    a = as_signal("y", y, min_len=3)
-    a = a.reshape(a.shape[0], -1)
-    b = a if refs is None else as_signal("refs", refs, min_len=3)
-    b = b.reshape(b.shape[0], -1)
-    if b.shape[0] != a.shape[0]:
-        raise ValueError(f"refs has {b.shape[0]} samples, y has {a.shape[0]}")
+    a, b = _outputs_and_refs(y, refs)
     segments = _check_int("segments", segments, 1)
     max_lag = _check_int("max_lag", max_lag, 1)
     ns = a.shape[0] // segments
@@ -197,12 +199,7 @@ def toeplitz_from_data(y: object, block_rows: int, *, segments: int = 1, refs: o
     ValueError
         If the record holds fewer than ``segments`` columns per group, or an argument is invalid.
     """
-    a = as_signal("y", y, min_len=3)
-    a = a.reshape(a.shape[0], -1)
-    b = a if refs is None else as_signal("refs", refs, min_len=3)
-    b = b.reshape(b.shape[0], -1)
-    if b.shape[0] != a.shape[0]:
-        raise ValueError(f"refs has {b.shape[0]} samples, y has {a.shape[0]}")
+    a, b = _outputs_and_refs(y, refs)
     i = _check_int("block_rows", block_rows, 1)
     segments = _check_int("segments", segments, 1)
     a = a - a.mean(axis=0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from analytics import (
-    OmaConfig, OperationalModalAnalysis, PoleSet, block_toeplitz, cluster_poles, identify_modes, identify_windows,
+    OmaConfig, OperationalModalAnalysis, PoleSet, block_toeplitz, cluster_poles, damping_estimates, identify_modes, identify_windows,
     modal_assurance, modal_phase_collinearity, output_correlations, ssi_cov, ssi_poles, stabilisation_diagram,
     subspace_damping, toeplitz_from_data, tracked_frequency,
 )
@@ -88,6 +88,20 @@ def test_standard_deviations_cover_the_errors_at_their_stated_rate():
     for z in (zf, zz):
         assert 0.55 <= np.mean(z <= 1) <= 0.85, np.mean(z <= 1)
         assert np.mean(z <= 2) >= 0.85, np.mean(z <= 2)
+
+
+def test_damping_by_subspace_and_random_decrement_each_with_method_and_uncertainty():
+    s = three_dof()
+    y = ambient_response(s, FS, 60_000, seed=8, noise_rel=0.05)
+    ident = identify_modes(y, FS, config=OmaConfig(fmin_hz=1.0, fmax_hz=15.0))
+    m = ident.modes[0]
+    est = {e.method: e for e in damping_estimates(y, FS, m)}
+    assert set(est) == {"ssi", "random_decrement"}
+    for e in est.values():
+        assert e.damping_std > 0
+        assert abs(e.damping_ratio - s.damping[0]) < 4 * e.damping_std + 5e-4, (e.method, e.damping_ratio, e.damping_std)
+    with pytest.raises(ValueError, match="channels"):
+        damping_estimates(y[:, :2], FS, m)
 
 
 def test_a_harmonic_is_not_listed_as_a_mode():
