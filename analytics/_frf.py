@@ -152,6 +152,7 @@ def frf_modes(
     damping_rel: float = 0.3,
     mac_min: float = 0.95,
     min_orders: float = 0.3,
+    min_coherence: float = 0.8,
 ) -> tuple[FrfMode, ...]:
     """Modes fitted to H1 FRFs in a band: pLSCF over model orders, stabilisation, clustering.
 
@@ -170,6 +171,9 @@ def frf_modes(
         Segment groups of the jackknife uncertainty (>= 3, at most the averages) [6].
     freq_rel, damping_rel, mac_min, min_orders : float
         Stabilisation and clustering criteria (:func:`stabilisation_diagram`, :func:`cluster_poles`).
+    min_coherence : float
+        A mode whose half-power band has a lower mean coherence is not listed: where the input
+        does not explain the outputs the FRF is noise [0.8].
 
     Returns
     -------
@@ -241,6 +245,8 @@ def frf_modes(
         fr, zr = c.frequency_hz, c.damping_ratio
         band = (frf.frequencies >= fr * (1 - max(zr, 0.002))) & (frf.frequencies <= fr * (1 + max(zr, 0.002)))
         coh = float(frf.coherence[band].mean()) if band.any() else float(frf.coherence[np.argmin(np.abs(frf.frequencies - fr))].mean())
+        if coh < min_coherence:
+            continue
         out.append(FrfMode(fr, zr, float(np.hypot(sf, c.frequency_spread_hz)), float(np.hypot(sz, c.damping_spread)),
                            tuple(float(v) for v in real), float(poles.mpc[rep]), c.orders, coh))
     return tuple(out)

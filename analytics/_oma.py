@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from scipy import linalg, signal, stats
 
 from ._damping import DampingEstimate
-from ._frf import ExcitationClass, classify_excitation
+from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
 from ._ssi import SsiModel, modal_assurance, ssi_poles, toeplitz_from_data
 from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, stabilisation_diagram
 from ._validate import as_signal, check_fs, positive
@@ -122,6 +122,9 @@ class ModalIdentification:
     clusters : the pole clusters behind ``modes``.
     fs_hz : rate the identification ran at (after decimation); block_rows, orders as used.
     excitation : class of the measured input (None without one).
+    frf_modes : with a measured input, the modes of a pLSCF fit to the H1 FRFs from it to the
+        outputs (:func:`analytics.frf_modes`): the input–output cross-check, which a support's
+        own coloured motion cannot fake.
     """
 
     modes: tuple[IdentifiedMode, ...]
@@ -132,6 +135,7 @@ class ModalIdentification:
     block_rows: int
     orders: tuple[int, ...]
     excitation: ExcitationClass | None = None
+    frf_modes: tuple[FrfMode, ...] = ()
 
 
 def _stages(q: int) -> list[int]:
@@ -331,14 +335,61 @@ def identify_modes(
         modes.append(IdentifiedMode(f, z, fstd, zstd, float(model.poles.mpc[c.representative]), tuple(float(v) for v in shape), mac, ref,
                                     float(share), c.orders, int(model.poles.order[c.representative]), sf, spread_f))
         kept.append(c)
-    exc = None
+    exc, io_modes = None, ()
     if inputs is not None:
         u = as_signal("inputs", inputs, min_len=16)
+        u = u.reshape(u.shape[0], -1)
         if u.shape[0] != raw.shape[0]:
             raise ValueError(f"inputs has {u.shape[0]} samples, y has {raw.shape[0]}")
+        ub = u - u.mean(axis=0) if band_ready else prepare_band(u, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)[0]
         track = [m.frequency_hz for m in modes] if tracked_hz is None else list(np.atleast_1d(tracked_hz))
-        exc = classify_excitation(u, fs, track)
-    return ModalIdentification(tuple(modes), tuple(rejected), diag, tuple(kept), fsb, i, tuple(int(o) for o in orders), exc)
+        exc = classify_excitation(ub, fsb, track)
+        frf, io_modes = _io_modes(ub, yb * scale, fsb, T, cfg, fmax)
+        if frf is not None:
+            modes, dropped = _confirmed_by_frf(modes, io_modes, frf)
+            rejected.extend(dropped)
+            kept = [c for c in kept if any(abs(c.frequency_hz - m.frequency_hz) < 1e-12 for m in modes)]
+    return ModalIdentification(tuple(modes), tuple(rejected), diag, tuple(kept), fsb, i, tuple(int(o) for o in orders), exc, io_modes)
+
+
+def _io_modes(ub: np.ndarray, yb: np.ndarray, fs: float, T: float, cfg: OmaConfig, fmax: float) -> tuple[Frf | None, tuple[FrfMode, ...]]:
+    """The H1 FRFs from the (first) measured input to the outputs (segments of T/6: about 11
+    Hann averages at 50 % overlap) and the modes fitted to them; (None, ()) if the window is too
+    short for a fit or the input is flat."""
+    seg = T / 6
+    lo = max(cfg.fmin_hz, 2.0 / seg)
+    hi = min(fmax, 0.45 * fs)
+    if ub.std() == 0 or lo >= hi:
+        return None, ()
+    try:
+        frf = frf_h1(ub[:, :1], yb, fs, segment_s=seg)
+        return frf, frf_modes(frf, fmin_hz=lo, fmax_hz=hi, max_order=min(24, max(2, int((hi - lo) * seg) // 2 * 2 // 2)))
+    except (ValueError, np.linalg.LinAlgError):
+        return None, ()
+
+
+def _confirmed_by_frf(modes: list[IdentifiedMode], io_modes: tuple[FrfMode, ...], frf: Frf, *, coherence: float = 0.5,
+                      rel: float = 0.02) -> tuple[list[IdentifiedMode], list[tuple[float, str]]]:
+    """Output-only modes where the measured input explains the outputs (coherence >= 0.5) must
+    show in the FRFs too (the nearest to an FRF mode, within 2 % or 3σ): otherwise the pole is the input's own
+    colour (a support's motion spectrum), not the structure's. Where the coherence is low the
+    response has another, unmeasured excitation, and the output-only mode stands."""
+    keep, dropped = [], []
+    # each FRF mode confirms one output-only mode at most: the nearest within the tolerance
+    confirmed = set()
+    for x in io_modes:
+        if modes:
+            j = int(np.argmin([abs(m.frequency_hz - x.frequency_hz) for m in modes]))
+            if abs(modes[j].frequency_hz - x.frequency_hz) <= max(rel * x.frequency_hz, 3 * modes[j].frequency_std_hz):
+                confirmed.add(j)
+    for j, m in enumerate(modes):
+        k = int(np.argmin(np.abs(frf.frequencies - m.frequency_hz)))
+        coh = float(frf.coherence[k].mean())
+        if coh >= coherence and j not in confirmed:
+            dropped.append((m.frequency_hz, f"input: the measured input explains the response here (coherence {coh:.2f}) and its FRFs show no resonance"))
+        else:
+            keep.append(m)
+    return keep, dropped
 
 
 def _real_shape(s: np.ndarray) -> np.ndarray:
@@ -623,9 +674,11 @@ def identify_windows(
     raw = raw.reshape(raw.shape[0], -1)
     if raw.shape[0] < int(round(window_s * fs)):
         raise ValueError(f"the record is {raw.shape[0] / fs:g} s long, shorter than one window ({window_s=} s)")
-    u = None if inputs is None else as_signal("inputs", inputs, min_len=2).reshape(raw.shape[0], -1)
+    u = None if inputs is None else as_signal("inputs", inputs, min_len=2)
+    if u is not None and u.shape[0] != raw.shape[0]:
+        raise ValueError(f"inputs has {u.shape[0]} samples, y has {raw.shape[0]}")
     yb, fsb = prepare_band(raw, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)
-    q = fs / fsb
+    ub = None if u is None else prepare_band(u, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)[0]
     nw = int(round(window_s * fsb))
     step = step_s * fsb
     out = []
@@ -634,12 +687,8 @@ def identify_windows(
         a = int(round(k * step))
         if a + nw > yb.shape[0]:
             break
-        ua = None if u is None else u[int(round(a * q)): int(round((a + nw) * q))]
         ident = identify_modes(yb[a: a + nw], fsb, config=cfg, reference_shapes=reference_shapes, band_ready=True,
-                               inputs=None)
-        if ua is not None:
-            exc = classify_excitation(ua, fs, [m.frequency_hz for m in ident.modes])
-            ident = ModalIdentification(ident.modes, ident.rejected, ident.diagram, ident.clusters, ident.fs_hz, ident.block_rows, ident.orders, exc)
+                               inputs=None if ub is None else ub[a: a + nw])
         out.append(OmaWindow(a / fsb, (a + nw) / fsb, ident))
         k += 1
     return tuple(out)

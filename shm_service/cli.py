@@ -303,13 +303,18 @@ def _cmd_oma(args: argparse.Namespace) -> int:
         names = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
         if args.channels is not None and not names:
             raise CliError(f"--channels {args.channels!r} names no channel")
+        inputs = None
+        if args.inputs:
+            inputs = select_channels(table, [c.strip() for c in args.inputs.split(",") if c.strip()]).data
+            if names is None:  # the inputs are not outputs too
+                names = [c for c in table.channels if c not in args.inputs.split(",")]
         table = select_channels(table, names)
         config = OmaConfig(fmin_hz=args.fmin or 0.0, fmax_hz=args.fmax)
         window = args.window
         step = args.step if args.step is not None else window
         if step is not None and window is None:
             raise CliError("--step needs --window")
-        result = OperationalModalAnalysis(config, window_s=window, step_s=step).run(table.data, table.fs_hz)
+        result = OperationalModalAnalysis(config, window_s=window, step_s=step).run(table.data, table.fs_hz, inputs=inputs)
     except ValidationError as exc:
         raise CliError(_pydantic_message(exc)) from None
     except (TableError, ValueError) as exc:
@@ -320,6 +325,14 @@ def _cmd_oma(args: argparse.Namespace) -> int:
                  "damping_std": m.damping_std, "mpc": m.mpc, "shape": list(m.shape), "contribution": m.contribution,
                  "orders": m.orders, "damping_method": m.damping_method} for m in ident.modes]
 
+    def io(ident) -> dict:
+        if ident.excitation is None:
+            return {}
+        e = ident.excitation
+        return {"excitation": {"kind": e.kind, "line_hz": e.line_hz, "line_fraction": e.line_fraction, "nearest_mode_hz": e.nearest_mode_hz},
+                "frf_modes": [{"frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "frequency_std_hz": m.frequency_std_hz,
+                               "damping_std": m.damping_std, "coherence": m.coherence, "shape": list(m.shape)} for m in ident.frf_modes]}
+
     rec = result.record
     doc = {
         "fs_hz": table.fs_hz,
@@ -329,7 +342,8 @@ def _cmd_oma(args: argparse.Namespace) -> int:
         "analysed_fs_hz": rec.fs_hz,
         "modes": modes(rec),
         "rejected": [{"frequency_hz": f, "reason": why} for f, why in rec.rejected],
-        "windows": [{"start_s": w.start_s, "end_s": w.end_s, "modes": modes(w.identification)} for w in result.windows],
+        **io(rec),
+        "windows": [{"start_s": w.start_s, "end_s": w.end_s, "modes": modes(w.identification), **io(w.identification)} for w in result.windows],
     }
     if args.json:
         _print_json(doc)
@@ -435,6 +449,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--channels", default=None, help="channels to use, names or column indices: A,B,...")
     p.add_argument("--fmin", type=float, default=None, help="lower edge of the analysed band, Hz")
     p.add_argument("--fmax", type=float, default=None, help="upper edge of the analysed band, Hz (default 0.4·fs)")
+    p.add_argument("--inputs", default=None, help="measured input channels (support acceleration): FRF cross-check and excitation class")
     p.add_argument("--window", type=float, default=None, metavar="S", help="also identify windows of S seconds")
     p.add_argument("--step", type=float, default=None, metavar="S", help="window step, s (default: --window)")
     p.add_argument("--json", action="store_true")

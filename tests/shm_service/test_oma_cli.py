@@ -150,6 +150,22 @@ def test_windows_are_listed_with_times_from_the_first_sample(tmp_path, capsys, r
     assert code == 0 and "f [Hz]" in out
 
 
+def test_measured_input_channel(tmp_path, capsys):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "analytics"))
+    from test_frf import base_excited
+
+    ag, acc, _ = base_excited(seconds=600.0)
+    p = tmp_path / "io.npz"
+    np.savez(p, support=ag, mass=acc, fs=100.0)
+    code, out, err = run(capsys, "oma", p, "--inputs", "support", "--fmin", "1", "--fmax", "8", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["channels"] == ["mass"]
+    assert doc["excitation"]["kind"] == "broadband"
+    assert [round(m["frequency_hz"], 1) for m in doc["frf_modes"]] == [3.0]
+    assert [round(m["frequency_hz"], 1) for m in doc["modes"]] == [3.0]
+
+
 def test_bad_input_is_refused_with_a_message_naming_the_value(tmp_path, capsys, response):
     one = tmp_path / "one.npy"
     np.save(one, response[:, 0])
