@@ -7,10 +7,20 @@ from ._chart import EwmaChart
 from ._config import AnalysisConfig
 from ._curvature import CurvatureChange, beam_third, curvature_change, curvature_field, curvature_shape
 from ._damping import DampingEstimate, bandpass, combine_estimates, envelope_decay, find_decay_segments, log_decrement, random_decrement
+from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
 from ._location import DamageLocation, locate_damage
 from ._monitor import Baseline, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model
+from ._oma import (
+    IdentifiedMode, ModalIdentification, OmaConfig, OmaResult, OmaWindow, OperationalModalAnalysis, damping_estimates, identify_modes,
+    identify_windows, prepare_band, subspace_damping, tracked_frequency,
+)
 from ._peaks import Peak, find_peaks, interpolate_peak
 from ._spectrum import Spectrum, amplitude_spectrum, averaged_spectrum, cross_spectra
+from ._ssi import (
+    PoleSet, SsiModel, block_toeplitz, modal_assurance, modal_phase_collinearity, output_correlations, segment_correlations,
+    ssi_cov, ssi_poles, toeplitz_from_data,
+)
+from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, stabilisation_diagram
 
 __all__ = [
     "AnalysisConfig", "AnalysisResult", "Baseline", "BaselineMode", "CurvatureChange", "DamageLocation", "DampingEstimate",
@@ -19,4 +29,10 @@ __all__ = [
     "cross_spectra", "curvature_change", "curvature_field", "curvature_shape", "envelope_decay",
     "find_decay_segments", "find_peaks", "fit_temperature_model", "interpolate_peak", "locate_damage", "log_decrement",
     "random_decrement",
+    # operational modal analysis (SSI-cov, stabilisation, clustering, FRFs)
+    "ExcitationClass", "Frf", "FrfMode", "IdentifiedMode", "ModalIdentification", "OmaConfig", "OmaResult", "OmaWindow",
+    "OperationalModalAnalysis", "PoleCluster", "PoleSet", "SsiModel", "StabilisationDiagram", "block_toeplitz",
+    "classify_excitation", "cluster_poles", "damping_estimates", "frf_h1", "frf_modes", "identify_modes", "identify_windows", "modal_assurance",
+    "modal_phase_collinearity", "output_correlations", "prepare_band", "segment_correlations", "ssi_cov", "ssi_poles",
+    "stabilisation_diagram", "subspace_damping", "toeplitz_from_data", "tracked_frequency",
 ]

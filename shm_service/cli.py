@@ -1,4 +1,4 @@
-"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, study, serve."""
+"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, oma, study, serve."""
 
 from __future__ import annotations
 
@@ -318,6 +318,79 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- shm oma -----------------------------------------------------------------------------
+def _cmd_oma(args: argparse.Namespace) -> int:
+    from pydantic import ValidationError
+
+    from analytics import OmaConfig, OperationalModalAnalysis
+
+    from .tables import TableError, read_table, select_channels
+
+    try:
+        table = read_table(args.data, fs=args.fs)
+        names = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
+        if args.channels is not None and not names:
+            raise CliError(f"--channels {args.channels!r} names no channel")
+        inputs = None
+        if args.inputs:
+            inputs = select_channels(table, [c.strip() for c in args.inputs.split(",") if c.strip()]).data
+            if names is None:  # the inputs are not outputs too
+                names = [c for c in table.channels if c not in args.inputs.split(",")]
+        table = select_channels(table, names)
+        config = OmaConfig(fmin_hz=args.fmin or 0.0, fmax_hz=args.fmax)
+        window = args.window
+        step = args.step if args.step is not None else window
+        if step is not None and window is None:
+            raise CliError("--step needs --window")
+        result = OperationalModalAnalysis(config, window_s=window, step_s=step).run(table.data, table.fs_hz, inputs=inputs)
+    except ValidationError as exc:
+        raise CliError(_pydantic_message(exc)) from None
+    except (TableError, ValueError) as exc:
+        raise CliError(str(exc)) from None
+
+    def modes(ident) -> list[dict]:
+        return [{"frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "frequency_std_hz": m.frequency_std_hz,
+                 "damping_std": m.damping_std, "mpc": m.mpc, "shape": list(m.shape), "contribution": m.contribution,
+                 "orders": m.orders, "damping_method": m.damping_method} for m in ident.modes]
+
+    def io(ident) -> dict:
+        if ident.excitation is None:
+            return {}
+        e = ident.excitation
+        return {"excitation": {"kind": e.kind, "line_hz": e.line_hz, "line_fraction": e.line_fraction, "nearest_mode_hz": e.nearest_mode_hz},
+                "frf_modes": [{"frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "frequency_std_hz": m.frequency_std_hz,
+                               "damping_std": m.damping_std, "coherence": m.coherence, "shape": list(m.shape)} for m in ident.frf_modes]}
+
+    rec = result.record
+    doc = {
+        "fs_hz": table.fs_hz,
+        "channels": list(table.channels),
+        "format": table.format,
+        "band_hz": [config.fmin_hz, config.fmax_hz if config.fmax_hz is not None else 0.4 * table.fs_hz],
+        "analysed_fs_hz": rec.fs_hz,
+        "modes": modes(rec),
+        "rejected": [{"frequency_hz": f, "reason": why} for f, why in rec.rejected],
+        **io(rec),
+        "windows": [{"start_s": w.start_s, "end_s": w.end_s, "modes": modes(w.identification), **io(w.identification)} for w in result.windows],
+    }
+    if args.json:
+        _print_json(doc)
+        return 0
+    print(f"{table.path}: {table.data.shape[0]} samples of {len(table.channels)} channel(s) at {table.fs_hz:g} Hz "
+          f"({table.format}); SSI-cov at {rec.fs_hz:g} Hz, {rec.block_rows} block rows, orders {rec.orders[0]}-{rec.orders[-1]}")
+    print(f"{'f [Hz]':>10} {'± [Hz]':>8} {'zeta [%]':>9} {'± [%]':>7} {'MPC':>5} {'share':>6}  shape")
+    for m in rec.modes:
+        print(f"{m.frequency_hz:10.4f} {m.frequency_std_hz:8.4f} {100 * m.damping_ratio:9.3f} {100 * m.damping_std:7.3f} "
+              f"{m.mpc:5.2f} {m.contribution:6.2f}  " + " ".join(f"{v:+.2f}" for v in m.shape))
+    for f, why in rec.rejected:
+        print(f"  not a mode: {f:.4f} Hz ({why})")
+    if result.windows:
+        print(f"{len(result.windows)} windows:")
+        for w in result.windows:
+            print(f"  {w.start_s:8.2f}-{w.end_s:8.2f} s: " + (", ".join(f"{m.frequency_hz:.3f} Hz ({100 * m.damping_ratio:.2f} %)" for m in w.modes) or "-"))
+    return 0
+
+
 # -- shm inspect -------------------------------------------------------------------------
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from .recording import format_inspection, inspect_recording
@@ -410,6 +483,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gauges", default=None)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_analyze)
+
+    p = sub.add_parser("oma", help="operational modal analysis (SSI-cov) of measured channels: .npy/.npz, CSV/TSV/text, .mat, HDF5, .mcap")
+    p.add_argument("data", help="measured channels (see shm_service/tables.py for the formats)")
+    p.add_argument("--fs", type=float, default=None, help="sample rate, Hz (required without a time column)")
+    p.add_argument("--channels", default=None, help="channels to use, names or column indices: A,B,...")
+    p.add_argument("--fmin", type=float, default=None, help="lower edge of the analysed band, Hz")
+    p.add_argument("--fmax", type=float, default=None, help="upper edge of the analysed band, Hz (default 0.4·fs)")
+    p.add_argument("--inputs", default=None, help="measured input channels (support acceleration): FRF cross-check and excitation class")
+    p.add_argument("--window", type=float, default=None, metavar="S", help="also identify windows of S seconds")
+    p.add_argument("--step", type=float, default=None, metavar="S", help="window step, s (default: --window)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_oma)
 
     p = sub.add_parser("inspect", help="topics, counts, rates, gaps and problems of a recording")
     p.add_argument("recording")

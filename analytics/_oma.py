@@ -1,0 +1,724 @@
+"""Operational modal identification of one window (or a record and its windows).
+
+The engine behind ``shm oma`` (and, next, ``shm analyze``/``shm serve``): SSI-cov over model
+orders (:mod:`._ssi`), stabilisation and clustering (:mod:`._stabilisation`), segment-jackknife
+uncertainties, harmonic rejection, MPC and MAC against reference shapes; with a measured input,
+the excitation class of the window (:mod:`._frf`).
+
+Layering as pyOMA-2: pure functions; :class:`OperationalModalAnalysis` holds a configuration and
+its ``run()`` only calls them and returns an :class:`OmaResult`.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+from scipy import linalg, signal, stats
+
+from ._damping import DampingEstimate
+from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
+from ._ssi import SsiModel, modal_assurance, ssi_poles, toeplitz_from_data
+from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, stabilisation_diagram
+from ._validate import as_signal, check_fs, positive
+
+__all__ = [
+    "IdentifiedMode",
+    "ModalIdentification",
+    "OmaConfig",
+    "OmaResult",
+    "OmaWindow",
+    "OperationalModalAnalysis",
+    "identify_modes",
+    "identify_windows",
+    "prepare_band",
+    "damping_estimates",
+    "subspace_damping",
+    "tracked_frequency",
+]
+
+
+class OmaConfig(BaseModel):
+    """Settings of the SSI-cov identification (defaults in brackets)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    fmin_hz: float = Field(0.0, ge=0, description="lower edge of the analysed band, Hz [0]")
+    fmax_hz: float | None = Field(None, gt=0, description="upper edge of the analysed band, Hz [None: 0.4·fs]; the data are decimated to ≈ 3·fmax")
+    block_rows: int | None = Field(None, ge=2, description="block rows i [None: the lags span 1/f_low, at least 2·max_order/l]")
+    max_order: int | None = Field(None, ge=2, description="largest model order [None: 40, at most (i-1)·l]")
+    min_cycles: float = Field(8.0, gt=0, description="the lowest frequency resolved is min_cycles/T of a window of T s [8]")
+    segments: int = Field(8, ge=3, le=64, description="data segments of the jackknife uncertainty [8, fewer if the window is short]")
+    freq_rel: float = Field(0.01, gt=0, le=1, description="stability: relative frequency change between orders [0.01]")
+    damping_rel: float = Field(0.3, gt=0, le=10, description="stability: relative damping change between orders [0.3]")
+    mac_min: float = Field(0.95, gt=0, le=1, description="stability: MAC between orders [0.95]")
+    max_damping: float = Field(0.2, gt=0, le=1, description="poles damped more are numerical [0.2]")
+    min_damping: float = Field(-0.01, gt=-1, le=0, description="apparent damping of a mode building up in a short window, down to this, is admitted [-0.01]")
+    cluster_distance: float = Field(0.02, gt=0, le=1, description="clustering cut-off in |Δf|/f + (1 − MAC) [0.02]")
+    min_orders: float = Field(0.3, gt=0, le=1, description="a mode holds poles of this fraction of the orders [0.3]")
+    sure_orders: float = Field(0.5, gt=0, le=1, description="a cluster with poles at fewer than this fraction of the orders is a mode only if it carries min_contribution of the response [0.5]")
+    min_contribution: float = Field(0.05, ge=0, le=1, description="see sure_orders: a drifting mode split in two carries a large share, a noise pole next to nothing [0.05]")
+    harmonic_kurtosis: float = Field(2.0, gt=1.5, lt=3, description="band-passed kurtosis below this with ζ < harmonic_damping: a harmonic [2.0]")
+    harmonic_damping: float = Field(0.002, ge=0, lt=1, description="see harmonic_kurtosis [0.002]")
+
+    @model_validator(mode="after")
+    def _band(self) -> "OmaConfig":
+        if self.fmax_hz is not None and self.fmax_hz <= self.fmin_hz:
+            raise ValueError(f"fmax_hz={self.fmax_hz} must exceed fmin_hz={self.fmin_hz}")
+        return self
+
+
+@dataclass(frozen=True)
+class IdentifiedMode:
+    """One mode of one window.
+
+    frequency_hz : undamped natural frequency (Hz); frequency_std_hz its 1σ (Hz).
+    damping_ratio : ζ (0.01 = 1 %); damping_std its 1σ.
+    mpc : modal phase collinearity 0 … 1 of the shape.
+    shape : (l,) real mode shape over the channels (unit norm, largest component positive).
+    mac : MAC of the shape against the best-matching reference shape (None without references);
+        reference : that reference's index.
+    contribution : share of all pole clusters' summed correlation amplitude (0 … 1): which mode dominates.
+    orders : model orders the mode was stable at; order : the representative pole's order.
+    statistical_std_hz, order_spread_hz : the two parts of frequency_std_hz (segment jackknife,
+        scatter across model orders), combined in quadrature.
+    damping_method : "ssi" (the subspace pole).
+    """
+
+    frequency_hz: float
+    damping_ratio: float
+    frequency_std_hz: float
+    damping_std: float
+    mpc: float
+    shape: tuple[float, ...]
+    mac: float | None
+    reference: int | None
+    contribution: float
+    orders: int
+    order: int
+    statistical_std_hz: float
+    order_spread_hz: float
+    damping_method: str = "ssi"
+
+    def as_dict(self) -> dict:
+        return {
+            "frequency_hz": self.frequency_hz, "damping_ratio": self.damping_ratio,
+            "frequency_std_hz": self.frequency_std_hz, "damping_std": self.damping_std,
+            "mpc": self.mpc, "shape": list(self.shape), "mac": self.mac, "contribution": self.contribution,
+            "orders": self.orders, "damping_method": self.damping_method,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class ModalIdentification:
+    """The modes of one window and how they were found.
+
+    modes : physical modes, lowest frequency first.
+    rejected : clusters dropped as harmonics (a line, not a resonance), with their frequency (Hz) and reason.
+    diagram : the stabilisation diagram (poles of every order and their flags).
+    clusters : the pole clusters behind ``modes``.
+    fs_hz : rate the identification ran at (after decimation); block_rows, orders as used.
+    excitation : class of the measured input (None without one).
+    frf_modes : with a measured input, the modes of a pLSCF fit to the H1 FRFs from it to the
+        outputs (:func:`analytics.frf_modes`): the input–output cross-check, which a support's
+        own coloured motion cannot fake.
+    """
+
+    modes: tuple[IdentifiedMode, ...]
+    rejected: tuple[tuple[float, str], ...]
+    diagram: StabilisationDiagram
+    clusters: tuple[PoleCluster, ...]
+    fs_hz: float
+    block_rows: int
+    orders: tuple[int, ...]
+    excitation: ExcitationClass | None = None
+    frf_modes: tuple[FrfMode, ...] = ()
+
+
+def _stages(q: int) -> list[int]:
+    """Split a decimation factor into stages of at most 10 (each with its own anti-alias filter)."""
+    out = []
+    while q > 10:
+        for d in range(10, 1, -1):
+            if q % d == 0:
+                out.append(d)
+                q //= d
+                break
+        else:
+            out.append(10)
+            q = int(math.ceil(q / 10))
+    if q > 1:
+        out.append(q)
+    return out
+
+
+@functools.lru_cache(maxsize=32)
+def _antialias(q: int) -> np.ndarray:
+    # scipy.signal.decimate's default: Chebyshev I, order 8, 0.05 dB ripple, edge at 0.8·Nyquist/q
+    return signal.cheby1(8, 0.05, 0.8 / q, output="sos")
+
+
+@functools.lru_cache(maxsize=32)
+def _highpass(edge: float) -> np.ndarray:
+    # 2nd-order Butterworth at ``edge`` cycles per sample
+    return signal.butter(2, 2 * edge, btype="highpass", output="sos")
+
+
+def prepare_band(y: object, fs: float, *, fmin_hz: float = 0.0, fmax_hz: float | None = None) -> tuple[np.ndarray, float]:
+    """Decimate y to about 3·fmax (an anti-aliased, zero-phase IIR per stage of ≤ 10) and remove
+    content below fmin/2 (zero-phase Butterworth); SSI is then fitted to the band of interest.
+
+    Parameters
+    ----------
+    y : array_like, shape (N,) or (N, l)
+    fs : float
+        Sample rate (Hz).
+    fmin_hz, fmax_hz : float
+        Band of interest (Hz); fmax None keeps the rate.
+
+    Returns
+    -------
+    (y_band, fs_band) : ndarray (M, l), float (Hz)
+
+    Raises
+    ------
+    ValueError
+        If fmax is above 0.45·fs or the record is too short to filter.
+    """
+    fs = check_fs(fs)
+    a = as_signal("y", y, min_len=8)
+    a = a.reshape(a.shape[0], -1)
+    positive("fmin_hz", fmin_hz, allow_zero=True)
+    if fmax_hz is not None:
+        positive("fmax_hz", fmax_hz)
+        if fmax_hz > 0.45 * fs:
+            raise ValueError(f"{fmax_hz=} must be at most 0.45·fs = {0.45 * fs} Hz")
+        q = int(fs // (3.0 * fmax_hz))
+        for d in _stages(q):
+            if a.shape[0] < 30 * d:
+                raise ValueError(f"y has {a.shape[0]} samples at this stage, too few to decimate by {d} (fmax_hz={fmax_hz})")
+            a = signal.sosfiltfilt(_antialias(d), a, axis=0)[::d]
+            fs = fs / d
+    if fmin_hz > 0:
+        if fmin_hz / 2 >= fs / 2:
+            raise ValueError(f"{fmin_hz=} is above the Nyquist frequency {fs / 2} Hz")
+        sos = _highpass(round(fmin_hz / 2 / fs, 12))
+        if a.shape[0] > 15:
+            a = signal.sosfiltfilt(sos, a, axis=0)
+    return a - a.mean(axis=0), float(fs)
+
+
+#: largest Toeplitz dimension i·l chosen automatically: the data product and the SVD grow as (i·l)²
+#: and (i·l)³; on 60 s windows of the rig-like benchmark 120 lost no accuracy against 200 (the
+#: statistical error of a window dominates), see benchmarks/bench_oma.py
+_AUTO_ROWS_CAP = 120
+
+
+def _auto_block_rows(n: int, l: int, fs: float, f_low: float, max_order: int) -> int:
+    # lags spanning half a period of the lowest frequency of interest (Rainieri & Fabbrocino),
+    # at least enough block rows for the largest order, within the SVD budget and short
+    # against the record (N ≥ 5·i)
+    i = int(math.ceil(fs / (2 * f_low)))
+    i = max(i, int(math.ceil(max_order / l)) + 2, 4)
+    i = min(i, max(4, _AUTO_ROWS_CAP // l, int(math.ceil(max_order / l)) + 2))
+    return int(min(i, max(4, n // 5)))
+
+
+def identify_modes(
+    y: object,
+    fs: float,
+    *,
+    config: OmaConfig | None = None,
+    inputs: object | None = None,
+    reference_shapes: object | None = None,
+    tracked_hz: object | None = None,
+    band_ready: bool = False,
+) -> ModalIdentification:
+    """Modes of one window of outputs y by SSI-cov with automated pole selection.
+
+    Parameters
+    ----------
+    y : array_like, shape (N,) or (N, l)
+        Output channels (deformation variables b, accelerations, strains …), sampled at fs.
+    fs : float
+        Sample rate (Hz).
+    config : OmaConfig, optional
+        Band, orders and criteria.
+    inputs : array_like, shape (N,) or (N, m), optional
+        Measured excitation (support acceleration) at fs: classified (:func:`classify_excitation`).
+    reference_shapes : array_like, shape (k, l), optional
+        Reference mode shapes (a baseline): each mode reports its best MAC.
+    tracked_hz : sequence of float, optional
+        Frequencies (Hz) the excitation classifier checks lines against (default: the modes found).
+    band_ready : bool
+        y is already decimated/filtered to the band (:func:`prepare_band`), skip that step.
+
+    Returns
+    -------
+    ModalIdentification
+
+    Raises
+    ------
+    ValueError
+        If y is not finite, too short for the band, or an argument is invalid.
+    """
+    cfg = OmaConfig() if config is None else config
+    if not isinstance(cfg, OmaConfig):
+        raise ValueError(f"config must be an OmaConfig, got {type(cfg).__name__}")
+    fs = check_fs(fs)
+    raw = as_signal("y", y, min_len=16)
+    raw = raw.reshape(raw.shape[0], -1)
+    if band_ready:
+        yb, fsb = raw - raw.mean(axis=0), fs
+    else:
+        yb, fsb = prepare_band(raw, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)
+    n, l = yb.shape
+    scale = yb.std(axis=0)
+    if np.all(scale == 0):
+        raise ValueError("y is constant in every channel: nothing to identify")
+    # channels of different kinds (accelerations, strains, volts) enter with unit RMS, else the
+    # largest-valued channel alone would shape the SVD; shapes are returned in the input units
+    scale = np.where(scale > 0, scale, 1.0)
+    yb = yb / scale
+    T = n / fsb
+    fmax = cfg.fmax_hz if cfg.fmax_hz is not None else 0.4 * fs
+    f_low = max(cfg.fmin_hz, cfg.min_cycles / T)
+    max_order = cfg.max_order or 40
+    i = cfg.block_rows or _auto_block_rows(n, l, fsb, f_low, max_order)
+    max_order = min(max_order, (i - 1) * l)
+    if max_order < 2:
+        raise ValueError(f"{l} channel(s) with block_rows={i} allow no model order")
+    if n <= 4 * i + 2:
+        raise ValueError(f"the window has {n} samples at {fsb:g} Hz, too short for block_rows={i}: lengthen it")
+    segs = int(max(1, min(cfg.segments, (n - 2 * i) // (4 * i))))
+    Tm, Tsegs = toeplitz_from_data(yb, i, segments=segs)
+    orders = np.arange(2, max_order + 1, 2)
+    model = ssi_poles(Tm, l, fsb, orders)
+    diag = stabilisation_diagram(model.poles, fmin_hz=max(cfg.fmin_hz, 0.0), fmax_hz=min(fmax, 0.49 * fsb), freq_rel=cfg.freq_rel,
+                                 damping_rel=cfg.damping_rel, mac_min=cfg.mac_min, max_damping=cfg.max_damping,
+                                 min_damping=cfg.min_damping)
+    clusters = cluster_poles(diag, distance=cfg.cluster_distance, min_orders=cfg.min_orders)
+    jack = _jackknife(model, Tm, Tsegs) if segs >= 3 else None
+    modes, kept, rejected = [], [], []
+    orders_cache: dict = {}
+    contrib = _contributions(model, clusters, orders_cache)
+    refs = None if reference_shapes is None else np.atleast_2d(np.asarray(reference_shapes, dtype=float))
+    if refs is not None and refs.shape[1] != l:
+        raise ValueError(f"reference_shapes has {refs.shape[1]} components, y has {l} channels")
+    n_orders = len(orders)
+    for c, share in zip(clusters, contrib):
+        f, z = c.frequency_hz, c.damping_ratio
+        if c.orders < cfg.sure_orders * n_orders and share < cfg.min_contribution:
+            rejected.append((f, f"noise: stable at {c.orders} of {n_orders} orders and {100 * share:.1f} % of the response"))
+            continue
+        # a steady line and a lightly damped mode look alike until the window spans many of the
+        # mode's correlation times 1/(ζω): test only windows that long (Brincker et al. 2000)
+        if abs(z) < cfg.harmonic_damping and 2 * np.pi * f * cfg.harmonic_damping * T >= 20 and _kurtosis_near(yb, fsb, f, T) < cfg.harmonic_kurtosis:
+            rejected.append((f, "harmonic: a steady line (band-passed kurtosis ≈ 1.5), not a resonance"))
+            continue
+        sf, sz = _pole_std(model, c, jack, orders_cache) if jack is not None else (float("nan"), float("nan"))
+        spread_f = c.frequency_spread_hz if c.orders > 1 else 0.0
+        spread_z = c.damping_spread if c.orders > 1 else 0.0
+        fstd = math.hypot(sf, spread_f) if math.isfinite(sf) else spread_f
+        zstd = math.hypot(sz, spread_z) if math.isfinite(sz) else spread_z
+        shape_c = model.poles.shapes[c.representative] * scale
+        shape_c = shape_c / np.linalg.norm(shape_c)
+        shape = _real_shape(shape_c)
+        mac = ref = None
+        if refs is not None:
+            m = modal_assurance(shape_c[None], refs)[0]
+            ref = int(np.argmax(m))
+            mac = float(m[ref])
+        modes.append(IdentifiedMode(f, z, fstd, zstd, float(model.poles.mpc[c.representative]), tuple(float(v) for v in shape), mac, ref,
+                                    float(share), c.orders, int(model.poles.order[c.representative]), sf, spread_f))
+        kept.append(c)
+    exc, io_modes = None, ()
+    if inputs is not None:
+        u = as_signal("inputs", inputs, min_len=16)
+        u = u.reshape(u.shape[0], -1)
+        if u.shape[0] != raw.shape[0]:
+            raise ValueError(f"inputs has {u.shape[0]} samples, y has {raw.shape[0]}")
+        ub = u - u.mean(axis=0) if band_ready else prepare_band(u, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)[0]
+        track = [m.frequency_hz for m in modes] if tracked_hz is None else list(np.atleast_1d(tracked_hz))
+        exc = classify_excitation(ub, fsb, track)
+        frf, io_modes = _io_modes(ub, yb * scale, fsb, T, cfg, fmax)
+        if frf is not None:
+            modes, dropped = _confirmed_by_frf(modes, io_modes, frf)
+            rejected.extend(dropped)
+            kept = [c for c in kept if any(abs(c.frequency_hz - m.frequency_hz) < 1e-12 for m in modes)]
+    return ModalIdentification(tuple(modes), tuple(rejected), diag, tuple(kept), fsb, i, tuple(int(o) for o in orders), exc, io_modes)
+
+
+def _io_modes(ub: np.ndarray, yb: np.ndarray, fs: float, T: float, cfg: OmaConfig, fmax: float) -> tuple[Frf | None, tuple[FrfMode, ...]]:
+    """The H1 FRFs from the (first) measured input to the outputs (segments of T/6: about 11
+    Hann averages at 50 % overlap) and the modes fitted to them; (None, ()) if the window is too
+    short for a fit or the input is flat."""
+    seg = T / 6
+    lo = max(cfg.fmin_hz, 2.0 / seg)
+    hi = min(fmax, 0.45 * fs)
+    if ub.std() == 0 or lo >= hi:
+        return None, ()
+    try:
+        frf = frf_h1(ub[:, :1], yb, fs, segment_s=seg)
+        return frf, frf_modes(frf, fmin_hz=lo, fmax_hz=hi, max_order=min(24, max(2, int((hi - lo) * seg) // 2 * 2 // 2)))
+    except (ValueError, np.linalg.LinAlgError):
+        return None, ()
+
+
+def _confirmed_by_frf(modes: list[IdentifiedMode], io_modes: tuple[FrfMode, ...], frf: Frf, *, coherence: float = 0.5,
+                      rel: float = 0.02) -> tuple[list[IdentifiedMode], list[tuple[float, str]]]:
+    """Output-only modes where the measured input explains the outputs (coherence >= 0.5) must
+    show in the FRFs too (the nearest to an FRF mode, within 2 % or 3σ): otherwise the pole is the input's own
+    colour (a support's motion spectrum), not the structure's. Where the coherence is low the
+    response has another, unmeasured excitation, and the output-only mode stands."""
+    keep, dropped = [], []
+    # each FRF mode confirms one output-only mode at most: the nearest within the tolerance
+    confirmed = set()
+    for x in io_modes:
+        if modes:
+            j = int(np.argmin([abs(m.frequency_hz - x.frequency_hz) for m in modes]))
+            if abs(modes[j].frequency_hz - x.frequency_hz) <= max(rel * x.frequency_hz, 3 * modes[j].frequency_std_hz):
+                confirmed.add(j)
+    for j, m in enumerate(modes):
+        k = int(np.argmin(np.abs(frf.frequencies - m.frequency_hz)))
+        coh = float(frf.coherence[k].mean())
+        if coh >= coherence and j not in confirmed:
+            dropped.append((m.frequency_hz, f"input: the measured input explains the response here (coherence {coh:.2f}) and its FRFs show no resonance"))
+        else:
+            keep.append(m)
+    return keep, dropped
+
+
+def _real_shape(s: np.ndarray) -> np.ndarray:
+    # the real shape nearest the complex one: rotate so the largest component is real, take Re
+    k = int(np.argmax(np.abs(s)))
+    r = np.real(s * np.exp(-1j * np.angle(s[k])))
+    nrm = np.linalg.norm(r)
+    return r / nrm if nrm > 0 else r
+
+
+@dataclass
+class _OrderModel:
+    """One model order's state matrix, its eigen-decomposition (left and right) and what the
+    first-order perturbation of its poles needs."""
+
+    A: np.ndarray
+    mu: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    lam: np.ndarray
+    Oup_pinv: np.ndarray
+    gram_inv: np.ndarray
+    residual: np.ndarray
+
+
+def _order_model(model: SsiModel, n: int, cache: dict) -> _OrderModel:
+    if n in cache:
+        return cache[n]
+    l = model.channels
+    O = model.observability[:, :n]
+    Oup, Odown = O[:-l], O[l:]
+    Oup_pinv = np.linalg.pinv(Oup)
+    A = Oup_pinv @ Odown
+    mu, W, V = linalg.eig(A, left=True, right=True)
+    om = _OrderModel(A, mu, W, V, np.log(mu.astype(complex)) * model.fs_hz, Oup_pinv, np.linalg.inv(Oup.T @ Oup), Odown - Oup @ A)
+    cache[n] = om
+    return om
+
+
+@dataclass
+class _Jackknife:
+    """Leave-one-segment-out perturbations of the observability matrix, δO_j = (T_j − T) V S^{-1/2}
+    for the largest order (each order takes its first columns)."""
+
+    dO: np.ndarray  # (S, il, n_max)
+    segments: int
+
+
+def _jackknife(model: SsiModel, Tfull: np.ndarray, Ts: np.ndarray) -> _Jackknife:
+    segs = Ts.shape[0]
+    total = Ts.sum(axis=0)
+    loo = (total[None] - Ts) / (segs - 1)
+    W = model.right_vectors / np.sqrt(model.singular_values[: model.right_vectors.shape[1]])[None, :]
+    return _Jackknife(np.matmul(loo - Tfull[None], W), segs)
+
+
+def _pole_std(model: SsiModel, c: PoleCluster, jack: _Jackknife, cache: dict) -> tuple[float, float]:
+    """Jackknife 1σ of the representative pole's frequency (Hz) and damping ratio.
+
+    Each leave-one-out matrix moves the pole to first order by δμ = wᴴ δA v / (wᴴ v) with
+    δA = O_up⁺ (δO_down − δO_up A) + (O_upᵀ O_up)⁻¹ δO_upᵀ (O_down − O_up A): no eigenproblem
+    per segment and no pole matching (Reynders, Pintelon & De Roeck 2008)."""
+    n = int(model.poles.order[c.representative])
+    om = _order_model(model, n, cache)
+    l = model.channels
+    k = int(np.argmin(np.abs(om.lam - model.poles.eigenvalue[c.representative])))
+    dO = jack.dO[:, :, :n]
+    dA = om.Oup_pinv[None] @ (dO[:, l:] - dO[:, :-l] @ om.A[None]) + om.gram_inv[None] @ np.swapaxes(dO[:, :-l], 1, 2) @ om.residual[None]
+    w, v = om.left[:, k], om.right[:, k]
+    dmu = np.einsum("i,sij,j->s", np.conj(w), dA, v) / (np.conj(w) @ v)
+    lam = np.log(om.mu[k] + dmu) * model.fs_hz
+    fj = np.abs(lam) / (2 * np.pi)
+    zj = -lam.real / np.abs(lam)
+    S = jack.segments
+    var_f = (S - 1) / S * np.sum((fj - fj.mean()) ** 2)
+    var_z = (S - 1) / S * np.sum((zj - zj.mean()) ** 2)
+    return float(np.sqrt(var_f)), float(np.sqrt(var_z))
+
+
+def _contributions(model: SsiModel, clusters: tuple[PoleCluster, ...], cache: dict) -> list[float]:
+    """Each cluster's share of the correlation amplitude: |φ|·|g| of its representative pole,
+    g = ψ⁻¹G from the controllability part of the SVD (T = O·[A^{i-1}G … G])."""
+    if not clusters:
+        return []
+    l = model.channels
+    r = model.right_vectors.shape[0] // model.block_rows
+    vals = []
+    for c in clusters:
+        n = int(model.poles.order[c.representative])
+        om = _order_model(model, n, cache)
+        k = int(np.argmin(np.abs(om.lam - model.poles.eigenvalue[c.representative])))
+        G = (np.sqrt(model.singular_values[:n])[:, None] * model.right_vectors[:, :n].T)[:, -r:]
+        w, v = om.left[:, k], om.right[:, k]
+        g = (np.conj(w) @ G) / (np.conj(w) @ v)  # the k-th row of ψ⁻¹G
+        phi = model.observability[:l, :n] @ v
+        vals.append(float(np.linalg.norm(phi) * np.linalg.norm(g)))
+    tot = sum(vals)
+    return [v / tot if tot > 0 else 0.0 for v in vals]
+
+
+def _kurtosis_near(yb: np.ndarray, fs: float, f: float, T: float) -> float:
+    """Kurtosis (Pearson, normal = 3, sinusoid = 1.5) of the channels' band-passed response near f."""
+    half = max(3.0 / T, 0.05 * f)
+    lo, hi = f - half, f + half
+    if lo <= 0 or hi >= fs / 2 or yb.shape[0] < 30:
+        return 3.0
+    sos = signal.butter(2, [lo, hi], btype="bandpass", fs=fs, output="sos")
+    x = signal.sosfiltfilt(sos, yb, axis=0)
+    edge = min(x.shape[0] // 10, int(2 * fs / half))
+    x = x[edge: x.shape[0] - edge] if x.shape[0] > 2 * edge + 10 else x
+    k = stats.kurtosis(x, axis=0, fisher=False)
+    w = x.std(axis=0)
+    return float(np.sum(k * w) / np.sum(w)) if np.sum(w) > 0 else 3.0
+
+
+def subspace_damping(mode: IdentifiedMode) -> DampingEstimate:
+    """The damping of an identified mode as a :class:`DampingEstimate` (method "ssi").
+
+    Parameters
+    ----------
+    mode : IdentifiedMode
+
+    Returns
+    -------
+    DampingEstimate
+        damping_ratio and damping_std of the subspace pole, its frequency (Hz), cycles = 0.
+
+    Raises
+    ------
+    ValueError
+        If mode is not an IdentifiedMode.
+    """
+    if not isinstance(mode, IdentifiedMode):
+        raise ValueError(f"mode must be an IdentifiedMode, got {type(mode).__name__}")
+    return DampingEstimate(mode.damping_ratio, mode.damping_std, mode.frequency_hz, "ssi", 0.0)
+
+
+def tracked_frequency(modes: tuple[IdentifiedMode, ...], fmin_hz: float, fmax_hz: float, *, mac_min: float = 0.9) -> float | None:
+    """The frequency (Hz) of the mode tracked in a band of one window, None if none is there.
+
+    The mode carrying the largest share of the response in [fmin_hz, fmax_hz], merged with the
+    other modes of the band whose shape matches it (MAC >= mac_min), weighted by their shares:
+    a mode that drifts within the window (a structure changing, a support moving) splits into
+    poles on either side of its mean frequency with the same shape, and their weighted mean
+    follows it; a different mode in the band has another shape and is left out. With one
+    channel shapes cannot tell modes apart, so the dominant mode alone is tracked.
+
+    Parameters
+    ----------
+    modes : tuple of IdentifiedMode
+    fmin_hz, fmax_hz : float
+        The tracked mode's band (Hz).
+    mac_min : float
+        Shapes this alike are one mode [0.9].
+
+    Raises
+    ------
+    ValueError
+        If the band is empty or negative, or mac_min is not in (0, 1].
+    """
+    if not (0 <= fmin_hz < fmax_hz):
+        raise ValueError(f"{fmin_hz=} and {fmax_hz=} must satisfy 0 <= fmin_hz < fmax_hz")
+    if not (0 < mac_min <= 1):
+        raise ValueError(f"{mac_min=} must be in (0, 1]")
+    inband = [m for m in modes if fmin_hz <= m.frequency_hz <= fmax_hz]
+    if not inband:
+        return None
+    top = max(inband, key=lambda m: m.contribution)
+    if len(top.shape) < 2:
+        return top.frequency_hz
+    ref = np.array(top.shape)[None]
+    same = [m for m in inband if modal_assurance(np.array(m.shape)[None], ref)[0, 0] >= mac_min]
+    w = np.array([max(m.contribution, 1e-12) for m in same])
+    return float(np.sum(w * np.array([m.frequency_hz for m in same])) / w.sum())
+
+
+def damping_estimates(y: object, fs: float, mode: IdentifiedMode, *, rd_cycles: float = 20.0) -> tuple[DampingEstimate, ...]:
+    """The damping of one identified mode by every method the record allows.
+
+    "ssi": the subspace pole (:func:`subspace_damping`); "random_decrement": the random
+    decrement signature (:func:`analytics.random_decrement`) of the channels projected on the
+    mode's shape (a spatial filter that favours the mode before the band-pass). A method the
+    record cannot serve (too few triggers, a band beyond Nyquist) is left out.
+
+    Parameters
+    ----------
+    y : array_like, shape (N,) or (N, l)
+        The outputs the mode was identified from, at fs.
+    fs : float
+        Sample rate (Hz).
+    mode : IdentifiedMode
+    rd_cycles : float
+        Length of the random decrement signature in periods [20].
+
+    Returns
+    -------
+    tuple of DampingEstimate, each with its method and 1σ.
+
+    Raises
+    ------
+    ValueError
+        If y does not have the mode's channels, or an argument is invalid.
+    """
+    from ._damping import random_decrement
+
+    fs = check_fs(fs)
+    a = as_signal("y", y, min_len=16)
+    a = a.reshape(a.shape[0], -1)
+    if not isinstance(mode, IdentifiedMode):
+        raise ValueError(f"mode must be an IdentifiedMode, got {type(mode).__name__}")
+    if a.shape[1] != len(mode.shape):
+        raise ValueError(f"y has {a.shape[1]} channels, the mode shape {len(mode.shape)}")
+    out = [subspace_damping(mode)]
+    try:
+        out.append(random_decrement((a - a.mean(axis=0)) @ np.array(mode.shape), fs, mode.frequency_hz, duration_cycles=rd_cycles))
+    except ValueError:
+        pass
+    return tuple(out)
+
+
+@dataclass(frozen=True, eq=False)
+class OmaWindow:
+    """The identification of one window: start_s, end_s (s from the first sample) and its modes."""
+
+    start_s: float
+    end_s: float
+    identification: ModalIdentification
+
+    @property
+    def modes(self) -> tuple[IdentifiedMode, ...]:
+        return self.identification.modes
+
+
+@dataclass(frozen=True, eq=False)
+class OmaResult:
+    """Modes of the whole record (``record``, None if not asked) and of each window."""
+
+    fs_hz: float
+    record: ModalIdentification | None
+    windows: tuple[OmaWindow, ...]
+
+
+def identify_windows(
+    y: object,
+    fs: float,
+    window_s: float,
+    step_s: float,
+    *,
+    config: OmaConfig | None = None,
+    inputs: object | None = None,
+    reference_shapes: object | None = None,
+) -> tuple[OmaWindow, ...]:
+    """Modes of consecutive windows of y (window_s long, every step_s seconds).
+
+    The band is prepared once for the whole record (no filter edges inside windows), then each
+    window is identified by :func:`identify_modes`.
+
+    Parameters
+    ----------
+    y : array_like, shape (N,) or (N, l)
+    fs : float
+        Sample rate (Hz).
+    window_s, step_s : float
+        Window length and step (s), both > 0; the record must hold one window.
+    config, inputs, reference_shapes
+        As :func:`identify_modes`.
+
+    Returns
+    -------
+    tuple of OmaWindow
+
+    Raises
+    ------
+    ValueError
+        If the record is shorter than one window, or an argument is invalid.
+    """
+    cfg = OmaConfig() if config is None else config
+    fs = check_fs(fs)
+    positive("window_s", window_s)
+    positive("step_s", step_s)
+    raw = as_signal("y", y, min_len=2)
+    raw = raw.reshape(raw.shape[0], -1)
+    if raw.shape[0] < int(round(window_s * fs)):
+        raise ValueError(f"the record is {raw.shape[0] / fs:g} s long, shorter than one window ({window_s=} s)")
+    u = None if inputs is None else as_signal("inputs", inputs, min_len=2)
+    if u is not None and u.shape[0] != raw.shape[0]:
+        raise ValueError(f"inputs has {u.shape[0]} samples, y has {raw.shape[0]}")
+    yb, fsb = prepare_band(raw, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)
+    ub = None if u is None else prepare_band(u, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)[0]
+    nw = int(round(window_s * fsb))
+    step = step_s * fsb
+    out = []
+    k = 0
+    while True:
+        a = int(round(k * step))
+        if a + nw > yb.shape[0]:
+            break
+        ident = identify_modes(yb[a: a + nw], fsb, config=cfg, reference_shapes=reference_shapes, band_ready=True,
+                               inputs=None if ub is None else ub[a: a + nw])
+        out.append(OmaWindow(a / fsb, (a + nw) / fsb, ident))
+        k += 1
+    return tuple(out)
+
+
+class OperationalModalAnalysis:
+    """The SSI-cov identification as an algorithm object: configure once, ``run()`` per record.
+
+    Parameters
+    ----------
+    config : OmaConfig, optional
+    window_s, step_s : float, optional
+        With both: the modes of each window as well as of the whole record.
+    whole_record : bool
+        Identify the whole record too [True].
+    """
+
+    def __init__(self, config: OmaConfig | None = None, *, window_s: float | None = None, step_s: float | None = None,
+                 whole_record: bool = True) -> None:
+        self.config = OmaConfig() if config is None else config
+        if not isinstance(self.config, OmaConfig):
+            raise ValueError(f"config must be an OmaConfig, got {type(self.config).__name__}")
+        if (window_s is None) != (step_s is None):
+            raise ValueError(f"{window_s=} and {step_s=} must be given together")
+        self.window_s, self.step_s, self.whole_record = window_s, step_s, whole_record
+
+    def run(self, y: object, fs: float, *, inputs: object | None = None, reference_shapes: object | None = None) -> OmaResult:
+        """Identify the record y (N, l) sampled at fs Hz; see :func:`identify_modes`."""
+        record = identify_modes(y, fs, config=self.config, inputs=inputs, reference_shapes=reference_shapes) if self.whole_record else None
+        windows = () if self.window_s is None else identify_windows(y, fs, self.window_s, self.step_s, config=self.config, inputs=inputs,
+                                                                    reference_shapes=reference_shapes)
+        fsb = record.fs_hz if record is not None else (windows[0].identification.fs_hz if windows else float(fs))
+        return OmaResult(fsb, record, windows)
