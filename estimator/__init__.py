@@ -4,7 +4,15 @@ Lower layer: knows nothing of the service or the web.
 """
 
 from ._beam import BeamModel, NaturalModes, NodalShapes, assemble_beam, natural_modes
-from ._calibration import TABLE1_HZ, CalibrationParameter, CalibrationResult, calibrate, modal_frequencies
+from ._calibration import (
+    TABLE1_HZ,
+    CalibrationParameter,
+    CalibrationResult,
+    Identifiability,
+    calibrate,
+    calibration_identifiability,
+    modal_frequencies,
+)
 from ._damage_signatures import DamageSignatures, damage_signatures
 from ._filter import (
     EstimateResult,
@@ -49,6 +57,7 @@ __all__ = [
     "BeamModel",
     "CalibrationParameter",
     "CalibrationResult",
+    "Identifiability",
     "DamageSignatures",
     "NaturalModes",
     "NodalShapes",
@@ -60,6 +69,7 @@ __all__ = [
     "UnitDeformations",
     "assemble_beam",
     "calibrate",
+    "calibration_identifiability",
     "damage_signatures",
     "load_rig",
     "modal_frequencies",

@@ -12,7 +12,7 @@ import time
 from collections.abc import Mapping
 from typing import Any
 
-from ._config import SettingsError, load_settings, render_toml
+from .._argtypes import number
 
 __all__ = ["add_serve_parser", "run_serve"]
 
@@ -26,8 +26,8 @@ def add_serve_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--keep-running", action="store_true", default=None, help="keep serving after a replay ends")
     p.add_argument("--db", help="SQLite database (default ./var/shm.sqlite)")
     p.add_argument("--host", help="API address (default 127.0.0.1; others need a token)")
-    p.add_argument("--port", type=int, help="API port (default 8600; 0 = a free port)")
-    p.add_argument("--dashboard-port", type=int, help="dashboard port (default 8080)")
+    p.add_argument("--port", type=number(int, low=0, high=65535), help="API port, 0-65535 (default 8600; 0 = a free port)")
+    p.add_argument("--dashboard-port", type=number(int, low=0, high=65535), help="dashboard port, 0-65535 (default 8080; 0 = a free port)")
     p.add_argument("--no-dashboard", action="store_true", default=None, help="do not start the dashboard")
     p.add_argument("--token-file", help="file with the API token (else env SHM_TOKEN)")
     p.add_argument("--rig", help="rig description (.json/.toml) for ingest or to replace a recording's rig.json")
@@ -72,6 +72,7 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
     from ._api import create_app
+    from ._config import SettingsError, load_settings, render_toml
     from ._server import ApiServer
     from ._service import MonitoringService, ServiceError
 

@@ -87,6 +87,7 @@ class MonitoringService:
         self.source = self._make_source()
         self.rig: RigDescription = self.source.rig  # type: ignore[assignment]
         est = settings.estimator
+        _check_sensor_counts(self.rig, est)
         try:
             self.model = build_model(self.rig, peripheral=est.peripheral, modes=est.modes, imus=est.imus, tofs=est.tofs,
                                      gauges=est.gauges)
@@ -309,6 +310,17 @@ class MonitoringService:
             raise LookupError(f"the service's source is {self.source.kind}, not ingest")
         result = self.source.submit(document)
         return None if result is None else result.as_dict()
+
+
+def _check_sensor_counts(rig: RigDescription, est: Any) -> None:
+    """A count set in the configuration must exist on the rig (the defaults are capped to it)."""
+    from ..estimation import sensor_count_problem
+
+    for kind in ("imus", "tofs", "gauges"):
+        if kind in est.model_fields_set:
+            problem = sensor_count_problem(rig, kind, getattr(est, kind), modes=est.modes)
+            if problem:
+                raise ServiceError(f"estimator.{kind} = {getattr(est, kind)}: {problem}")
 
 
 def _check(settings: ServiceSettings) -> None:
