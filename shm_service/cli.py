@@ -434,9 +434,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_inspect)
 
+    from .demo import add_demo_parser
     from .service._cli import add_serve_parser  # shm serve (issue 6)
 
     add_serve_parser(sub)
+    add_demo_parser(sub)
 
     return parser
 

@@ -22,6 +22,7 @@ from ._archive import Archive
 from ._config import ServiceSettings, SettingsError, resolve_token
 from ._notify import Notifier, notify_targets
 from ._pipeline import Pipeline
+from ._retention import RetentionWorker
 from ._sources import END, FileSource, IngestSource, SimSource, Source
 from ._storage import Storage
 
@@ -115,6 +116,9 @@ class MonitoringService:
             sink=sink, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
         )
         self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
+        self.retention = RetentionWorker(settings.retention, storage=self.storage,
+                                         directory=archive.directory if archive is not None else None,
+                                         current=lambda: archive.current if archive is not None else None)
         self._lock = threading.Lock()
         self._done = threading.Event()
         self._stopping = threading.Event()
@@ -181,6 +185,7 @@ class MonitoringService:
 
     def start(self) -> None:
         self.notifier.start()
+        self.retention.start()
         self._thread = threading.Thread(target=self._pipeline_loop, name="pipeline", daemon=True)
         self._thread.start()
         self.source.start()
@@ -221,6 +226,7 @@ class MonitoringService:
         if self._thread is not None:
             self._done.wait(30.0)
         self.notifier.stop(drain_s=drain_s)
+        self.retention.stop()
         if self.dashboard is not None:
             try:
                 self.dashboard.stop()
