@@ -129,3 +129,14 @@ def test_help_and_argument_errors_import_no_numerics():
     )
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert "HEAVY []" in result.stdout, result.stdout + result.stderr
+
+
+def test_modes_calibration_reports_what_table1_determines(capsys):
+    code, out, _ = run(capsys, "modes", "--calibration", "--json")
+    data = json.loads(out)["calibration"]
+    assert code == 0 and "board_rotary_inertia" in data["undetermined"] and "youngs_modulus" not in data["undetermined"]
+    assert set(data["parameters"]["youngs_modulus"]) == {"value", "std", "prior_std", "resolution"}
+    code, out, _ = run(capsys, "modes", "--calibration")
+    assert code == 0 and "board_rotary_inertia" in out and "not determined by the frequencies" in out
+    code, _, err = run(capsys, "modes", "--calibration", "--layout", "dense")
+    assert code == 2 and "benchmark layout" in err
