@@ -143,11 +143,14 @@ def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, 
     pace = "max speed" if speed is None else f"{speed:g}x real time"
     t, a = timeline, settings.analytics
     lines = [f"shm demo: the virtual rig at {pace}, {t.duration_s:g} s of simulated data ({_clock(t.duration_s, speed)}).", ""]
+    free = "on a free port, printed below when it starts"
     if settings.dashboard.enabled:
-        lines.append(f"  dashboard  http://{settings.dashboard.host}:{settings.dashboard.port or '(a free port, printed below)'}")
-    api = f"http://{settings.server.host}:{settings.server.port or '(a free port, printed below)'}"
-    lines += [f"  API        {api}/api/status  (trends /api/trends, alarms /api/alarms, documents /docs)", "",
-              "What happens when (simulated time, and wall-clock time at this pace):"]
+        d = settings.dashboard
+        lines.append(f"  dashboard  {f'http://{d.host}:{d.port}' if d.port else free}")
+    api = f"http://{settings.server.host}:{settings.server.port}" if settings.server.port else None
+    lines += [f"  API        {f'{api}/api/status' if api else free}  (trends /api/trends, alarms /api/alarms, "
+              "documents /docs)", "", "What happens when (simulated time" + (")" if speed is None else
+                                                                           ", and wall-clock time at this pace):")]
 
     def at(data_s: float, text: str, *more: str) -> None:
         wall = "" if speed is None else f"  [{_clock(data_s, speed):>9}]"
