@@ -105,7 +105,8 @@ def test_a_short_demo_runs_to_its_end_and_says_what_happened(tmp_path):
     out = result.stdout + result.stderr
     assert result.returncode == 0, out
     assert "Traceback" not in out
-    assert re.search(r"API\s+http://127\.0\.0\.1:", out) and "Ctrl-C" in out and f"Its data: {demo}/" in out
+    assert "API        on a free port, printed below" in out and re.search(r"shm serve: API at http://127\.0\.0\.1:\d+", out)
+    assert "Ctrl-C" in out and f"Its data: {demo}/" in out
     assert re.search(r"120 s\s+the damage appears: mass:0\.126@4\.0", out)
     assert re.search(r"the simulated plant's eigenfrequencies change by mode 1 -0\.\d+ %", out)
     assert "shm demo: done (exit 0)" in out
