@@ -119,8 +119,9 @@ def test_a_short_demo_runs_to_its_end_and_says_what_happened(tmp_path):
     assert (f"{len(alarms)} alarm" if alarms else "no alarms raised") in out  # the summary is the database's
     assert (demo / "demo.toml").exists() and list((demo / "recordings").glob("*.mcap"))
     assert not (demo / "demo.pid").exists() and not (tmp_path / "var").exists()
-    # a second run starts afresh: the first run's data move aside
-    second = subprocess.run(_shm(*args), capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    # a second run starts afresh: the first run's data move aside (a minute of healthy data will do)
+    second = subprocess.run(_shm("demo", "--dir", str(demo), "--duration", "60", "--no-damage", "--speed", "max",
+                                 "--no-dashboard", "--port", "0"), capture_output=True, text=True, timeout=600, cwd=tmp_path)
     assert second.returncode == 0, second.stdout + second.stderr
     assert f"the previous run's data are in {demo}.previous/" in second.stdout
     assert (tmp_path / "demo.previous" / "shm.sqlite").exists()
