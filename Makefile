@@ -12,9 +12,12 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m pip install --quiet -c constraints.txt -e '.[test]'
 	touch $(STAMP)
 
-# The simulated rig at 4x real time, the service (SQLite under var/) and the dashboard.
+# A bounded demo (30 simulated minutes at 4x real time: 7.5 min) of the service and its dashboard
+# on the virtual rig, in a fresh var/demo/ (the previous run moves to var/demo.previous/). It says
+# what happens when; Ctrl-C stops it. Options: make demo DEMO_ARGS="--duration 1200 --speed max".
+DEMO_ARGS ?=
 demo: $(STAMP)
-	$(VENV)/bin/shm serve --source sim --speed 4
+	$(VENV)/bin/shm demo $(DEMO_ARGS)
 
 test: $(STAMP)
 	$(PY) -m pytest -q
@@ -22,5 +25,6 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m benchmarks
 
+# Everything the setup and the runs made: the venv, build files and var/ (the demo's and serve's data).
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info var

@@ -14,7 +14,15 @@ from ._beam import (
     greenhill_length,
     natural_modes,
 )
-from ._calibration import TABLE1_HZ, CalibrationParameter, CalibrationResult, calibrate, modal_frequencies
+from ._calibration import (
+    TABLE1_HZ,
+    CalibrationParameter,
+    CalibrationResult,
+    Identifiability,
+    calibrate,
+    calibration_identifiability,
+    modal_frequencies,
+)
 from ._damage_signatures import DamageSignatures, damage_signatures
 from ._filter import (
     EstimateResult,
@@ -62,6 +70,7 @@ __all__ = [
     "BucklingError",
     "CalibrationParameter",
     "CalibrationResult",
+    "Identifiability",
     "DamageSignatures",
     "NaturalModes",
     "NodalShapes",
@@ -74,6 +83,7 @@ __all__ = [
     "assemble_beam",
     "calibrate",
     "critical_load_factor",
+    "calibration_identifiability",
     "damage_signatures",
     "load_rig",
     "modal_frequencies",

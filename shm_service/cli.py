@@ -1,4 +1,8 @@
-"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, oma, study, serve."""
+"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, oma, study, serve, demo.
+
+Building the parser imports nothing heavy (numpy, scipy, pydantic, the estimator are imported by
+the command that needs them), so ``shm --help`` and argument errors answer at once.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-import numpy as np
+from ._argtypes import number, output_path
 
 __all__ = ["main"]
 
@@ -45,8 +49,12 @@ def _rig_from_args(args: argparse.Namespace):
 
 # -- shm modes ---------------------------------------------------------------------------
 def _cmd_modes(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from estimator import TABLE1_HZ, assemble_beam, natural_modes, unit_deformations
 
+    if args.calibration:
+        return _print_calibration(args)
     rig = _rig_from_args(args)
     model = assemble_beam(rig, temperature_c=args.temperature)
     count = max(args.count, 6)
@@ -85,6 +93,30 @@ def _cmd_modes(args: argparse.Namespace) -> int:
     return 0
 
 
+def _print_calibration(args: argparse.Namespace) -> int:
+    """The frozen model update against Table 1 with what the frequencies determine of it."""
+    if args.rig or args.layout != "benchmark":
+        raise CliError("--calibration describes the shipped calibration of the benchmark layout; drop --rig/--layout")
+    from .rig_layouts import CALIBRATED, CALIBRATION_PARAMETERS, frozen_calibration_identifiability
+
+    ident = frozen_calibration_identifiability()
+    if args.json:
+        _print_json({"calibration": ident.as_dict()})
+        return 0
+    nominal = {p.name: p.nominal for p in CALIBRATION_PARAMETERS}
+    print(f"Model update of the benchmark layout against Table 1 (frozen values; target σ = {100 * ident.frequency_std:.2f} %"
+          f" from the residuals, cost {ident.cost:.4g})")
+    print(f"{'parameter':<24} {'nominal':>10} {'calibrated':>11} {'± 1σ':>10} {'prior σ':>10} {'resolution':>10}")
+    for name, std, prior, res in zip(ident.names, ident.std, ident.prior_std, ident.resolution):
+        flag = "" if name not in ident.undetermined else "  not determined by the frequencies"
+        print(f"{name:<24} {nominal[name]:10.4g} {CALIBRATED[name]:11.4g} {std:10.3g} {prior:10.3g} {res:10.3f}{flag}")
+    print(f"effective parameters determined: {ident.effective_parameters:.2f} of {len(ident.names)}")
+    print("singular values of the weighted relative sensitivities (1 % along a combination moves the weighted frequencies by s %):")
+    for i, value in enumerate(ident.singular_values):
+        print(f"  s{i + 1} = {value:.3g}: {ident.combination_text(i)}")
+    return 0
+
+
 # -- shm simulate ------------------------------------------------------------------------
 def _simulation_settings(args: argparse.Namespace):
     from pydantic import ValidationError
@@ -119,9 +151,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from .virtual_rig import simulate
 
     settings = _simulation_settings(args)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    summary = simulate(settings, out)
+    summary = simulate(settings, Path(args.out))
     if args.json:
         _print_json(summary.as_dict())
     else:
@@ -135,12 +165,15 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 # -- shm estimate ------------------------------------------------------------------------
+DEFAULT_SENSOR_COUNT = 4
+
+
 def _count_or_names(text: str | None, default: int) -> int | tuple[str, ...]:
     """'4' → 4; 's1,s3' → ('s1', 's3')."""
     if text is None:
         return default
     text = text.strip()
-    if text.isdigit():
+    if text.lstrip("+-").isdigit():
         return int(text)
     names = tuple(n.strip() for n in text.split(",") if n.strip())
     if not names:
@@ -157,13 +190,28 @@ def _model_from_args(rig, args: argparse.Namespace):
             aided = tuple(int(a) for a in args.aided.split(","))
         except ValueError:
             raise CliError(f"--aided {args.aided!r} must list unit deformations, e.g. 2,3,4") from None
+        bad = [a for a in aided if not 1 <= a <= args.modes]
+        if bad:
+            raise CliError(f"--aided {args.aided}: unit deformations {bad} are outside 1..{args.modes} (Γ = --modes)")
+    counts = _sensor_counts(rig, args)
     try:
-        return build_model(
-            rig, peripheral=args.peripheral, modes=args.modes, imus=_count_or_names(args.imus, 4),
-            tofs=_count_or_names(args.tofs, 4), gauges=_count_or_names(args.gauges, 4), aided=aided,
-        )
+        return build_model(rig, peripheral=args.peripheral, modes=args.modes, aided=aided, **counts)
     except ValueError as exc:
         raise CliError(str(exc)) from None
+
+
+def _sensor_counts(rig, args: argparse.Namespace) -> dict[str, int | tuple[str, ...]]:
+    """--imus/--tofs/--gauges as the estimator takes them. A count the user gave must exist on the
+    rig; the default (4 each) is capped to what the rig has, as the help says."""
+    from .estimation import sensor_count_problem
+
+    counts = {kind: _count_or_names(getattr(args, kind), DEFAULT_SENSOR_COUNT) for kind in ("imus", "tofs", "gauges")}
+    for kind, wanted in counts.items():
+        if getattr(args, kind) is not None and isinstance(wanted, int):
+            problem = sensor_count_problem(rig, kind, wanted, modes=args.modes)
+            if problem:
+                raise CliError(f"--{kind} {wanted}: {problem} (or give names)")
+    return counts
 
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
@@ -180,7 +228,6 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
     result = estimate(meas, model)
     if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         write_estimates(args.out, rec, result)
     summary = {
         "samples": int(result.t.size),
@@ -262,8 +309,7 @@ def _analysis_of(path: str, args: argparse.Namespace, baseline=None):
     from .recording import read_recording
 
     rec = read_recording(path, rig=args.rig)
-    model_args = dict(peripheral=args.peripheral, modes=args.modes, imus=_count_or_names(args.imus, 4),
-                      tofs=_count_or_names(args.tofs, 4), gauges=_count_or_names(args.gauges, 4))
+    model_args = dict(peripheral=args.peripheral, modes=args.modes, **_sensor_counts(rec.rig, args))
     try:
         data = deformation_record(rec, model_args=model_args)
     except ValueError as exc:
@@ -410,7 +456,7 @@ def _add_configuration_arguments(p: argparse.ArgumentParser, *, rig_file: bool) 
                    help=f"pinned: the plain bearing (default); clamped: the fixed bearing, φ ≡ 0{over}")
     p.add_argument("--orientation", choices=("hanging", "standing"), default=None,
                    help=f"hanging below D (default) or standing above it, a mast (needs --support clamped){over}")
-    p.add_argument("--length", type=float, default=None, metavar="M",
+    p.add_argument("--length", type=number(low=0, low_open=True, high=1000, unit="m"), default=None, metavar="M",
                    help="beam length in m (default 4); the layout's sensors and truth stations scale with it")
 
 
@@ -422,24 +468,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rig", help="rig description (.json or .toml); default: the calibrated rig of --layout")
     p.add_argument("--layout", choices=("benchmark", "dense"), default="benchmark")
     _add_configuration_arguments(p, rig_file=True)
-    p.add_argument("--temperature", type=float, default=None, help="°C (default: the beam's reference temperature)")
-    p.add_argument("--count", type=int, default=6, choices=range(1, 21), metavar="N", help="modes to list (1-20)")
+    p.add_argument("--temperature", type=number(low=-60, high=150, unit="°C"), default=None,
+                   help="°C, -60 to 150 (default: the beam's reference temperature)")
+    p.add_argument("--count", type=number(int, low=1, high=20), default=6, metavar="N", help="modes to list (1-20)")
+    p.add_argument("--calibration", action="store_true",
+                   help="the shipped model update against Table 1: each parameter's value, 1σ and resolution "
+                        "(what the six frequencies determine), and the identifiable combinations")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_modes)
 
     p = sub.add_parser("simulate", help="simulate the virtual rig and write a recording")
-    p.add_argument("--duration", type=float, default=300.0, help="s (default 300)")
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--out", required=True, help="output .mcap")
+    p.add_argument("--duration", type=number(low=0, low_open=True, high=7 * 24 * 3600, unit="s"), default=300.0,
+                   help="s, up to a week (default 300)")
+    p.add_argument("--seed", type=number(int, low=0), default=1)
+    p.add_argument("--out", required=True, type=output_path, help="output .mcap (its directory must exist)")
     p.add_argument("--excitation", choices=("paper", "ambient", "decay"), default="paper")
     p.add_argument("--layout", choices=("benchmark", "dense"), default="benchmark")
     _add_configuration_arguments(p, rig_file=False)
     p.add_argument("--ideal", action="store_true", help="plant = nominal rig (no mismatch, friction, scale/misalignment)")
     p.add_argument("--damage", action="append", metavar="SPEC", help="mass:KG@POS or stiffness:FACTOR@A-B (repeatable)")
-    p.add_argument("--damage-at", type=float, default=None, metavar="SECONDS", help="damage appears at this time")
-    p.add_argument("--temperature-swing", type=float, default=0.0, metavar="K", help="peak-to-peak swing")
-    p.add_argument("--temperature-mean", type=float, default=20.0, metavar="C")
-    p.add_argument("--friction", type=float, default=0.0, metavar="N·m",
+    p.add_argument("--damage-at", type=number(low=0, unit="s"), default=None, metavar="SECONDS",
+                   help="damage appears at this time (within --duration)")
+    p.add_argument("--temperature-swing", type=number(low=0, high=100, unit="K"), default=0.0, metavar="K",
+                   help="peak-to-peak swing, 0-100 K")
+    p.add_argument("--temperature-mean", type=number(low=-60, high=150, unit="°C"), default=20.0, metavar="C",
+                   help="°C, -60 to 150 (default 20)")
+    p.add_argument("--friction", type=number(low=0, high=10, unit="N·m"), default=0.0, metavar="N·m",
                    help="Coulomb friction torque of the bearing (default 0; the study uses 0.03): makes the modal "
                         "figures amplitude dependent, so the recording's exact linear modal figures no longer hold")
     p.add_argument("--json", action="store_true")
@@ -449,27 +503,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording")
     p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
     p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
-    p.add_argument("--modes", type=int, default=4, choices=range(1, 6), metavar="Γ", help="unit deformations (1-5)")
-    p.add_argument("--imus", default=None, help="peripheral IMUs: a count (EfI) or names s1,s2,... (default 4)")
-    p.add_argument("--tofs", default=None, help="ToFs: a count (EfI) or names (default 4)")
-    p.add_argument("--gauges", default=None, help="strain gauges: a count (EfI) or names (default 4)")
+    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
+    p.add_argument("--imus", default=None,
+                   help="peripheral IMUs: a count Γ..(the rig's) chosen by EfI, or names s1,s2,... (default 4, or all if fewer)")
+    p.add_argument("--tofs", default=None, help="ToFs: a count 0..(the rig's) or names (default 4, or all if fewer)")
+    p.add_argument("--gauges", default=None, help="strain gauges: a count 0..(the rig's) or names (default 4, or all if fewer)")
     p.add_argument("--aided", default=None, help="unit deformations aided by the gauges, e.g. 2,3,4 (Eq. 22)")
-    p.add_argument("--out", help="write the estimates to this .mcap")
+    p.add_argument("--out", type=output_path, help="write the estimates to this .mcap (its directory must exist)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_estimate)
 
     p = sub.add_parser("study", help="the paper's sensor-configuration study; design mode with --target-*")
     p.add_argument("--out", default="study", help="output folder (default study/)")
     p.add_argument("--seeds", default=None, help="seeds, one simulated recording each (default 1,2,3)")
-    p.add_argument("--duration", type=float, default=None, help="recording length, s (default 300)")
-    p.add_argument("--rest", type=float, default=None, help="initial rest phase, s (default 60)")
+    p.add_argument("--duration", type=number(low=0, low_open=True, high=3600, unit="s"), default=None,
+                   help="recording length, s, up to 3600 (default 300)")
+    p.add_argument("--rest", type=number(low=5, unit="s"), default=None, help="initial rest phase, s, at least 5 (default 60)")
     p.add_argument("--tofs", default=None, help="ν_ρ swept, e.g. 4-13 (default)")
     p.add_argument("--ideal", action="store_true", help="idealised plant (the drift without gauges disappears)")
     p.add_argument("--quick", action="store_true", help="small study: 2 seeds of 240 s, ν_ρ = 4, 5, ν_ε = 0, 2, 4")
-    p.add_argument("--workers", type=int, default=None, help="worker processes (default: the cores)")
+    p.add_argument("--workers", type=number(int, low=1, high=64), default=None, help="worker processes, 1-64 (default: the cores)")
     p.add_argument("--keep-recordings", action="store_true", help="keep the simulated recordings in OUT/recordings/")
-    p.add_argument("--target-phi-deg", type=float, default=None, metavar="X", help="design mode: RMSE target of φ, degrees")
-    p.add_argument("--target-e-m", type=float, default=None, metavar="Y", help="design mode: RMSE target of e, m")
+    p.add_argument("--target-phi-deg", type=number(low=0, low_open=True, high=90, unit="°"), default=None, metavar="X",
+                   help="design mode: RMSE target of φ, degrees (0-90]")
+    p.add_argument("--target-e-m", type=number(low=0, low_open=True, high=4, unit="m"), default=None, metavar="Y",
+                   help="design mode: RMSE target of e, m (0-4]")
     p.set_defaults(func=_cmd_study)
 
     p = sub.add_parser("analyze", help="modal analytics of the deformation variables (runs the estimator on raw recordings)")
@@ -477,22 +535,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--baseline", help="a healthy recording to compare against")
     p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
     p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
-    p.add_argument("--modes", type=int, default=4, choices=range(1, 6), metavar="Γ")
-    p.add_argument("--imus", default=None)
-    p.add_argument("--tofs", default=None)
-    p.add_argument("--gauges", default=None)
+    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
+    p.add_argument("--imus", default=None, help="as for estimate")
+    p.add_argument("--tofs", default=None, help="as for estimate")
+    p.add_argument("--gauges", default=None, help="as for estimate")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_analyze)
 
     p = sub.add_parser("oma", help="operational modal analysis (SSI-cov) of measured channels: .npy/.npz, CSV/TSV/text, .mat, HDF5, .mcap")
     p.add_argument("data", help="measured channels (see shm_service/tables.py for the formats)")
-    p.add_argument("--fs", type=float, default=None, help="sample rate, Hz (required without a time column)")
+    p.add_argument("--fs", type=number(low=0, low_open=True, unit="Hz"), default=None,
+                   help="sample rate, Hz (required without a time column)")
     p.add_argument("--channels", default=None, help="channels to use, names or column indices: A,B,...")
-    p.add_argument("--fmin", type=float, default=None, help="lower edge of the analysed band, Hz")
-    p.add_argument("--fmax", type=float, default=None, help="upper edge of the analysed band, Hz (default 0.4·fs)")
+    p.add_argument("--fmin", type=number(low=0, unit="Hz"), default=None, help="lower edge of the analysed band, Hz")
+    p.add_argument("--fmax", type=number(low=0, low_open=True, unit="Hz"), default=None,
+                   help="upper edge of the analysed band, Hz (default 0.4·fs)")
     p.add_argument("--inputs", default=None, help="measured input channels (support acceleration): FRF cross-check and excitation class")
-    p.add_argument("--window", type=float, default=None, metavar="S", help="also identify windows of S seconds")
-    p.add_argument("--step", type=float, default=None, metavar="S", help="window step, s (default: --window)")
+    p.add_argument("--window", type=number(low=0, low_open=True, unit="s"), default=None, metavar="S",
+                   help="also identify windows of S seconds")
+    p.add_argument("--step", type=number(low=0, low_open=True, unit="s"), default=None, metavar="S",
+                   help="window step, s (default: --window)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_oma)
 
@@ -502,23 +564,37 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_inspect)
 
+    from .demo import add_demo_parser
     from .service._cli import add_serve_parser  # shm serve (issue 6)
 
     add_serve_parser(sub)
+    add_demo_parser(sub)
 
     return parser
 
 
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """Errors that are the user's (bad file, bad rig): the modules defining them are imported only
+    when a command has already loaded them."""
+    errors: list[type[BaseException]] = [CliError, FileNotFoundError]
+    if "estimator._rig" in sys.modules:
+        errors.append(sys.modules["estimator._rig"].RigError)
+    if "shm_service.recording._reader" in sys.modules:
+        errors.append(sys.modules["shm_service.recording._reader"].RecordingError)
+    return tuple(errors)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
-    from estimator import RigError
-
-    from .recording import RecordingError
-
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or an argument error (2, already printed)
+        return exc.code if isinstance(exc.code, int) else 2
     try:
         return args.func(args)
-    except (CliError, RigError, RecordingError, FileNotFoundError) as exc:
+    except Exception as exc:
+        if not isinstance(exc, _user_errors()):
+            raise
         print(f"shm {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -17,11 +17,35 @@ __all__ = [
     "estimate_payloads",
     "measurements_from_recording",
     "score_against_truth",
+    "sensor_count_problem",
     "truth_from_recording",
     "write_estimates",
 ]
 
 _NS = 1e-9
+
+_SENSOR_LABELS = {"imus": "peripheral IMUs", "tofs": "ToFs", "gauges": "strain gauges"}
+
+
+def sensor_count_problem(rig, kind: str, wanted: int, *, modes: int) -> str | None:
+    """Why a count of ``kind`` ("imus", "tofs", "gauges") cannot be chosen on ``rig``, with the valid
+    range, or None when it can. The estimator caps a count to what the rig has; an explicit request
+    beyond it is the user's mistake and must be refused, not capped."""
+    if kind == "imus":
+        names = [s.name for s in rig.sensors_of("imu") if s.name != "D" and (s.position or 0) > 0]
+        low = modes
+    elif kind == "tofs":
+        names, low = [s.name for s in rig.sensors_of("tof")], 0
+    elif kind == "gauges":
+        names, low = [s.name for s in rig.sensors_of("strain")], 0
+    else:
+        raise ValueError(f"{kind=} must be imus, tofs or gauges")
+    if low <= wanted <= len(names):
+        return None
+    need = f"; Γ = {modes} needs at least {modes}" if kind == "imus" else ""
+    valid = "none" if low > len(names) else str(low) if low == len(names) else f"{low}..{len(names)}"
+    return (f"the rig has {len(names)} {_SENSOR_LABELS[kind]} ({', '.join(names) or '-'}){need}: "
+            f"valid counts: {valid}")
 
 
 def measurements_from_recording(rec: Recording) -> Measurements:

@@ -18,6 +18,7 @@ from typing import Any, Literal, Protocol
 from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
 from fastapi.responses import JSONResponse, PlainTextResponse, Response
 
+from ._docs import serve_docs_offline
 from ._ingest import IngestError, parse_body
 
 __all__ = ["ApiService", "create_app"]
@@ -164,6 +165,7 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
         description="Structural health monitoring service: status, modal trends, alarms, spectra, ingest.",
         dependencies=[Depends(everyone)],
     )
+    serve_docs_offline(app)  # /docs and /redoc from the installed packages, not a CDN
 
     @app.get("/healthz", summary="liveness", responses=_AUTH_RESPONSES)
     def healthz() -> dict[str, Any]:

@@ -2,13 +2,16 @@
 
 Each file is a valid recording of the contract (rig.json attached first, JSON messages, flushed
 at least every ``flush_s`` seconds so a crash loses at most that much). A new file starts after
-``rotate_mb`` or ``rotate_s`` seconds of data.
+``rotate_mb`` or ``rotate_s`` seconds of data. A file is named after its source and the data
+time of its first message (``parse_archive_name`` reads it back for retention).
 """
 
 from __future__ import annotations
 
 import logging
+import re
 import time
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -18,9 +21,29 @@ from estimator import RigDescription
 from ..recording import ESTIMATE_TOPIC, RecordingWriter
 from ._config import ArchiveSettings
 
-__all__ = ["Archive"]
+__all__ = ["Archive", "ArchiveName", "parse_archive_name"]
 
 log = logging.getLogger("shm.serve.archive")
+
+_STAMP = "%Y%m%dT%H%M%SZ"
+_NAME = re.compile(r"^(?P<source>.+)-(?P<start>\d{8}T\d{6}Z)-w\d{8}T\d{6}(?:-\d+)?\.mcap$")
+
+
+@dataclass(frozen=True)
+class ArchiveName:
+    """What an archive file's name says: its source and the data time of its first message."""
+
+    source: str
+    start_s: float
+
+
+def parse_archive_name(path: str | Path) -> ArchiveName | None:
+    """The source and first data time (UNIX s) of an archive file, or None for any other file."""
+    match = _NAME.match(Path(path).name)
+    if match is None:
+        return None
+    start = datetime.strptime(match["start"], _STAMP).replace(tzinfo=timezone.utc)
+    return ArchiveName(match["source"], start.timestamp())
 
 
 class Archive:
@@ -30,6 +53,8 @@ class Archive:
         self.rig = rig
         self.source_id = "".join(c if c.isalnum() or c in "-_." else "_" for c in source_id)
         self.metadata = metadata or {}
+        if settings.directory is None:
+            raise ValueError("archive.directory is not resolved (load the settings through ServiceSettings)")
         self.directory = Path(settings.directory)
         self._writer: RecordingWriter | None = None
         self._path: Path | None = None
@@ -46,7 +71,7 @@ class Archive:
 
     def _open(self, first_ns: int) -> RecordingWriter:
         self.directory.mkdir(parents=True, exist_ok=True)
-        stamp = datetime.fromtimestamp(first_ns / 1e9, tz=timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        stamp = datetime.fromtimestamp(first_ns / 1e9, tz=timezone.utc).strftime(_STAMP)
         written = datetime.now(tz=timezone.utc).strftime("%Y%m%dT%H%M%S")
         path = self.directory / f"{self.source_id}-{stamp}-w{written}.mcap"
         n = 1

@@ -12,7 +12,7 @@ import time
 from collections.abc import Mapping
 from typing import Any
 
-from ._config import SettingsError, load_settings, render_toml
+from .._argtypes import number
 
 __all__ = ["add_serve_parser", "run_serve"]
 
@@ -24,16 +24,17 @@ def add_serve_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--source", help="sim | replay:FILE.mcap | follow:FILE.mcap | ingest (default sim)")
     p.add_argument("--speed", help="sim/replay pace: factor of real time or 'max' (default 1)")
     p.add_argument("--keep-running", action="store_true", default=None, help="keep serving after a replay ends")
-    p.add_argument("--db", help="SQLite database (default ./var/shm.sqlite)")
+    p.add_argument("--data-dir", metavar="DIR", help="directory of all the service's files (default: the directory of --db, else ./var)")
+    p.add_argument("--db", help="SQLite database (default DATA_DIR/shm.sqlite)")
     p.add_argument("--host", help="API address (default 127.0.0.1; others need a token)")
-    p.add_argument("--port", type=int, help="API port (default 8600; 0 = a free port)")
-    p.add_argument("--dashboard-port", type=int, help="dashboard port (default 8080)")
+    p.add_argument("--port", type=number(int, low=0, high=65535), help="API port, 0-65535 (default 8600; 0 = a free port)")
+    p.add_argument("--dashboard-port", type=number(int, low=0, high=65535), help="dashboard port, 0-65535 (default 8080; 0 = a free port)")
     p.add_argument("--no-dashboard", action="store_true", default=None, help="do not start the dashboard")
     p.add_argument("--token-file", help="file with the API token (else env SHM_TOKEN)")
     p.add_argument("--rig", help="rig description (.json/.toml) for ingest or to replace a recording's rig.json")
     p.add_argument("--source-id", help="source id of the trend rows")
     p.add_argument("--webhook", action="append", metavar="URL", help="webhook for alarm notifications (repeatable)")
-    p.add_argument("--recordings", metavar="DIR", help="directory of the rotating recordings (default var/recordings)")
+    p.add_argument("--recordings", metavar="DIR", help="directory of the rotating recordings (default DATA_DIR/recordings)")
     p.add_argument("--no-archive", action="store_true", default=None, help="do not write recordings")
     p.add_argument("--json", action="store_true", help="print the final summary as JSON")
     p.set_defaults(func=run_serve)
@@ -57,6 +58,7 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
     put("source.keep_running", args.keep_running)
     put("source.rig", args.rig)
     put("source.id", args.source_id)
+    put("data_dir", args.data_dir)
     put("db", args.db)
     put("server.host", args.host)
     put("server.port", args.port)
@@ -72,6 +74,7 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
     from ._api import create_app
+    from ._config import SettingsError, load_settings, render_toml
     from ._server import ApiServer
     from ._service import MonitoringService, ServiceError
 
@@ -100,7 +103,8 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         service.stop()
         return 2
     print(f"shm serve: API at {api.url} (docs {api.url}/docs); source {settings.source.spec} as '{service.source.id}'; "
-          f"db {settings.db}", flush=True)
+          f"data in {settings.data_dir} (db {settings.db}, recordings "
+          f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
     if service.dashboard is not None:
         print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
     stop = threading.Event()

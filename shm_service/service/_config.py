@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from analytics import AnalysisConfig
 
@@ -21,6 +21,7 @@ __all__ = [
     "DashboardSettings",
     "EstimatorSettings",
     "NotifySettings",
+    "RetentionSettings",
     "ServerSettings",
     "ServiceSettings",
     "SettingsError",
@@ -162,13 +163,29 @@ class ArchiveSettings(_Closed):
     """Rotating MCAP recordings of everything incoming and of the estimates."""
 
     enabled: bool = Field(True, description="write recordings")
-    directory: str = Field("var/recordings", description="where the recordings go")
+    directory: str | None = Field(None, description="where the recordings go (default: DATA_DIR/recordings)")
     raw: Literal["auto", "always", "never"] = Field("auto", description="record incoming samples: auto = not for replay/follow (already a file)")
     estimates: bool = Field(True, description="record /estimate/state")
-    estimate_decimation: int = Field(1, ge=1, le=200, description="record every n-th estimate")
-    rotate_mb: float = Field(256.0, gt=0, description="start a new file after this many MB")
+    estimate_decimation: int = Field(
+        4, ge=1, le=200, description="record every n-th estimate [4: 50 Hz of a 200 Hz estimator, Nyquist 25 Hz, three "
+        "times mode 6; the raw samples are recorded in full, so the estimates can be recomputed at any rate]")
+    rotate_mb: float = Field(256.0, gt=0, description="start a new file after this many MB of (uncompressed) messages")
     rotate_s: float = Field(3600.0, gt=0, description="start a new file after this much data time, s")
     flush_s: float = Field(2.0, gt=0, description="flush (end a chunk) at least this often, wall-clock s")
+
+
+class RetentionSettings(_Closed):
+    """What the service keeps of the past. Ages are in data time (the newest sample or window), so a
+    replay of old data keeps what it writes. Checked at start and every ``interval_s``."""
+
+    recordings_max_gb: float = Field(
+        100.0, gt=0, description="most disk the recordings may take, GB (oldest files go first); the default holds "
+        "a week of the benchmark rig: 0.52 GB per hour of data (raw samples and 50 Hz estimates, measured), 87 GB a week")
+    recordings_max_age_days: float | None = Field(7.0, gt=0, description="recordings whose data are older are deleted, days (None: no age limit)")
+    trends_max_age_days: float | None = Field(
+        400.0, gt=0, description="trend rows older than this before their source's newest window are deleted, days "
+        "(None: keep all; 2 MB per day of one structure with 5 modes and a window every 30 s, measured)")
+    interval_s: float = Field(60.0, gt=0, le=86400, description="how often retention runs, wall-clock s")
 
 
 class AlarmSettings(_Closed):
@@ -207,7 +224,10 @@ class NotifySettings(_Closed):
 class ServiceSettings(_Closed):
     """Everything ``shm serve`` reads. Every key has a default; a TOML file sets some of them."""
 
-    db: str = Field("var/shm.sqlite", description="SQLite database (trends, baseline, alarms, outbox)")
+    data_dir: str | None = Field(
+        None, description="directory of all of the service's files: db and archive.directory default to paths under it "
+        "(default: the directory of db when db is given, else ./var)")
+    db: str | None = Field(None, description="SQLite database (trends, baseline, alarms, outbox); default DATA_DIR/shm.sqlite")
     server: ServerSettings = ServerSettings()
     dashboard: DashboardSettings = DashboardSettings()
     source: SourceSettings = SourceSettings()
@@ -215,11 +235,27 @@ class ServiceSettings(_Closed):
     estimator: EstimatorSettings = EstimatorSettings()
     analytics: AnalysisConfig = AnalysisConfig()
     archive: ArchiveSettings = ArchiveSettings()
+    retention: RetentionSettings = RetentionSettings()
     alarms: AlarmSettings = AlarmSettings()
     notify: NotifySettings = NotifySettings()
     storage_sync: Literal["normal", "full"] = Field("normal", description="SQLite synchronous mode: normal survives a process crash, full also a power loss")
     queue_batches: int = Field(8, ge=2, le=10_000, description="bounded queue between source and pipeline, batches (a batch is at most ~10 s of data or 2 MB of a file)")
     log_level: Literal["debug", "info", "warning", "error"] = Field("info", description="log level")
+
+    @model_validator(mode="after")
+    def _paths(self) -> "ServiceSettings":
+        # One data directory holds everything; the database and the recordings default to it. The
+        # resolved paths are stored, so --print-config shows where the files really go.
+        data_dir = self.data_dir or (str(Path(self.db).parent) if self.db else "var")
+        object.__setattr__(self, "data_dir", data_dir)
+        if self.db is None:
+            object.__setattr__(self, "db", str(Path(data_dir) / "shm.sqlite"))
+        if self.archive.directory is None:
+            object.__setattr__(self, "archive", self.archive.model_copy(update={"directory": str(Path(data_dir) / "recordings")}))
+        if self.retention.recordings_max_gb * 1e3 < 2 * self.archive.rotate_mb:
+            raise ValueError(f"retention.recordings_max_gb={self.retention.recordings_max_gb} must hold at least two files of "
+                             f"archive.rotate_mb={self.archive.rotate_mb} (the one being written is never deleted)")
+        return self
 
 
 def _merge(base: dict[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:

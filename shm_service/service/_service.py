@@ -22,6 +22,7 @@ from ._archive import Archive
 from ._config import ServiceSettings, SettingsError, resolve_token
 from ._notify import Notifier, notify_targets
 from ._pipeline import Pipeline
+from ._retention import RetentionWorker
 from ._sources import END, FileSource, IngestSource, SimSource, Source
 from ._storage import Storage
 
@@ -87,6 +88,7 @@ class MonitoringService:
         self.source = self._make_source()
         self.rig: RigDescription = self.source.rig  # type: ignore[assignment]
         est = settings.estimator
+        _check_sensor_counts(self.rig, est)
         try:
             self.model = build_model(self.rig, peripheral=est.peripheral, modes=est.modes, imus=est.imus, tofs=est.tofs,
                                      gauges=est.gauges)
@@ -114,6 +116,9 @@ class MonitoringService:
             sink=sink, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
         )
         self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
+        self.retention = RetentionWorker(settings.retention, storage=self.storage,
+                                         directory=archive.directory if archive is not None else None,
+                                         current=lambda: archive.current if archive is not None else None)
         self._lock = threading.Lock()
         self._done = threading.Event()
         self._stopping = threading.Event()
@@ -180,6 +185,7 @@ class MonitoringService:
 
     def start(self) -> None:
         self.notifier.start()
+        self.retention.start()
         self._thread = threading.Thread(target=self._pipeline_loop, name="pipeline", daemon=True)
         self._thread.start()
         self.source.start()
@@ -220,6 +226,7 @@ class MonitoringService:
         if self._thread is not None:
             self._done.wait(30.0)
         self.notifier.stop(drain_s=drain_s)
+        self.retention.stop()
         if self.dashboard is not None:
             try:
                 self.dashboard.stop()
@@ -309,6 +316,17 @@ class MonitoringService:
             raise LookupError(f"the service's source is {self.source.kind}, not ingest")
         result = self.source.submit(document)
         return None if result is None else result.as_dict()
+
+
+def _check_sensor_counts(rig: RigDescription, est: Any) -> None:
+    """A count set in the configuration must exist on the rig (the defaults are capped to it)."""
+    from ..estimation import sensor_count_problem
+
+    for kind in ("imus", "tofs", "gauges"):
+        if kind in est.model_fields_set:
+            problem = sensor_count_problem(rig, kind, getattr(est, kind), modes=est.modes)
+            if problem:
+                raise ServiceError(f"estimator.{kind} = {getattr(est, kind)}: {problem}")
 
 
 def _check(settings: ServiceSettings) -> None:

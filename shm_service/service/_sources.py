@@ -23,7 +23,7 @@ from ._config import ServiceSettings
 from ._ingest import IngestResult, IngestValidator
 from ._pipeline import Batch
 
-__all__ = ["FileSource", "IngestSource", "SimSource", "Source", "END"]
+__all__ = ["FileSource", "IngestSource", "SimSource", "Source", "END", "simulation_settings"]
 
 log = logging.getLogger("shm.serve.source")
 
@@ -144,6 +144,19 @@ class _Pacer:
             self.stop.wait(delay)
 
 
+def simulation_settings(settings: ServiceSettings):
+    """The virtual rig's settings for ``--source sim`` (``sim`` section of the service settings)."""
+    from ..virtual_rig import SimulationSettings
+
+    s = settings.sim
+    return SimulationSettings(
+        duration=s.duration_s, seed=s.seed, excitation=s.excitation, layout=s.layout,
+        support=s.support, orientation=s.orientation, length=s.length_m,
+        damage=tuple(s.damage) if s.damage_at_s is not None else (), damage_at=s.damage_at_s,
+        temperature_mean=s.temperature_mean_c, temperature_swing=s.temperature_swing_k,
+    )
+
+
 class SimSource(Source):
     """The virtual rig, live."""
 
@@ -151,15 +164,10 @@ class SimSource(Source):
 
     def __init__(self, source_id: str, out: queue.Queue, settings: ServiceSettings, *, raw: bool, truth: bool) -> None:
         super().__init__(source_id, out)
-        from ..virtual_rig import SimulationSettings, VirtualRig
+        from ..virtual_rig import VirtualRig
 
         s = settings.sim
-        self.settings = SimulationSettings(
-            duration=s.duration_s, seed=s.seed, excitation=s.excitation, layout=s.layout,
-            support=s.support, orientation=s.orientation, length=s.length_m,
-            damage=tuple(s.damage) if s.damage_at_s is not None else (), damage_at=s.damage_at_s,
-            temperature_mean=s.temperature_mean_c, temperature_swing=s.temperature_swing_k,
-        )
+        self.settings = simulation_settings(settings)
         self.rigsim = VirtualRig(self.settings)
         self.rig = self.rigsim.nominal_rig
         self.block_s = s.block_s

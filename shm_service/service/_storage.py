@@ -442,6 +442,17 @@ class Storage:
         with self._lock:
             return [dict(r) for r in self._db.execute(sql, args).fetchall()]
 
+    def delete_trends_older_than(self, age_s: float) -> int:
+        """Delete the trend rows whose window starts more than ``age_s`` before the newest window of
+        their source (data time: a replay of old data keeps its rows). Returns how many went."""
+        if not (math.isfinite(age_s) and age_s > 0):
+            raise ValueError(f"{age_s=} must be a positive number of seconds")
+        with self.transaction() as db:
+            cur = db.execute(
+                "DELETE FROM trends WHERE window_start_s < "
+                "(SELECT MAX(t.window_start_s) FROM trends AS t WHERE t.source = trends.source) - ?", (float(age_s),))
+            return int(cur.rowcount)
+
     def count(self, table: str) -> int:
         if table not in ("trends", "alarms", "alarm_events", "outbox", "notification_log", "baselines"):
             raise ValueError(table)

@@ -3,6 +3,8 @@
 import importlib.util
 import json
 from pathlib import Path
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -11,7 +13,10 @@ from shm_service.cli import main
 
 
 def run(capsys, *argv):
-    code = main(list(argv))
+    try:
+        code = main(list(argv))
+    except SystemExit as exc:  # argparse refuses bad arguments with exit code 2
+        code = exc.code
     out, err = capsys.readouterr()
     return code, out, err
 
@@ -172,10 +177,61 @@ def test_estimate_with_named_sensors_and_restricted_aiding(capsys, recording):
         (["estimate", "{rec}", "--aided", "x"], "--aided"),
         (["simulate", "--duration", "-1", "--out", "x.mcap"], "duration"),
         (["simulate", "--damage", "mass:abc", "--out", "x.mcap"], "damage"),
-        (["simulate", "--friction", "-0.1", "--out", "x.mcap"], "friction_torque"),
+        (["simulate", "--friction", "-0.1", "--out", "x.mcap"], "argument --friction: -0.1 is out of range (valid: a number from 0 to 10 N·m)"),
+        (["simulate", "--duration", "nan", "--out", "x.mcap"], "argument --duration: 'nan' must be finite"),
+        (["simulate", "--seed", "1.5", "--out", "x.mcap"], "argument --seed: '1.5' is not an integer"),
+        (["modes", "--count", "21"], "argument --count: 21 is out of range (valid: an integer from 1 to 20)"),
+        (["estimate", "{rec}", "--modes", "0"], "argument --modes: 0 is out of range (valid: an integer from 1 to 5)"),
+        # counts the rig does not have are refused with the valid range, not capped
+        (["estimate", "{rec}", "--imus", "7"], "--imus 7: the rig has 4 peripheral IMUs (s1, s2, s3, s4); Γ = 4 needs at least 4: valid counts: 4"),
+        (["estimate", "{rec}", "--modes", "2", "--imus", "1"], "Γ = 2 needs at least 2: valid counts: 2..4"),
+        (["estimate", "{rec}", "--tofs", "5"], "--tofs 5: the rig has 4 ToFs (s1, s2, s3, s4): valid counts: 0..4"),
+        (["estimate", "{rec}", "--gauges", "9"], "--gauges 9: the rig has 4 strain gauges (g1, g2, g3, g4): valid counts: 0..4"),
+        (["analyze", "{rec}", "--imus", "7"], "--imus 7: the rig has 4 peripheral IMUs"),
+        (["estimate", "{rec}", "--aided", "2,7"], "unit deformations [7] are outside 1..4"),
+        (["serve", "--port", "70000"], "argument --port: 70000 is out of range (valid: an integer from 0 to 65535)"),
+        (["study", "--workers", "0"], "argument --workers: 0 is out of range (valid: an integer from 1 to 64)"),
     ],
 )
 def test_bad_input_gives_one_clear_error(capsys, recording, argv, message):
     code, _, err = run(capsys, *[a.replace("{rec}", str(recording)) for a in argv])
     assert code == 2
     assert message in err
+
+
+def test_output_into_a_missing_directory_is_refused_and_nothing_is_created(capsys, tmp_path):
+    target = tmp_path / "missing" / "dir" / "x.mcap"
+    code, _, err = run(capsys, "simulate", "--duration", "1", "--out", str(target))
+    assert code == 2 and f"directory {target.parent} does not exist" in err
+    assert not (tmp_path / "missing").exists()
+    code, _, err = run(capsys, "simulate", "--duration", "1", "--out", str(tmp_path))
+    assert code == 2 and "is a directory" in err
+
+
+def test_help_and_argument_errors_import_no_numerics():
+    # `shm --help` and argparse errors must not pay for numpy, scipy, pydantic or the estimator
+    # (1.4 s on a fresh machine); what they import is checked, not how long it takes.
+    probe = (
+        "import sys\n"
+        "from shm_service.cli import main\n"
+        "for argv in (['--help'], ['serve', '--help'], ['estimate', 'x.mcap', '--modes', '9'], ['demo', '--help']):\n"
+        "    try:\n"
+        "        main(argv)\n"
+        "    except SystemExit:\n"
+        "        pass\n"
+        "heavy = sorted(m for m in ('numpy', 'scipy', 'pydantic', 'estimator', 'analytics', 'fastapi', 'viser') if m in sys.modules)\n"
+        "print('HEAVY', heavy)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
+    assert "HEAVY []" in result.stdout, result.stdout + result.stderr
+
+
+def test_modes_calibration_reports_what_table1_determines(capsys):
+    code, out, _ = run(capsys, "modes", "--calibration", "--json")
+    data = json.loads(out)["calibration"]
+    assert code == 0 and "board_rotary_inertia" in data["undetermined"] and "youngs_modulus" not in data["undetermined"]
+    assert set(data["parameters"]["youngs_modulus"]) == {"value", "std", "prior_std", "resolution"}
+    code, out, _ = run(capsys, "modes", "--calibration")
+    assert code == 0 and "board_rotary_inertia" in out and "not determined by the frequencies" in out
+    code, _, err = run(capsys, "modes", "--calibration", "--layout", "dense")
+    assert code == 2 and "benchmark layout" in err

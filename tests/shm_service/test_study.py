@@ -156,4 +156,4 @@ def test_cli_rejects_bad_values(capsys, tmp_path):
     assert main(["study", "--out", str(tmp_path), "--seeds", "1,x"]) == 2
     assert "--seeds '1,x' must list integers" in capsys.readouterr().err
     assert main(["study", "--out", str(tmp_path), "--target-phi-deg", "-1"]) == 2
-    assert "phi_deg: Input should be greater than 0" in capsys.readouterr().err
+    assert "argument --target-phi-deg: -1 is out of range (valid: a number > 0 and <= 90 °)" in capsys.readouterr().err

@@ -1,0 +1,297 @@
+"""``shm demo`` (what ``make demo`` runs): a bounded monitoring scenario on the virtual rig.
+
+It builds a service configuration (``shm serve`` with ``--source sim``) in a demo directory of its
+own, rotated on every run (the previous run moves to ``DIR.previous``), so a run never inherits the
+last run's baseline or alarms. Before it starts it prints where to look (dashboard and API URLs),
+what happens when (the rest phase, the filter's warm-up, when the baseline is learnt, when the damage
+appears, the earliest an alarm can be raised and the frequency changes the damage causes in the
+simulated plant), how to stop it and where its data live; every figure is computed from the
+scenario's configuration. It ends by itself when the scenario ends; Ctrl-C stops it early, exit 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ._argtypes import number
+
+__all__ = ["DemoError", "add_demo_parser", "demo_overrides", "demo_timeline", "prepare_demo_directory", "run_demo"]
+
+MARKER = ".shm-demo"
+PIDFILE = "demo.pid"
+CONFIG = "demo.toml"
+
+
+class DemoError(Exception):
+    """The demo cannot start (the message says why)."""
+
+
+def add_demo_parser(sub: Any) -> argparse.ArgumentParser:
+    p = sub.add_parser("demo", help="a bounded monitoring demo on the virtual rig (what make demo runs)",
+                       description="Runs shm serve on the simulated rig in a fresh demo directory: a healthy period, "
+                                   "a baseline, then a damage (an added tip mass) and its alarms. Prints what happens "
+                                   "when; ends when the scenario ends; Ctrl-C stops it (exit 0).")
+    p.add_argument("--dir", default="var/demo", metavar="DIR",
+                   help="demo directory (default var/demo); an earlier run's moves to DIR.previous")
+    p.add_argument("--duration", type=number(low=60, high=7 * 24 * 3600, unit="s"), default=1800.0, metavar="S",
+                   help="simulated length of the scenario, s (default 1800)")
+    p.add_argument("--speed", default="4", metavar="N|max", help="pace, a factor of real time or max (default 4)")
+    p.add_argument("--damage-at", type=number(low=0, unit="s"), default=900.0, metavar="S",
+                   help="simulated time the damage appears, s (default 900; after the baseline)")
+    p.add_argument("--no-damage", action="store_true", help="a healthy scenario: no damage, no alarm expected")
+    p.add_argument("--damage", default="mass:0.126@4.0", metavar="SPEC",
+                   help="the damage: mass:KG@POS or stiffness:FACTOR@A-B (default mass:0.126@4.0, 1 %% of the beam at the tip)")
+    p.add_argument("--temperature-swing", type=number(low=0, high=100, unit="K"), default=4.0, metavar="K",
+                   help="peak-to-peak temperature cycle over the scenario, K (default 4)")
+    p.add_argument("--seed", type=number(int, low=0), default=1)
+    p.add_argument("--port", type=number(int, low=0, high=65535), default=8600, help="API port (default 8600)")
+    p.add_argument("--dashboard-port", type=number(int, low=0, high=65535), default=8080, help="dashboard port (default 8080)")
+    p.add_argument("--no-dashboard", action="store_true", help="no dashboard (API only)")
+    p.add_argument("--keep-running", action="store_true", help="keep the API and dashboard up after the scenario ends")
+    p.add_argument("--config", metavar="FILE", help="a shm serve TOML file for everything else (the options above win)")
+    p.set_defaults(func=run_demo)
+    return p
+
+
+def demo_overrides(args: argparse.Namespace, directory: Path) -> dict[str, Any]:
+    """The service configuration of the demo (a nested dict for ``load_settings``)."""
+    return {
+        "data_dir": str(directory),
+        "source": {"spec": "sim", "speed": args.speed, "keep_running": bool(args.keep_running)},
+        "sim": {"duration_s": float(args.duration), "seed": int(args.seed),
+                "damage": [] if args.no_damage else [args.damage],
+                "damage_at_s": None if args.no_damage else float(args.damage_at),
+                "temperature_swing_k": float(args.temperature_swing)},
+        "server": {"port": int(args.port)},
+        "dashboard": {"enabled": not args.no_dashboard, "port": int(args.dashboard_port)},
+        # A demo of hours keeps all it records: the retention defaults are sized for a week.
+    }
+
+
+@dataclass(frozen=True)
+class Timeline:
+    """When things happen in a sim scenario (simulated seconds from the start)."""
+
+    rest_s: float
+    first_window_s: tuple[float, float]
+    step_s: float
+    baseline_s: float
+    damage_s: float | None
+    first_damaged_window_end_s: float | None
+    earliest_alarm_s: float | None
+    duration_s: float
+
+
+def demo_timeline(settings: Any) -> Timeline:
+    """The scenario's timeline from its configuration: the simulator's rest phase, the estimator's
+    warm-up, the analysis grid, the baseline period and the alarm hysteresis."""
+    from .service._sources import simulation_settings
+
+    sim = simulation_settings(settings)
+    a, est = settings.analytics, settings.estimator
+    step = a.window_s * (1.0 - a.overlap)
+    rest = sim.rest
+    # windows start on multiples of the step (data time from the start, which is on the grid)
+    first_start = math.ceil((rest + est.warmup_s) / step) * step
+    # the baseline is learnt at the end of the first window ending baseline_s after the first one's start
+    k = max(0, math.ceil((first_start + a.baseline_s - a.window_s - first_start) / step))
+    baseline = first_start + k * step + a.window_s
+    damage = sim.damage_at if sim.damage else None
+    first_damaged_end = earliest = None
+    if damage is not None:
+        # the first analysed window that holds damaged data (it ends after the damage appears)
+        first_damaged_end = max((math.floor((damage - a.window_s) / step) + 1) * step, first_start) + a.window_s
+        # a chart reaches a level after hold_windows windows beyond it; the service raises an alarm-level at
+        # once (a warning only after raise_windows windows at it)
+        earliest = first_damaged_end + (a.hold_windows - 1) * step
+    return Timeline(rest, (first_start, first_start + a.window_s), step, baseline, damage, first_damaged_end, earliest,
+                    sim.duration)
+
+
+def _clock(data_s: float, speed: float | None) -> str:
+    if speed is None:
+        return "as fast as the machine runs"
+    wall = round(data_s / speed)
+    return f"{wall // 60}:{wall % 60:02d} wall"
+
+
+def expected_changes(settings: Any) -> list[tuple[int, float, float]]:
+    """(mode, healthy Hz, relative change) of the simulated plant's eigenfrequencies due to the
+    scheduled damage (its exact linear figures), modes 1-5."""
+    from .service._sources import simulation_settings
+    from .virtual_rig import VirtualRig
+
+    truth = VirtualRig(simulation_settings(settings)).truth_metadata()
+    if "eigenfrequencies_after_damage_hz" not in truth:
+        return []
+    before = json.loads(truth["eigenfrequencies_hz"])
+    after = json.loads(truth["eigenfrequencies_after_damage_hz"])
+    return [(m + 1, before[m], after[m] / before[m] - 1.0) for m in range(min(5, len(before), len(after)))]
+
+
+def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, float]]) -> str:
+    """The banner: where to look, what happens when, how to stop it, where the data live."""
+    speed = None if settings.source.speed == "max" else float(settings.source.speed)
+    pace = "max speed" if speed is None else f"{speed:g}x real time"
+    t, a = timeline, settings.analytics
+    lines = [f"shm demo: the virtual rig at {pace}, {t.duration_s:g} s of simulated data ({_clock(t.duration_s, speed)}).", ""]
+    free = "on a free port, printed below when it starts"
+    if settings.dashboard.enabled:
+        d = settings.dashboard
+        lines.append(f"  dashboard  {f'http://{d.host}:{d.port}' if d.port else free}")
+    api = f"http://{settings.server.host}:{settings.server.port}" if settings.server.port else None
+    lines += [f"  API        {f'{api}/api/status' if api else free}  (trends /api/trends, alarms /api/alarms, "
+              "documents /docs)", "", "What happens when (simulated time" + (")" if speed is None else
+                                                                           ", and wall-clock time at this pace):")]
+
+    def at(data_s: float, text: str, *more: str) -> None:
+        wall = "" if speed is None else f"  [{_clock(data_s, speed):>9}]"
+        lines.append(f"  {data_s:7g} s{wall}  {text}")
+        lines.extend(f"  {'':{9 + len(wall)}}  {m}" for m in more)
+
+    at(0, f"the beam rests for {t.rest_s:g} s: the estimator learns the sensors' biases and noise")
+    at(t.rest_s, f"ambient excitation; the filter converges ({settings.estimator.warmup_s:g} s are not analysed)")
+    at(t.first_window_s[1], f"the first analysis window ({t.first_window_s[0]:g}-{t.first_window_s[1]:g} s); "
+       f"a {a.window_s:g} s window every {t.step_s:g} s")
+    at(t.baseline_s, f"the baseline is learnt from {a.baseline_s:g} s of healthy windows")
+    if t.damage_s is not None:
+        shifts = ", ".join(f"mode {m} {100 * r:+.2f} %" for m, _, r in changes)
+        at(t.damage_s, f"the damage appears: {', '.join(settings.sim.damage)}",
+           *([f"the simulated plant's eigenfrequencies change by {shifts}"] if changes else []))
+        at(t.earliest_alarm_s, "the earliest an alarm can be raised: the first window holding the damage ends at "
+           f"{t.first_damaged_window_end_s:g} s", f"and a chart needs {a.hold_windows} windows beyond a level (a warning "
+           f"alarm {settings.alarms.raise_windows} more at it); how much later depends on the change",
+           f"against the baseline's scatter (EWMA charts, λ = {a.ewma_lambda:g}, warning {a.warning_sigma:g} σ, "
+           f"alarm {a.alarm_sigma:g} σ)")
+        if t.earliest_alarm_s > t.duration_s:
+            lines.append("  NOTE: the scenario ends before an alarm can be raised; give a longer --duration")
+    else:
+        lines.append("  (no damage: no alarm is expected)")
+    at(t.duration_s, "the scenario ends; " + ("the API and dashboard stay up (--keep-running)"
+                                              if settings.source.keep_running else "so does the demo"))
+    lines += ["", "Stop it at any time with Ctrl-C (exit status 0).",
+              f"Its data: {settings.data_dir}/ (database {Path(settings.db).name}, recordings "
+              f"{Path(settings.archive.directory).name}/, configuration {CONFIG}); the next run moves them to "
+              f"{settings.data_dir}.previous/", ""]
+    return "\n".join(lines)
+
+
+def _running_pid(directory: Path) -> int | None:
+    try:
+        pid = int((directory / PIDFILE).read_text().strip())
+    except (OSError, ValueError):
+        return None
+    if pid == os.getpid():
+        return None
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return None
+    except PermissionError:
+        return pid
+    return pid
+
+
+def prepare_demo_directory(directory: Path) -> Path | None:
+    """Make ``directory`` a fresh, empty demo directory. An earlier demo's directory moves to
+    ``DIR.previous`` (replacing an older one); a directory that is not a demo's and not empty is
+    refused, as is one a running demo uses. Returns where the earlier run went, or None."""
+    directory = Path(directory)
+    previous = directory.with_name(directory.name + ".previous")
+    moved = None
+    if directory.exists():
+        if not directory.is_dir():
+            raise DemoError(f"{directory} exists and is not a directory")
+        pid = _running_pid(directory)
+        if pid is not None:
+            raise DemoError(f"a demo is running in {directory} (pid {pid}); stop it first (Ctrl-C there, or kill {pid})")
+        if not (directory / MARKER).exists() and any(directory.iterdir()):
+            raise DemoError(f"{directory} is not empty and not a demo directory: give another --dir")
+        if any(directory.iterdir()):
+            if previous.exists():
+                if not (previous / MARKER).exists():
+                    raise DemoError(f"{previous} exists and is not a demo directory: move it away first")
+                shutil.rmtree(previous)
+            directory.rename(previous)
+            moved = previous
+    directory.mkdir(parents=True, exist_ok=True)
+    (directory / MARKER).write_text("made by shm demo: removed or rotated by the next run\n")
+    (directory / PIDFILE).write_text(f"{os.getpid()}\n")
+    return moved
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    from .service._cli import run_serve
+    from .service._config import SettingsError, load_settings, render_toml
+
+    directory = Path(args.dir)
+    try:
+        if not args.no_damage and args.damage_at >= args.duration:
+            raise DemoError(f"--damage-at {args.damage_at:g} s must be before the end of the scenario (--duration {args.duration:g} s)")
+        settings = load_settings(args.config, demo_overrides(args, directory))
+        timeline = demo_timeline(settings)
+        if timeline.damage_s is not None and timeline.damage_s < timeline.baseline_s:
+            raise DemoError(f"--damage-at {args.damage_at:g} s comes before the baseline is learnt "
+                            f"({timeline.baseline_s:g} s): the damage would be learnt as healthy")
+        changes = expected_changes(settings) if timeline.damage_s is not None else []
+        moved = prepare_demo_directory(directory)
+    except SettingsError as exc:
+        print(f"shm demo: error: {exc}", file=sys.stderr)
+        return 2
+    except DemoError as exc:
+        print(f"shm demo: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("\nshm demo: stopped before it started", file=sys.stderr)
+        return 0
+    config = directory / CONFIG
+    config.write_text(render_toml(settings), encoding="utf-8")
+    if moved is not None:
+        print(f"shm demo: the previous run's data are in {moved}/")
+    print(describe(settings, timeline, changes), flush=True)
+    serve_args = argparse.Namespace(
+        config=str(config), print_config=False, source=None, speed=None, keep_running=None, data_dir=None, db=None,
+        host=None, port=None, dashboard_port=None, no_dashboard=None, token_file=None, rig=None, source_id=None,
+        webhook=None, recordings=None, no_archive=None, json=False,
+    )
+    try:
+        code = run_serve(serve_args)
+    except KeyboardInterrupt:  # Ctrl-C before shm serve took over the signal
+        code = 0
+    finally:
+        try:
+            (directory / PIDFILE).unlink()
+        except OSError:
+            pass
+    print(happened(settings), flush=True)
+    print(f"shm demo: done (exit {code}); its data are in {directory}/", flush=True)
+    return code
+
+
+def happened(settings: Any) -> str:
+    """What the run raised: its alarms, in simulated time, from the demo's database."""
+    from .service._sources import simulation_settings
+    from .service._storage import Storage
+
+    start_s = simulation_settings(settings).start_time_ns / 1e9
+    try:
+        storage = Storage(settings.db)
+        try:
+            alarms = sorted(storage.alarms(), key=lambda a: a["raised_at_s"])
+            windows = storage.count("trends")
+        finally:
+            storage.close()
+    except Exception as exc:  # the summary must not turn a good run into a failure
+        return f"shm demo: cannot read {settings.db}: {exc}"
+    lines = [f"shm demo: {windows} trend rows stored; {len(alarms) or 'no'} alarm{'s' if len(alarms) != 1 else ''} raised"]
+    for a in alarms:
+        lines.append(f"  {a['raised_at_s'] - start_s:7.0f} s  {a['level']:<7} {a['chart']}: {a['message']}")
+    return "\n".join(lines)
