@@ -94,7 +94,7 @@ def test_modes_configuration_options(capsys):
     code, _, err = run(capsys, "modes", "--support", "pinned", "--orientation", "standing")
     assert code == 2 and "inverted pendulum" in err
     code, _, err = run(capsys, "modes", "--length", "0")
-    assert code == 2 and "length=0.0" in err
+    assert code == 2 and "--length: 0 is out of range" in err
 
 
 def test_simulate_friction_is_opt_in_and_recorded(capsys, tmp_path):
