@@ -3,7 +3,17 @@
 Lower layer: knows nothing of the service or the web.
 """
 
-from ._beam import BeamModel, NaturalModes, NodalShapes, assemble_beam, natural_modes
+from ._beam import (
+    GREENHILL_COEFFICIENT,
+    BeamModel,
+    BucklingError,
+    NaturalModes,
+    NodalShapes,
+    assemble_beam,
+    critical_load_factor,
+    greenhill_length,
+    natural_modes,
+)
 from ._calibration import TABLE1_HZ, CalibrationParameter, CalibrationResult, calibrate, modal_frequencies
 from ._damage_signatures import DamageSignatures, damage_signatures
 from ._filter import (
@@ -42,11 +52,14 @@ __all__ = [
     "default_aided",
     "effective_independence",
     "estimate",
+    "greenhill_length",
     "select_sensors",
+    "GREENHILL_COEFFICIENT",
     "MAX_UNIT_DEFORMATIONS",
     "TABLE1_HZ",
     "Beam",
     "BeamModel",
+    "BucklingError",
     "CalibrationParameter",
     "CalibrationResult",
     "DamageSignatures",
@@ -60,6 +73,7 @@ __all__ = [
     "UnitDeformations",
     "assemble_beam",
     "calibrate",
+    "critical_load_factor",
     "damage_signatures",
     "load_rig",
     "modal_frequencies",

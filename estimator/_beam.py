@@ -1,14 +1,23 @@
-"""Euler–Bernoulli finite-element model of the hanging beam.
+"""Euler–Bernoulli finite-element model of the beam held at D, hanging or standing.
 
-The beam hangs from the bearing D (η = 0, pinned: no lateral displacement, free rotation) and
-is free at the tip (η = L). Lateral displacement w(η) is across the thickness, in the plane.
-Cubic Hermite elements carry [w, w'] at each node. Besides the bending stiffness the model holds
-the geometric stiffness of the axial tension: the self-weight of the beam and of every attached
-mass below η, per unit gravity (``tension_stiffness``), and the centrifugal tension per unit
-ω² (``centrifugal_stiffness``, used by the virtual rig for large pendulum swings).
+The beam is held at the bearing D (η = 0) and free at the tip (η = L). The rig's ``support`` says
+how: ``pinned`` (the paper's plain bearing: no lateral displacement, free rotation) or
+``clamped`` (the fixed bearing of Section 3.5, a mast's or blade's root: no displacement, no
+rotation). Lateral displacement w(η) is across the thickness, in the plane. Cubic Hermite
+elements carry [w, w'] at each node.
+
+Besides the bending stiffness the model holds the geometric stiffness of the static axial
+force: the weight of the beam and of every attached mass beyond η, per unit gravity along +η
+(from D towards the tip; ``tension_stiffness``). A hanging beam has gravity +g along η, so its
+self-weight is a tension that stiffens it; a standing beam (a mast) has gravity −g along η, so
+the same law becomes a compression that softens it, and the beam buckles where the compression
+reaches the critical load (``critical_load_factor``, refused with ``BucklingError``). The
+centrifugal tension per unit ω² (``centrifugal_stiffness``) serves the virtual rig's large
+pendulum swings.
 
 Units: SI throughout (m, kg, s, N, Pa). Matrices are over all 2(n+1) nodal DOFs in the order
-[w_0, w'_0, w_1, w'_1, ...]; the pinned support removes DOF 0 (``free_dofs``).
+[w_0, w'_0, w_1, w'_1, ...]; the pinned support removes DOF 0, the clamp DOFs 0 and 1
+(``free_dofs``).
 """
 
 from __future__ import annotations
@@ -18,10 +27,40 @@ from typing import Sequence
 
 import numpy as np
 import scipy.linalg
+import scipy.optimize
+import scipy.special
 
-from ._rig import RigDescription
+from ._rig import RigDescription, RigError
 
-__all__ = ["BeamModel", "NodalShapes", "NaturalModes", "assemble_beam", "natural_modes"]
+__all__ = [
+    "GREENHILL_COEFFICIENT",
+    "BeamModel",
+    "BucklingError",
+    "NodalShapes",
+    "NaturalModes",
+    "assemble_beam",
+    "critical_load_factor",
+    "greenhill_length",
+    "natural_modes",
+]
+
+#: q L³ / EI at which a uniform column clamped at its foot buckles under its own weight q per
+#: length (Greenhill 1881): 9 j² / 4 with j the first zero of the Bessel function J_{−1/3}.
+GREENHILL_COEFFICIENT = 2.25 * scipy.optimize.brentq(lambda z: scipy.special.jv(-1.0 / 3.0, z), 1.5, 2.2, xtol=1e-14) ** 2
+
+
+class BucklingError(RigError):
+    """A standing beam that buckles under its own weight and attached masses.
+
+    ``critical_load_factor`` is the multiplier of the gravity load at which it buckles (< 1 here);
+    ``bare_critical_length`` the length (m) above which a bare uniform beam of the same section
+    buckles under its own weight (Greenhill).
+    """
+
+    def __init__(self, message: str, *, critical_load_factor: float, bare_critical_length: float):
+        super().__init__(message)
+        self.critical_load_factor = critical_load_factor
+        self.bare_critical_length = bare_critical_length
 
 _GAUSS_XI, _GAUSS_W = np.polynomial.legendre.leggauss(5)
 _GAUSS_XI = 0.5 * (_GAUSS_XI + 1.0)  # on [0, 1]
@@ -101,27 +140,47 @@ class NodalShapes:
 
 @dataclass(frozen=True)
 class BeamModel:
-    """Assembled FE matrices of the hanging beam (all nodal DOFs, see module docstring)."""
+    """Assembled FE matrices of the beam (all nodal DOFs, see module docstring)."""
 
     rig: RigDescription
     nodes: np.ndarray
     mass: np.ndarray
     rotary_mass: np.ndarray  # the part of ``mass`` from rotary inertia of attached masses
     bending_stiffness: np.ndarray
-    tension_stiffness: np.ndarray  # geometric stiffness of the static tension per unit gravity
+    tension_stiffness: np.ndarray  # geometric stiffness of the weight beyond η per unit gravity along +η
     centrifugal_stiffness: np.ndarray  # geometric stiffness of the centrifugal tension per unit ω²
     youngs_modulus: float
     temperature_c: float | None
     free_dofs: np.ndarray = field(repr=False)
+    critical_load_factor: float = float("inf")  # gravity-load multiplier at which it buckles (inf: no compression)
 
     @property
     def gravity(self) -> float:
+        """|g| (m/s²)."""
         return self.rig.gravity
 
     @property
+    def support(self) -> str:
+        return self.rig.support
+
+    @property
+    def orientation(self) -> str:
+        return self.rig.orientation
+
+    @property
+    def axial_gravity(self) -> float:
+        """Gravity's component along +η (m/s²): +g hanging (tension), −g standing (compression)."""
+        return _axial_gravity(self.rig)
+
+    @property
+    def geometric_stiffness(self) -> np.ndarray:
+        """Geometric stiffness of the static axial force: tension (hanging) or compression (standing)."""
+        return self.axial_gravity * self.tension_stiffness
+
+    @property
     def stiffness(self) -> np.ndarray:
-        """Linear stiffness about the hanging equilibrium: bending plus gravity tension."""
-        return self.bending_stiffness + self.gravity * self.tension_stiffness
+        """Linear stiffness about the static equilibrium: bending plus the geometric stiffness of the weight."""
+        return self.bending_stiffness + self.geometric_stiffness
 
     def rigid_rotation(self) -> np.ndarray:
         """Nodal field of a unit rotation about D: w = η, w' = 1."""
@@ -140,6 +199,73 @@ class BeamModel:
     def total_mass(self) -> float:
         t = self.uniform_translation()
         return float(t @ self.mass @ t)
+
+
+def _axial_gravity(rig: RigDescription) -> float:
+    if rig.orientation == "hanging":
+        return rig.gravity
+    if rig.orientation == "standing":
+        return -rig.gravity
+    raise RigError(f"orientation={rig.orientation!r} must be 'hanging' or 'standing'")
+
+
+def _free_dofs(rig: RigDescription, n_dof: int) -> np.ndarray:
+    if rig.support == "pinned":
+        return np.arange(1, n_dof)  # w(0) = 0
+    if rig.support == "clamped":
+        return np.arange(2, n_dof)  # w(0) = w'(0) = 0
+    raise RigError(f"support={rig.support!r} must be 'pinned' or 'clamped'")
+
+
+def greenhill_length(bending_stiffness: float, mass_per_length: float, gravity: float) -> float:
+    """Length (m) above which a uniform column clamped at its foot buckles under its own weight.
+
+    Parameters
+    ----------
+    bending_stiffness : EI (N·m²), > 0.
+    mass_per_length : ρA (kg/m), > 0.
+    gravity : g (m/s²), ≥ 0.
+
+    Returns
+    -------
+    L_cr = (7.837 EI / (ρ A g))^(1/3) in m; ``inf`` without gravity.
+    """
+    for name, value in (("bending_stiffness", bending_stiffness), ("mass_per_length", mass_per_length)):
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{name}={value} must be positive and finite")
+    if not (np.isfinite(gravity) and gravity >= 0):
+        raise ValueError(f"{gravity=} must be non-negative and finite")
+    if gravity == 0:
+        return float("inf")
+    return float((GREENHILL_COEFFICIENT * bending_stiffness / (mass_per_length * gravity)) ** (1.0 / 3.0))
+
+
+def critical_load_factor(
+    bending_stiffness: np.ndarray, tension_stiffness: np.ndarray, free_dofs: np.ndarray, compression: float
+) -> float:
+    """Smallest λ > 0 with det(K_b − λ·compression·K_G) = 0 over ``free_dofs``: the multiplier of
+    the static compression at which the beam buckles.
+
+    Parameters
+    ----------
+    bending_stiffness, tension_stiffness : (n, n) K_b and K_G (geometric stiffness per unit axial load).
+    free_dofs : indices the support leaves free; K_b must be positive definite on them.
+    compression : the load that compresses the beam (for gravity: g of a standing beam), ≥ 0.
+
+    Returns
+    -------
+    λ_cr (dimensionless; ``inf`` if nothing compresses the beam). The beam is stable for λ_cr > 1.
+    """
+    if not (np.isfinite(compression) and compression >= 0):
+        raise ValueError(f"{compression=} must be non-negative and finite")
+    if compression == 0:
+        return float("inf")
+    Kb = bending_stiffness[np.ix_(free_dofs, free_dofs)]
+    KG = compression * tension_stiffness[np.ix_(free_dofs, free_dofs)]
+    n = Kb.shape[0]
+    # K_G x = μ K_b x: the largest μ is 1/λ_cr (K_b is definite, K_G of a compression semi-definite).
+    mu = scipy.linalg.eigh(0.5 * (KG + KG.T), 0.5 * (Kb + Kb.T), eigvals_only=True, subset_by_index=(n - 1, n - 1))[0]
+    return float("inf") if mu <= 0 else float(1.0 / mu)
 
 
 def _mesh(rig: RigDescription, elements: int, extra_nodes: Sequence[float] = ()) -> np.ndarray:
@@ -175,6 +301,11 @@ def assemble_beam(
     ``elements`` is the number of uniform elements before nodes are added at attached masses,
     stiffness-segment ends and ``extra_nodes`` (m; e.g. where a later damage will sit, so two
     models share one mesh). ``temperature_c=None`` uses the beam's reference temperature.
+
+    Raises
+    ------
+    BucklingError
+        A standing beam whose weight and attached masses exceed its critical load (λ_cr ≤ 1).
     """
     if not isinstance(elements, (int, np.integer)) or elements < 2:
         raise ValueError(f"{elements=} must be an integer >= 2")
@@ -232,6 +363,21 @@ def assemble_beam(
         M[sl] += rot
         M_rot[sl] += rot
 
+    free = _free_dofs(rig, n_dof)
+    compression = max(0.0, -_axial_gravity(rig))
+    factor = critical_load_factor(K, KG, free, compression)
+    if factor <= 1.0:
+        bare = greenhill_length(EI, mu, rig.gravity)
+        at = "" if temperature_c is None else f" at {temperature_c:g} °C"
+        load = "its own weight and attached masses" if any(m.mass > 0 and m.position > 0 for m in rig.point_masses) else "its own weight"
+        raise BucklingError(
+            f"the standing beam buckles under {load}{at}: its critical load factor is "
+            f"λ_cr = {factor:.4g} (it would stand only up to {factor * rig.gravity:.4g} m/s² of the {rig.gravity:g} m/s² "
+            f"gravity); a bare standing beam of this section (EI = {EI:.4g} N·m², ρA = {mu:.4g} kg/m) buckles under "
+            f"its own weight above the critical length L_cr = {bare:.4g} m (Greenhill), this one is {length:g} m long",
+            critical_load_factor=factor,
+            bare_critical_length=bare,
+        )
     return BeamModel(
         rig=rig,
         nodes=nodes,
@@ -242,16 +388,18 @@ def assemble_beam(
         centrifugal_stiffness=KC,
         youngs_modulus=E,
         temperature_c=temperature_c,
-        free_dofs=np.arange(1, n_dof),
+        free_dofs=free,
+        critical_load_factor=factor,
     )
 
 
 @dataclass(frozen=True)
 class NaturalModes:
-    """Eigenfrequencies (Hz) and mass-normalised eigenmodes of the pinned hanging beam."""
+    """Eigenfrequencies (Hz) and mass-normalised eigenmodes of the beam on its support."""
 
     frequencies_hz: np.ndarray
     shapes: NodalShapes
+    support: str = "pinned"  # the support they belong to: "pinned" or "clamped"
 
     @property
     def angular_frequencies(self) -> np.ndarray:
@@ -259,9 +407,11 @@ class NaturalModes:
 
 
 def natural_modes(model: BeamModel, count: int = 6) -> NaturalModes:
-    """The first ``count`` modes of the beam linearised about the hanging equilibrium.
+    """The first ``count`` modes of the beam linearised about its static equilibrium.
 
-    Shapes are mass-normalised (φᵀ M φ = 1) and signed so that the tip displacement is positive.
+    The equilibrium is the straight beam, hanging (stretched by its weight) or standing
+    (compressed by it). Shapes are mass-normalised (φᵀ M φ = 1) and signed so that the tip
+    displacement is positive.
     """
     free = model.free_dofs
     if not isinstance(count, (int, np.integer)) or not 1 <= count <= len(free):
@@ -277,4 +427,4 @@ def natural_modes(model: BeamModel, count: int = 6) -> NaturalModes:
     dofs[free] = vectors
     tip = dofs[-2]
     dofs *= np.where(tip < 0, -1.0, 1.0)
-    return NaturalModes(np.sqrt(eigenvalues) / (2 * np.pi), NodalShapes(model.nodes, dofs))
+    return NaturalModes(np.sqrt(eigenvalues) / (2 * np.pi), NodalShapes(model.nodes, dofs), model.support)

@@ -202,10 +202,10 @@ def damage_signatures(
                 j = int(np.argmin(np.abs(nodes - c)))
                 dM[2 * j, 2 * j] += m
                 for e in np.flatnonzero(mids < nodes[j]):
-                    dK[2 * e : 2 * e + 4, 2 * e : 2 * e + 4] += m * rig.gravity * _element_tension(lengths[e])
+                    dK[2 * e : 2 * e + 4, 2 * e : 2 * e + 4] += m * model.axial_gravity * _element_tension(lengths[e])
                 idx = np.array([2 * j, 2 * j + 1])
                 s = m
-            idx = idx[idx > 0]
+            idx = idx[np.isin(idx, free)]  # the support's constrained DOFs carry no residual
             R = Kinv[:, idx] - phi @ (phi[idx].T / lam[:, None])
             R = R / np.maximum(np.sqrt(np.einsum("ij,ij->j", R, M @ R)), 1e-300)
             Bs = np.column_stack([phi, R])[free]

@@ -1,11 +1,18 @@
-"""Unit deformations: the eigenmodes of the hanging beam seen from the body frame.
+"""Unit deformations: the eigenmodes of the beam seen from the body frame.
 
 The body frame is the tangent of the beam at D, so every unit deformation satisfies
-s(0) = 0 and s'(0) = 0: an eigenmode w_k becomes s̃_k(η) = w_k(η) − w_k'(0)·η, scaled so that
-max |s̃_k| = 1 over the beam. After this transformation modes 1 and 2 look alike (both are
-dominated by the first bending shape); they are merged into the combimode, the dominant shape of
-the pair (first singular vector over the beam), so six modes give five unit deformations:
-unit deformation 1 = modes 1 + 2, unit deformation χ ≥ 2 = mode χ + 1 (paper, Table 1).
+s(0) = 0 and s'(0) = 0.
+
+Pinned support (the paper's plain bearing): an eigenmode w_k becomes
+s̃_k(η) = w_k(η) − w_k'(0)·η, scaled so that max |s̃_k| = 1 over the beam. After this
+transformation modes 1 and 2 look alike (both are dominated by the first bending shape); they
+are merged into the combimode, the dominant shape of the pair (first singular vector over the
+beam), so six modes give five unit deformations: unit deformation 1 = modes 1 + 2, unit
+deformation χ ≥ 2 = mode χ + 1 (paper, Table 1).
+
+Clamped support (the fixed bearing of Section 3.5, a mast's root): the body frame is the
+clamp's, the eigenmodes already satisfy w(0) = w'(0) = 0, nothing looks alike and there is no
+combimode: unit deformation χ = mode χ, scaled to max |s| = 1.
 
 Because s̃ is η times a constant away from a Hermite field, the unit deformations stay exact
 Hermite fields and s, s', s'' are interpolated exactly at any η.
@@ -87,25 +94,50 @@ def _normalise(field: NodalShapes) -> np.ndarray:
 
 
 def unit_deformations(
-    model_or_modes: BeamModel | NaturalModes, count: int = 4, *, combimode: bool = True
+    model_or_modes: BeamModel | NaturalModes, count: int = 4, *, combimode: bool | None = None
 ) -> UnitDeformations:
     """The first ``count`` (Γ, 1..5) unit deformations of a beam model (or of its modes).
 
-    With ``combimode=False`` each eigenmode becomes its own unit deformation (as for a beam
-    with a fixed bearing, where modes 1 and 2 no longer look alike).
+    Parameters
+    ----------
+    model_or_modes : the beam model, or its natural modes (enough of them: Γ + 1 with the combimode).
+    count : Γ, an integer in 1..5.
+    combimode : merge modes 1 and 2 into one unit deformation. ``None`` (default) follows the
+        support: the combimode for a pinned beam (paper, Figure 5), none for a clamped one
+        (Section 3.5: each eigenmode is its own unit deformation).
+
+    Returns
+    -------
+    UnitDeformations with Γ shapes in the body frame.
+
+    Raises
+    ------
+    ValueError
+        ``count`` out of range, or too few eigenmodes given.
     """
     if not isinstance(count, (int, np.integer)) or not 1 <= count <= MAX_UNIT_DEFORMATIONS:
         raise ValueError(f"{count=} must be an integer in [1, {MAX_UNIT_DEFORMATIONS}]")
+    support = model_or_modes.support
+    if support not in ("pinned", "clamped"):
+        raise ValueError(f"{support=} must be 'pinned' or 'clamped'")
+    if combimode is None:
+        combimode = support == "pinned"
+    elif not isinstance(combimode, (bool, np.bool_)):
+        raise ValueError(f"{combimode=} must be True, False or None (from the support)")
     needed = count + 1 if combimode else count
     modes = model_or_modes if isinstance(model_or_modes, NaturalModes) else natural_modes(model_or_modes, needed)
     if modes.shapes.count < needed:
         raise ValueError(f"{count} unit deformations need {needed} eigenmodes, got {modes.shapes.count}")
     nodes = modes.shapes.nodes
     dofs = modes.shapes.dofs[:, :needed].copy()
-    rigid = np.zeros(2 * len(nodes))
-    rigid[0::2] = nodes
-    rigid[1::2] = 1.0
-    body = dofs - np.outer(rigid, dofs[1])
+    if support == "pinned":
+        # The body frame turns with the tangent at D: take out each mode's rotation about D.
+        rigid = np.zeros(2 * len(nodes))
+        rigid[0::2] = nodes
+        rigid[1::2] = 1.0
+        body = dofs - np.outer(rigid, dofs[1])
+    else:
+        body = dofs  # the clamp's frame: w(0) = w'(0) = 0 already
     body = _normalise(NodalShapes(nodes, body))
     freqs = [float(f) for f in modes.frequencies_hz[:needed]]
     if combimode:

@@ -22,13 +22,25 @@ def _print_json(data: object) -> None:
 
 
 def _rig_from_args(args: argparse.Namespace):
-    from estimator import load_rig
+    """The rig of --rig (with --support/--orientation overriding its keys) or of --layout
+    (with --length, --support, --orientation)."""
+    from estimator import RigError, load_rig, parse_rig
 
-    from .rig_layouts import default_rig
+    from .rig_layouts import build_rig
 
     if getattr(args, "rig", None):
-        return load_rig(args.rig)
-    return default_rig(args.layout)
+        if args.length is not None:
+            raise CliError("--length scales a --layout rig; with --rig set beam.length in the file")
+        rig = load_rig(args.rig)
+        overrides = {k: v for k, v in (("support", args.support), ("orientation", args.orientation)) if v is not None}
+        return parse_rig({**rig.model_dump(mode="json"), **overrides}, source=args.rig) if overrides else rig
+    try:
+        return build_rig(args.layout, length=args.length, support=args.support or "pinned",
+                         orientation=args.orientation or "hanging")
+    except ValueError as exc:
+        if isinstance(exc, RigError):
+            raise
+        raise CliError(str(exc)) from None
 
 
 # -- shm modes ---------------------------------------------------------------------------
@@ -40,23 +52,36 @@ def _cmd_modes(args: argparse.Namespace) -> int:
     count = max(args.count, 6)
     modes = natural_modes(model, count)
     freqs = modes.frequencies_hz[: args.count]
+    units = unit_deformations(modes, 5)
+    unit_of_mode = {m: i + 1 for i, group in enumerate(units.modes) for m in group}
+    # Table 1 is the paper's pinned, hanging sheet: only that configuration is compared with it.
+    paper = rig.support == "pinned" and rig.orientation == "hanging"
     table = np.array(TABLE1_HZ)
-    n = min(len(freqs), len(table))
+    n = min(len(freqs), len(table)) if paper else 0
     relative = (freqs[:n] / table[:n] - 1).tolist()
+    critical = model.critical_load_factor
     if args.json:
         _print_json({
             "frequencies_hz": [round(float(f), 6) for f in freqs],
-            "table1_hz": list(TABLE1_HZ),
-            "relative_error": [round(float(r), 6) for r in relative],
+            **({"table1_hz": list(TABLE1_HZ), "relative_error": [round(float(r), 6) for r in relative]} if paper else {}),
+            "support": rig.support,
+            "orientation": rig.orientation,
+            "length_m": rig.beam.length,
+            "gravity": rig.gravity,
+            "critical_load_factor": None if not np.isfinite(critical) else round(float(critical), 6),
+            "unit_deformations": [list(group) for group in units.modes],
         })
         return 0
-    units = unit_deformations(modes, 5)
-    unit_of_mode = {m: i + 1 for i, group in enumerate(units.modes) for m in group}
-    print(f"{'mode':>4} {'f [Hz]':>9} {'Table 1':>8} {'error':>8}  unit deformation")
+    print(f"{rig.support}, {rig.orientation} beam of {rig.beam.length:g} m, g = {rig.gravity:g} m/s²"
+          + (f"; critical load factor {critical:.4g} (it buckles under {critical:.4g} × its weight)" if np.isfinite(critical) else ""))
+    print(f"{'mode':>4} {'f [Hz]':>9}" + (f" {'Table 1':>8} {'error':>8}" if paper else "") + "  unit deformation")
     for k, f in enumerate(freqs, start=1):
-        t = f"{table[k - 1]:8.3f}" if k <= len(table) else " " * 8
-        r = f"{100 * relative[k - 1]:+7.2f}%" if k <= n else " " * 8
-        print(f"{k:4d} {f:9.4f} {t} {r}  {unit_of_mode.get(k, '-')}")
+        compared = ""
+        if paper:
+            t = f"{table[k - 1]:8.3f}" if k <= len(table) else " " * 8
+            r = f"{100 * relative[k - 1]:+7.2f}%" if k <= n else " " * 8
+            compared = f" {t} {r}"
+        print(f"{k:4d} {f:9.4f}{compared}  {unit_of_mode.get(k, '-')}")
     return 0
 
 
@@ -72,6 +97,9 @@ def _simulation_settings(args: argparse.Namespace):
             seed=args.seed,
             excitation=args.excitation,
             layout=args.layout,
+            support=args.support or "pinned",
+            orientation=args.orientation or "hanging",
+            length=4.0 if args.length is None else args.length,
             ideal=args.ideal,
             damage=tuple(args.damage or ()),
             damage_at=args.damage_at,
@@ -84,7 +112,7 @@ def _simulation_settings(args: argparse.Namespace):
 
 
 def _pydantic_message(exc) -> str:
-    return "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors())
+    return "; ".join(f"{'.'.join(str(p) for p in e['loc']) or 'settings'}: {e['msg']}" for e in exc.errors())
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
@@ -361,13 +389,25 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_configuration_arguments(p: argparse.ArgumentParser, *, rig_file: bool) -> None:
+    """--support, --orientation and --length of a layout's rig (the contract's keys)."""
+    over = " (overrides the --rig file's key)" if rig_file else ""
+    p.add_argument("--support", choices=("pinned", "clamped"), default=None,
+                   help=f"pinned: the plain bearing (default); clamped: the fixed bearing, φ ≡ 0{over}")
+    p.add_argument("--orientation", choices=("hanging", "standing"), default=None,
+                   help=f"hanging below D (default) or standing above it, a mast (needs --support clamped){over}")
+    p.add_argument("--length", type=float, default=None, metavar="M",
+                   help="beam length in m (default 4); the layout's sensors and truth stations scale with it")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="shm", description="Structural health monitoring by integrated motion measurement.")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("modes", help="eigenfrequencies of the rig model against the paper's Table 1")
+    p = sub.add_parser("modes", help="eigenfrequencies of the rig model (against the paper's Table 1 when pinned and hanging)")
     p.add_argument("--rig", help="rig description (.json or .toml); default: the calibrated rig of --layout")
     p.add_argument("--layout", choices=("benchmark", "dense"), default="benchmark")
+    _add_configuration_arguments(p, rig_file=True)
     p.add_argument("--temperature", type=float, default=None, help="°C (default: the beam's reference temperature)")
     p.add_argument("--count", type=int, default=6, choices=range(1, 21), metavar="N", help="modes to list (1-20)")
     p.add_argument("--json", action="store_true")
@@ -379,6 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output .mcap")
     p.add_argument("--excitation", choices=("paper", "ambient", "decay"), default="paper")
     p.add_argument("--layout", choices=("benchmark", "dense"), default="benchmark")
+    _add_configuration_arguments(p, rig_file=False)
     p.add_argument("--ideal", action="store_true", help="plant = nominal rig (no mismatch, friction, scale/misalignment)")
     p.add_argument("--damage", action="append", metavar="SPEC", help="mass:KG@POS or stiffness:FACTOR@A-B (repeatable)")
     p.add_argument("--damage-at", type=float, default=None, metavar="SECONDS", help="damage appears at this time")

@@ -1,6 +1,8 @@
 """The rig descriptions this product ships: the paper's benchmark layout and the dense layout.
 
-Both describe the same 4 m × 0.2 m × 2 mm steel sheet (DX51D+Z) of the paper. The physical
+Both describe the same 4 m × 0.2 m × 2 mm steel sheet (DX51D+Z) of the paper, by default pinned
+and hanging; a layout may also be built clamped (the fixed bearing), standing (a mast) or of
+another length, with every board, gauge and truth station moved in proportion to the length. The physical
 parameters that the paper's Table 1 constrains (Young's modulus of the sheet, the mass and
 rotary inertia of a sensor board, the rotary inertia of the bearing's clamp that turns with the
 beam) come from model updating (``calibrated_parameters``), run on the benchmark layout;
@@ -31,6 +33,7 @@ Layout = Literal["benchmark", "dense"]
 LAYOUTS: tuple[Layout, ...] = ("benchmark", "dense")
 
 BEAM = {"length": 4.0, "width": 0.2, "thickness": 0.002, "density": 7850.0}
+#: Truth stations of the 4 m sheet (m from D); a beam of another length has them in proportion.
 TRUTH_STATIONS = tuple(np.round(np.arange(0.5, 4.0001, 0.5), 6).tolist())
 REFLECTOR_DISTANCE = 0.5
 GRAVITY = 9.81
@@ -75,16 +78,48 @@ def _layout_positions(layout: Layout) -> tuple[tuple[float, ...], tuple[float, .
     raise ValueError(f"{layout=} must be one of {LAYOUTS}")
 
 
-def build_rig(layout: Layout = "benchmark", parameters: dict[str, float] | None = None, **extra: Any) -> RigDescription:
+def build_rig(
+    layout: Layout = "benchmark",
+    parameters: dict[str, float] | None = None,
+    *,
+    length: float | None = None,
+    support: str = "pinned",
+    orientation: str = "hanging",
+    **extra: Any,
+) -> RigDescription:
     """The rig description of ``layout`` with physical ``parameters`` (default: ``CALIBRATED``).
 
-    ``extra`` keys are added to the description (the contract allows extension keys).
+    Parameters
+    ----------
+    layout : "benchmark" or "dense".
+    parameters : the calibrated physical parameters (``CALIBRATION_PARAMETERS``' names).
+    length : beam length in m (default 4, the paper's sheet). Board, gauge and truth-station
+        positions scale with it (a layout is a pattern of fractions of the length).
+    support, orientation : the contract's keys ("pinned" | "clamped", "hanging" | "standing"),
+        validated by the rig description.
+    extra : keys added to the description (the contract allows extension keys).
+
+    Raises
+    ------
+    ValueError
+        Unknown layout, missing parameters, or a length that is not a positive finite number.
+    RigError
+        A combination the contract refuses (pinned and standing).
     """
     values = dict(CALIBRATED if parameters is None else parameters)
     missing = {p.name for p in CALIBRATION_PARAMETERS} - values.keys()
     if missing:
         raise ValueError(f"parameters lack {sorted(missing)}")
+    nominal_length = BEAM["length"]
+    if length is None:
+        length = nominal_length
+    if not (isinstance(length, (int, float)) and np.isfinite(length) and length > 0):
+        raise ValueError(f"{length=} must be a positive finite beam length in m")
+    scale = float(length) / nominal_length
     boards, gauges = _layout_positions(layout)
+    boards = tuple(round(p * scale, 9) for p in boards)
+    gauges = tuple(round(p * scale, 9) for p in gauges)
+    stations = [round(p * scale, 9) for p in TRUTH_STATIONS]
     sensors: list[dict[str, Any]] = [{"name": "D", "kind": "imu", "position": 0.0}]
     for index, position in enumerate(boards, start=1):
         sensors.append({"name": f"s{index}", "kind": "imu", "position": position})
@@ -104,15 +139,18 @@ def build_rig(layout: Layout = "benchmark", parameters: dict[str, float] | None 
     description = {
         "beam": {
             **BEAM,
+            "length": float(length),
             "youngs_modulus": values["youngs_modulus"],
             "youngs_modulus_temperature_coefficient": -3.0e-4,
             "reference_temperature": 20.0,
         },
         "gravity": GRAVITY,
         "reflector_distance": REFLECTOR_DISTANCE,
+        "support": support,
+        "orientation": orientation,
         "point_masses": point_masses,
         "sensors": sensors,
-        "truth_stations": list(TRUTH_STATIONS),
+        "truth_stations": stations,
         "layout": layout,
         **extra,
     }

@@ -84,6 +84,12 @@ class SimSettings(_Closed):
     duration_s: float = Field(7 * 24 * 3600.0, gt=0, le=7 * 24 * 3600, description="simulated run length, s (the run ends then)")
     seed: int = Field(1, ge=0, description="random seed of the simulation")
     layout: Literal["benchmark", "dense"] = Field("benchmark", description="sensor layout")
+    support: Literal["pinned", "clamped"] = Field(
+        "pinned", description="pinned: the plain bearing (the beam swings about D); clamped: the fixed bearing (phi = 0)")
+    orientation: Literal["hanging", "standing"] = Field(
+        "hanging", description="hanging below D, or standing above it as a mast (needs support = clamped; must not buckle)")
+    length_m: float = Field(
+        4.0, gt=0, le=100, description="beam length, m; the layout's sensors scale with it (damage positions do not)")
     excitation: Literal["paper", "ambient", "decay"] = Field("ambient", description="excitation of the rig")
     damage: tuple[str, ...] = Field(("mass:0.126@4.0",), description="damage specs (mass:KG@POS, stiffness:FACTOR@A-B)")
     damage_at_s: float | None = Field(

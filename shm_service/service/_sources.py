@@ -156,6 +156,7 @@ class SimSource(Source):
         s = settings.sim
         self.settings = SimulationSettings(
             duration=s.duration_s, seed=s.seed, excitation=s.excitation, layout=s.layout,
+            support=s.support, orientation=s.orientation, length=s.length_m,
             damage=tuple(s.damage) if s.damage_at_s is not None else (), damage_at=s.damage_at_s,
             temperature_mean=s.temperature_mean_c, temperature_swing=s.temperature_swing_k,
         )

@@ -2,7 +2,8 @@
 
 A material point at arc length x sits in the floating frame at p = (x + u, w), with
 w = Σ Φ_i(x) q_i and the inextensible foreshortening u = −½ ∫₀ˣ w'² = −½ qᵀ G(x) q. Its
-inertial acceleration in frame components is a_D + p̈ + 2Ω J ṗ + Ω̇ J p − Ω² p (J turns by +90°).
+inertial acceleration in frame components is a_D + p̈ + 2Ω J ṗ + Ω̇ J p − Ω² p (J turns by +90°);
+the specific force subtracts gravity, g_η e_η of the inertial frame (g_η = +g hanging, −g standing).
 The local tangent is turned by α = arcsin(w') against the frame, and the curvature is
 κ = w'' / cos α.
 """
@@ -62,7 +63,9 @@ def point_motion(
 ) -> PointMotion:
     """Kinematics of the point at arc length ``x`` from plant states y = [θ, q] (N, 1 + m).
 
-    ``bearing`` and ``bearing_acceleration`` are d and d̈ (N,) in m and m/s².
+    ``bearing`` and ``bearing_acceleration`` are d and d̈ (N,) in m and m/s². ``gravity`` is
+    gravity's component along inertial η (m/s²): +g for a hanging beam, −g for a standing one
+    (η points up along it), so a standing beam's accelerometers read +g along x at rest.
     """
     phi = basis.evaluate(x, 0)
     dphi = basis.evaluate(x, 1)

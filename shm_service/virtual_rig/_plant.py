@@ -1,23 +1,34 @@
-"""The plant of the virtual rig: the hanging beam as a flexible pendulum on a moving bearing.
+"""The plant of the virtual rig: the beam on a moving bearing, pinned (a flexible pendulum) or
+clamped (a cantilever, hanging or standing as a mast).
 
 Formulation (floating frame of reference, exact in the large rotation):
 the frame sits at the bearing D and turns with the beam's tangent there (angle θ, positive
 turning η towards ζ). In it the beam's lateral deflection is w(x, t) = Σ_i Φ_i(x) q_i(t), with
 Φ_i the first modes of the beam clamped in the frame (w(0) = w'(0) = 0), mass-normalised,
-computed with the nominal gravity tension. Axial shortening u(x) = −½∫₀ˣ w'² (inextensible
+computed with the nominal static axial force. Axial shortening u(x) = −½∫₀ˣ w'² (inextensible
 beam) is kept in the sensor kinematics.
 
-With y = [θ, q], bearing displacement d(t) (prescribed, horizontal), gravity g:
+Gravity is the vector g_η·e_η of the inertial frame: g_η = +g for a hanging beam (η points down
+along it), g_η = −g for a standing one (η points up along it). With y = [θ, q], bearing
+displacement d(t) (prescribed, horizontal):
 
-    I_D θ̈ + bᵀ q̈ = −S_D (d̈ cos θ + g sin θ) − (g cos θ − d̈ sin θ) cᵀ q + M_f − (C ẏ)_θ + F_θ
-    b θ̈ + M_q q̈ = −[κ_E K_b + (g cos θ − d̈ sin θ) K_g + θ̇² K_c] q − c (d̈ cos θ + g sin θ) − (C ẏ)_q + F_q
+    I_D θ̈ + bᵀ q̈ = −S_D (d̈ cos θ + g_η sin θ) − (g_η cos θ − d̈ sin θ) cᵀ q + M_f − (C ẏ)_θ + F_θ
+    b θ̈ + M_q q̈ = −[κ_E K_b + (g_η cos θ − d̈ sin θ) K_g + θ̇² K_c] q − c (d̈ cos θ + g_η sin θ) − (C ẏ)_q + F_q
 
 where I_D, S_D are the beam's second and first moments of mass about D, b and c the modal
 first moments (∫ m x Φ_i + J Φ_i', ∫ m Φ_i), K_b, K_g the bending and gravity-tension
 stiffness, K_c the centrifugal tension stiffness minus the centrifugal softening, κ_E the
 temperature factor of Young's modulus, M_f the bearing's Coulomb friction and C modal damping of
-the linearised structure. Linearised at θ = 0 this is the pinned FE beam projected on [θ, Φ], so
-the plant's eigenfrequencies are those of ``linear_frequencies``.
+the linearised structure. K_g is the geometric stiffness of the weight beyond x per unit axial
+gravity, so g_η < 0 makes it a compression (a mast softens and can buckle). Linearised at
+θ = 0 this is the pinned FE beam projected on [θ, Φ], so the plant's eigenfrequencies are those
+of ``linear_frequencies``.
+
+A clamped support (the fixed bearing) holds the frame: θ ≡ 0, the θ row above becomes the clamp's
+reaction moment and drops out, and only the q rows are integrated (the inverse mass matrix has a
+zero θ row and column, so θ̈ = 0 exactly):
+
+    M_q q̈ = −[κ_E K_b + g_η K_g] q − c d̈ − C_q q̇ + F_q
 
 This model is the plant, not the estimator's kinematic model: more modes than unit
 deformations, no small-angle shortcuts, foreshortening in the kinematics, exact sensor angles.
@@ -73,14 +84,16 @@ class Plant:
     """Reduced matrices of one configuration of the plant (see module docstring)."""
 
     basis: NodalShapes
+    clamped: bool  # θ ≡ 0 (fixed bearing) instead of a free rotation about D
     mass: np.ndarray  # (n, n), n = 1 + modes: [θ, q]
+    inverse_mass: np.ndarray  # (n, n): of ``mass`` (pinned), or of the q block alone (clamped, θ̈ = 0)
     bending: np.ndarray  # (m, m) K_b at the reference temperature
     tension: np.ndarray  # (m, m) K_g per unit effective gravity
     centrifugal: np.ndarray  # (m, m) K_c per unit θ̇²
     first_moment: float  # S_D (kg·m)
     modal_first_moment: np.ndarray  # c (m,)
     damping: np.ndarray  # (n, n)
-    gravity: float
+    gravity: float  # g_η: gravity's component along inertial η (+g hanging, −g standing), m/s²
     friction_torque: float  # Coulomb torque of the bearing (N·m)
     friction_smoothing: float  # rate (rad/s) over which the friction torque builds up
     temperature_coefficient: float
@@ -96,6 +109,23 @@ class Plant:
         return 1.0 + self.temperature_coefficient * (np.asarray(temperature_c) - self.reference_temperature)
 
 
+def _axial_gravity(model: BeamModel) -> float:
+    """g_η: the plant's gravity along inertial η, from where the beam points (module docstring)."""
+    orientation = model.rig.orientation
+    if orientation == "hanging":
+        return model.rig.gravity
+    if orientation == "standing":
+        return -model.rig.gravity
+    raise ValueError(f"{orientation=} must be 'hanging' or 'standing'")
+
+
+def _is_clamped(model: BeamModel) -> bool:
+    support = model.rig.support
+    if support not in ("pinned", "clamped"):
+        raise ValueError(f"{support=} must be 'pinned' or 'clamped'")
+    return support == "clamped"
+
+
 def build_plant(
     model: BeamModel,
     basis: NodalShapes,
@@ -105,11 +135,18 @@ def build_plant(
     friction_smoothing: float = 2e-3,
 ) -> Plant:
     """Reduce ``model`` onto [θ, basis] and add modal damping ``damping_ratios`` (one per mode, the
-    last value repeats for higher modes)."""
+    last value repeats for higher modes).
+
+    A pinned support keeps θ free (the modes are those of [θ, q]); a clamped one holds θ ≡ 0
+    (the modes are those of q alone, and a bearing friction torque has nothing to act on).
+    """
     if np.any(np.asarray(damping_ratios) < 0):
         raise ValueError(f"{damping_ratios=} must be non-negative")
     if friction_torque < 0 or friction_smoothing <= 0:
         raise ValueError(f"{friction_torque=} must be >= 0 and {friction_smoothing=} > 0")
+    clamped = _is_clamped(model)
+    if clamped and friction_torque > 0:
+        raise ValueError(f"{friction_torque=} acts on the pinned bearing's rotation: a clamped support has none")
     phi = basis.dofs
     rigid = model.rigid_rotation()
     translation = model.uniform_translation()
@@ -122,22 +159,32 @@ def build_plant(
     centrifugal = phi.T @ (model.centrifugal_stiffness - m_trans) @ phi
     c = phi.T @ model.mass @ translation
     first_moment = float(rigid @ model.mass @ translation)
-    g = model.gravity
+    g = _axial_gravity(model)
     n = T.shape[1]
     K_lin = np.zeros((n, n))
     K_lin[0, 0] = g * first_moment
     K_lin[0, 1:] = K_lin[1:, 0] = g * c
     K_lin[1:, 1:] = bending + g * tension
     K_lin = 0.5 * (K_lin + K_lin.T)
-    eigval, vectors = scipy.linalg.eigh(K_lin, M)
-    omega = np.sqrt(np.clip(eigval, 0.0, None))
+    free = slice(1, n) if clamped else slice(0, n)  # the clamp removes θ
+    K_free, M_free = K_lin[free, free], M[free, free]
+    eigval, vectors = scipy.linalg.eigh(K_free, M_free)
+    if eigval[0] < -1e-9 * np.abs(eigval).max():
+        raise ValueError("the linearised plant is unstable (a negative eigenvalue): check gravity and support")
+    omega = np.sqrt(np.clip(eigval, 0.0, None))  # a pinned beam without gravity keeps a zero-frequency rotation
     ratios = np.asarray(damping_ratios, dtype=float)
-    zeta = np.concatenate([ratios, np.full(max(0, n - ratios.size), ratios[-1])])[:n]
-    damping = M @ vectors @ np.diag(2.0 * zeta * omega) @ vectors.T @ M
+    m = omega.size
+    zeta = np.concatenate([ratios, np.full(max(0, m - ratios.size), ratios[-1])])[:m]
+    damping = np.zeros((n, n))
+    damping[free, free] = M_free @ vectors @ np.diag(2.0 * zeta * omega) @ vectors.T @ M_free
+    inverse = np.zeros((n, n))
+    inverse[free, free] = np.linalg.inv(M_free)
     beam = model.rig.beam
     return Plant(
         basis=basis,
+        clamped=clamped,
         mass=M,
+        inverse_mass=inverse,
         bending=bending / (model.youngs_modulus / beam.youngs_modulus),
         tension=tension,
         centrifugal=centrifugal,
@@ -241,7 +288,7 @@ def integrate(
     y_end, yd_end = _integrate(
         np.asarray(y0, float), np.asarray(yd0, float), np.ascontiguousarray(bearing_acceleration_fine, float),
         kappa, np.ascontiguousarray(generalized_force, float), int(substeps), sample_period / substeps,
-        np.linalg.inv(plant.mass), plant.bending, plant.tension, plant.centrifugal,
+        plant.inverse_mass, plant.bending, plant.tension, plant.centrifugal,
         plant.modal_first_moment, plant.first_moment, plant.damping, plant.gravity,
         plant.friction_torque, plant.friction_smoothing, out_y, out_yd, out_ydd,
     )

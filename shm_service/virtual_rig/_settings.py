@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from estimator import PointMass, StiffnessSegment
 
@@ -63,7 +63,10 @@ class PlantSettings(_Closed):
     )
     stiffness_mismatch: float = Field(0.03, ge=0, description="1σ relative error of the sheet's E")
     mass_mismatch: float = Field(0.05, ge=0, description="1σ relative error of each board's mass and inertia")
-    substeps: int = Field(5, ge=1, le=50, description="Runge–Kutta steps per 200 Hz sample")
+    substeps: int = Field(
+        5, ge=1, le=50,
+        description="Runge–Kutta steps per 200 Hz sample, at least; raised so that the highest mode of the basis "
+        "takes ω·h ≤ 0.6 (a short, stiff beam has modes of hundreds of Hz)")
     ambient_force: float = Field(0.05, ge=0, description="random load per FE node and sample (ambient), N; small enough that the beam stays in its linear range")
 
 
@@ -114,6 +117,12 @@ class SimulationSettings(_Closed):
     seed: int = Field(1, ge=0)
     excitation: Literal["paper", "ambient", "decay"] = "paper"
     layout: Literal["benchmark", "dense"] = "benchmark"
+    support: Literal["pinned", "clamped"] = Field(
+        "pinned", description="pinned: the plain bearing (the beam swings about D); clamped: the fixed bearing (θ ≡ 0)")
+    orientation: Literal["hanging", "standing"] = Field(
+        "hanging", description="hanging below D (self-weight stretches it) or standing above it (compresses it; needs clamped)")
+    length: float = Field(
+        4.0, gt=0, le=100, description="beam length, m; the layout's sensors and truth stations scale with it")
     ideal: bool = Field(False, description="plant = nominal rig: no mismatch, friction, scale or misalignment errors")
     damage: tuple[Damage, ...] = ()
     damage_at: float | None = Field(None, ge=0, description="time the damage appears, s (None: from the start)")
@@ -123,6 +132,14 @@ class SimulationSettings(_Closed):
     start_time_ns: int = Field(1_767_225_600_000_000_000, ge=0, description="log_time of the first sample (2026-01-01 UTC)")
     plant: PlantSettings = PlantSettings()
     errors: SensorErrors = SensorErrors()
+
+    @model_validator(mode="after")
+    def _friction_needs_a_bearing_that_turns(self) -> "SimulationSettings":
+        if self.support == "clamped" and self.plant.friction_torque > 0:
+            raise ValueError(
+                f"plant.friction_torque={self.plant.friction_torque} acts on the pinned bearing's rotation: "
+                "a clamped support has none (leave it 0)")
+        return self
 
     @field_validator("damage", mode="before")
     @classmethod

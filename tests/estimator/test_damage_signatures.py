@@ -50,6 +50,24 @@ def test_signatures_match_an_exact_fe_solve(sig, rig):
     np.testing.assert_allclose(sig.frequency_shift[_pick(sig, "mass", 4.0)], f2 / f0 - 1, rtol=2e-3, atol=1e-7)
 
 
+def test_signatures_of_a_clamped_standing_mast_match_an_exact_fe_solve():
+    # At the clamp the constrained slope carries no residual; a tip mass's weight compresses the mast.
+    from shm_service.rig_layouts import build_rig
+
+    mast = build_rig(length=1.5, support="clamped", orientation="standing")
+    sig = damage_signatures(mast, step=0.1, segment_length=0.2)
+    assert sig.units == (0, 1, 2, 3)  # no combimode: one mode per unit deformation
+    seg = StiffnessSegment(start=0.0, end=0.2, factor=0.8)
+    damaged = mast.model_copy(update={"beam": mast.beam.model_copy(update={"stiffness_segments": (seg,)})})
+    f0 = natural_modes(assemble_beam(mast, extra_nodes=(0.2,)), 4).frequencies_hz
+    f1 = natural_modes(assemble_beam(damaged, extra_nodes=(0.2,)), 4).frequencies_hz
+    np.testing.assert_allclose(sig.frequency_shift[_pick(sig, "stiffness", 0.1)], f1 / f0 - 1, rtol=2e-3, atol=1e-7)
+    tip = PointMass(position=1.5, mass=0.01 * mast.beam.mass)
+    heavy = mast.model_copy(update={"point_masses": tuple(mast.point_masses) + (tip,)})
+    f2 = natural_modes(assemble_beam(heavy, extra_nodes=(1.5,)), 4).frequencies_hz
+    np.testing.assert_allclose(sig.frequency_shift[_pick(sig, "mass", 1.5)], f2 / f0 - 1, rtol=2e-3, atol=1e-7)
+
+
 @pytest.mark.parametrize("kind, eta", [("stiffness", 2.15), ("stiffness", 0.85), ("mass", 1.25), ("mass", 3.55)])
 def test_localisation_of_a_damage_between_candidates(sig, rig, kind, eta):
     """The observed change is the FE model's own prediction for a damage half-way between two

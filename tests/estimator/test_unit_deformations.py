@@ -71,3 +71,36 @@ def test_without_combimode_each_mode_is_its_own_unit(model):
 def test_bad_count_is_refused(model, count):
     with pytest.raises(ValueError, match="count="):
         unit_deformations(model, count)
+
+
+@pytest.fixture(scope="module")
+def clamped_model():
+    from shm_service.rig_layouts import build_rig
+
+    return assemble_beam(build_rig(length=1.5, support="clamped", orientation="standing"))
+
+
+def test_clamped_support_has_no_combimode_and_each_unit_is_its_own_mode(clamped_model):
+    units = unit_deformations(clamped_model, MAX_UNIT_DEFORMATIONS)
+    assert units.modes == ((1,), (2,), (3,), (4,), (5,))
+    modes = natural_modes(clamped_model, 5)
+    assert [f[0] for f in units.frequencies_hz] == pytest.approx(list(modes.frequencies_hz))
+    grid = np.linspace(0.0, units.length, 401)
+    w = modes.shapes.evaluate(grid)
+    # The clamp's frame is the body frame: unit χ is eigenmode χ scaled to max |s| = 1.
+    scale = np.abs(modes.shapes.evaluate(np.linspace(0.0, units.length, 4001))).max(axis=0)
+    np.testing.assert_allclose(units.shape(grid), w / scale, atol=1e-9)
+    np.testing.assert_array_equal(units.shape(0.0), 0.0)
+    np.testing.assert_array_equal(units.slope(0.0), 0.0)
+
+
+def test_combimode_follows_the_support_unless_told(model, clamped_model):
+    assert unit_deformations(model, 2).modes == ((1, 2), (3,))  # pinned: the combimode
+    assert unit_deformations(natural_modes(clamped_model, 3), 2).modes == ((1,), (2,))  # from the modes' support
+    assert unit_deformations(clamped_model, 2, combimode=True).modes == ((1, 2), (3,))
+    assert unit_deformations(model, 2, combimode=False).modes == ((1,), (2,))
+
+
+def test_bad_combimode_is_refused(model):
+    with pytest.raises(ValueError, match="combimode='yes'"):
+        unit_deformations(model, 2, combimode="yes")

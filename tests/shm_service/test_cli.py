@@ -1,7 +1,10 @@
 """The shm command line: modes, simulate, inspect, estimate, and its errors."""
 
+import importlib.util
 import json
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 from shm_service.cli import main
@@ -17,9 +20,76 @@ def test_modes_json_has_the_contracted_keys(capsys):
     code, out, _ = run(capsys, "modes", "--json")
     data = json.loads(out)
     assert code == 0
-    assert set(data) == {"frequencies_hz", "table1_hz", "relative_error"}
+    assert {"frequencies_hz", "table1_hz", "relative_error"} <= set(data)
     assert len(data["frequencies_hz"]) == 6 and data["table1_hz"][0] == 0.302
     assert all(abs(r) <= 0.02 for r in data["relative_error"][:4])
+    assert (data["support"], data["orientation"], data["critical_load_factor"]) == ("pinned", "hanging", None)
+    assert data["unit_deformations"] == [[1, 2], [3], [4], [5], [6]]
+
+
+def _sheet(tmp_path, name, **overrides):
+    """A bare 2 mm steel sheet as a rig file (the contract's keys only)."""
+    description = {
+        "beam": {"length": 1.5, "width": 0.2, "thickness": 0.002, "youngs_modulus": 2.1e11, "density": 7850.0},
+        "gravity": 9.81, "reflector_distance": 0.5, "support": "clamped",
+        "sensors": [{"name": "D", "kind": "imu", "position": 0.0}],
+    }
+    for key, value in overrides.items():
+        if key == "beam":
+            description["beam"].update(value)
+        else:
+            description[key] = value
+    path = tmp_path / f"{name}.json"
+    path.write_text(json.dumps(description))
+    return path
+
+
+def _beam_column_reference():
+    spec = importlib.util.spec_from_file_location(
+        "beam_column_reference", Path(__file__).parents[1] / "estimator" / "beam_column_reference.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_modes_of_a_clamped_sheet_without_gravity_meet_the_closed_form(capsys, tmp_path):
+    path = _sheet(tmp_path, "clamped", gravity=0.0)
+    code, out, _ = run(capsys, "modes", "--rig", str(path), "--count", "4", "--json")
+    data = json.loads(out)
+    assert code == 0 and "table1_hz" not in data and data["unit_deformations"][:2] == [[1], [2]]
+    EI, mu = 2.1e11 * 0.2 * 0.002**3 / 12, 7850.0 * 0.2 * 0.002
+    closed = np.array([1.87510407, 4.69409113, 7.85475744, 10.99554073]) ** 2 / (2 * np.pi * 1.5**2) * np.sqrt(EI / mu)
+    np.testing.assert_allclose(data["frequencies_hz"], closed, rtol=1e-3)
+
+
+@pytest.mark.parametrize("orientation", ["hanging", "standing"])
+def test_modes_of_the_clamped_1_5_m_sheet_match_an_independent_beam_column_solution(capsys, tmp_path, orientation):
+    path = _sheet(tmp_path, orientation, orientation=orientation)
+    code, out, _ = run(capsys, "modes", "--rig", str(path), "--count", "5", "--json")
+    assert code == 0
+    EI, mu = 2.1e11 * 0.2 * 0.002**3 / 12, 7850.0 * 0.2 * 0.002
+    reference = _beam_column_reference().clamped_frequencies(
+        5, length=1.5, EI=EI, mu=mu, axial_gravity=9.81 if orientation == "hanging" else -9.81)
+    np.testing.assert_allclose(json.loads(out)["frequencies_hz"], reference, rtol=1e-2)
+    np.testing.assert_allclose(json.loads(out)["frequencies_hz"], reference, rtol=1e-4)  # in fact much closer
+
+
+def test_modes_of_a_4_m_standing_sheet_exit_non_zero_because_it_buckles(capsys, tmp_path):
+    path = _sheet(tmp_path, "mast", orientation="standing", beam={"length": 4.0})
+    code, out, err = run(capsys, "modes", "--rig", str(path), "--json")
+    assert code == 2 and out == ""
+    assert "buckles" in err and "L_cr = 1.924 m" in err and "4 m long" in err
+
+
+def test_modes_configuration_options(capsys):
+    code, out, _ = run(capsys, "modes", "--support", "clamped", "--orientation", "standing", "--length", "1.5", "--json")
+    data = json.loads(out)
+    assert code == 0 and (data["support"], data["orientation"], data["length_m"]) == ("clamped", "standing", 1.5)
+    assert 1 < data["critical_load_factor"] < 3
+    code, _, err = run(capsys, "modes", "--support", "pinned", "--orientation", "standing")
+    assert code == 2 and "inverted pendulum" in err
+    code, _, err = run(capsys, "modes", "--length", "0")
+    assert code == 2 and "length=0.0" in err
 
 
 def test_simulate_friction_is_opt_in_and_recorded(capsys, tmp_path):
@@ -31,6 +101,31 @@ def test_simulate_friction_is_opt_in_and_recorded(capsys, tmp_path):
         truth = json.loads(read_recording(path).metadata["truth"]["friction_torque_nm"])
         assert truth == torque
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("excitation", ["paper", "ambient", "decay"])
+def test_simulate_a_clamped_standing_mast_with_truth(capsys, tmp_path, excitation):
+    from shm_service.recording import read_recording
+
+    path = tmp_path / f"mast-{excitation}.mcap"
+    code = main(["simulate", "--duration", "3", "--out", str(path), "--excitation", excitation, "--support", "clamped",
+                 "--orientation", "standing", "--length", "1.5", "--json"])
+    summary = json.loads(capsys.readouterr().out)
+    assert code == 0 and summary["eigenfrequencies_hz"][0] < 0.6  # compression softens mode 1 (0.87 Hz hanging)
+    rec = read_recording(path)
+    assert (rec.rig.support, rec.rig.orientation, rec.rig.beam.length) == ("clamped", "standing", 1.5)
+    truth = rec.metadata["truth"]
+    assert truth["support"] == "clamped" and json.loads(truth["critical_load_factor"]) > 1
+
+
+def test_simulate_refuses_a_mast_that_buckles_and_a_pinned_standing_beam(capsys, tmp_path):
+    path = tmp_path / "mast.mcap"
+    code, _, err = run(capsys, "simulate", "--duration", "2", "--out", str(path), "--support", "clamped", "--orientation", "standing")
+    assert code == 2 and "buckles" in err and "L_cr" in err and not path.exists()
+    code, _, err = run(capsys, "simulate", "--duration", "2", "--out", str(path), "--orientation", "standing")
+    assert code == 2 and "inverted pendulum" in err and not path.exists()
+    code, _, err = run(capsys, "simulate", "--duration", "2", "--out", str(path), "--support", "clamped", "--friction", "0.03")
+    assert code == 2 and "clamped support has none" in err
 
 
 @pytest.fixture(scope="module")

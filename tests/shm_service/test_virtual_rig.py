@@ -1,5 +1,7 @@
 """Physics of the virtual rig: static hang, exact kinematics, strain, spectrum, linearisation."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -7,6 +9,7 @@ from estimator import assemble_beam, natural_modes, parse_rig
 from shm_service.rig_layouts import default_rig
 from shm_service.virtual_rig import SensorErrors, SimulationSettings, VirtualRig, parse_damage
 from shm_service.virtual_rig._kinematics import point_motion
+from shm_service.virtual_rig._plant import integrate
 
 NO_ERRORS = SensorErrors(**{name: 0.0 for name in SensorErrors.model_fields if name != "bias_correlation_time"})
 
@@ -22,17 +25,22 @@ def run(settings, rig=None):
     return vr, meas, truth
 
 
-def test_static_hang_reads_gravity_and_the_reflector():
-    vr, meas, truth = run(SimulationSettings(duration=5, ideal=True, errors=NO_ERRORS))
+def _assert_static(vr, meas, truth, accel_x):
+    """A beam at rest: accel x reads ``accel_x``, nothing else moves, the ToFs see the reflector."""
     for sensor in vr.nominal_rig.sensors_of("imu"):
         _, values = meas[sensor.topic]
-        np.testing.assert_allclose(values[:, 0], -9.81, atol=1e-9)  # accel x: −g along the hanging beam
+        np.testing.assert_allclose(values[:, 0], accel_x, atol=1e-9)
         np.testing.assert_allclose(values[:, 1:], 0.0, atol=1e-9)
     for sensor in vr.nominal_rig.sensors_of("tof"):
         np.testing.assert_allclose(meas[sensor.topic][1], 0.5, atol=1e-12)
     for sensor in vr.nominal_rig.sensors_of("strain"):
         np.testing.assert_allclose(meas[sensor.topic][1], 0.0, atol=1e-15)
     assert np.all(truth["phi"] == 0) and np.all(truth["e"] == 0)
+
+
+def test_static_hang_reads_gravity_and_the_reflector():
+    vr, meas, truth = run(SimulationSettings(duration=5, ideal=True, errors=NO_ERRORS))
+    _assert_static(vr, meas, truth, -9.81)  # accel x: −g along the hanging beam
 
 
 @pytest.fixture(scope="module")
@@ -133,3 +141,120 @@ def test_bad_damage_specs_are_refused(spec):
 def test_damage_outside_the_beam_is_refused():
     with pytest.raises(ValueError, match="outside the beam"):
         VirtualRig(SimulationSettings(duration=1, damage=("mass:0.1@5.0",)))
+
+
+# -- clamped support, standing beam -----------------------------------------------------------
+from estimator import BucklingError  # noqa: E402
+
+
+@pytest.mark.parametrize("orientation, length, accel_x", [("hanging", 4.0, -9.81), ("standing", 1.5, 9.81)])
+def test_clamped_static_beam_reads_gravity_with_its_sign(orientation, length, accel_x):
+    # Standing: η points up along the mast, gravity is −g along η, so accel x reads +g at rest.
+    settings = SimulationSettings(duration=5, ideal=True, errors=NO_ERRORS, support="clamped",
+                                  orientation=orientation, length=length)
+    vr, meas, truth = run(settings)
+    assert vr.plants[0].clamped and vr.plants[0].gravity == pytest.approx(-accel_x)
+    _assert_static(vr, meas, truth, accel_x)
+
+
+def test_layout_scales_with_the_beam_length():
+    vr = VirtualRig(SimulationSettings(duration=1, ideal=True, support="clamped", orientation="standing", length=1.5))
+    rig, full = vr.nominal_rig, default_rig()
+    assert rig.beam.length == 1.5 and (rig.support, rig.orientation) == ("clamped", "standing")
+    np.testing.assert_allclose(rig.truth_stations, np.array(full.truth_stations) * 1.5 / 4.0)
+    np.testing.assert_allclose([s.position for s in rig.sensors if s.position is not None],
+                               [s.position * 1.5 / 4.0 for s in full.sensors if s.position is not None])
+    np.testing.assert_allclose([m.position for m in rig.point_masses], [m.position * 1.5 / 4.0 for m in full.point_masses])
+
+
+@pytest.mark.parametrize("orientation", ["hanging", "standing"])
+def test_clamped_plant_has_the_fe_eigenfrequencies_and_never_turns(orientation):
+    vr = VirtualRig(SimulationSettings(duration=1, ideal=True, support="clamped", orientation=orientation, length=1.5))
+    fe = natural_modes(assemble_beam(vr.plant_rig), 6).frequencies_hz
+    np.testing.assert_allclose(vr.plants[0].linear_frequencies_hz[:6], fe, rtol=2e-4)
+    meta = vr.truth_metadata()
+    assert (meta["support"], meta["orientation"]) == ("clamped", orientation)
+    np.testing.assert_allclose(json.loads(meta["eigenfrequencies_hz"])[:6], fe, rtol=2e-4)
+    assert len(json.loads(meta["modal_damping_ratios"])) == 8
+    assert (json.loads(meta["critical_load_factor"]) is None) == (orientation == "hanging")
+
+
+def test_mast_sensor_outputs_are_the_exact_kinematics_of_the_simulated_motion():
+    # A 1.5 m mast has modes up to hundreds of Hz: differentiate its motion on a 10 kHz grid
+    # (re-integrated from the 200 Hz run's state), where central differences are exact enough.
+    settings = SimulationSettings(duration=40, rest=5, ideal=True, seed=3, errors=NO_ERRORS, support="clamped",
+                                  orientation="standing", length=1.5)
+    vr = VirtualRig(settings)
+    y, yd, ydd = vr._integrate_range(0, int(40 * 200))
+    assert np.all(y[:, 0] == 0) and np.all(yd[:, 0] == 0) and np.all(ydd[:, 0] == 0)  # the clamp holds θ ≡ 0
+    t = np.arange(y.shape[0]) / 200.0
+    d, _, d_acc = vr.excitation.bearing(t)
+    k0 = int(np.argmax(np.abs(d_acc))) - 200  # a second before the bearing's hardest push
+    dt, n, sub = 1e-4, 20000, 2
+    fine_t = t[k0] + np.arange(2 * sub * n + 1) * dt / (2 * sub)
+    plant = vr.plants[0]
+    y, yd, ydd, _, _ = integrate(plant, y[k0], yd[k0], vr.excitation.bearing(fine_t)[2], np.full(n, 20.0),
+                                 np.zeros((n, plant.size)), sample_period=dt, substeps=sub)
+    d, _, d_acc = vr.excitation.bearing(t[k0] + np.arange(n) * dt)
+    g_eta = -9.81  # standing: gravity points against η
+    root = point_motion(vr.basis, 0.0, y, yd, ydd, d, d_acc, g_eta)
+    np.testing.assert_array_equal(root.inertial_zeta, d)  # D moves with the actuator along ζ
+    np.testing.assert_array_equal(root.inertial_eta, 0.0)
+    motion = point_motion(vr.basis, 1.425, y, yd, ydd, d, d_acc, g_eta)
+    acc_eta = np.gradient(np.gradient(motion.inertial_eta, dt), dt)
+    acc_zeta = np.gradient(np.gradient(motion.inertial_zeta, dt), dt)
+    angle = motion.slope_angle
+    fx = np.cos(angle) * (acc_eta - g_eta) + np.sin(angle) * acc_zeta
+    fy = -np.sin(angle) * (acc_eta - g_eta) + np.cos(angle) * acc_zeta
+    rate = np.gradient(angle, dt)
+    inner = slice(5, -5)
+    scale = np.abs(motion.specific_force_y[inner]).max()
+    assert scale > 0.1 and np.abs(motion.lateral).max() > 0.005
+    np.testing.assert_allclose(motion.specific_force_x[inner], fx[inner], atol=2e-3 * scale)
+    np.testing.assert_allclose(motion.specific_force_y[inner], fy[inner], atol=2e-3 * scale)
+    np.testing.assert_allclose(motion.rate[inner], rate[inner], atol=2e-3 * np.abs(rate).max())
+    # The tip of a bent mast comes down (inextensible): η of the point ≤ its arc length.
+    assert np.all(motion.inertial_eta <= 1.425 + 1e-15) and motion.inertial_eta.min() < 1.425 - 1e-6
+
+
+@pytest.mark.parametrize("orientation", ["hanging", "standing"])
+def test_clamped_ambient_spectrum_peaks_at_the_plant_eigenfrequencies(orientation):
+    settings = SimulationSettings(duration=400, rest=0, excitation="ambient", ideal=True, seed=5, errors=NO_ERRORS,
+                                  support="clamped", orientation=orientation, length=1.5)
+    vr, meas, truth = run(settings)
+    assert np.all(truth["phi"] == 0)
+    freqs = vr.plants[0].linear_frequencies_hz
+    signal = truth["curvature"][:, 1]  # η = 0.375 m: no node of modes 1–5
+    window = np.hanning(signal.size)
+    spectrum = np.abs(np.fft.rfft((signal - signal.mean()) * window, 8 * signal.size))
+    f = np.fft.rfftfreq(8 * signal.size, 1 / 200.0)
+    for k in range(5):
+        band = (f > 0.9 * freqs[k]) & (f < 1.1 * freqs[k])
+        peak = f[band][np.argmax(spectrum[band])]
+        assert peak == pytest.approx(freqs[k], rel=0.01), k
+
+
+@pytest.mark.parametrize("excitation", ["paper", "decay"])
+def test_clamped_mast_runs_every_excitation(excitation):
+    settings = SimulationSettings(duration=90, rest=5, ideal=True, seed=2, excitation=excitation, support="clamped",
+                                  orientation="standing", length=1.5)
+    vr, meas, truth = run(settings)
+    assert np.all(truth["phi"] == 0) and np.abs(truth["d"]).max() > 1e-3
+    assert 1e-4 < np.abs(truth["e"]).max() < 0.1 * 1.5  # it moved, and stayed in the linear range
+    assert all(np.all(np.isfinite(values)) for _, values in meas.values())
+
+
+def test_a_standing_beam_that_buckles_is_refused():
+    with pytest.raises(BucklingError, match="buckles.*L_cr"):
+        VirtualRig(SimulationSettings(duration=1, support="clamped", orientation="standing"))
+    # Near the critical length the temperature swing's softening is enough to buckle it.
+    with pytest.raises(BucklingError, match="temperature swing"):
+        VirtualRig(SimulationSettings(duration=1, ideal=True, support="clamped", orientation="standing", length=1.85,
+                                      temperature_swing=80.0, temperature_mean=60.0))
+
+
+def test_pinned_standing_and_friction_on_a_clamp_are_refused():
+    with pytest.raises(ValueError, match="inverted pendulum"):
+        VirtualRig(SimulationSettings(duration=1, orientation="standing"))
+    with pytest.raises(ValueError, match="clamped support has none"):
+        SimulationSettings(duration=1, support="clamped", plant={"friction_torque": 0.03})

@@ -89,3 +89,26 @@ def test_ingest_validation_counts_each_kind_of_bad_message():
     with pytest.raises(IngestError, match="JSON"):
         parse_body(b"{nope")
     assert parse_body(b'{"a": NaN}')["a"] != parse_body(b'{"a": NaN}')["a"]  # NaN parsed, rejected per message
+
+
+def test_sim_source_takes_support_orientation_and_length_from_the_sim_table(tmp_path):
+    import queue
+    import tomllib
+
+    from estimator import BucklingError
+    from shm_service.service._config import ServiceSettings
+    from shm_service.service._sources import SimSource
+
+    cfg = tomllib.loads('[sim]\nsupport = "clamped"\norientation = "standing"\nlength_m = 1.5\n'
+                        'damage = ["mass:0.05@1.5"]\ntemperature_swing_k = 0.0\n')
+    source = SimSource("sim", queue.Queue(), ServiceSettings.model_validate(cfg), raw=False, truth=True)
+    rig = source.rig
+    assert (rig.support, rig.orientation, rig.beam.length) == ("clamped", "standing", 1.5)
+    assert source.rigsim.plants[0].clamped and source.metadata["truth"]["orientation"] == "standing"
+    block = next(source.rigsim.blocks(1.0))
+    assert np.all(block.truth["phi"] == 0)
+    # +g standing (the realistic boards carry a scale-factor error of ~1 % and a bias)
+    np.testing.assert_allclose(block.measurements["/imu/s1"][1][:, 0].mean(), 9.81, rtol=0.05)
+    mast = tomllib.loads('[sim]\nsupport = "clamped"\norientation = "standing"\ndamage = []\n')
+    with pytest.raises(BucklingError, match="buckles"):
+        SimSource("sim", queue.Queue(), ServiceSettings.model_validate(mast), raw=False, truth=True)
