@@ -1,4 +1,4 @@
-"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, oma, study, serve."""
+"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, oma, study, serve, import."""
 
 from __future__ import annotations
 
@@ -490,6 +490,10 @@ def build_parser() -> argparse.ArgumentParser:
     from .service._cli import add_serve_parser  # shm serve (issue 6)
 
     add_serve_parser(sub)
+
+    from .daq_import import add_import_parser  # shm import (issue 12)
+
+    add_import_parser(sub)
 
     return parser
 

@@ -35,7 +35,13 @@ _CLOCK_TOLERANCE = 0.01
 
 
 class TableError(ValueError):
-    """A file that cannot be read as measured channels (the message names what is wrong)."""
+    """A file that cannot be read as measured channels (the message names what is wrong).
+
+    ``channel`` is the asked-for channel that the file lacks, when that is the problem."""
+
+    def __init__(self, message: str, *, channel: str | None = None) -> None:
+        super().__init__(message)
+        self.channel = channel
 
 
 
@@ -51,6 +57,7 @@ class Table:
     path : the file; format : "text", "labview", "npy", "npz", "mat", "hdf5" or "mcap".
     time : (N,) the time column's values in s where the file has one (checked to be a uniform
         clock), else None.
+    other_channels : the file's channels that were not asked for (``read_table(channels=...)``).
     """
 
     data: np.ndarray
@@ -61,6 +68,7 @@ class Table:
     path: Path
     format: str
     time: np.ndarray | None = None
+    other_channels: tuple[str, ...] = ()
 
     @property
     def duration_s(self) -> float | None:
@@ -112,12 +120,12 @@ def _select(names: list[str], wanted: Sequence[str] | None, where: str, time_nam
         elif time_name is not None and name == time_name:
             raise TableError(f"{where}: column {name!r} is the time column, not a channel")
         else:
-            raise TableError(f"{where}: unknown channel {name!r}; the file has {names}")
+            raise TableError(f"{where}: unknown channel {name!r}; the file has {names}", channel=name)
     return idx
 
 
 def _finish(data: np.ndarray, names: list[str], units: list[str] | None, opts: _Options, path: Path, fmt: str,
-            time: np.ndarray | None = None, time_name: str | None = None) -> Table:
+            time: np.ndarray | None = None, time_name: str | None = None, other_channels: Sequence[str] = ()) -> Table:
     where = str(path)
     fs = opts.fs
     start = 0.0
@@ -127,6 +135,7 @@ def _finish(data: np.ndarray, names: list[str], units: list[str] | None, opts: _
             raise TableError(f"{where}: channel name {name!r} appears twice")
         seen.add(name)
     keep = _select(names, opts.channels, where, time_name)
+    others = tuple(other_channels) + tuple(n for i, n in enumerate(names) if i not in keep)
     data, names = data[:, keep], [names[i] for i in keep]
     units = None if units is None else [units[i] for i in keep]
     if time is not None:
@@ -143,7 +152,7 @@ def _finish(data: np.ndarray, names: list[str], units: list[str] | None, opts: _
             if bad.size:
                 raise TableError(f"{where}: channel {name!r} has {bad.size} NaN or infinite value(s), the first at sample {int(bad[0])}")
     return Table(np.ascontiguousarray(data, dtype=float), tuple(names), None if units is None else tuple(units), fs, start,
-                 path, fmt, None if time is None else np.ascontiguousarray(time))
+                 path, fmt, None if time is None else np.ascontiguousarray(time), others)
 
 
 # -- text ------------------------------------------------------------------------------------
@@ -237,7 +246,7 @@ def _time_columns(names: Sequence[str], opts: _Options, where: str) -> list[int]
     if opts.time_column is None:
         return [i for i, n in enumerate(names) if _is_time(n)]
     if opts.time_column not in names:
-        raise TableError(f"{where}: no time column {opts.time_column!r}; the file has {list(names)}")
+        raise TableError(f"{where}: no time column {opts.time_column!r}; the file has {list(names)}", channel=opts.time_column)
     return [list(names).index(opts.time_column)]
 
 
@@ -262,7 +271,7 @@ def _from_arrays(arrays: dict[str, np.ndarray], opts: _Options, path: Path, fmt:
     time = time_name = None
     if opts.time_column is not None:
         if opts.time_column not in series:
-            raise TableError(f"{where}: no time array {opts.time_column!r}; the file has {sorted(series)}")
+            raise TableError(f"{where}: no time array {opts.time_column!r}; the file has {sorted(series)}", channel=opts.time_column)
         time_name = opts.time_column
         time = series.pop(time_name)
         if time.ndim != 1:
@@ -279,14 +288,16 @@ def _from_arrays(arrays: dict[str, np.ndarray], opts: _Options, path: Path, fmt:
             raise TableError(f"{where}: array {key!r} has shape {a.shape}; expected samples × channels (more rows than columns)")
         names = [str(j) for j in range(a.shape[1])]
         data = a.astype(float)
+        others = []
     else:
         ones = {k: v.ravel() for k, v in series.items() if v.ndim == 1 or 1 in v.shape}
+        others = [k for k in series if opts.channels is not None and k not in opts.channels]
         if opts.channels is not None:
             # only the asked-for arrays: the file may hold other clocks' arrays of other lengths
             for name in opts.channels:
                 if name not in ones:
                     what = f"array {name!r} has shape {series[name].shape}, not a vector" if name in series else f"unknown channel {name!r}"
-                    raise TableError(f"{where}: {what}; the file has the vectors {sorted(ones)}")
+                    raise TableError(f"{where}: {what}; the file has the vectors {sorted(ones)}", channel=name)
             ones = {name: ones[name] for name in opts.channels}
         if not ones:
             raise TableError(f"{where}: holds no numeric channel arrays (found {sorted(arrays)})")
@@ -299,7 +310,7 @@ def _from_arrays(arrays: dict[str, np.ndarray], opts: _Options, path: Path, fmt:
         raise TableError(f"{where}: the time array {time_name!r} has {time.size} samples, the channels {data.shape[0]}")
     if time is None and fs is None:
         raise TableError(f"{where}: no sample rate in the file (a 'fs' value or a time array): give --fs (the sample rate in Hz), fs=None")
-    return _finish(data, names, None, replace(opts, fs=fs), path, fmt, time, time_name)
+    return _finish(data, names, None, replace(opts, fs=fs), path, fmt, time, time_name, others)
 
 
 def _read_npy(path: Path, opts: _Options) -> Table:
