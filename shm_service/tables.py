@@ -242,9 +242,10 @@ def _read_text(path: Path, opts: _Options) -> Table:
 
 
 def _time_columns(names: Sequence[str], opts: _Options, where: str) -> list[int]:
-    """The time column: the one the caller names, else every column with a time name."""
+    """The time column: the one the caller names, else every column with a time name that the
+    caller did not ask for as a channel (a temperature ``T``)."""
     if opts.time_column is None:
-        return [i for i, n in enumerate(names) if _is_time(n)]
+        return [i for i, n in enumerate(names) if _is_time(n) and n not in (opts.channels or ())]
     if opts.time_column not in names:
         raise TableError(f"{where}: no time column {opts.time_column!r}; the file has {list(names)}", channel=opts.time_column)
     return [list(names).index(opts.time_column)]
@@ -278,7 +279,7 @@ def _from_arrays(arrays: dict[str, np.ndarray], opts: _Options, path: Path, fmt:
             raise TableError(f"{where}: the time array {time_name!r} has shape {time.shape}; expected a vector")
     else:
         for k in list(series):
-            if _is_time(k) and series[k].ndim == 1:
+            if _is_time(k) and series[k].ndim == 1 and k not in (opts.channels or ()):
                 time_name, time = k, series.pop(k)
                 break
     two_d = {k: v for k, v in series.items() if v.ndim == 2}
