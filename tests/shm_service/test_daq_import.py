@@ -546,3 +546,27 @@ def test_example_files_are_valid():
     assert rig.support == "clamped" and rig.beam.length == 0.35
     assert sorted((s.kind, s.name) for s in rig.sensors) == [("imu", "high_g"), ("imu", "low_g"),
                                                             ("strain", "SG_300_a"), ("strain", "SG_306_b")]
+
+
+def test_matlab_structs_groups_and_text_variables(tmp_path):
+    from scipy import io
+
+    d = _data(n=100)
+    io.savemat(tmp_path / "v5.mat", {"daq": {"time": d["time"], "eps": d["eps"]}, "note": "volts", "other": np.ones(7)})
+    table = read_table(tmp_path / "v5.mat", channels=["eps"], time_column="time")
+    assert table.channels == ("eps",) and table.fs_hz == pytest.approx(200.0) and table.other_channels == ("other",)
+    np.testing.assert_array_equal(table.data[:, 0], d["eps"])
+    import hdf5storage
+
+    hdf5storage.savemat(str(tmp_path / "v73.mat"), {"time": d["time"], "eps": d["eps"], "note": "volts"}, format="7.3",
+                        matlab_compatible=True)
+    table = read_table(tmp_path / "v73.mat")  # the text variable is not a channel
+    assert table.format == "mat" and table.channels == ("eps",)
+    np.testing.assert_array_equal(table.time, d["time"])
+
+
+def test_a_nan_in_the_time_column_names_the_sample(tmp_path):
+    d = _data()
+    d["time"][42] = np.nan
+    _refused(tmp_path, _simple_map(), d, match=["time column 'time' has 1 NaN or infinite value(s), the first at sample 42"],
+             error=TableError)
