@@ -1,4 +1,4 @@
-"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, oma, study, serve, demo.
+"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, oma, study, serve, demo, import.
 
 Building the parser imports nothing heavy (numpy, scipy, pydantic, the estimator are imported by
 the command that needs them), so ``shm --help`` and argument errors answer at once.
@@ -460,6 +460,12 @@ def _add_configuration_arguments(p: argparse.ArgumentParser, *, rig_file: bool) 
                    help="beam length in m (default 4); the layout's sensors and truth stations scale with it")
 
 
+def _cmd_import(args: argparse.Namespace) -> int:
+    from .daq_import import cmd_import
+
+    return cmd_import(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="shm", description="Structural health monitoring by integrated motion measurement.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -569,6 +575,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_serve_parser(sub)
     add_demo_parser(sub)
+
+    p = sub.add_parser(
+        "import",
+        help="measured channels of DAQ files (CSV/TSV/text, LabVIEW, .npy/.npz, .mat, HDF5) into a contract recording",
+    )
+    p.add_argument("data", nargs="+", help="the DAQ file(s); several when the map's clocks read different files")
+    p.add_argument("--rig", required=True, help="rig description (.json or .toml) declaring every topic of the map")
+    p.add_argument("--map", required=True, help="channel map (.toml): per column topic, field, index, scale, offset, clock")
+    p.add_argument("--out", required=True, type=output_path, help="the recording to write (.mcap; its directory must exist)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_import)
 
     return parser
 

@@ -8,7 +8,10 @@
 - MATLAB ``.mat`` (v5 with scipy.io; v7.3 is HDF5) and HDF5 ``.h5``/``.hdf5`` (h5py);
 - a contract recording ``.mcap``: its raw IMU accelerations and strains.
 
-Used by ``shm oma`` and meant for ``shm import``: nothing here knows about modal analysis.
+Used by ``shm oma`` and ``shm import``: nothing here knows about modal analysis or the contract's
+topics. ``read_table`` can read a subset of the channels (``channels``), take the time from a named
+column (``time_column``, in ``time_unit``) and keep NaN/infinite values for the caller to count
+(``nonfinite="keep"``); arrays of other lengths in the same file (another clock) are then ignored.
 Bad input raises :class:`TableError` with a message that names the file, column or value.
 """
 
@@ -21,16 +24,26 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Table", "TableError", "read_table", "select_channels", "TIME_NAMES"]
+__all__ = ["Table", "TableError", "read_table", "select_channels", "TIME_NAMES", "TIME_UNITS"]
 
 #: Column names (case-insensitive, units in brackets ignored) that hold the time in s.
 TIME_NAMES = ("time", "t", "times", "time_s", "timestamp")
+#: Units a time column may be in, with their length in s.
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 #: Relative scatter of the time steps above which a time column is not a uniform sample clock.
 _CLOCK_TOLERANCE = 0.01
 
 
 class TableError(ValueError):
-    """A file that cannot be read as measured channels (the message names what is wrong)."""
+    """A file that cannot be read as measured channels (the message names what is wrong).
+
+    ``channel`` is the asked-for channel that the file lacks, when that is the problem."""
+
+    def __init__(self, message: str, *, channel: str | None = None) -> None:
+        super().__init__(message)
+        self.channel = channel
+
+
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,6 +55,9 @@ class Table:
     fs_hz : sample rate (Hz), from a time column, the file, or the caller; None if unknown.
     start_s : time of the first sample in the file's time base (s), 0 without one.
     path : the file; format : "text", "labview", "npy", "npz", "mat", "hdf5" or "mcap".
+    time : (N,) the time column's values in s where the file has one (checked to be a uniform
+        clock), else None.
+    other_channels : the file's channels that were not asked for (``read_table(channels=...)``).
     """
 
     data: np.ndarray
@@ -51,10 +67,23 @@ class Table:
     start_s: float
     path: Path
     format: str
+    time: np.ndarray | None = None
+    other_channels: tuple[str, ...] = ()
 
     @property
     def duration_s(self) -> float | None:
         return None if self.fs_hz is None else self.data.shape[0] / self.fs_hz
+
+
+@dataclass(frozen=True)
+class _Options:
+    """What the caller asked of ``read_table`` (see there)."""
+
+    fs: float | None = None
+    channels: tuple[str, ...] | None = None
+    time_column: str | None = None
+    time_scale: float = 1.0
+    keep_nonfinite: bool = False
 
 
 def _is_time(name: str) -> bool:
@@ -62,41 +91,68 @@ def _is_time(name: str) -> bool:
     return base in TIME_NAMES
 
 
-def _rate_from_time(t: np.ndarray, where: str) -> tuple[float, float]:
+def _rate_from_time(t: np.ndarray, where: str, name: str | None = None) -> tuple[float, float]:
+    column = "the time column" if name is None else f"the time column {name!r}"
     if t.size < 2:
-        raise TableError(f"{where}: the time column has {t.size} value(s); a sample rate needs two")
+        raise TableError(f"{where}: {column} has {t.size} value(s); a sample rate needs two")
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise TableError(f"{where}: {column} has {bad.size} NaN or infinite value(s), the first at sample {int(bad[0])}")
     dt = np.diff(t)
     step = float(np.median(dt))
     if not np.isfinite(step) or step <= 0:
-        raise TableError(f"{where}: the time column does not increase (median step {step!r} s)")
+        raise TableError(f"{where}: {column} does not increase (median step {step!r} s)")
     if np.max(np.abs(dt - step)) > _CLOCK_TOLERANCE * step:
         k = int(np.argmax(np.abs(dt - step)))
-        raise TableError(f"{where}: the time column is not a uniform clock (step {dt[k]!r} s at row {k + 1}, median {step!r} s)")
+        raise TableError(f"{where}: {column} is not a uniform clock (step {dt[k]!r} s from sample {k} to {k + 1}, "
+                         f"median {step!r} s)")
     return 1.0 / step, float(t[0])
 
 
-def _finish(data: np.ndarray, names: list[str], units: list[str] | None, fs: float | None, path: Path, fmt: str,
-            time: np.ndarray | None = None) -> Table:
+def _select(names: list[str], wanted: Sequence[str] | None, where: str, time_name: str | None = None) -> list[int]:
+    """Indices of ``wanted`` in ``names`` (all when ``wanted`` is None)."""
+    if wanted is None:
+        return list(range(len(names)))
+    idx = []
+    for name in wanted:
+        if name in names:
+            idx.append(names.index(name))
+        elif time_name is not None and name == time_name:
+            raise TableError(f"{where}: column {name!r} is the time column, not a channel")
+        else:
+            raise TableError(f"{where}: unknown channel {name!r}; the file has {names}", channel=name)
+    return idx
+
+
+def _finish(data: np.ndarray, names: list[str], units: list[str] | None, opts: _Options, path: Path, fmt: str,
+            time: np.ndarray | None = None, time_name: str | None = None, other_channels: Sequence[str] = ()) -> Table:
     where = str(path)
+    fs = opts.fs
     start = 0.0
-    if time is not None:
-        rate, start = _rate_from_time(time, where)
-        if fs is not None and abs(rate / fs - 1) > _CLOCK_TOLERANCE:
-            raise TableError(f"{where}: --fs {fs} Hz disagrees with the time column's {rate:.6g} Hz")
-        fs = rate if fs is None else fs
-    if fs is not None and (not np.isfinite(fs) or fs <= 0):
-        raise TableError(f"{fs=} must be a positive finite sample rate in Hz")
-    for j, name in enumerate(names):
-        col = data[:, j]
-        bad = np.flatnonzero(~np.isfinite(col))
-        if bad.size:
-            raise TableError(f"{where}: channel {name!r} has {bad.size} NaN or infinite value(s), the first at sample {int(bad[0])}")
     seen = set()
     for name in names:
         if name in seen:
             raise TableError(f"{where}: channel name {name!r} appears twice")
         seen.add(name)
-    return Table(np.ascontiguousarray(data, dtype=float), tuple(names), None if units is None else tuple(units), fs, start, path, fmt)
+    keep = _select(names, opts.channels, where, time_name)
+    others = tuple(other_channels) + tuple(n for i, n in enumerate(names) if i not in keep)
+    data, names = data[:, keep], [names[i] for i in keep]
+    units = None if units is None else [units[i] for i in keep]
+    if time is not None:
+        time = np.asarray(time, dtype=float) * opts.time_scale
+        rate, start = _rate_from_time(time, where, time_name)
+        if fs is not None and abs(rate / fs - 1) > _CLOCK_TOLERANCE:
+            raise TableError(f"{where}: the given sample rate {fs} Hz (--fs) disagrees with the time column's {rate:.6g} Hz")
+        fs = rate if fs is None else fs
+    if fs is not None and (not np.isfinite(fs) or fs <= 0):
+        raise TableError(f"{fs=} must be a positive finite sample rate in Hz")
+    if not opts.keep_nonfinite:
+        for j, name in enumerate(names):
+            bad = np.flatnonzero(~np.isfinite(data[:, j]))
+            if bad.size:
+                raise TableError(f"{where}: channel {name!r} has {bad.size} NaN or infinite value(s), the first at sample {int(bad[0])}")
+    return Table(np.ascontiguousarray(data, dtype=float), tuple(names), None if units is None else tuple(units), fs, start,
+                 path, fmt, None if time is None else np.ascontiguousarray(time), others)
 
 
 # -- text ------------------------------------------------------------------------------------
@@ -120,7 +176,7 @@ def _delimiter(lines: list[str]) -> str | None:
     return None
 
 
-def _read_text(path: Path, fs: float | None) -> Table:
+def _read_text(path: Path, opts: _Options) -> Table:
     where = str(path)
     text = path.read_text(errors="replace")
     lines = text.splitlines()
@@ -172,20 +228,40 @@ def _read_text(path: Path, fs: float | None) -> Table:
     except ValueError as exc:
         raise TableError(f"{where}: a data row is not numeric ({exc})") from None
     fmt = "labview" if header_at > 0 and units_at is not None else "text"
+    fmt = "labview" if header_at > 0 and units_at is not None else "text"
     units = _split(lines[units_at], delim) if units_at is not None else None
-    tcols = [i for i, n in enumerate(names) if _is_time(n)]
+    tcols = _time_columns(names, opts, where)
     time = data[:, tcols[0]] if tcols else None
-    if time is None and fs is None:
+    if time is None and opts.fs is None:
         raise TableError(f"{where}: no time column ({'/'.join(('Time', 'time', 't'))}) gives the sample rate: give --fs (the sample rate in Hz)")
     keep = [i for i in range(k) if i not in tcols]
     if not keep:
         raise TableError(f"{where}: the file holds only a time column")
-    return _finish(data[:, keep], [names[i] for i in keep], None if units is None else [units[i] for i in keep], fs, path, fmt, time)
+    return _finish(data[:, keep], [names[i] for i in keep], None if units is None else [units[i] for i in keep], opts, path, fmt,
+                   time, names[tcols[0]] if tcols else None)
+
+
+def _time_columns(names: Sequence[str], opts: _Options, where: str) -> list[int]:
+    """The time column: the one the caller names, else every column with a time name that the
+    caller did not ask for as a channel (a temperature ``T``)."""
+    if opts.time_column is None:
+        return [i for i, n in enumerate(names) if _is_time(n) and n not in (opts.channels or ())]
+    if opts.time_column not in names:
+        raise TableError(f"{where}: no time column {opts.time_column!r}; the file has {list(names)}", channel=opts.time_column)
+    return [list(names).index(opts.time_column)]
 
 
 # -- arrays ----------------------------------------------------------------------------------
-def _from_arrays(arrays: dict[str, np.ndarray], fs: float | None, path: Path, fmt: str) -> Table:
+def _leaf_names(paths: Sequence[str]) -> list[str]:
+    """Each array by its last path component where that is unique in the file, else by its
+    whole path (``fast/time`` and ``slow/time``)."""
+    leaves = [p.rsplit("/", 1)[-1] for p in paths]
+    return [leaf if leaves.count(leaf) == 1 else p for p, leaf in zip(paths, leaves)]
+
+
+def _from_arrays(arrays: dict[str, np.ndarray], opts: _Options, path: Path, fmt: str) -> Table:
     where = str(path)
+    fs = opts.fs
     scalars = {k.lower(): v for k, v in arrays.items() if np.ndim(v) == 0 or np.size(v) == 1}
     for key in ("fs", "fs_hz", "sample_rate", "samplerate", "sampling_frequency", "rate"):
         if key in scalars and fs is None:
@@ -193,11 +269,19 @@ def _from_arrays(arrays: dict[str, np.ndarray], fs: float | None, path: Path, fm
     # MATLAB keeps vectors as 1 × N or N × 1 matrices
     series = {k: (np.asarray(v).ravel() if 1 in np.shape(v) else np.asarray(v)) for k, v in arrays.items()
               if np.ndim(v) >= 1 and np.size(v) > 1 and np.issubdtype(np.asarray(v).dtype, np.number)}
-    time = None
-    for k in list(series):
-        if _is_time(k) and series[k].ndim == 1:
-            time = series.pop(k).astype(float)
-            break
+    time = time_name = None
+    if opts.time_column is not None:
+        if opts.time_column not in series:
+            raise TableError(f"{where}: no time array {opts.time_column!r}; the file has {sorted(series)}", channel=opts.time_column)
+        time_name = opts.time_column
+        time = series.pop(time_name)
+        if time.ndim != 1:
+            raise TableError(f"{where}: the time array {time_name!r} has shape {time.shape}; expected a vector")
+    else:
+        for k in list(series):
+            if _is_time(k) and series[k].ndim == 1 and k not in (opts.channels or ()):
+                time_name, time = k, series.pop(k)
+                break
     two_d = {k: v for k, v in series.items() if v.ndim == 2}
     if len(two_d) == 1 and all(v.ndim == 2 for v in series.values()):
         (key, a), = two_d.items()
@@ -205,8 +289,17 @@ def _from_arrays(arrays: dict[str, np.ndarray], fs: float | None, path: Path, fm
             raise TableError(f"{where}: array {key!r} has shape {a.shape}; expected samples × channels (more rows than columns)")
         names = [str(j) for j in range(a.shape[1])]
         data = a.astype(float)
+        others = []
     else:
         ones = {k: v.ravel() for k, v in series.items() if v.ndim == 1 or 1 in v.shape}
+        others = [k for k in series if opts.channels is not None and k not in opts.channels]
+        if opts.channels is not None:
+            # only the asked-for arrays: the file may hold other clocks' arrays of other lengths
+            for name in opts.channels:
+                if name not in ones:
+                    what = f"array {name!r} has shape {series[name].shape}, not a vector" if name in series else f"unknown channel {name!r}"
+                    raise TableError(f"{where}: {what}; the file has the vectors {sorted(ones)}", channel=name)
+            ones = {name: ones[name] for name in opts.channels}
         if not ones:
             raise TableError(f"{where}: holds no numeric channel arrays (found {sorted(arrays)})")
         lengths = {k: v.size for k, v in ones.items()}
@@ -215,77 +308,109 @@ def _from_arrays(arrays: dict[str, np.ndarray], fs: float | None, path: Path, fm
         names = list(ones)
         data = np.column_stack([ones[k].astype(float) for k in names])
     if time is not None and time.size != data.shape[0]:
-        raise TableError(f"{where}: the time array has {time.size} samples, the channels {data.shape[0]}")
+        raise TableError(f"{where}: the time array {time_name!r} has {time.size} samples, the channels {data.shape[0]}")
     if time is None and fs is None:
         raise TableError(f"{where}: no sample rate in the file (a 'fs' value or a time array): give --fs (the sample rate in Hz), fs=None")
-    return _finish(data, names, None, fs, path, fmt, time)
+    return _finish(data, names, None, replace(opts, fs=fs), path, fmt, time, time_name, others)
 
 
-def _read_npy(path: Path, fs: float | None) -> Table:
+def _read_npy(path: Path, opts: _Options) -> Table:
     a = np.load(path, allow_pickle=False)
     if not np.issubdtype(a.dtype, np.number):
         raise TableError(f"{path}: array of dtype {a.dtype} is not numeric")
     if a.ndim == 1:
-        if fs is None:
+        if opts.fs is None:
             raise TableError(f"{path}: a 1-D array of {a.size} samples needs its sample rate: give --fs (fs=None)")
         a = a[:, None]
     elif a.ndim != 2:
         raise TableError(f"{path}: array of shape {a.shape} must be 1-D or 2-D (samples × channels)")
-    if fs is None:
-        raise TableError(f"{path}: a .npy array carries no sample rate: give --fs (fs=None)")
     if a.shape[0] < a.shape[1]:
         raise TableError(f"{path}: array of shape {a.shape} has more columns than rows; expected samples × channels")
-    return _finish(a.astype(float), [str(j) for j in range(a.shape[1])], None, fs, path, "npy")
+    names = [str(j) for j in range(a.shape[1])]
+    tcols = _time_columns(names, opts, str(path)) if opts.time_column is not None else []
+    if not tcols and opts.fs is None:
+        raise TableError(f"{path}: a .npy array carries no sample rate: give --fs (fs=None)")
+    keep = [j for j in range(a.shape[1]) if j not in tcols]
+    time = a[:, tcols[0]] if tcols else None
+    return _finish(a[:, keep].astype(float), [names[j] for j in keep], None, opts, path, "npy", time,
+                   names[tcols[0]] if tcols else None)
 
 
-def _read_npz(path: Path, fs: float | None) -> Table:
+def _read_npz(path: Path, opts: _Options) -> Table:
     with np.load(path, allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
-    return _from_arrays(arrays, fs, path, "npz")
+    return _from_arrays(arrays, opts, path, "npz")
 
 
-def _read_hdf5(path: Path, fs: float | None, fmt: str = "hdf5") -> Table:
+def _read_hdf5(path: Path, opts: _Options, fmt: str = "hdf5") -> Table:
     try:
         import h5py
     except ImportError:
         raise TableError(f"{path}: reading HDF5 (and MATLAB v7.3) needs h5py: pip install h5py") from None
-    arrays: dict[str, np.ndarray] = {}
-    with h5py.File(path, "r") as h:
+    found: dict[str, np.ndarray] = {}
+    try:
+        h = h5py.File(path, "r")
+    except OSError as exc:
+        raise TableError(f"{path}: not an HDF5 file h5py can read ({exc})") from None
+    with h:
         def visit(name, obj):
-            if isinstance(obj, h5py.Dataset) and np.issubdtype(obj.dtype, np.number):
-                a = np.asarray(obj[()])
-                # MATLAB v7.3 stores arrays transposed (column-major)
-                arrays[name.split("/")[-1]] = a.T if fmt == "mat" and a.ndim == 2 else a
+            if not isinstance(obj, h5py.Dataset) or not np.issubdtype(obj.dtype, np.number):
+                return
+            if fmt == "mat" and (name.startswith("#") or obj.attrs.get("MATLAB_class", b"double") in (b"char", b"logical")):
+                return  # MATLAB's references and its text and logical arrays are not channels
+            a = np.asarray(obj[()])
+            # MATLAB v7.3 stores arrays transposed (column-major)
+            found[name] = a.T if fmt == "mat" and a.ndim == 2 else a
         h.visititems(visit)
+        arrays = dict(zip(_leaf_names(list(found)), found.values()))
         for k, v in h.attrs.items():
             if np.ndim(v) == 0 and np.issubdtype(np.asarray(v).dtype, np.number):
                 arrays.setdefault(k, np.asarray(v))
-    return _from_arrays(arrays, fs, path, fmt)
+    return _from_arrays(arrays, opts, path, fmt)
 
 
-def _read_mat(path: Path, fs: float | None) -> Table:
+def _mat_arrays(raw: dict, prefix: str = "") -> dict[str, np.ndarray]:
+    """The numeric arrays of a loaded v5 file, the fields of 1 × 1 structs as ``struct/field``."""
+    out: dict[str, np.ndarray] = {}
+    for k, v in raw.items():
+        if k.startswith("__") or not isinstance(v, np.ndarray):
+            continue
+        if v.dtype.names and v.size == 1:
+            out.update(_mat_arrays({f: v.ravel()[0][f] for f in v.dtype.names}, f"{prefix}{k}/"))
+        elif np.issubdtype(v.dtype, np.number):
+            out[prefix + k] = v
+    return out
+
+
+def _read_mat(path: Path, opts: _Options) -> Table:
     from scipy import io
 
     try:
         raw = io.loadmat(path, squeeze_me=False)
     except NotImplementedError:  # v7.3: HDF5
-        return _read_hdf5(path, fs, "mat")
+        return _read_hdf5(path, opts, "mat")
     except ValueError as exc:
         raise TableError(f"{path}: not a MATLAB file scipy can read ({exc})") from None
-    arrays = {k: v for k, v in raw.items() if not k.startswith("__") and isinstance(v, np.ndarray) and np.issubdtype(v.dtype, np.number)}
-    return _from_arrays(arrays, fs, path, "mat")
+    found = _mat_arrays(raw)
+    return _from_arrays(dict(zip(_leaf_names(list(found)), found.values())), opts, path, "mat")
 
 
-def _read_mcap(path: Path, fs: float | None) -> Table:
+def _read_mcap(path: Path, opts: _Options) -> Table:
     from .recording import read_recording
 
     rec = read_recording(path)
+    sensors = rec.rig.sensor_by_topic()
     chans = []
     for topic in sorted(rec.channels):
         c = rec.channels[topic]
         if c.kind == "imu":
+            # an IMU whose rig.json lists its ``axes`` (an extension key: a single-axis
+            # accelerometer imported by ``shm import``) gives only those; the others are fill
+            sensor = sensors.get(topic)
+            axes = None if sensor is None else (sensor.model_extra or {}).get("axes")
             for axis, j in (("x", 0), ("y", 1), ("z", 2)):
-                chans.append((f"{c.name}.accel_{axis}", "m/s^2", c, j))
+                if axes is None or f"accel_{axis}" in axes:
+                    chans.append((f"{c.name}.accel_{axis}", "m/s^2", c, j))
         elif c.kind == "strain":
             chans.append((f"{c.name}.strain", "m/m", c, 0))
     if not chans:
@@ -294,13 +419,13 @@ def _read_mcap(path: Path, fs: float | None) -> Table:
     t0 = max(int(c.log_time_ns[0]) for _, _, c, _ in chans if len(c))
     t1 = min(int(c.log_time_ns[-1]) for _, _, c, _ in chans if len(c))
     step = float(np.median(np.diff(chans[0][2].log_time_ns)))
-    rate = 1e9 / step if fs is None else fs
+    rate = 1e9 / step if opts.fs is None else opts.fs
     n = int(np.floor((t1 - t0) / 1e9 * rate)) + 1
     if n < 2:
         raise TableError(f"{path}: the channels share no common time span")
     grid = t0 + np.arange(n) * (1e9 / rate)
     data = np.column_stack([np.interp(grid, c.log_time_ns.astype(float), c.values[:, j]) for _, _, c, j in chans])
-    table = _finish(data, [n_ for n_, *_ in chans], [u for _, u, *_ in chans], rate, path, "mcap")
+    table = _finish(data, [n_ for n_, *_ in chans], [u for _, u, *_ in chans], replace(opts, fs=rate), path, "mcap")
     return replace(table, start_s=(t0 - rec.start_ns) / 1e9)
 
 
@@ -310,7 +435,8 @@ _READERS = {
 _TEXT = (".csv", ".tsv", ".txt", ".dat", ".lvm", ".asc")
 
 
-def read_table(path: str | Path, *, fs: float | None = None) -> Table:
+def read_table(path: str | Path, *, fs: float | None = None, channels: Sequence[str] | None = None,
+               time_column: str | None = None, time_unit: str = "s", nonfinite: str = "raise") -> Table:
     """Read measured channels from ``path`` (format from the suffix; see the module docstring).
 
     Parameters
@@ -318,6 +444,17 @@ def read_table(path: str | Path, *, fs: float | None = None) -> Table:
     path : str or Path
     fs : float, optional
         Sample rate (Hz); required where the file has none (.npy, text without a time column).
+    channels : sequence of str, optional
+        The channels to read, in this order (default: all). For ``.npz``/``.mat``/HDF5 only these
+        arrays are read, so arrays of another length (another clock) may share the file.
+    time_column : str, optional
+        The column (array, or ``.npy`` column index as text) holding the sample times; default:
+        the first column named like a time (``TIME_NAMES``).
+    time_unit : {"s", "ms", "us", "ns"}
+        Unit of the time column; ``Table.time`` and ``fs_hz`` are in s and Hz.
+    nonfinite : {"raise", "keep"}
+        What a NaN or infinite channel value does: raise, or stay in ``data`` for the caller to
+        count and skip.
 
     Returns
     -------
@@ -327,7 +464,8 @@ def read_table(path: str | Path, *, fs: float | None = None) -> Table:
     ------
     TableError
         For an unknown suffix, a file without a header naming its columns, a missing sample
-        rate, a non-uniform time column, NaN in a channel, or a malformed file.
+        rate, a non-uniform time column, NaN in a channel (with ``nonfinite="raise"``), an
+        unknown channel, arrays of different lengths, or a malformed file.
     FileNotFoundError
         If the file does not exist.
     """
@@ -336,11 +474,20 @@ def read_table(path: str | Path, *, fs: float | None = None) -> Table:
         raise FileNotFoundError(f"{p}: no such file")
     if fs is not None and (isinstance(fs, bool) or not np.isfinite(fs) or fs <= 0):
         raise TableError(f"{fs=} must be a positive finite sample rate in Hz")
+    if time_unit not in TIME_UNITS:
+        raise TableError(f"{time_unit=} is not one of {sorted(TIME_UNITS)}")
+    if nonfinite not in ("raise", "keep"):
+        raise TableError(f"{nonfinite=} must be 'raise' or 'keep'")
+    if channels is not None:
+        channels = tuple(channels)
+        if not channels or len(set(channels)) != len(channels):
+            raise TableError(f"{channels=} must name at least one channel, each once")
+    opts = _Options(fs, channels, time_column, TIME_UNITS[time_unit], nonfinite == "keep")
     suffix = p.suffix.lower()
     if suffix in _READERS:
-        return _READERS[suffix](p, fs)
+        return _READERS[suffix](p, opts)
     if suffix in _TEXT:
-        return _read_text(p, fs)
+        return _read_text(p, opts)
     raise TableError(f"{p}: unknown format {suffix!r} (known: {', '.join(sorted((*_READERS, *_TEXT)))})")
 
 
