@@ -19,7 +19,7 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
-from ._rig import RigDescription
+from contract import RigDescription
 
 __all__ = ["BeamModel", "NodalShapes", "NaturalModes", "assemble_beam", "natural_modes"]
 

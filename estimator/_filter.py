@@ -25,7 +25,7 @@ from ._imms import (
     state_size,
     tip_variance,
 )
-from ._rig import RigDescription
+from contract import RigDescription
 from ._selection import SensorSelection, select_sensors
 from ._unit_deformations import UnitDeformations, unit_deformations
 
