@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dashboard_feeder import TOKEN, DemoFeeder, FakeService, history_rows, simulated_estimates
+from contract import ModeDocument, WindowDocument
+from dashboard_feeder import TOKEN, DemoFeeder, FakeService, alarm, history_rows, simulated_estimates
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [
@@ -60,23 +61,22 @@ def chromium() -> str:
 def live_dashboard():
     from web import Dashboard
 
-    rig, units, stations, times, states, truth = simulated_estimates(20.0)
+    rig, units, layout, stations, times, states, truth = simulated_estimates(20.0)
     sensor_states = {s.topic: "ok" for s in rig.sensors}
     sensor_states["/tof/s3"] = "degraded"
     sensor_states["/strain/g2"] = "rejected"
-    service = FakeService(history=history_rows(40, units.count, stations, t0=-40 * 30.0), sensors=sensor_states)
-    dash = Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, stations=stations, service=service)
+    service = FakeService(history=history_rows(40, units, t0=-40 * 30.0), sensors=sensor_states)
+    dash = Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=layout, stations=stations, service=service)
     feeder = DemoFeeder(dash, times, states, truth, sensor_states, rate_hz=20.0)
     feeder.push_spectra(len(times) - 1)
-    dash.push_window({
-        "start_s": 0.0, "end_s": 30.0, "kind": "ambient", "trusted": True, "temperature_c": 20.5,
-        "modes": [{"mode": m, "frequency_hz": f, "damping_ratio": 0.004, "confidence": 0.9}
-                  for m, f in zip(range(1, 5), (0.861, 1.885, 3.507, 5.645))],
-        "frequency_scores_sigma": [0.4, -6.2, 0.1, -0.3],
-        "curvature_index": np.linspace(0.02, 0.35, stations.size).tolist(),
-        "curvature_eta_m": float(stations[-1]), "curvature_third": "lower",
-        "levels": {"mode1": "ok", "mode2": "alarm", "mode3": "ok", "mode4": "ok"},
-    })
+    dash.push_window(WindowDocument(
+        source="virtual-rig", start_s=0.0, end_s=30.0, kind="ambient", trusted=True, temperature_c=20.5,
+        modes=[ModeDocument(mode=m, unit=u, frequency_hz=f, damping_ratio=0.004, confidence=0.9, score_sigma=z, level=lvl)
+               for m, u, f, z, lvl in zip(range(1, 6), (1, 1, 2, 3, 4), (0.301, 0.861, 1.885, 3.507, 5.645),
+                                          (0.2, -6.2, 0.1, -0.3, 0.5), ("ok", "alarm", "ok", "ok", "ok"))],
+        curvature={"index": np.linspace(0.02, 0.35, stations.size).tolist(), "total": 0.2, "eta_m": float(stations[-1]),
+                   "third": "lower"},
+    ))
     feeder.start()
     yield dash, service, feeder
     feeder.stop()
@@ -129,10 +129,8 @@ def test_dashboard_in_headless_chromium(chromium, live_dashboard, tmp_path):
             assert _rss_bytes() - rss0 < 30 * 2**20
 
             # An alarm raised by the service shows up as a notification and in the header.
-            alarm = {"id": 42, "level": "alarm", "state": "raised", "mode": 2,
-                     "message": "mode 2 frequency 1.1 % below baseline (6.2 σ)", "since_s": 25.0}
-            service.add_alarm({**alarm, "state": "active"})
-            dash.push_alarm(alarm)
+            service.add_alarm(alarm(42))
+            dash.push_alarm(alarm(42))
             _visible(page, "ALARM #42 raised").wait_for(timeout=10_000)
             _visible(page, "1 ALARM").wait_for(timeout=10_000)
             try:  # the browser's own notice about software WebGL only hides the picture
@@ -201,11 +199,12 @@ def test_dashboard_in_headless_chromium(chromium, live_dashboard, tmp_path):
             type_token("wrong")
             page.get_by_role("button", name="Acknowledge").click()
             _visible(page, "Not acknowledged").wait_for(timeout=10_000)
-            assert service.alarms()[0].get("acknowledged_at_s") is None
+            assert not service.alarms()[0].acknowledged
             type_token(TOKEN)
             page.get_by_role("button", name="Acknowledge").click()
             _visible(page, "Alarm #42 acknowledged").wait_for(timeout=10_000)
-            assert service.alarms()[0]["acknowledged_at_s"] is not None
+            assert service.alarms()[0].acknowledged
+            _visible(page, "active, acknowledged by operator", exact=False).wait_for(timeout=10_000)
 
             # Pause freezes this browser's view and, with no live browser left, the pushes.
             page.get_by_text("Spectra", exact=True).first.click()
