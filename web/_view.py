@@ -403,7 +403,7 @@ class ClientView:
             return
         token = str(self.token.value)
         try:
-            result = self.dash.service.acknowledge(alarm_id, token)
+            result = self.dash.service.acknowledge(alarm_id, token, by="dashboard")
         except PermissionError as exc:
             self.ack_result.content = f"<p style='color:#dc2626'>Not acknowledged: {html.escape(str(exc) or 'token missing or wrong')}</p>"
             return
@@ -619,15 +619,14 @@ class ClientView:
         scores = [_arr([w.score_sigma.get(m) for w in shown]) for m in modes]
         self.score_plot.data = (x, *scores, *_threshold_lines(th.get("frequency"), x.size))
         self.score_plot.visible = any(np.isfinite(s).any() for s in scores)
-        for plot in (self.damping_plot, self.score_plot):
+        for plot, levels in ((self.damping_plot, None), (self.score_plot, th.get("frequency"))):
             series = list(plot.series)
-            changed = False
             for i, m in enumerate(modes, start=1):
-                want = m in visible_modes
-                if series[i].get("show", True) != want:
-                    series[i] = {**series[i], "show": want}
-                    changed = True
-            if changed:
+                if series[i].get("show", True) != (m in visible_modes):
+                    series[i] = {**series[i], "show": m in visible_modes}
+            if plot is self.score_plot:
+                series[len(modes) + 1:] = _threshold_series(levels)
+            if tuple(series) != tuple(plot.series):
                 plot.series = tuple(series)
         temps = _arr([w.temperature_c for w in shown])
         self.temperature_plot.data = (x, temps)
@@ -638,6 +637,9 @@ class ClientView:
         curv_scores = _arr([w.curvature_score_sigma for w in shown])
         self.curv_score_plot.data = (x, curv_scores, *_threshold_lines(th.get("curvature"), x.size))
         self.curv_score_plot.visible = bool(np.isfinite(curv_scores).any())
+        curv_series = (*self.curv_score_plot.series[:2], *_threshold_series(th.get("curvature")))
+        if tuple(self.curv_score_plot.series) != curv_series:
+            self.curv_score_plot.series = curv_series
         profiles = [w.curvature_profile for w in shown if w.curvature_profile is not None]
         if profiles:
             stack = np.array(profiles)
@@ -753,12 +755,14 @@ def _colour(index: int) -> str:
     return MODE_COLOURS[(index - 1) % len(MODE_COLOURS)]
 
 
-def _threshold_series() -> tuple[dict, ...]:
+def _threshold_series(levels: tuple[float, float] | None = None) -> tuple[dict, ...]:
+    """The four level lines of a control chart; their legend names the levels (σ) in force."""
+    warning, alarm = ("?", "?") if levels is None else (f"{levels[0]:g}", f"{levels[1]:g}")
     return (
-        {"label": "warning +", "stroke": "#ffaa00", "dash": (6, 4), "width": 1},
-        {"label": "warning −", "stroke": "#ffaa00", "dash": (6, 4), "width": 1},
-        {"label": "alarm +", "stroke": "#dc2626", "dash": (6, 4), "width": 1.5},
-        {"label": "alarm −", "stroke": "#dc2626", "dash": (6, 4), "width": 1.5},
+        {"label": f"warning +{warning} σ", "stroke": "#ffaa00", "dash": (6, 4), "width": 1},
+        {"label": f"warning −{warning} σ", "stroke": "#ffaa00", "dash": (6, 4), "width": 1},
+        {"label": f"alarm +{alarm} σ", "stroke": "#dc2626", "dash": (6, 4), "width": 1.5},
+        {"label": f"alarm −{alarm} σ", "stroke": "#dc2626", "dash": (6, 4), "width": 1.5},
     )
 
 

@@ -48,8 +48,8 @@ class DashboardService(Protocol):
         """All alarms, newest first."""
         ...
 
-    def acknowledge(self, alarm_id: int, token: str) -> AlarmDocument:
-        """Acknowledge an alarm; same rules as ``POST /api/alarms/{id}/ack``.
+    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
+        """Acknowledge an alarm as ``by`` (who: shown with the alarm); same rules as ``POST /api/alarms/{id}/ack``.
 
         Raises ``PermissionError`` on a missing or wrong token (or when no token is configured),
         ``KeyError`` when the alarm does not exist. Returns the updated alarm.

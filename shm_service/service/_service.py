@@ -317,7 +317,7 @@ class MonitoringService:
     def alarms(self, state: str | None = None) -> list[AlarmDocument]:
         return self.storage.alarms(state=state)
 
-    def acknowledge(self, alarm_id: int, token: str, by: str = "api") -> AlarmDocument:
+    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         self.check_token(token)
         alarm = self.storage.acknowledge(alarm_id, by)
         if alarm is None:

@@ -100,13 +100,13 @@ class FakeService:
             self._alarms[alarm.id] = alarm
             return alarm
 
-    def acknowledge(self, alarm_id: int, token: str) -> AlarmDocument:
+    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         if self.token is None or not token or token != self.token:
             raise PermissionError("missing or wrong token")
         with self.lock:
             if alarm_id not in self._alarms:
                 raise KeyError(alarm_id)
-            alarm = self._alarms[alarm_id].model_copy(update={"acknowledged_at_s": time.time(), "acknowledged_by": "operator"})
+            alarm = self._alarms[alarm_id].model_copy(update={"acknowledged_at_s": time.time(), "acknowledged_by": by})
             self._alarms[alarm_id] = alarm
             return alarm
 
