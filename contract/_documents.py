@@ -40,6 +40,7 @@ __all__ = [
     "CurvatureDocument",
     "DegradedImuDocument",
     "EstimateDocument",
+    "ErrorDocument",
     "EstimatorStatusDocument",
     "FlagDocument",
     "HealthDocument",
@@ -581,6 +582,13 @@ class BaselineRequestDocument(_Document):
     state: Literal["learning"]
     source: str
     learn_s: Finite
+
+
+class ErrorDocument(_Document):
+    """The body of every error response: a sentence saying what is wrong, or (for a request
+    that does not match the API's parameter types) FastAPI's list of validation errors."""
+
+    detail: str | list[dict[str, Any]]
 
 
 class IngestErrorDocument(_Document):

@@ -22,6 +22,7 @@ from contract import (
     AlarmDocument,
     AlarmsDocument,
     BaselineRequestDocument,
+    ErrorDocument,
     HealthDocument,
     IngestResultDocument,
     SpectrumDocument,
@@ -137,10 +138,16 @@ def _parse_time(name: str, value: str | None) -> float | None:
     return x
 
 
+def _error(description: str) -> dict[str, Any]:
+    return {"model": ErrorDocument, "description": description}
+
+
 _AUTH_RESPONSES: dict[int | str, dict[str, Any]] = {
-    401: {"description": "missing or wrong token"},
-    403: {"description": "no token is configured: the action is disabled"},
+    401: _error("missing or wrong token"),
+    403: _error("no token is configured: the action is disabled"),
 }
+#: Our own 422s say in a sentence what is wrong with a parameter; FastAPI's list what does not parse.
+_INVALID = {422: _error("a parameter is invalid")}
 
 
 def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: int = 64 * 1024,
@@ -178,7 +185,7 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
         return service.status()
 
     @app.get("/api/trends", summary="the modal trend export (one row per window and mode)", response_model=TrendsDocument,
-             responses={**_AUTH_RESPONSES, 200: {"content": {"text/csv": {"schema": {"type": "string"}}}}})
+             responses={**_AUTH_RESPONSES, **_INVALID, 200: {"content": {"text/csv": {"schema": {"type": "string"}}}}})
     def trends(
         from_: str | None = Query(None, alias="from", max_length=64, description="UNIX s or ISO 8601 (inclusive)"),
         to: str | None = Query(None, max_length=64, description="UNIX s or ISO 8601 (exclusive)"),
@@ -200,13 +207,13 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
                             headers={"Content-Disposition": 'attachment; filename="trends.csv"'})
         return TrendsDocument(rows=rows, count=len(rows))
 
-    @app.get("/api/alarms", summary="alarms, newest first", response_model=AlarmsDocument, responses=_AUTH_RESPONSES)
+    @app.get("/api/alarms", summary="alarms, newest first", response_model=AlarmsDocument, responses={**_AUTH_RESPONSES, **_INVALID})
     def alarms(state: Literal["active", "cleared"] | None = Query(None, description="only alarms in this state")) -> AlarmsDocument:
         items = service.alarms(state)
         return AlarmsDocument(alarms=items, count=len(items))
 
     @app.post("/api/alarms/{alarm_id}/ack", summary="acknowledge an alarm (token required)", response_model=AlarmDocument,
-              responses={**_AUTH_RESPONSES, 404: {"description": "no such alarm"}})
+              responses={**_AUTH_RESPONSES, **_INVALID, 404: _error("no such alarm")})
     def acknowledge(request: Request, alarm_id: int = Path(..., ge=1, le=2**62)) -> AlarmDocument:
         authorize(request)
         try:
@@ -217,7 +224,7 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
             raise HTTPException(401, str(exc)) from None
 
     @app.get("/api/spectra/latest", summary="amplitude spectra of b of the latest window", response_model=SpectrumDocument,
-             responses={**_AUTH_RESPONSES, 404: {"description": "no window analysed yet"}})
+             responses={**_AUTH_RESPONSES, 404: _error("no window analysed yet")})
     def spectra() -> SpectrumDocument:
         spec = service.spectra()
         if spec is None:
@@ -233,8 +240,8 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
     @app.post(
         "/api/ingest", summary="ingest a batch of samples in the recording format (token required)",
         response_model=IngestResultDocument,
-        responses={**_AUTH_RESPONSES, 400: {"description": "body is not a valid batch"}, 409: {"description": "source is not ingest"},
-                   413: {"description": "body too large"}, 503: {"description": "pipeline full, retry later"}},
+        responses={**_AUTH_RESPONSES, 400: _error("body is not a valid batch"), 409: _error("source is not ingest"),
+                   413: _error("body too large"), 503: _error("pipeline full, retry later")},
         openapi_extra={"requestBody": {"required": True, "content": {"application/json": {"schema": {
             "type": "object", "required": ["messages"], "additionalProperties": False,
             "properties": {"messages": {"type": "array", "items": {

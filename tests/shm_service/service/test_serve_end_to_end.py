@@ -166,3 +166,37 @@ def test_replay_of_a_recording_written_channel_after_channel(tmp_path):
     src = st.sources[0]
     assert src.state == "finished" and src.dropped == 0 and src.rejected == 0
     assert st.pipeline.estimates > 59 * 200
+
+
+def test_replay_with_the_dashboard_on_commits_every_window_and_logs_no_error(tmp_path, short_recording):
+    """``shm serve`` as a subprocess with its dashboard on (free port), the log read afterwards."""
+    import tomli_w
+
+    cfg = fast_overrides(tmp_path)
+    cfg.pop("db")
+    cfg["dashboard"] = {"enabled": True, "port": 0}
+    toml = tmp_path / "serve.toml"
+    toml.write_text(tomli_w.dumps(cfg))
+    db = tmp_path / "shm.sqlite"
+    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(toml), "--source", f"replay:{short_recording}",
+           "--speed", "max", "--port", "0", "--db", str(db), "--json"]
+    proc = subprocess.run(cmd, cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
+                          timeout=300)
+    log = proc.stderr
+    assert proc.returncode == 0, log[-3000:]
+    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert summary["state"] == "finished" and summary["pipeline_errors"] == 0 and summary["sink_errors"] == {}, summary
+    # every analysed window was committed, and the committed windows reach the end of the recording
+    assert summary["windows"] == summary["windows_committed"] >= 8, summary
+    con = sqlite3.connect(db)
+    starts = [r[0] for r in con.execute("SELECT DISTINCT window_start_s FROM trends ORDER BY window_start_s")]
+    con.close()
+    assert len(starts) == summary["windows_committed"]
+    rec = read_recording(short_recording)
+    window = cfg["analytics"]["window_s"]
+    step = window * (1 - cfg["analytics"]["overlap"])
+    assert rec.end_ns / 1e9 - (starts[-1] + window) < step + 1e-6
+    assert all(abs(b - a - step) < 1e-6 for a, b in zip(starts, starts[1:])), "a window is missing"
+    levels = [line.split()[2] for line in log.splitlines() if len(line.split()) > 2]
+    assert "Traceback" not in log and "ERROR" not in levels and "WARNING" not in levels, log[-3000:]
+    assert "dashboard at http://" in proc.stdout
