@@ -11,7 +11,7 @@ from typing import Literal, Mapping
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from contract import ModeMap, RigDescription, StateLayout
+from contract import BEARING_TOPIC, ModeMap, RigDescription, StateLayout
 
 from ._beam import assemble_beam
 from ._imms import (
@@ -171,7 +171,7 @@ class ImmsModel:
     @property
     def aiding_channels(self) -> list[str]:
         return ([f"/tof/{n}" for n in self.selection.tofs] + [f"/strain/{n}" for n in self.selection.gauges]
-                + ["/bearing/displacement", "pseudo:h", "pseudo:h_rate"])
+                + [BEARING_TOPIC, "pseudo:h", "pseudo:h_rate"])
 
     def tip_row(self) -> np.ndarray:
         return self.units.shape(self.rig.beam.length)

@@ -6,7 +6,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from contract import IMU_PLANAR_COLUMNS, TRUTH_TOPIC, estimate_payloads as _estimate_payloads, row_layout
+from contract import (
+    BEARING_TOPIC,
+    IMU_PLANAR_COLUMNS,
+    TEMPERATURE_TOPIC,
+    TRUTH_TOPIC,
+    row_layout,
+)
+from contract import estimate_payloads as _estimate_payloads
 from estimator import EstimateResult, Measurements, SensorSeries
 
 from .recording import Recording
@@ -128,11 +135,11 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
     }
     stamps = rec.start_ns + np.round(result.t * 1e9).astype(np.int64)
     with RecordingWriter(path, rec.rig, metadata=metadata) as writer:
-        for topic in ("/env/temperature", "/bearing/displacement"):
+        for topic in (TEMPERATURE_TOPIC, BEARING_TOPIC):
             channel = rec.channels.get(topic)
             if channel is None:
                 continue
-            key = "celsius" if topic == "/env/temperature" else "distance"
+            key = "celsius" if topic == TEMPERATURE_TOPIC else "distance"
             for lt, pt, value in zip(channel.log_time_ns.tolist(), channel.publish_time_ns.tolist(), channel.values[:, 0].tolist()):
                 writer.write(topic, lt, {key: value}, pt)
         for stamp, payload in zip(stamps.tolist(), estimate_payloads(result)):
@@ -178,11 +185,11 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None) -> Def
         times, b, units = result.t, result.b, model.units
         estimated_here = True
     temperature = None
-    channel = rec.channels.get("/env/temperature")
+    channel = rec.channels.get(TEMPERATURE_TOPIC)
     if channel is not None and len(channel) >= 2:
         temperature = ((channel.log_time_ns - rec.start_ns) * _NS, channel.values[:, 0])
     bearing = None
-    channel = rec.channels.get("/bearing/displacement")
+    channel = rec.channels.get(BEARING_TOPIC)
     if channel is not None and len(channel) >= 2:
         bearing = np.interp(times, (channel.log_time_ns - rec.start_ns) * _NS, channel.values[:, 0])
     return DeformationRecord(times, b, units, np.asarray(rec.rig.truth_stations, dtype=float) if rec.rig.truth_stations

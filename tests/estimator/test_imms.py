@@ -291,3 +291,39 @@ def test_model_refuses_bad_configurations():
 
     with pytest.raises(ValueError, match="no IMU named 'D'"):
         build_model(parse_rig(no_d))
+
+
+@pytest.mark.parametrize("peripheral", ["gyro", "acc"])
+def test_kernels_read_every_offset_from_the_layout(peripheral):
+    """The same model run through a layout without φ and β_D (a support that fixes φ ≡ 0) gives,
+    at φ = 0, ω_D = 0 and β_D = 0, exactly the propagation and ToF Jacobian of the full layout on
+    the states both have: no offset is hard-wired in the compiled kernels."""
+    from contract import StateLayout
+
+    model = build_model(default_rig(), peripheral=peripheral)
+    full = model.state_layout
+    fixed = StateLayout(full.peripheral, full.gamma, full.nu, attitude=False, imu_names=full.imu_names)
+    common = [full.position(name) for name in fixed.names]
+    assert len(common) == full.size - 2
+    arrays = model_arrays(model, _zero_calibration(model), FilterConfig())
+    rng = np.random.default_rng(5)
+    x_full = np.zeros(full.size)
+    x_full[common] = rng.normal(scale=1e-2, size=fixed.size)
+    x_fixed = x_full[common].copy()
+    nu = full.nu
+    active = np.ones(nu, dtype=np.bool_)
+    inputs = (np.array([-9.7, 0.3]), 0.0, rng.normal(scale=0.1, size=(nu, 2)) + [-9.81, 0.0], rng.normal(scale=1e-2, size=nu))
+    results = []
+    for layout, x in ((full, x_full), (fixed, x_fixed)):
+        m = arrays._replace(index=layout.index)
+        xn, F, Q = propagate(m, x, 0.005, *inputs, active, least_squares_map(m, active))
+        rho, H = tof_measurement(layout.index, x, model.tof_eta[1], arrays.tof_S[1], arrays.tof_S1[1],
+                                 model.rig.reflector_distance)
+        results.append((xn, F, Q, rho, H))
+    (xn_a, F_a, Q_a, rho_a, H_a), (xn_b, F_b, Q_b, rho_b, H_b) = results
+    assert np.abs(xn_a[full.b] - x_full[full.b]).max() > 1e-6  # b moved: not a trivial comparison
+    np.testing.assert_array_equal(xn_a[common], xn_b)
+    np.testing.assert_array_equal(F_a[np.ix_(common, common)], F_b)
+    np.testing.assert_allclose(Q_a[np.ix_(common, common)], Q_b, rtol=1e-12, atol=1e-30)
+    assert rho_a == rho_b
+    np.testing.assert_array_equal(H_a[common], H_b)
