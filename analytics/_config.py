@@ -49,6 +49,14 @@ class AnalysisConfig(BaseModel):
     curvature_min_std: float = Field(0.005, gt=0, description="floor of one window's curvature-shape scatter (unit-RMS shape) [0.005]: a few high-SNR windows (free decays) underrate the scatter between events")
     spectrum_memory_windows: float = Field(1.0, ge=1, description="time constant of the power-spectra average the per-window frequencies are read from, windows [1: each window alone]; > 1 smooths the estimates, which the baseline scatter then underrates")
 
+    def chart_levels(self, kind: str) -> tuple[float, float]:
+        """(warning, alarm) levels in σ of the ``"frequency"`` or ``"curvature"`` control charts."""
+        if kind == "frequency":
+            return self.warning_sigma, self.alarm_sigma
+        if kind == "curvature":
+            return self.warning_sigma, max(self.curvature_alarm_sigma, self.warning_sigma)
+        raise ValueError(f"{kind=} must be 'frequency' or 'curvature'")
+
     @model_validator(mode="after")
     def _levels(self) -> "AnalysisConfig":
         if not self.clear_sigma < self.warning_sigma <= self.alarm_sigma:

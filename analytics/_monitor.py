@@ -8,6 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from contract import CURVATURE_CHART, chart_name
+
 from ._chart import EwmaChart
 from ._config import AnalysisConfig
 from ._curvature import CurvatureChange, curvature_change, curvature_shape
@@ -289,7 +291,8 @@ class ModalMonitor:
 
     def _chart(self, inflation: float) -> EwmaChart:
         c = self.config
-        return EwmaChart(c.ewma_lambda, c.warning_sigma, c.alarm_sigma, c.clear_sigma, c.hold_windows, inflation)
+        warning, alarm = c.chart_levels("frequency")
+        return EwmaChart(c.ewma_lambda, warning, alarm, c.clear_sigma, c.hold_windows, inflation)
 
     def _arm(self, baseline: Baseline) -> None:
         if not self.ref:
@@ -299,7 +302,8 @@ class ModalMonitor:
         self._charts = [self._chart(math.sqrt((1 + m.rho) / (1 - m.rho))) for m in baseline.modes]
         c = self.config
         # the statistic already averages (cross spectra over curvature_memory_windows): no second EWMA
-        self._ci_chart = EwmaChart(1.0, c.warning_sigma, max(c.curvature_alarm_sigma, c.warning_sigma), c.clear_sigma, c.hold_windows, 1.0)
+        warning, alarm = c.chart_levels("curvature")
+        self._ci_chart = EwmaChart(1.0, warning, alarm, c.clear_sigma, c.hold_windows, 1.0)
 
     def _init_modes(self, spec) -> None:
         for u in range(self.gamma):
@@ -425,7 +429,7 @@ class ModalMonitor:
                     # One-sided: less shape change than in the healthy period is no damage.
                     z = max((q - bl.curvature_index_mean) / bl.curvature_index_std, 0.0)
                     ci_score, lvl = self._ci_chart.update(z, tmid)
-                    levels["curvature"] = lvl
+                    levels[CURVATURE_CHART] = lvl
             for i, (e, m) in enumerate(zip(est, bl.modes)):
                 if e.frequency_hz is None or e.confidence < c.min_confidence or m.windows < c.baseline_min_windows:
                     continue
@@ -434,7 +438,7 @@ class ModalMonitor:
                 Tw = m.temperature_ref_c if T is None else T
                 expected = m.f_ref_hz * (1 + m.slope_per_k * (Tw - m.temperature_ref_c))
                 rel = e.frequency_hz / expected - 1
-                scores[i], levels[f"mode{m.mode}"] = self._charts[i].update(rel / m.sigma_rel, tmid)
+                scores[i], levels[chart_name("frequency", m.mode)] = self._charts[i].update(rel / m.sigma_rel, tmid)
             location = self._locate(delta, dsd)
             flags = self._flags(change, scores, ci_score, location)
         return WindowResult(t0, t1, kind, trusted, T, tuple(est), tuple(scores), change, ci_score, levels, tuple(flags), location)

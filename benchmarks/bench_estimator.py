@@ -26,7 +26,7 @@ from shm_service.virtual_rig import SimulationSettings, simulate
 def _errors(result, truth, after):
     i = np.searchsorted(truth.t, result.t)
     m = result.t >= after
-    return (result.phi - truth.phi[i])[m], (result.e - truth.e[i])[m], result.P_diag[m, 4], result.var_e[m]
+    return (result.phi - truth.phi[i])[m], (result.e - truth.e[i])[m], result.P_diag[m, result.model.state_layout.phi], result.var_e[m]
 
 
 def accuracy(workdir: Path, seeds, duration: float) -> None:

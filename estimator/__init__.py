@@ -39,7 +39,7 @@ from ._filter import (
     calibrate_at_rest,
     estimate,
 )
-from ._rig import Beam, PointMass, RigDescription, RigError, Sensor, StiffnessSegment, load_rig, parse_rig
+from contract import Beam, PointMass, RigDescription, RigError, Sensor, StiffnessSegment, load_rig, parse_rig
 from ._selection import SensorSelection, default_aided, effective_independence, select_sensors
 from ._unit_deformations import MAX_UNIT_DEFORMATIONS, UnitDeformations, unit_deformations
 

@@ -30,7 +30,7 @@ import scipy.linalg
 import scipy.optimize
 import scipy.special
 
-from ._rig import RigDescription, RigError
+from contract import RigDescription, RigError
 
 __all__ = [
     "GREENHILL_COEFFICIENT",

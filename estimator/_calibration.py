@@ -24,7 +24,7 @@ import numpy as np
 import scipy.optimize
 
 from ._beam import assemble_beam, natural_modes
-from ._rig import RigDescription
+from contract import RigDescription
 
 __all__ = [
     "CalibrationParameter",

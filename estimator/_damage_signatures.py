@@ -24,7 +24,7 @@ import numpy as np
 import scipy.linalg
 
 from ._beam import NodalShapes, assemble_beam, natural_modes
-from ._rig import RigDescription
+from contract import RigDescription
 from ._unit_deformations import unit_deformations
 
 __all__ = ["DamageSignatures", "damage_signatures"]

@@ -11,6 +11,8 @@ from typing import Literal, Mapping
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from contract import BEARING_TOPIC, ModeMap, RigDescription, StateLayout
+
 from ._beam import assemble_beam
 from ._imms import (
     EVENT_BEARING,
@@ -18,14 +20,17 @@ from ._imms import (
     EVENT_IMU_PERIPHERAL,
     EVENT_STRAIN,
     EVENT_TOF,
-    FLOAT_PARAMS,
     KIND_ACC,
     KIND_GYRO,
+    AidingCounters,
+    EventArrays,
+    FilterOutputs,
+    FilterParams,
+    FilterState,
+    ModelArrays,
     run_events,
-    state_size,
     tip_variance,
 )
-from ._rig import RigDescription
 from ._selection import SensorSelection, select_sensors
 from ._unit_deformations import UnitDeformations, unit_deformations
 
@@ -43,6 +48,7 @@ __all__ = [
     "build_model",
     "calibrate_at_rest",
     "estimate",
+    "model_arrays",
 ]
 
 
@@ -144,22 +150,28 @@ class ImmsModel:
         return self.units.count
 
     @property
+    def state_layout(self) -> StateLayout:
+        """Which entry of the state vector is what (the one layout every consumer reads)."""
+        return StateLayout(self.selection.peripheral, self.gamma, len(self.selection.imus), attitude=True,
+                           imu_names=tuple(self.selection.imus))
+
+    @property
+    def mode_map(self) -> ModeMap:
+        """The eigenmodes each unit deformation carries (the labels of trends and spectra)."""
+        return ModeMap.of(self.units.modes)
+
+    @property
     def state_size(self) -> int:
-        return int(state_size(self.kind, self.gamma, len(self.selection.imus)))
+        return self.state_layout.size
 
     @property
     def state_names(self) -> list[str]:
-        names = ["d", "h", "d_rate", "h_rate", "phi"] + [f"b{k + 1}" for k in range(self.gamma)]
-        if self.kind == KIND_ACC:
-            names += [f"v{k + 1}" for k in range(self.gamma)]
-        else:
-            names += [f"gyro_bias_{name}" for name in self.selection.imus]
-        return names + ["gyro_bias_D"]
+        return list(self.state_layout.names)
 
     @property
     def aiding_channels(self) -> list[str]:
         return ([f"/tof/{n}" for n in self.selection.tofs] + [f"/strain/{n}" for n in self.selection.gauges]
-                + ["/bearing/displacement", "pseudo:h", "pseudo:h_rate"])
+                + [BEARING_TOPIC, "pseudo:h", "pseudo:h_rate"])
 
     def tip_row(self) -> np.ndarray:
         return self.units.shape(self.rig.beam.length)
@@ -183,6 +195,9 @@ def build_model(
     temperature_c: float | None = None,
 ) -> ImmsModel:
     """Unit deformations (Γ = ``modes``) of the rig's FE model and the selected sensors (EfI for counts)."""
+    if rig.support != "pinned":
+        raise ValueError(f"support={rig.support!r} is not yet supported by the estimator (it models the pinned bearing, "
+                         "φ a state); a clamped support needs the layout without an attitude state")
     if not any(s.kind == "imu" and s.name == "D" for s in rig.sensors):
         raise ValueError("rig.json has no IMU named 'D' at the bearing: the IMMS needs it")
     units = unit_deformations(assemble_beam(rig, temperature_c=temperature_c), modes)
@@ -393,6 +408,57 @@ class FilterOutput:
                             np.concatenate([p.P_diag for p in parts]), np.concatenate([p.var_e for p in parts]))
 
 
+def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterConfig = FilterConfig()) -> ModelArrays:
+    """What the compiled loop reads of a model, its rest calibration and the tuning (read only).
+
+    Every array is float64 and C-contiguous, so one compiled version of the loop serves all
+    models of a configuration.
+    """
+    m, c, cfg = model, calibration, config
+    units = m.units
+    noise_D = c.noise_D
+    bearing_std = max(cfg.bearing_std, c.bearing_std if np.isfinite(c.bearing_std) else 0.0)
+    params = FilterParams(
+        gravity=float(m.rig.gravity), reflector_distance=float(m.rig.reflector_distance), gate=cfg.gate,
+        stale_after=cfg.stale_after_s, sigma_f_d_x=float(noise_D[0]), sigma_f_d_y=float(noise_D[1]),
+        sigma_omega_d=float(noise_D[2]), q_b=cfg.q_b,
+        q_v=cfg.q_v if cfg.q_v is not None else (1e-4 if m.selection.gauges else 1e-3), q_beta=cfg.q_beta,
+        q_rigid=cfg.q_rigid, bearing_var=bearing_std**2, pseudo_h_var=cfg.pseudo_h_std**2,
+        pseudo_h_rate_var=cfg.pseudo_h_rate_std**2, max_step=cfg.max_step_s, q_null=cfg.q_null,
+        q_beta_peripheral=cfg.q_beta_peripheral,
+    )
+    gamma = m.gamma
+    empty = np.zeros((0, gamma))
+    aided = np.zeros(gamma)
+    aided[[a - 1 for a in m.selection.aided]] = 1.0
+
+    def arr(value: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(value, dtype=np.float64)
+
+    return ModelArrays(
+        index=m.state_layout.index,
+        kind=int(m.kind),
+        params=params,
+        bias_D=arr(c.bias_D),
+        bias_j=arr(c.bias_imu),
+        imu_eta=arr(m.imu_eta),
+        imu_S=arr(units.shape(m.imu_eta) if m.imu_eta.size else empty),
+        imu_S1=arr(units.slope(m.imu_eta) if m.imu_eta.size else empty),
+        sig_fj=arr(c.noise_imu[:, :2]),
+        sig_wj=arr(c.noise_imu[:, 2]),
+        tof_eta=arr(m.tof_eta),
+        tof_S=arr(units.shape(m.tof_eta) if m.tof_eta.size else empty),
+        tof_S1=arr(units.slope(m.tof_eta) if m.tof_eta.size else empty),
+        tof_offset=arr(c.tof_offset),
+        tof_var=arr(c.tof_std**2 + cfg.tof_model_std**2),
+        strain_K=arr(m.strain_matrix()),
+        strain_offset=arr(c.strain_offset),
+        strain_var=arr(c.strain_std**2 + cfg.strain_model_std**2),
+        aided=arr(aided),
+        tip_row=arr(m.tip_row()),
+    )
+
+
 class ImmsFilter:
     """The EKF of one configuration; holds the state between calls of ``process``."""
 
@@ -402,63 +468,41 @@ class ImmsFilter:
         self.config = config
         n = model.state_size
         nu = len(model.selection.imus)
-        self.x = np.zeros(n)
-        self.P = np.eye(n) * config.initial_std**2
-        self.t = float(t0)
-        self._held_fD = np.array([-model.rig.gravity, 0.0])
-        self._held_wD = np.zeros(1)
-        self._held_fj = np.tile([-model.rig.gravity, 0.0], (nu, 1))
-        self._held_wj = np.zeros(nu)
-        self._last_seen = np.full(nu, float(t0))
-        self._active = np.ones(nu, dtype=np.bool_)
-        self._held_t = np.array([float(t0)])
-        self._pending = False
+        g = model.rig.gravity
+        self.state = FilterState(
+            x=np.zeros(n), P=np.eye(n) * config.initial_std**2, clock=np.array([float(t0), float(t0)]),
+            held_fD=np.array([-g, 0.0]), held_wD=np.zeros(1), held_fj=np.tile([-g, 0.0], (nu, 1)), held_wj=np.zeros(nu),
+            last_seen=np.full(nu, float(t0)), active=np.ones(nu, dtype=np.bool_), pending=np.zeros(1, dtype=np.bool_),
+        )
         self._tail = Events.empty()
         n_channels = len(model.aiding_channels)
-        self.accepted = np.zeros(n_channels, dtype=np.int64)
-        self.rejected = np.zeros(n_channels, dtype=np.int64)
-        self.nis_sum = np.zeros(n_channels)
-        self.last_innovation = np.zeros(n_channels)
-        self.degraded_time = np.zeros(nu)
-        self._arrays = self._model_arrays()
-
-    def _model_arrays(self) -> dict[str, np.ndarray]:
-        m, c, cfg = self.model, self.calibration, self.config
-        units = m.units
-        params = dict.fromkeys(FLOAT_PARAMS, 0.0)
-        noise_D = c.noise_D
-        bearing_std = max(cfg.bearing_std, c.bearing_std if np.isfinite(c.bearing_std) else 0.0)
-        params.update(
-            gravity=m.rig.gravity, reflector_distance=m.rig.reflector_distance, gate=cfg.gate,
-            stale_after=cfg.stale_after_s, sigma_f_d_x=noise_D[0], sigma_f_d_y=noise_D[1], sigma_omega_d=noise_D[2],
-            q_b=cfg.q_b, q_v=cfg.q_v if cfg.q_v is not None else (1e-4 if m.selection.gauges else 1e-3), q_beta=cfg.q_beta, q_rigid=cfg.q_rigid, bearing_var=bearing_std**2,
-            pseudo_h_var=cfg.pseudo_h_std**2, pseudo_h_rate_var=cfg.pseudo_h_rate_std**2, max_step=cfg.max_step_s,
-            q_null=cfg.q_null, q_beta_peripheral=cfg.q_beta_peripheral,
+        self.counters = AidingCounters(
+            accepted=np.zeros(n_channels, dtype=np.int64), rejected=np.zeros(n_channels, dtype=np.int64),
+            nis_sum=np.zeros(n_channels), last_innovation=np.zeros(n_channels), degraded_time=np.zeros(nu),
         )
-        gamma = m.gamma
-        empty = np.zeros((0, gamma))
-        aided = np.zeros(gamma)
-        aided[[a - 1 for a in m.selection.aided]] = 1.0
-        return {
-            "iparams": np.array([m.kind, gamma, len(m.selection.imus), len(m.selection.tofs), len(m.selection.gauges)], dtype=np.int64),
-            "params": np.array([params[k] for k in FLOAT_PARAMS]),
-            "bias_D": c.bias_D.astype(float),
-            "bias_j": c.bias_imu.astype(float),
-            "imu_eta": m.imu_eta,
-            "imu_S": units.shape(m.imu_eta) if m.imu_eta.size else empty,
-            "imu_S1": units.slope(m.imu_eta) if m.imu_eta.size else empty,
-            "sig_fj": np.ascontiguousarray(c.noise_imu[:, :2]),
-            "sig_wj": np.ascontiguousarray(c.noise_imu[:, 2]),
-            "tof_eta": m.tof_eta,
-            "tof_S": units.shape(m.tof_eta) if m.tof_eta.size else empty,
-            "tof_S1": units.slope(m.tof_eta) if m.tof_eta.size else empty,
-            "tof_offset": c.tof_offset.astype(float),
-            "tof_var": c.tof_std**2 + cfg.tof_model_std**2,
-            "strain_K": m.strain_matrix(),
-            "strain_offset": c.strain_offset.astype(float),
-            "strain_var": c.strain_std**2 + cfg.strain_model_std**2,
-            "aided": aided,
-        }
+        self.arrays = model_arrays(model, calibration, config)
+
+    @property
+    def x(self) -> np.ndarray:
+        """The state (n,) in the model's StateLayout."""
+        return self.state.x
+
+    @property
+    def P(self) -> np.ndarray:
+        return self.state.P
+
+    @property
+    def t(self) -> float:
+        """The filter's time (s)."""
+        return float(self.state.clock[0])
+
+    @property
+    def accepted(self) -> np.ndarray:
+        return self.counters.accepted
+
+    @property
+    def rejected(self) -> np.ndarray:
+        return self.counters.rejected
 
     def process(self, events: Events, *, final: bool = False) -> FilterOutput:
         """Run the filter over ``events`` (times must not precede the filter's time).
@@ -493,25 +537,12 @@ class ImmsFilter:
             next_d[has] = d_index[pos[has]]
         n = self.model.state_size
         capacity = int(np.count_nonzero(events.kind == EVENT_IMU_D)) + 1
-        out_t = np.empty(capacity)
-        out_x = np.empty((capacity, n))
-        out_P = np.empty((capacity, n))
-        out_var_e = np.empty(capacity)
-        tip_row = self.model.tip_row()
-        a = self._arrays
-        x, P, t_now, n_out, pending = run_events(
-            events.t, events.kind, events.index, events.values, next_d,
-            self.x, self.P, self.t, self._held_t, self._held_fD, self._held_wD, self._held_fj, self._held_wj,
-            self._last_seen, self._active,
-            a["iparams"], a["params"], a["bias_D"], a["bias_j"], a["imu_eta"], a["imu_S"], a["imu_S1"],
-            a["sig_fj"], a["sig_wj"], a["tof_eta"], a["tof_S"], a["tof_S1"], a["tof_offset"], a["tof_var"],
-            a["strain_K"], a["strain_offset"], a["strain_var"], a["aided"],
-            tip_row, out_t, out_x, out_P, out_var_e, 0, self._pending,
-            self.accepted, self.rejected, self.nis_sum, self.last_innovation, self.degraded_time,
-        )
-        self.x, self.P, self.t = x, P, float(t_now)
-        self._pending = pending
-        return FilterOutput(out_t[:n_out], out_x[:n_out], out_P[:n_out], out_var_e[:n_out])
+        out = FilterOutputs(np.empty(capacity), np.empty((capacity, n)), np.empty((capacity, n)), np.empty(capacity))
+        batch = EventArrays(np.ascontiguousarray(events.t, dtype=np.float64), np.ascontiguousarray(events.kind, dtype=np.int64),
+                            np.ascontiguousarray(events.index, dtype=np.int64),
+                            np.ascontiguousarray(events.values, dtype=np.float64), next_d)
+        n_out = run_events(batch, self.arrays, self.state, out, self.counters)
+        return FilterOutput(out.t[:n_out], out.x[:n_out], out.P[:n_out], out.var_e[:n_out])
 
     def flush(self) -> FilterOutput:
         """Process what waits for a next IMU sample and output the last state."""
@@ -519,27 +550,29 @@ class ImmsFilter:
         if len(self._tail):
             out = self.process(Events.empty(), final=True)
             return FilterOutput.concatenate([out, self.flush()], n)
-        if not self._pending:
+        if not self.state.pending[0]:
             return FilterOutput.concatenate([], n)
-        self._pending = False
-        var_e = np.array([tip_variance(self.P, self.model.tip_row())])
+        self.state.pending[0] = False
+        var_e = np.array([tip_variance(self.P, self.arrays.tip_row, self.model.state_layout.index.b)])
         return FilterOutput(np.array([self.t]), self.x[None, :].copy(), np.diag(self.P)[None, :].copy(), var_e)
 
     def diagnostics(self) -> dict:
         """Per aiding channel: accepted, rejected, mean NIS; degraded peripheral IMUs."""
         channels = self.model.aiding_channels
+        c = self.counters
         per_channel = {
             name: {
-                "accepted": int(self.accepted[i]),
-                "rejected": int(self.rejected[i]),
-                "mean_nis": float(self.nis_sum[i] / self.accepted[i]) if self.accepted[i] else None,
+                "accepted": int(c.accepted[i]),
+                "rejected": int(c.rejected[i]),
+                "mean_nis": float(c.nis_sum[i] / c.accepted[i]) if c.accepted[i] else None,
             }
             for i, name in enumerate(channels)
         }
+        active = self.state.active
         degraded = [
-            {"sensor": f"/imu/{name}", "silent_s": float(self.degraded_time[j]), "active": bool(self._active[j])}
+            {"sensor": f"/imu/{name}", "silent_s": float(c.degraded_time[j]), "active": bool(active[j])}
             for j, name in enumerate(self.model.selection.imus)
-            if self.degraded_time[j] > 0 or not self._active[j]
+            if c.degraded_time[j] > 0 or not active[j]
         ]
         return {"aiding": per_channel, "rejected": int(self.rejected.sum()), "degraded_imus": degraded}
 
@@ -558,7 +591,7 @@ class EstimateResult:
     filter_seconds: float
 
     def _column(self, name: str) -> np.ndarray:
-        return self.x[:, self.model.state_names.index(name)]
+        return self.x[:, self.model.state_layout.position(name)]
 
     @property
     def d(self) -> np.ndarray:
@@ -570,11 +603,12 @@ class EstimateResult:
 
     @property
     def phi(self) -> np.ndarray:
-        return self._column("phi")
+        """φ (rad); zeros for a configuration without an attitude state."""
+        return self.model.state_layout.phi_of(self.x)
 
     @property
     def b(self) -> np.ndarray:
-        return self.x[:, 5:5 + self.model.gamma]
+        return self.model.state_layout.b_of(self.x)
 
     @property
     def e(self) -> np.ndarray:

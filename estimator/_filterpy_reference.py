@@ -12,21 +12,14 @@ from __future__ import annotations
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from ._filter import Events, FilterConfig, FilterOutput, ImmsFilter, ImmsModel, RestCalibration
+from ._filter import Events, FilterConfig, FilterOutput, ImmsModel, RestCalibration, model_arrays
 from ._imms import (
     EVENT_BEARING,
     EVENT_IMU_D,
     EVENT_IMU_PERIPHERAL,
     EVENT_STRAIN,
     EVENT_TOF,
-    KIND_ACC,
-    P_DREF,
-    P_GATE,
-    P_MAXSTEP,
-    P_RBEAR,
-    P_RH,
-    P_RHD,
-    _least_squares_map,
+    least_squares_map,
     propagate,
     tof_measurement,
 )
@@ -43,20 +36,17 @@ class _ModelEKF(ExtendedKalmanFilter):
 
 def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration, config: FilterConfig = FilterConfig(), *, t0: float) -> FilterOutput:
     """Run the reference loop over ``events`` (complete data) and return the states at the D samples."""
-    arrays = ImmsFilter(model, calibration, config, t0=t0)._arrays
-    params = arrays["params"]
-    gamma = model.gamma
-    n = model.state_size
+    arrays = model_arrays(model, calibration, config)
+    params = arrays.params
+    layout = model.state_layout
+    n = layout.size
     nu = len(model.selection.imus)
-    kind = model.kind
     ekf = _ModelEKF(dim_x=n, dim_z=1)
     ekf.x = np.zeros(n)
     ekf.P = np.eye(n) * config.initial_std**2
     active = np.ones(nu, dtype=np.bool_)
-    S_map = arrays["imu_S1"] if kind == 0 else arrays["imu_S"]
-    Pinv, null_proj = _least_squares_map(S_map, active, gamma)
-    c_acc = Pinv @ arrays["imu_eta"] if kind == KIND_ACC else np.zeros(gamma)
-    bias_D, bias_j = arrays["bias_D"], arrays["bias_j"]
+    lsq = least_squares_map(arrays, active)
+    bias_D, bias_j = arrays.bias_D, arrays.bias_j
     held_fD = np.array([-model.rig.gravity, 0.0])
     held_wD = 0.0
     held_fj = np.tile([-model.rig.gravity, 0.0], (nu, 1))
@@ -100,15 +90,14 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
                         next_wj[j] = v[2] - bias_j[j, 2]
             start, remaining = t_now, t - t_now
             while remaining > 1e-12:
-                dt = min(remaining, params[P_MAXSTEP])
+                dt = min(remaining, params.max_step)
                 if have_next:
                     w = min(max((start + 0.5 * dt - held_t) / (t_next - held_t), 0.0), 1.0)
                     u = (held_fD + w * (next_fD - held_fD), held_wD + w * (next_wD - held_wD),
                          held_fj + w * (next_fj - held_fj), held_wj + w * (next_wj - held_wj))
                 else:
                     u = (held_fD, held_wD, held_fj, held_wj)
-                x_new, F, Q = propagate(ekf.x, dt, kind, gamma, u[0], u[1], u[2], u[3], active, Pinv, c_acc,
-                                        arrays["imu_S"], arrays["imu_S1"], arrays["sig_fj"], arrays["sig_wj"], params, null_proj)
+                x_new, F, Q = propagate(arrays, ekf.x, dt, u[0], u[1], u[2], u[3], active, lsq)
                 ekf._propagated = x_new
                 ekf.F, ekf.Q = F, Q
                 ekf.predict()
@@ -126,15 +115,17 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
             held_fj[j] = v[:2] - bias_j[j, :2]
             held_wj[j] = v[2] - bias_j[j, 2]
         elif k == EVENT_TOF:
-            rho, H = tof_measurement(ekf.x, arrays["tof_eta"][j], arrays["tof_S"][j], arrays["tof_S1"][j], params[P_DREF])
-            update(v[0] - arrays["tof_offset"][j] - rho, H, arrays["tof_var"][j], params[P_GATE])
+            rho, H = tof_measurement(layout.index, ekf.x, arrays.tof_eta[j], arrays.tof_S[j], arrays.tof_S1[j],
+                                     params.reflector_distance)
+            update(v[0] - arrays.tof_offset[j] - rho, H, arrays.tof_var[j], params.gate)
         elif k == EVENT_STRAIN:
-            K = arrays["strain_K"][j]
+            K = arrays.strain_K[j]
             H = np.zeros(n)
-            H[5:5 + gamma] = K * arrays["aided"]
-            update(v[0] - arrays["strain_offset"][j] - K @ ekf.x[5:5 + gamma], H, arrays["strain_var"][j], params[P_GATE])
+            H[layout.b] = K * arrays.aided
+            update(v[0] - arrays.strain_offset[j] - K @ ekf.x[layout.b], H, arrays.strain_var[j], params.gate)
         elif k == EVENT_BEARING:
-            for index, z, R, gate in ((0, v[0], params[P_RBEAR], params[P_GATE]), (1, 0.0, params[P_RH], np.inf), (3, 0.0, params[P_RHD], np.inf)):
+            for index, z, R, gate in ((layout.d, v[0], params.bearing_var, params.gate), (layout.h, 0.0, params.pseudo_h_var, np.inf),
+                                      (layout.h_rate, 0.0, params.pseudo_h_rate_var, np.inf)):
                 H = np.zeros(n)
                 H[index] = 1.0
                 update(z - ekf.x[index], H, R, gate)

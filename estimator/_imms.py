@@ -3,24 +3,37 @@
 Everything here is compiled with numba and works on plain arrays; ``_filter.py`` holds the
 Python-facing class. Frames and signs follow the recording contract (see planar-imms.md).
 
-State layout (``x``)
+State layout (``x``): ``contract.StateLayout``, read through its ``StateIndex`` (no offset is
+written here)::
+
     gyro: [d, h, ḋ, ḣ, φ, b_1..b_Γ, β_1..β_ν, β_D]
     acc:  [d, h, ḋ, ḣ, φ, b_1..b_Γ, v_1..v_Γ, β_D]
+
 β_D is the bias of the gyroscope at D and β_j those of the peripheral gyroscopes (random walks:
 what the rest phase cannot calibrate, the wander of low-cost MEMS, goes straight into ḃ). For accelerometers the velocity state is
 v = ḃ + c·ω_D with c = S⁺η: Eq. (8) contains ω̇·η_j with ω̇ the numerical derivative of ω_D,
 and integrating that term once gives exactly c·(ω_D,k − ω_D,k−1). Carrying v keeps the
 differentiated gyro noise what it is — a difference of two samples, not white noise of
-1/dt size — and ḃ = v − c·ω_D is reported.
+1/dt size — and ḃ = v − c·ω_D is reported. A layout without an attitude state (φ ≡ 0) has
+neither φ nor β_D; the kernels then read φ = 0 and β_D = 0 and write no entry of theirs.
 
 Events (``kind``): 0 IMU at D, 1 peripheral IMU, 2 ToF, 3 strain gauge, 4 bearing displacement.
 IMU values are [f_x, f_y, ω_z] in the sensor frame; the others carry their value in column 0.
+
+The event loop takes named structures (numba-compiled namedtuples), not long positional lists:
+``EventArrays`` (the batch), ``ModelArrays`` (the model, calibration and tuning: read only),
+``FilterState`` (the state and the held inputs: updated in place), ``FilterOutputs`` (the
+states at the D samples) and ``AidingCounters`` (per-channel counters: updated in place).
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
+
+from contract import StateIndex
 
 from ._ekf import predict_covariance_into, update_scalar_into
 
@@ -30,14 +43,19 @@ __all__ = [
     "EVENT_IMU_PERIPHERAL",
     "EVENT_STRAIN",
     "EVENT_TOF",
-    "FLOAT_PARAMS",
-    "INT_PARAMS",
     "KIND_ACC",
     "KIND_GYRO",
+    "AidingCounters",
+    "EventArrays",
+    "FilterOutputs",
+    "FilterParams",
+    "FilterState",
+    "LeastSquares",
+    "ModelArrays",
+    "least_squares_map",
     "propagate",
     "propagate_into",
     "run_events",
-    "state_size",
     "tip_variance",
     "tof_measurement",
     "tof_measurement_into",
@@ -47,37 +65,138 @@ KIND_GYRO = 0
 KIND_ACC = 1
 EVENT_IMU_D, EVENT_IMU_PERIPHERAL, EVENT_TOF, EVENT_STRAIN, EVENT_BEARING = 0, 1, 2, 3, 4
 
-# Layout of the float parameter vector.
-FLOAT_PARAMS = (
-    "gravity", "reflector_distance", "gate", "stale_after", "sigma_f_d_x", "sigma_f_d_y", "sigma_omega_d",
-    "q_b", "q_v", "q_beta", "q_rigid", "bearing_var", "pseudo_h_var", "pseudo_h_rate_var", "max_step", "q_null",
-    "q_beta_peripheral",
-)
-INT_PARAMS = ("kind", "gamma", "nu", "n_tof", "n_gauge")
-(P_G, P_DREF, P_GATE, P_STALE, P_SFX, P_SFY, P_SWD, P_QB, P_QV, P_QBETA, P_QRIGID, P_RBEAR, P_RH, P_RHD, P_MAXSTEP, P_QNULL,
- P_QBETAJ) = range(17)
+
+class FilterParams(NamedTuple):
+    """Scalar tuning and rig constants of the loop (SI units; variances in the unit squared)."""
+
+    gravity: float  # m/s²
+    reflector_distance: float  # m
+    gate: float  # innovation gate, squared Mahalanobis distance
+    stale_after: float  # s
+    sigma_f_d_x: float  # m/s², noise of the D accelerometer
+    sigma_f_d_y: float
+    sigma_omega_d: float  # rad/s
+    q_b: float
+    q_v: float
+    q_beta: float
+    q_rigid: float
+    bearing_var: float  # m²
+    pseudo_h_var: float  # m²
+    pseudo_h_rate_var: float  # m²/s²
+    max_step: float  # s
+    q_null: float
+    q_beta_peripheral: float
+
+
+class ModelArrays(NamedTuple):
+    """What the loop reads and never changes: layout, configuration, calibration, tuning.
+
+    Shapes: ν peripheral IMUs, Γ unit deformations, T ToFs, G gauges. bias_D (3,) and bias_j
+    (ν, 3) as [f_x, f_y, ω_z]; imu_eta (ν,); imu_S, imu_S1 (ν, Γ) shape and slope at the IMUs;
+    sig_fj (ν, 2), sig_wj (ν,) noise; tof_eta (T,), tof_S, tof_S1 (T, Γ), tof_offset, tof_var (T,);
+    strain_K (G, Γ) of Eq. (19), strain_offset, strain_var (G,); aided (Γ,) 1 for unit
+    deformations the gauges aid; tip_row (Γ,) = s(L).
+    """
+
+    index: StateIndex
+    kind: int  # KIND_GYRO | KIND_ACC
+    params: FilterParams
+    bias_D: np.ndarray
+    bias_j: np.ndarray
+    imu_eta: np.ndarray
+    imu_S: np.ndarray
+    imu_S1: np.ndarray
+    sig_fj: np.ndarray
+    sig_wj: np.ndarray
+    tof_eta: np.ndarray
+    tof_S: np.ndarray
+    tof_S1: np.ndarray
+    tof_offset: np.ndarray
+    tof_var: np.ndarray
+    strain_K: np.ndarray
+    strain_offset: np.ndarray
+    strain_var: np.ndarray
+    aided: np.ndarray
+    tip_row: np.ndarray
+
+
+class EventArrays(NamedTuple):
+    """A batch of events in time order: t (N,) s, kind (N,) event code, index (N,) sensor,
+    values (N, 3); next_d (N,) the index of the first D-IMU event at or after each (−1: none)."""
+
+    t: np.ndarray
+    kind: np.ndarray
+    index: np.ndarray
+    values: np.ndarray
+    next_d: np.ndarray
+
+
+class FilterState(NamedTuple):
+    """The filter between batches, updated in place: x (n,), P (n, n); clock = [t_now, held_t]
+    (s: the filter's time, the time of the held D sample); the held inputs held_fD (2,),
+    held_wD (1,), held_fj (ν, 2), held_wj (ν,); last_seen (ν,) s; active (ν,) peripheral IMUs in
+    the solution; pending (1,) a D sample whose state is not output yet."""
+
+    x: np.ndarray
+    P: np.ndarray
+    clock: np.ndarray
+    held_fD: np.ndarray
+    held_wD: np.ndarray
+    held_fj: np.ndarray
+    held_wj: np.ndarray
+    last_seen: np.ndarray
+    active: np.ndarray
+    pending: np.ndarray
+
+
+class FilterOutputs(NamedTuple):
+    """Buffers of the states at the D samples: t (M,), x (M, n), P (M, n) diagonal, var_e (M,)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    var_e: np.ndarray
+
+
+class AidingCounters(NamedTuple):
+    """Per aiding channel [ToF..., strain..., bearing, pseudo h, pseudo ḣ]: accepted, rejected,
+    nis_sum, last_innovation; degraded_time (ν,) s each peripheral IMU was out of the solution."""
+
+    accepted: np.ndarray
+    rejected: np.ndarray
+    nis_sum: np.ndarray
+    last_innovation: np.ndarray
+    degraded_time: np.ndarray
+
+
+class LeastSquares(NamedTuple):
+    """The least-squares map of the active peripheral IMUs: Pinv (Γ, ν) = S⁺ (zero columns for
+    inactive sensors), null_proj (Γ, Γ) the projector on what they cannot see, c_acc (Γ,) = S⁺η."""
+
+    Pinv: np.ndarray
+    null_proj: np.ndarray
+    c_acc: np.ndarray
 
 
 @numba.njit(cache=True)
-def state_size(kind: int, gamma: int, nu: int) -> int:
-    return 5 + gamma + nu + 1 if kind == KIND_GYRO else 5 + 2 * gamma + 1
-
-
-@numba.njit(cache=True)
-def propagate_into(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, imu_S, imu_S1, sig_fj, sig_wj,
-                   params, null_proj, xn, F, Q, Gm, sig, acc_ws):
+def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, sig, acc_ws):
     """Propagate x over dt with the given inputs into the buffers xn (n,), F (n, n), Q (n, n).
 
-    fD (2,), omegaD: bias-corrected inputs at D; fj (ν, 2), omegaj (ν,): bias-corrected
-    peripheral inputs; ``Pinv`` (Γ, ν) the least-squares map of the active peripheral sensors
-    (zero columns for inactive ones); ``c_acc`` (Γ,) = S⁺η for accelerometers. Gm (n, n_in),
-    sig (n_in,) and acc_ws (Γ, Γ + 2) are scratch buffers.
+    ``m`` is the ``ModelArrays``; fD (2,), omegaD: bias-corrected inputs at D; fj (ν, 2),
+    omegaj (ν,): bias-corrected peripheral inputs of the ``active`` (ν,) sensors, whose
+    ``LeastSquares`` map is ``lsq``. Gm (n, n_in), sig (n_in,) and acc_ws (Γ, Γ + 2) are scratch
+    buffers (n_in = 3 + ν for gyro, 3 + 2ν for acc).
     """
+    ix = m.index
+    p = m.params
+    gamma = ix.gamma
     n = x.shape[0]
-    g = params[P_G]
-    ib = n - 1  # β_D
-    phi = x[4]
-    omega = omegaD - x[ib]
+    g = p.gravity
+    i_phi, i_bd, i_b = ix.phi, ix.bias_d, ix.b
+    imu_S, imu_S1 = m.imu_S, m.imu_S1
+    Pinv, c_acc = lsq.Pinv, lsq.c_acc
+    phi = x[i_phi] if i_phi >= 0 else 0.0
+    omega = omegaD - (x[i_bd] if i_bd >= 0 else 0.0)
     cp, sp = np.cos(phi), np.sin(phi)
     for i in range(n):
         xn[i] = x[i]
@@ -92,39 +211,42 @@ def propagate_into(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_a
     for j in range(n_in):
         sig[j] = 0.0
     # Rigid part: inertial acceleration of D from its specific force (η down, gravity +g).
+    i_d, i_h, i_dr, i_hr = ix.d, ix.h, ix.d_rate, ix.h_rate
     acc_h = cp * fD[0] - sp * fD[1] + g
     acc_d = sp * fD[0] + cp * fD[1]
     dacc_h = -sp * fD[0] - cp * fD[1]
     dacc_d = cp * fD[0] - sp * fD[1]
     half = 0.5 * dt * dt
-    xn[0] = x[0] + dt * x[2] + half * acc_d
-    xn[1] = x[1] + dt * x[3] + half * acc_h
-    xn[2] = x[2] + dt * acc_d
-    xn[3] = x[3] + dt * acc_h
-    xn[4] = phi + dt * omega
-    F[0, 2] = dt
-    F[1, 3] = dt
-    F[0, 4] = half * dacc_d
-    F[1, 4] = half * dacc_h
-    F[2, 4] = dt * dacc_d
-    F[3, 4] = dt * dacc_h
-    F[4, ib] = -dt
+    xn[i_d] = x[i_d] + dt * x[i_dr] + half * acc_d
+    xn[i_h] = x[i_h] + dt * x[i_hr] + half * acc_h
+    xn[i_dr] = x[i_dr] + dt * acc_d
+    xn[i_hr] = x[i_hr] + dt * acc_h
+    F[i_d, i_dr] = dt
+    F[i_h, i_hr] = dt
+    if i_phi >= 0:
+        xn[i_phi] = phi + dt * omega
+        F[i_d, i_phi] = half * dacc_d
+        F[i_h, i_phi] = half * dacc_h
+        F[i_dr, i_phi] = dt * dacc_d
+        F[i_hr, i_phi] = dt * dacc_h
+        if i_bd >= 0:
+            F[i_phi, i_bd] = -dt
+        Gm[i_phi, 2] = dt
     nu = fj.shape[0]
-    sig[0] = params[P_SFX]
-    sig[1] = params[P_SFY]
-    sig[2] = params[P_SWD]
-    Gm[0, 0] = half * sp
-    Gm[0, 1] = half * cp
-    Gm[1, 0] = half * cp
-    Gm[1, 1] = -half * sp
-    Gm[2, 0] = dt * sp
-    Gm[2, 1] = dt * cp
-    Gm[3, 0] = dt * cp
-    Gm[3, 1] = -dt * sp
-    Gm[4, 2] = dt
-    if kind == KIND_GYRO:
+    sig[0] = p.sigma_f_d_x
+    sig[1] = p.sigma_f_d_y
+    sig[2] = p.sigma_omega_d
+    Gm[i_d, 0] = half * sp
+    Gm[i_d, 1] = half * cp
+    Gm[i_h, 0] = half * cp
+    Gm[i_h, 1] = -half * sp
+    Gm[i_dr, 0] = dt * sp
+    Gm[i_dr, 1] = dt * cp
+    Gm[i_hr, 0] = dt * cp
+    Gm[i_hr, 1] = -dt * sp
+    if m.kind == KIND_GYRO:
         # Eq. (9): ω_j − ω_D = Σ ḃ s'_χ(η_j), solved in the least-squares sense.
-        ibj = 5 + gamma
+        ibj = ix.peripheral_bias
         for k in range(gamma):
             bdot = 0.0
             row_sum = 0.0
@@ -132,21 +254,22 @@ def propagate_into(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_a
                 if active[j]:
                     bdot += Pinv[k, j] * (omegaj[j] - x[ibj + j] - omega)
                 row_sum += Pinv[k, j]
-                Gm[5 + k, 3 + j] = dt * Pinv[k, j]
-                F[5 + k, ibj + j] = -dt * Pinv[k, j]
-            xn[5 + k] = x[5 + k] + dt * bdot
-            F[5 + k, ib] = dt * row_sum
-            Gm[5 + k, 2] = -dt * row_sum
-            Q[5 + k, 5 + k] += params[P_QB] * dt
+                Gm[i_b + k, 3 + j] = dt * Pinv[k, j]
+                F[i_b + k, ibj + j] = -dt * Pinv[k, j]
+            xn[i_b + k] = x[i_b + k] + dt * bdot
+            if i_bd >= 0:
+                F[i_b + k, i_bd] = dt * row_sum
+            Gm[i_b + k, 2] = -dt * row_sum
+            Q[i_b + k, i_b + k] += p.q_b * dt
         for j in range(nu):
-            sig[3 + j] = sig_wj[j]
-            Q[ibj + j, ibj + j] += params[P_QBETAJ] * dt
+            sig[3 + j] = m.sig_wj[j]
+            Q[ibj + j, ibj + j] += p.q_beta_peripheral * dt
     else:
         # Eq. (8) per sensor: Δ̈_j = f_j,ζ − f_D,ζ − ω̇ η_j + ω² Δ_j with f_j,ζ = sin α_j f_j,x + cos α_j f_j,y.
-        iv = 5 + gamma
+        iv = ix.v
         for k in range(gamma):
-            for m in range(gamma + 2):
-                acc_ws[k, m] = 0.0  # [dB (Γ) | b̈ | ∂b̈/∂β_D]
+            for mm in range(gamma + 2):
+                acc_ws[k, mm] = 0.0  # [dB (Γ) | b̈ | ∂b̈/∂β_D]
         w2 = omega * omega
         for j in range(nu):
             if not active[j]:
@@ -154,46 +277,48 @@ def propagate_into(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_a
             alpha = 0.0
             delta = 0.0
             for k in range(gamma):
-                alpha += imu_S1[j, k] * x[5 + k]
-                delta += imu_S[j, k] * x[5 + k]
+                alpha += imu_S1[j, k] * x[i_b + k]
+                delta += imu_S[j, k] * x[i_b + k]
             ca, sa = np.cos(alpha), np.sin(alpha)
             ddelta = sa * fj[j, 0] + ca * fj[j, 1] - fD[1] + w2 * delta
             tilt = ca * fj[j, 0] - sa * fj[j, 1]
             dbeta = -2.0 * omega * delta
-            sig[3 + 2 * j] = sig_fj[j, 0]
-            sig[4 + 2 * j] = sig_fj[j, 1]
+            sig[3 + 2 * j] = m.sig_fj[j, 0]
+            sig[4 + 2 * j] = m.sig_fj[j, 1]
             for k in range(gamma):
                 pk = Pinv[k, j]
                 acc_ws[k, gamma] += pk * ddelta
                 acc_ws[k, gamma + 1] += pk * dbeta
-                for m in range(gamma):
-                    acc_ws[k, m] += pk * (tilt * imu_S1[j, m] + w2 * imu_S[j, m])
+                for mm in range(gamma):
+                    acc_ws[k, mm] += pk * (tilt * imu_S1[j, mm] + w2 * imu_S[j, mm])
                 Gm[iv + k, 3 + 2 * j] = dt * pk * sa
                 Gm[iv + k, 4 + 2 * j] = dt * pk * ca
         for k in range(gamma):
             v = x[iv + k]
             bddot = acc_ws[k, gamma]
-            xn[5 + k] = x[5 + k] + dt * (v - c_acc[k] * omega) + half * bddot
+            xn[i_b + k] = x[i_b + k] + dt * (v - c_acc[k] * omega) + half * bddot
             xn[iv + k] = v + dt * bddot
-            F[5 + k, iv + k] += dt
-            F[5 + k, ib] = dt * c_acc[k] + half * acc_ws[k, gamma + 1]
-            F[iv + k, ib] = dt * acc_ws[k, gamma + 1]
-            for m in range(gamma):
-                F[5 + k, 5 + m] += half * acc_ws[k, m]
-                F[iv + k, 5 + m] += dt * acc_ws[k, m]
-            Gm[5 + k, 2] = -dt * c_acc[k]
+            F[i_b + k, iv + k] += dt
+            if i_bd >= 0:
+                F[i_b + k, i_bd] = dt * c_acc[k] + half * acc_ws[k, gamma + 1]
+                F[iv + k, i_bd] = dt * acc_ws[k, gamma + 1]
+            for mm in range(gamma):
+                F[i_b + k, i_b + mm] += half * acc_ws[k, mm]
+                F[iv + k, i_b + mm] += dt * acc_ws[k, mm]
+            Gm[i_b + k, 2] = -dt * c_acc[k]
             row_sum = 0.0
             for j in range(nu):
                 row_sum += Pinv[k, j]
             # f_D,y enters every Δ̈_j with −1.
             Gm[iv + k, 1] += -dt * row_sum
-            Q[5 + k, 5 + k] += params[P_QB] * dt
-            Q[iv + k, iv + k] += params[P_QV] * dt
+            Q[i_b + k, i_b + k] += p.q_b * dt
+            Q[iv + k, iv + k] += p.q_v * dt
     # Unobservable directions of b (fewer active sensors than Γ) random-walk instead of freezing.
-    if params[P_QNULL] > 0:
+    if p.q_null > 0:
+        null_proj = lsq.null_proj
         for k in range(gamma):
-            for m in range(gamma):
-                Q[5 + k, 5 + m] += params[P_QNULL] * dt * null_proj[k, m]
+            for mm in range(gamma):
+                Q[i_b + k, i_b + mm] += p.q_null * dt * null_proj[k, mm]
     for i in range(n_in):
         s2 = sig[i] * sig[i]
         if s2 == 0.0:
@@ -204,64 +329,76 @@ def propagate_into(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_a
                 continue
             for bb in range(n):
                 Q[a, bb] += ga * s2 * Gm[bb, i]
-    Q[2, 2] += params[P_QRIGID] * dt
-    Q[3, 3] += params[P_QRIGID] * dt
-    Q[ib, ib] += params[P_QBETA] * dt
+    Q[i_dr, i_dr] += p.q_rigid * dt
+    Q[i_hr, i_hr] += p.q_rigid * dt
+    if i_bd >= 0:
+        Q[i_bd, i_bd] += p.q_beta * dt
 
 
 @numba.njit(cache=True)
-def propagate(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, imu_S, imu_S1, sig_fj, sig_wj, params, null_proj):
+def _input_count(m, nu):
+    return 3 + (nu if m.kind == KIND_GYRO else 2 * nu)
+
+
+@numba.njit(cache=True)
+def propagate(m, x, dt, fD, omegaD, fj, omegaj, active, lsq):
     """Pure form of ``propagate_into``: returns (x⁺, F, Q) as new arrays."""
     n = x.shape[0]
-    n_in = 3 + (fj.shape[0] if kind == KIND_GYRO else 2 * fj.shape[0])
+    n_in = _input_count(m, fj.shape[0])
+    gamma = m.index.gamma
     xn = np.empty(n)
     F = np.empty((n, n))
     Q = np.empty((n, n))
-    propagate_into(x, dt, kind, gamma, fD, omegaD, fj, omegaj, active, Pinv, c_acc, imu_S, imu_S1, sig_fj, sig_wj,
-                   params, null_proj, xn, F, Q, np.empty((n, n_in)), np.empty(n_in), np.empty((gamma, gamma + 2)))
+    propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, np.empty((n, n_in)), np.empty(n_in),
+                   np.empty((gamma, gamma + 2)))
     return xn, F, Q
 
 
 @numba.njit(cache=True)
-def tip_variance(P, tip_row):
-    """Variance of e = Σ b_χ s_χ(L) from the full covariance (off-diagonal terms included)."""
+def tip_variance(P, tip_row, b0):
+    """Variance of e = Σ b_χ s_χ(L) from the full covariance (off-diagonal terms included); b
+    starts at index ``b0`` of the state."""
     gamma = tip_row.shape[0]
     v = 0.0
     for k in range(gamma):
-        for m in range(gamma):
-            v += tip_row[k] * P[5 + k, 5 + m] * tip_row[m]
+        for mm in range(gamma):
+            v += tip_row[k] * P[b0 + k, b0 + mm] * tip_row[mm]
     return v
 
 
 @numba.njit(cache=True)
-def tof_measurement_into(x, eta, S_row, S1_row, d_ref, H):
-    """Eq. (18): predicted distance ρ̂ (m) of a ToF at arc length ``eta``; its Jacobian row into H (n,)."""
+def tof_measurement_into(ix, x, eta, S_row, S1_row, d_ref, H):
+    """Eq. (18): predicted distance ρ̂ (m) of a ToF at arc length ``eta``; its Jacobian row into H (n,).
+
+    ``ix`` is the state's ``StateIndex``."""
     gamma = S_row.shape[0]
-    phi = x[4]
+    i_phi, i_b = ix.phi, ix.b
+    phi = x[i_phi] if i_phi >= 0 else 0.0
     delta = 0.0
     alpha = 0.0
     for k in range(gamma):
-        delta += S_row[k] * x[5 + k]
-        alpha += S1_row[k] * x[5 + k]
+        delta += S_row[k] * x[i_b + k]
+        alpha += S1_row[k] * x[i_b + k]
     cp, sp = np.cos(phi), np.sin(phi)
-    zeta = x[0] + sp * eta + cp * delta
+    zeta = x[ix.d] + sp * eta + cp * delta
     phij = phi + alpha
     cj, sj = np.cos(phij), np.sin(phij)
     gap = d_ref - zeta
     for i in range(H.shape[0]):
         H[i] = 0.0
-    H[0] = -1.0 / cj
-    H[4] = (-(cp * eta - sp * delta) * cj + gap * sj) / (cj * cj)
+    H[ix.d] = -1.0 / cj
+    if i_phi >= 0:
+        H[i_phi] = (-(cp * eta - sp * delta) * cj + gap * sj) / (cj * cj)
     for k in range(gamma):
-        H[5 + k] = (-cp * S_row[k] * cj + gap * sj * S1_row[k]) / (cj * cj)
+        H[i_b + k] = (-cp * S_row[k] * cj + gap * sj * S1_row[k]) / (cj * cj)
     return gap / cj
 
 
 @numba.njit(cache=True)
-def tof_measurement(x, eta, S_row, S1_row, d_ref):
+def tof_measurement(ix, x, eta, S_row, S1_row, d_ref):
     """Eq. (18): predicted distance ρ̂ (m) and its Jacobian row (pure form)."""
     H = np.empty(x.shape[0])
-    rho = tof_measurement_into(x, eta, S_row, S1_row, d_ref, H)
+    rho = tof_measurement_into(ix, x, eta, S_row, S1_row, d_ref, H)
     return rho, H
 
 
@@ -293,54 +430,61 @@ def _least_squares_map(S, active, gamma):
 
 
 @numba.njit(cache=True)
-def _aid(x, P, innovation, H, R, gate, ubuf, channel, counts_accepted, counts_rejected, nis_sum, last_innovation):
-    """One gated aiding update of channel ``channel`` with its counters."""
-    S, d2, ok = update_scalar_into(x, P, innovation, H, R, gate, ubuf)
-    last_innovation[channel] = innovation
-    if ok:
-        counts_accepted[channel] += 1
-        nis_sum[channel] += d2
-    else:
-        counts_rejected[channel] += 1
+def least_squares_map(m, active):
+    """The ``LeastSquares`` map of the ``active`` peripheral IMUs of model ``m``: gyroscopes see
+    the slopes s'(η_j) (Eq. 9), accelerometers the deflections s(η_j) (Eq. 8)."""
+    gamma = m.index.gamma
+    S_map = m.imu_S1 if m.kind == KIND_GYRO else m.imu_S
+    Pinv, null_proj = _least_squares_map(S_map, active, gamma)
+    c_acc = np.zeros(gamma)
+    if m.kind == KIND_ACC:
+        c_acc = Pinv @ m.imu_eta
+    return LeastSquares(Pinv, null_proj, c_acc)
 
 
 @numba.njit(cache=True)
-def run_events(
-    t_ev, kind_ev, index_ev, values_ev, next_d,
-    x, P, t_now, held_t, held_fD, held_wD, held_fj, held_wj, last_seen, active,
-    iparams, params,
-    bias_D, bias_j, imu_eta, imu_S, imu_S1, sig_fj, sig_wj,
-    tof_eta, tof_S, tof_S1, tof_offset, tof_var,
-    strain_K, strain_offset, strain_var, aided,
-    tip_row, out_t, out_x, out_P, out_var_e, n_out_start, pending_in,
-    counts_accepted, counts_rejected, nis_sum, last_innovation, degraded_time,
-):
-    """Process events in time order; returns (x, P, t_now, n_out, pending).
+def _aid(x, P, innovation, H, R, gate, ubuf, channel, counters):
+    """One gated aiding update of channel ``channel`` with its counters."""
+    S, d2, ok = update_scalar_into(x, P, innovation, H, R, gate, ubuf)
+    counters.last_innovation[channel] = innovation
+    if ok:
+        counters.accepted[channel] += 1
+        counters.nis_sum[channel] += d2
+    else:
+        counters.rejected[channel] += 1
 
-    ``next_d[e]`` is the index of the first D-IMU event at or after event e (−1: none in this
+
+@numba.njit(cache=True)
+def run_events(ev, m, st, out, counters):
+    """Process the events ``ev`` (``EventArrays``) in time order with model ``m``
+    (``ModelArrays``) from filter state ``st`` (``FilterState``, updated in place); the states
+    at the D samples go into ``out`` (``FilterOutputs``), the aiding counts into ``counters``
+    (``AidingCounters``). Returns the number of states written to ``out``.
+
+    ``ev.next_d[e]`` is the index of the first D-IMU event at or after event e (−1: none in this
     batch). Between two IMU samples the inputs are interpolated linearly (midpoint rule): holding
     the last sample would delay the integrated φ and b by half a sample period, which for the
     beam's swinging is the largest error of all. Without a next sample the inputs are held.
-
-    Mutates ``held_t`` (time of the held IMU sample), the held inputs, ``last_seen``,
-    ``active``, the outputs and the counters in place. Counters are per aiding channel:
-    [ToF..., strain..., bearing, pseudo h, pseudo ḣ].
+    Counters are per aiding channel: [ToF..., strain..., bearing, pseudo h, pseudo ḣ].
     """
-    kind = iparams[0]
-    gamma = iparams[1]
-    nu = iparams[2]
-    n_tof = iparams[3]
-    n_gauge = iparams[4]
-    n_out = n_out_start
-    pending = pending_in
-    c_acc = np.zeros(gamma)
-    S_map = imu_S1 if kind == KIND_GYRO else imu_S
-    Pinv, null_proj = _least_squares_map(S_map, active, gamma)
-    if kind == KIND_ACC:
-        c_acc = Pinv @ imu_eta
-    stale_after = params[P_STALE]
-    max_step = params[P_MAXSTEP]
-    i_bear = n_tof + n_gauge
+    ix = m.index
+    p = m.params
+    gamma = ix.gamma
+    nu = ix.nu
+    n_tof = m.tof_eta.shape[0]
+    i_b = ix.b
+    x, P = st.x, st.P
+    held_fD, held_wD, held_fj, held_wj = st.held_fD, st.held_wD, st.held_fj, st.held_wj
+    last_seen, active = st.last_seen, st.active
+    t_ev, kind_ev, index_ev, values_ev, next_d = ev.t, ev.kind, ev.index, ev.values, ev.next_d
+    bias_D, bias_j = m.bias_D, m.bias_j
+    t_now = st.clock[0]
+    pending = st.pending[0]
+    n_out = 0
+    lsq = least_squares_map(m, active)
+    stale_after = p.stale_after
+    max_step = p.max_step
+    i_bear = n_tof + m.strain_K.shape[0]
     n = x.shape[0]
     n_ev = t_ev.shape[0]
     next_fD = np.zeros(2)
@@ -350,7 +494,7 @@ def run_events(
     u_fj = np.zeros((nu, 2))
     u_wj = np.zeros(nu)
     # Work buffers: the loop allocates nothing per event.
-    n_in = 3 + (nu if kind == KIND_GYRO else 2 * nu)
+    n_in = _input_count(m, nu)
     xn = np.empty(n)
     F = np.empty((n, n))
     Q = np.empty((n, n))
@@ -364,16 +508,18 @@ def run_events(
         t = t_ev[e]
         if t > t_now:
             if pending:
-                out_t[n_out] = t_now
-                out_x[n_out] = x
+                out.t[n_out] = t_now
+                out.x[n_out] = x
                 for i in range(n):
-                    out_P[n_out, i] = P[i, i]
-                out_var_e[n_out] = tip_variance(P, tip_row)
+                    out.P[n_out, i] = P[i, i]
+                out.var_e[n_out] = tip_variance(P, m.tip_row, i_b)
                 n_out += 1
                 pending = False
+            held_t = st.clock[1]
             nd = next_d[e]
-            have_next = nd >= 0 and t_ev[nd] > held_t[0]
+            have_next = nd >= 0 and t_ev[nd] > held_t
             t_next = t
+            next_wD = 0.0
             if have_next:
                 t_next = t_ev[nd]
                 next_fD[0] = values_ev[nd, 0] - bias_D[0]
@@ -401,7 +547,7 @@ def run_events(
             while remaining > 1e-12:
                 dt = remaining if remaining < max_step else max_step
                 if have_next:
-                    w = (start + 0.5 * dt - held_t[0]) / (t_next - held_t[0])
+                    w = (start + 0.5 * dt - held_t) / (t_next - held_t)
                     w = min(max(w, 0.0), 1.0)
                     u_fD[0] = held_fD[0] + w * (next_fD[0] - held_fD[0])
                     u_fD[1] = held_fD[1] + w * (next_fD[1] - held_fD[1])
@@ -416,8 +562,7 @@ def run_events(
                     u_wD = held_wD[0]
                     u_fj[:, :] = held_fj
                     u_wj[:] = held_wj
-                propagate_into(x, dt, kind, gamma, u_fD, u_wD, u_fj, u_wj, active, Pinv, c_acc,
-                               imu_S, imu_S1, sig_fj, sig_wj, params, null_proj, xn, F, Q, Gm, sig, acc_ws)
+                propagate_into(m, x, dt, u_fD, u_wD, u_fj, u_wj, active, lsq, xn, F, Q, Gm, sig, acc_ws)
                 x[:] = xn
                 predict_covariance_into(P, F, Q, work)
                 start += dt
@@ -433,7 +578,7 @@ def run_events(
                 held_fD[0] = v0
                 held_fD[1] = v1
                 held_wD[0] = v2
-            held_t[0] = t
+            st.clock[1] = t
             pending = True
             # Peripheral sensors that stopped delivering leave the least-squares solution.
             changed = False
@@ -442,62 +587,58 @@ def run_events(
                     active[jj] = False
                     changed = True
             if changed:
-                Pinv, null_proj = _least_squares_map(S_map, active, gamma)
-                if kind == KIND_ACC:
-                    c_acc = Pinv @ imu_eta
+                lsq = least_squares_map(m, active)
         elif k == EVENT_IMU_PERIPHERAL:
             v0 = values_ev[e, 0] - bias_j[j, 0]
             v1 = values_ev[e, 1] - bias_j[j, 1]
             v2 = values_ev[e, 2] - bias_j[j, 2]
             if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2):
                 if not active[j]:
-                    degraded_time[j] += t - last_seen[j]
+                    counters.degraded_time[j] += t - last_seen[j]
                     active[j] = True
-                    Pinv, null_proj = _least_squares_map(S_map, active, gamma)
-                    if kind == KIND_ACC:
-                        c_acc = Pinv @ imu_eta
+                    lsq = least_squares_map(m, active)
                 held_fj[j, 0] = v0
                 held_fj[j, 1] = v1
                 held_wj[j] = v2
                 last_seen[j] = t
         elif k == EVENT_TOF:
-            z = values_ev[e, 0] - tof_offset[j]
+            z = values_ev[e, 0] - m.tof_offset[j]
             if not np.isfinite(z):
-                counts_rejected[j] += 1
+                counters.rejected[j] += 1
                 continue
-            rho = tof_measurement_into(x, tof_eta[j], tof_S[j], tof_S1[j], params[P_DREF], H)
-            _aid(x, P, z - rho, H, tof_var[j], params[P_GATE], ubuf, j, counts_accepted, counts_rejected, nis_sum, last_innovation)
+            rho = tof_measurement_into(ix, x, m.tof_eta[j], m.tof_S[j], m.tof_S1[j], p.reflector_distance, H)
+            _aid(x, P, z - rho, H, m.tof_var[j], p.gate, ubuf, j, counters)
         elif k == EVENT_STRAIN:
             ch = n_tof + j
-            z = values_ev[e, 0] - strain_offset[j]
+            z = values_ev[e, 0] - m.strain_offset[j]
             if not np.isfinite(z):
-                counts_rejected[ch] += 1
+                counters.rejected[ch] += 1
                 continue
             H[:] = 0.0
             pred = 0.0
-            for m in range(gamma):
-                if aided[m] > 0:
-                    H[5 + m] = strain_K[j, m]
+            for mm in range(gamma):
+                if m.aided[mm] > 0:
+                    H[i_b + mm] = m.strain_K[j, mm]
                 # Eq. (22): the strain of unaided unit deformations is subtracted at its estimate.
-                pred += strain_K[j, m] * x[5 + m]
-            _aid(x, P, z - pred, H, strain_var[j], params[P_GATE], ubuf, ch, counts_accepted, counts_rejected, nis_sum,
-                 last_innovation)
+                pred += m.strain_K[j, mm] * x[i_b + mm]
+            _aid(x, P, z - pred, H, m.strain_var[j], p.gate, ubuf, ch, counters)
         elif k == EVENT_BEARING:
             z = values_ev[e, 0]
             if not np.isfinite(z):
-                counts_rejected[i_bear] += 1
+                counters.rejected[i_bear] += 1
                 continue
             H[:] = 0.0
-            H[0] = 1.0
-            _aid(x, P, z - x[0], H, params[P_RBEAR], params[P_GATE], ubuf, i_bear, counts_accepted, counts_rejected,
-                 nis_sum, last_innovation)
+            H[ix.d] = 1.0
+            _aid(x, P, z - x[ix.d], H, p.bearing_var, p.gate, ubuf, i_bear, counters)
             # The bearing runs on a rail: h = 0 and ḣ = 0 as pseudo-measurements.
             H[:] = 0.0
-            H[1] = 1.0
-            S, d2, ok = update_scalar_into(x, P, -x[1], H, params[P_RH], 1e300, ubuf)
-            counts_accepted[i_bear + 1] += 1
+            H[ix.h] = 1.0
+            S, d2, ok = update_scalar_into(x, P, -x[ix.h], H, p.pseudo_h_var, 1e300, ubuf)
+            counters.accepted[i_bear + 1] += 1
             H[:] = 0.0
-            H[3] = 1.0
-            S, d2, ok = update_scalar_into(x, P, -x[3], H, params[P_RHD], 1e300, ubuf)
-            counts_accepted[i_bear + 2] += 1
-    return x, P, t_now, n_out, pending
+            H[ix.h_rate] = 1.0
+            S, d2, ok = update_scalar_into(x, P, -x[ix.h_rate], H, p.pseudo_h_rate_var, 1e300, ubuf)
+            counters.accepted[i_bear + 2] += 1
+    st.clock[0] = t_now
+    st.pending[0] = pending
+    return n_out

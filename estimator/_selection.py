@@ -14,7 +14,7 @@ from typing import Literal, Sequence
 
 import numpy as np
 
-from ._rig import RigDescription
+from contract import RigDescription
 from ._unit_deformations import UnitDeformations
 
 __all__ = ["SensorSelection", "default_aided", "effective_independence", "select_sensors"]

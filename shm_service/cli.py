@@ -594,8 +594,8 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     """Errors that are the user's (bad file, bad rig): the modules defining them are imported only
     when a command has already loaded them."""
     errors: list[type[BaseException]] = [CliError, FileNotFoundError]
-    if "estimator._rig" in sys.modules:
-        errors.append(sys.modules["estimator._rig"].RigError)
+    if "contract._rig" in sys.modules:
+        errors.append(sys.modules["contract._rig"].RigError)
     if "shm_service.recording._reader" in sys.modules:
         errors.append(sys.modules["shm_service.recording._reader"].RecordingError)
     return tuple(errors)

@@ -34,7 +34,7 @@ import numpy as np
 import orjson
 from pydantic import AwareDatetime, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from estimator import RigDescription, load_rig
+from contract import RigDescription, load_rig
 
 from .recording import PAYLOAD_FIELDS, RecordingWriter, classify_topic
 from .tables import Table, TableError, read_table

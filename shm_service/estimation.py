@@ -6,6 +6,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from contract import (
+    BEARING_TOPIC,
+    IMU_PLANAR_COLUMNS,
+    TEMPERATURE_TOPIC,
+    TRUTH_TOPIC,
+    row_layout,
+)
+from contract import estimate_payloads as _estimate_payloads
 from estimator import EstimateResult, Measurements, SensorSeries
 
 from .recording import Recording
@@ -58,7 +66,7 @@ def measurements_from_recording(rec: Recording) -> Measurements:
     imu, tof, strain, bearing = {}, {}, {}, None
     for topic, channel in rec.channels.items():
         if channel.kind == "imu":
-            imu[channel.name] = series(channel, [0, 1, 5])  # accel x, accel y, gyro z
+            imu[channel.name] = series(channel, IMU_PLANAR_COLUMNS)
         elif channel.kind == "tof":
             tof[channel.name] = series(channel, [0])
         elif channel.kind == "strain":
@@ -82,13 +90,17 @@ class TruthSeries:
 
 
 def truth_from_recording(rec: Recording) -> TruthSeries | None:
-    channel = rec.channels.get("/truth/state")
+    channel = rec.channels.get(TRUTH_TOPIC)
     if channel is None or len(channel) == 0:
         return None
     v = channel.values
-    n_st = (v.shape[1] - 4) // 2
-    return TruthSeries((channel.log_time_ns - rec.start_ns) * _NS, v[:, 0], v[:, 1], v[:, 2], v[:, 3],
-                       v[:, 4:4 + n_st], v[:, 4 + n_st:4 + 2 * n_st])
+    layout = row_layout("shm.TruthState", stations=len(rec.rig.truth_stations))
+    if v.shape[1] != layout.width:
+        raise ValueError(f"{rec.path}: {TRUTH_TOPIC} rows have {v.shape[1]} values; rig.json's {len(rec.rig.truth_stations)} "
+                         f"truth stations give {layout.width}")
+    col = layout.columns
+    return TruthSeries((channel.log_time_ns - rec.start_ns) * _NS, v[:, col("d")].ravel(), v[:, col("h")].ravel(),
+                       v[:, col("phi")].ravel(), v[:, col("e")].ravel(), v[:, col("deflection")], v[:, col("curvature")])
 
 
 def score_against_truth(result: EstimateResult, truth: TruthSeries, *, after: float) -> dict:
@@ -104,7 +116,7 @@ def score_against_truth(result: EstimateResult, truth: TruthSeries, *, after: fl
     rms = lambda a: float(np.sqrt(np.mean(np.square(a))))  # noqa: E731
     phi_err = result.phi[match] - truth.phi[i]
     e_err = result.e[match] - truth.e[i]
-    var_phi = result.P_diag[match, 4]
+    i_phi = result.model.state_layout.phi
     return {
         "rmse": {
             "phi_deg": rms(np.degrees(phi_err)),
@@ -114,7 +126,7 @@ def score_against_truth(result: EstimateResult, truth: TruthSeries, *, after: fl
             "curvature_per_m": rms(result.curvature()[match] - truth.curvature[i]),
         },
         "nees": {
-            "phi": float(np.mean(phi_err**2 / var_phi)),
+            "phi": None if i_phi is None else float(np.mean(phi_err**2 / result.P_diag[match, i_phi])),
             "e": float(np.mean(e_err**2 / result.var_e[match])),
         },
         "scored_samples": int(match.sum()),
@@ -125,15 +137,9 @@ def estimate_payloads(result: EstimateResult) -> list[bytes]:
     """``/estimate/state`` payloads (contract's shm.EstimateState) for every estimate sample."""
     import orjson
 
-    deflection = result.deflection().tolist()
-    curvature = result.curvature().tolist()
-    b = result.b.tolist()
-    cov = result.P_diag.tolist()
-    return [
-        orjson.dumps({"d": d, "h": h, "phi": p, "e": e, "b": bb, "deflection": w, "curvature": k, "covariance_diagonal": c})
-        for d, h, p, e, bb, w, k, c in zip(result.d.tolist(), result.h.tolist(), result.phi.tolist(), result.e.tolist(),
-                                           b, deflection, curvature, cov)
-    ]
+    rows = _estimate_payloads(result.model.state_layout, result.x, result.P_diag, result.e, result.deflection(),
+                              result.curvature())
+    return [orjson.dumps(row) for row in rows]
 
 
 def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metadata: dict[str, str] | None = None) -> int:
@@ -153,11 +159,11 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
     }
     stamps = rec.start_ns + np.round(result.t * 1e9).astype(np.int64)
     with RecordingWriter(path, rec.rig, metadata=metadata) as writer:
-        for topic in ("/env/temperature", "/bearing/displacement"):
+        for topic in (TEMPERATURE_TOPIC, BEARING_TOPIC):
             channel = rec.channels.get(topic)
             if channel is None:
                 continue
-            key = "celsius" if topic == "/env/temperature" else "distance"
+            key = "celsius" if topic == TEMPERATURE_TOPIC else "distance"
             for lt, pt, value in zip(channel.log_time_ns.tolist(), channel.publish_time_ns.tolist(), channel.values[:, 0].tolist()):
                 writer.write(topic, lt, {key: value}, pt)
         for stamp, payload in zip(stamps.tolist(), estimate_payloads(result)):
@@ -203,11 +209,11 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None) -> Def
         times, b, units = result.t, result.b, model.units
         estimated_here = True
     temperature = None
-    channel = rec.channels.get("/env/temperature")
+    channel = rec.channels.get(TEMPERATURE_TOPIC)
     if channel is not None and len(channel) >= 2:
         temperature = ((channel.log_time_ns - rec.start_ns) * _NS, channel.values[:, 0])
     bearing = None
-    channel = rec.channels.get("/bearing/displacement")
+    channel = rec.channels.get(BEARING_TOPIC)
     if channel is not None and len(channel) >= 2:
         bearing = np.interp(times, (channel.log_time_ns - rec.start_ns) * _NS, channel.values[:, 0])
     return DeformationRecord(times, b, units, np.asarray(rec.rig.truth_stations, dtype=float) if rec.rig.truth_stations

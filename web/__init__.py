@@ -1,9 +1,10 @@
 """The live SHM dashboard (viser): deformed beam in 3D, spectra, trends, alarms and status.
 
 The service constructs one :class:`Dashboard` and feeds it (``push_estimate``, ``push_spectra``,
-``push_window``, ``push_alarm``); the dashboard reads the rest through a ``DashboardService``
-(duck typed: ``status``, ``trends``, ``alarms``, ``acknowledge``, ``set_paused``). Upper layer:
-imports ``estimator``-level objects only through the arguments it is given, never the service.
+``push_window``, ``push_alarm``, with the ``contract``'s documents); the dashboard reads the rest
+through a ``DashboardService`` (duck typed: ``status``, ``trends``, ``alarms``, ``acknowledge``,
+``set_paused``). Upper layer: imports the ``contract`` (state layout, mode map, documents) and
+gets the estimator's objects only as arguments, never the service.
 """
 
 from ._dashboard import SENSOR_STATES, Dashboard

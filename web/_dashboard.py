@@ -25,15 +25,24 @@ from typing import Any
 import numpy as np
 import viser
 
+from contract import (
+    SENSOR_STATES,
+    AlarmDocument,
+    BaselineModeDocument,
+    ModeMap,
+    SpectrumDocument,
+    StateLayout,
+    StatusDocument,
+    WindowDocument,
+)
+
 from ._data import (
-    DEFAULT_THRESHOLDS,
-    AlarmRecord,
     SpectraRecord,
     WindowRecord,
     baseline_band,
-    normalise_alarm,
-    normalise_spectra,
-    normalise_window,
+    spectra_record,
+    thresholds_of,
+    window_record,
     windows_from_trend_rows,
 )
 from ._geometry import BeamState, parse_state
@@ -42,8 +51,6 @@ from ._view import ClientView
 __all__ = ["Dashboard", "SENSOR_STATES"]
 
 log = logging.getLogger(__name__)
-
-SENSOR_STATES = ("ok", "degraded", "rejected")
 MAX_WINDOWS = 20_000  # ≈ 7 days of 30 s windows
 MAX_ALARMS = 500
 STATUS_POLL_S = 1.0
@@ -70,9 +77,9 @@ class Snapshot:
     spectra_version: int
     windows: tuple[WindowRecord, ...]
     windows_version: int
-    alarms: tuple[AlarmRecord, ...]  # newest first
+    alarms: tuple[AlarmDocument, ...]  # newest first
     alarms_version: int
-    status: dict | None
+    status: StatusDocument | None
     status_error: str | None
     status_version: int
     estimate_rate_hz: float
@@ -89,13 +96,13 @@ class _Store:
         self.windows: deque[WindowRecord] = deque(maxlen=MAX_WINDOWS)
         self.windows_tuple: tuple[WindowRecord, ...] = ()
         self.windows_version = 0
-        self.alarms: dict[int, AlarmRecord] = {}
-        self.alarms_tuple: tuple[AlarmRecord, ...] = ()
+        self.alarms: dict[int, AlarmDocument] = {}
+        self.alarms_tuple: tuple[AlarmDocument, ...] = ()
         self.alarms_version = 0
-        self.status: dict | None = None
+        self.status: StatusDocument | None = None
         self.status_error: str | None = None
         self.status_version = 0
-        self.notify: deque[AlarmRecord] = deque(maxlen=50)
+        self.notify: deque[AlarmDocument] = deque(maxlen=50)
         self.push_times: deque[float] = deque(maxlen=50)
 
     def snapshot(self) -> Snapshot:
@@ -113,11 +120,11 @@ class _Store:
                 rate,
             )
 
-    def upsert_alarm(self, rec: AlarmRecord) -> bool:
+    def upsert_alarm(self, rec: AlarmDocument) -> bool:
         """Insert/update an alarm; True when it newly became active (worth a notification)."""
         with self.lock:
             old = self.alarms.get(rec.id)
-            if old is not None and old.raw == rec.raw:
+            if old is not None and old == rec:
                 return False
             self.alarms[rec.id] = rec
             if len(self.alarms) > MAX_ALARMS:  # forget the oldest cleared ones first
@@ -139,8 +146,10 @@ class Dashboard:
     ----------
     host, port : where viser listens (``port=0`` picks a free port; a taken port is replaced by
         the next free one; :attr:`url` and :attr:`port` give the real one).
-    rig : ``estimator.RigDescription`` (beam length and width, reflector distance, sensors).
-    units : ``estimator.UnitDeformations`` (shape/slope of the Γ unit deformations).
+    rig : ``contract.RigDescription`` (beam length and width, reflector distance, sensors).
+    units : ``estimator.UnitDeformations`` (shape/slope of the Γ unit deformations; their
+        ``modes`` label trends and spectra).
+    layout : ``contract.StateLayout`` of the estimator's state vector (how ``push_estimate`` reads x).
     stations : η (m) of the curvature-change index (and of ``truth_deflection``).
     service : a ``DashboardService`` (status, trends, alarms, acknowledge, set_paused); duck typed.
     render_hz : frames per second drawn into each browser (10–60).
@@ -153,6 +162,7 @@ class Dashboard:
         port: int,
         rig: Any,
         units: Any,
+        layout: StateLayout,
         stations: np.ndarray,
         service: Any,
         render_hz: float = 20.0,
@@ -161,6 +171,13 @@ class Dashboard:
         gamma = int(getattr(units, "count", 0))
         if gamma < 1:
             raise ValueError("units must provide at least one unit deformation (units.count >= 1)")
+        if not isinstance(layout, StateLayout):
+            raise TypeError(f"layout must be a contract.StateLayout, got {type(layout).__name__}")
+        if layout.gamma != gamma:
+            raise ValueError(f"layout has Γ={layout.gamma} unit deformations, units {gamma}")
+        mode_map = ModeMap.of(getattr(units, "modes", ()))
+        if mode_map.gamma != gamma:
+            raise ValueError(f"units.modes names the modes of {mode_map.gamma} unit deformations, units.count is {gamma}")
         self.length = float(rig.beam.length)
         self.width = float(rig.beam.width)
         if not (self.length > 0 and self.width > 0):
@@ -178,6 +195,8 @@ class Dashboard:
             raise ValueError(f"{render_hz=} must be within [1, 60]")
         self.rig = rig
         self.units = units
+        self.layout = layout
+        self.mode_map = mode_map
         self.gamma = gamma
         self.stations = stations.copy()
         self.service = service
@@ -216,7 +235,7 @@ class Dashboard:
     ) -> None:
         """The newest state estimate (called ≥ 10 Hz). Raises ValueError on malformed input."""
         t = _finite("t_s", t_s)
-        state = parse_state(x, self.gamma)
+        state = parse_state(x, self.layout)
         if not isinstance(sensor_states, dict):
             raise ValueError(f"sensor_states must be a dict topic -> state, got {type(sensor_states).__name__}")
         for topic, value in sensor_states.items():
@@ -245,29 +264,24 @@ class Dashboard:
             store.estimate_version += 1
             store.push_times.append(time.monotonic())
 
-    def push_spectra(
-        self,
-        frequencies_hz: np.ndarray,
-        amplitudes: np.ndarray,
-        tracked_hz: list[float | None],
-        baseline_hz: list[float | None],
-    ) -> None:
+    def push_spectra(self, spectrum: SpectrumDocument) -> None:
         """Amplitude spectra (n_freq, Γ) of b1..bΓ of the latest window, with the tracked and
-        baseline eigenfrequency per unit deformation (None where unknown)."""
-        rec = normalise_spectra(frequencies_hz, amplitudes, tracked_hz, baseline_hz, self.gamma)
+        baseline eigenfrequencies per unit deformation (before a baseline: tracked only)."""
+        rec = spectra_record(spectrum, self.gamma)
         with self._store.lock:
             self._store.spectra = rec
             self._store.spectra_version += 1
 
-    def push_window(self, window: dict) -> None:
-        """One analytics window (``WindowResult.as_dict()`` keys, damping per mode, curvature index
-        along ``stations``) or one trend row."""
-        rec = normalise_window(window, n_stations=self.stations.size)
+    def push_window(self, window: WindowDocument) -> None:
+        """One analysis window (its modes, charts and curvature change along ``stations``)."""
+        rec = window_record(window, n_stations=self.stations.size)
         self._add_windows([rec])
 
-    def push_alarm(self, alarm: dict) -> None:
+    def push_alarm(self, alarm: AlarmDocument) -> None:
         """An alarm raised, updated, acknowledged or cleared; a raised alarm notifies every browser."""
-        self._store.upsert_alarm(normalise_alarm(alarm))
+        if not isinstance(alarm, AlarmDocument):
+            raise ValueError(f"alarm must be a contract.AlarmDocument, got {type(alarm).__name__}")
+        self._store.upsert_alarm(alarm)
 
     def stop(self) -> None:
         """Stop the render thread and the web server (idempotent)."""
@@ -306,42 +320,22 @@ class Dashboard:
         with self._views_lock:
             return len(self._views)
 
-    def baseline_modes(self, snap: Snapshot) -> dict[int, dict]:
-        """Baseline entries per mode from the service status (``status()["baseline"]["modes"]``)."""
-        status = snap.status or {}
-        baseline = status.get("baseline") if isinstance(status, dict) else None
-        modes = baseline.get("modes") if isinstance(baseline, dict) else None
-        out: dict[int, dict] = {}
-        if isinstance(modes, (list, tuple)):
-            for entry in modes:
-                if isinstance(entry, dict):
-                    m = entry.get("mode", entry.get("unit"))
-                    if isinstance(m, (int, np.integer)) and not isinstance(m, bool):
-                        out[int(m)] = entry
-        return out
+    def baseline_modes(self, snap: Snapshot) -> dict[int, BaselineModeDocument]:
+        """The service's baseline per mode (empty while it learns one)."""
+        if snap.status is None or snap.status.baseline.modes is None:
+            return {}
+        return {m.mode: m for m in snap.status.baseline.modes}
 
     def band(self, snap: Snapshot, rec: WindowRecord, mode: int) -> tuple[float | None, float | None, float | None]:
-        """(expected, low, high) Hz of ``mode`` at ``rec``: from the window, else the baseline."""
-        expected = rec.expected_hz.get(mode)
-        band = rec.band_hz.get(mode)
-        if band is not None:
-            return expected if expected is not None else 0.5 * (band[0] + band[1]), band[0], band[1]
+        """(expected, low, high) Hz of ``mode`` at ``rec`` from the baseline (None without one)."""
         entry = self.baseline_modes(snap).get(mode)
-        if entry is not None:
-            b = baseline_band(entry, rec.temperature_c)
-            if b is not None:
-                return (expected if expected is not None else b[0]), b[1], b[2]
-        return expected, None, None
+        if entry is None:
+            return None, None, None
+        return baseline_band(entry, rec.temperature_c)
 
-    def thresholds(self, snap: Snapshot) -> dict[str, float]:
-        out = dict(DEFAULT_THRESHOLDS)
-        status = snap.status if isinstance(snap.status, dict) else {}
-        for source in (status.get("thresholds"), status.get("config")):
-            if isinstance(source, dict):
-                out.update({k: float(v) for k, v in source.items() if k in DEFAULT_THRESHOLDS and _is_num(v)})
-        if snap.windows and snap.windows[-1].thresholds:
-            out.update({k: v for k, v in snap.windows[-1].thresholds.items() if k in DEFAULT_THRESHOLDS})
-        return out
+    def thresholds(self, snap: Snapshot) -> dict[str, tuple[float, float]]:
+        """(warning, alarm) σ of the frequency and curvature charts, as the service applies them."""
+        return thresholds_of(None if snap.status is None else snap.status.thresholds, snap.windows)
 
     def set_view_paused(self) -> None:
         """Pause the service's pushes only when every connected browser is paused."""
@@ -388,8 +382,7 @@ class Dashboard:
         if "history" not in last:  # once, at start: the stored trend history
             last["history"] = now
             try:
-                rows = self.service.trends(None, None)
-                records = windows_from_trend_rows(rows or [], n_stations=self.stations.size)
+                records = windows_from_trend_rows(self.service.trends(None, None) or [])
                 if records:
                     self._add_windows(records)
             except Exception as exc:
@@ -398,21 +391,21 @@ class Dashboard:
             last["status"] = now
             try:
                 status = self.service.status()
-                error = None if isinstance(status, dict) else f"status() returned {type(status).__name__}"
+                error = None if isinstance(status, StatusDocument) else f"status() returned {type(status).__name__}"
             except Exception as exc:
                 status, error = None, f"{type(exc).__name__}: {exc}"
             with store.lock:
-                store.status = status if isinstance(status, dict) else store.status
+                store.status = status if isinstance(status, StatusDocument) else store.status
                 store.status_error = error
                 store.status_version += 1
         if now - last.get("alarms", -math.inf) >= ALARM_POLL_S:
             last["alarms"] = now
             try:
                 for item in self.service.alarms() or []:
-                    try:
-                        store.upsert_alarm(normalise_alarm(item))
-                    except ValueError as exc:
-                        log.warning("ignoring malformed alarm from service: %s", exc)
+                    if isinstance(item, AlarmDocument):
+                        store.upsert_alarm(item)
+                    else:
+                        log.warning("ignoring an alarm that is not a contract.AlarmDocument: %r", type(item).__name__)
             except Exception as exc:
                 log.warning("service.alarms() failed: %s", exc)
 

@@ -19,6 +19,8 @@ from typing import Protocol
 
 import numpy as np
 
+from contract import StateLayout
+
 __all__ = [
     "BeamState",
     "UnitShapes",
@@ -27,7 +29,6 @@ __all__ = [
     "ribbon",
     "ribbon_faces",
     "segments",
-    "state_size_options",
     "tangent_angle",
     "tof_rays",
     "to_world",
@@ -58,33 +59,24 @@ class BeamState:
     b: np.ndarray
 
 
-def state_size_options(gamma: int) -> tuple[int, int]:
-    """Valid state lengths for Γ unit deformations: gyro (5 + Γ + 1) and acc (5 + 2Γ + 1)."""
-    return 5 + gamma + 1, 5 + 2 * gamma + 1
-
-
-def parse_state(x: object, gamma: int) -> BeamState:
-    """Validate a state vector [d, h, ḋ, ḣ, φ, b1..bΓ, (v1..vΓ), β_D] and pick the beam part.
+def parse_state(x: object, layout: StateLayout) -> BeamState:
+    """Validate an estimator state vector and pick the beam part through its ``layout``.
 
     Raises ValueError (naming the problem) for a non-1-D, wrong-length or non-finite vector.
     """
-    if not isinstance(gamma, (int, np.integer)) or gamma < 1:
-        raise ValueError(f"gamma={gamma!r} must be a positive integer")
+    if not isinstance(layout, StateLayout):
+        raise ValueError(f"layout must be a contract.StateLayout, got {type(layout).__name__}")
     try:
         arr = np.asarray(x, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"state vector x must be numeric: {exc}") from None
     if arr.ndim != 1:
         raise ValueError(f"state vector x must be 1-D, got shape {arr.shape}")
-    sizes = state_size_options(int(gamma))
-    if arr.size not in sizes:
-        raise ValueError(
-            f"state vector x has {arr.size} entries; with Γ={gamma} unit deformations it needs "
-            f"{sizes[0]} (gyro: d, h, d_rate, h_rate, phi, b1..b{gamma}, gyro_bias_D) or {sizes[1]} (acc: plus v1..v{gamma})"
-        )
-    if not np.all(np.isfinite(arr[: 5 + gamma])):
+    arr = layout.check(arr)
+    d, h, phi, b = arr[layout.d], arr[layout.h], float(layout.phi_of(arr)), layout.b_of(arr)
+    if not (np.isfinite(d) and np.isfinite(h) and np.isfinite(phi) and np.all(np.isfinite(b))):
         raise ValueError("state vector x has NaN or infinite values in d, h, phi or b")
-    return BeamState(d=float(arr[0]), h=float(arr[1]), phi=float(arr[4]), b=arr[5 : 5 + gamma].copy())
+    return BeamState(d=float(d), h=float(h), phi=phi, b=b.copy())
 
 
 def _place(state: BeamState, eta: np.ndarray, delta: np.ndarray, rigid_scale: float) -> np.ndarray:

@@ -12,7 +12,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import viser
 
-from ._data import AlarmRecord, WindowRecord, frequencies_of, spectrum_plot
+from contract import AlarmDocument, StatusDocument
+
+from ._data import WindowRecord, frequencies_of, spectrum_plot
 from ._geometry import (
     BeamState,
     centreline,
@@ -35,7 +37,7 @@ STATE_COLOURS = {
     "rejected": (220, 38, 38),
     "unknown": (140, 140, 140),
 }
-MODE_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
+MODE_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 BEAM_COLOUR = (30, 100, 200)
 GHOST_COLOUR = (150, 150, 150)
 TRUTH_COLOUR = (235, 120, 20)
@@ -122,7 +124,7 @@ class ClientView:
         self.paused = False
         self.elastic_scale = 20.0
         self.rigid_scale = 1.0
-        self.modes_shown = set(range(1, dash.gamma + 1))
+        self.units_shown = set(range(1, dash.gamma + 1))  # unit deformations (and their modes) shown
         self.trend_window_s = TREND_WINDOWS["1 h"]
         self.dirty_scene = True
         self.dirty_trends = True
@@ -254,25 +256,31 @@ class ClientView:
         with tabs.add_tab("View", viser.Icon.SETTINGS):
             self._build_settings(gui)
 
-    def _mode_label(self, mode: int) -> str:
-        units = self.dash.units
-        try:
-            modes = units.modes[mode - 1]
-            freqs = units.frequencies_hz[mode - 1]
-            return f"b{mode} · mode {'+'.join(str(m) for m in modes)} ({', '.join(f'{f:.2f}' for f in freqs)} Hz model)"
-        except (AttributeError, IndexError, TypeError):
-            return f"b{mode}"
+    def _unit_label(self, unit: int) -> str:
+        """``b1 · mode 1+2 (0.30, 0.86 Hz model)``: the spectra's and the mode switches' label."""
+        label = self.dash.mode_map.unit_label(unit)
+        freqs = self._model_freqs(unit)
+        return f"{label} ({', '.join(f'{f:.2f}' for f in freqs)} Hz model)" if freqs else label
 
-    def _model_hz(self, mode: int) -> float | None:
+    def _model_freqs(self, unit: int) -> tuple[float, ...]:
         try:
-            return float(self.dash.units.frequencies_hz[mode - 1][-1])
+            return tuple(float(f) for f in self.dash.units.frequencies_hz[unit - 1])
         except (AttributeError, IndexError, TypeError, ValueError):
-            return None
+            return ()
+
+    def _model_hz(self, unit: int) -> float | None:
+        freqs = self._model_freqs(unit)
+        return freqs[-1] if freqs else None
 
     def _f_max(self) -> float:
-        freqs = [self._model_hz(m) for m in range(1, self.dash.gamma + 1)]
+        freqs = [self._model_hz(u) for u in range(1, self.dash.gamma + 1)]
         freqs = [f for f in freqs if f]
         return 1.4 * max(freqs) if freqs else 10.0
+
+    def _modes_shown(self) -> list[int]:
+        """The eigenmodes of the unit deformations shown."""
+        mm = self.dash.mode_map
+        return [m for m in mm.modes if mm.unit_of(m) in self.units_shown]
 
     def _build_spectra(self, gui: Any) -> None:
         gui.add_markdown(
@@ -282,21 +290,21 @@ class ClientView:
         self.spectra_plots = {}
         f_max = self._f_max()
         f = np.linspace(0.0, f_max, 200)
-        for mode in range(1, self.dash.gamma + 1):
-            x, y, tr, bl = spectrum_plot(f, np.ones(f.size), None, self._model_hz(mode))
-            self.spectra_plots[mode] = gui.add_uplot(
+        for unit in range(1, self.dash.gamma + 1):
+            x, y, tr, bl = spectrum_plot(f, np.ones(f.size), None, self._model_freqs(unit))
+            self.spectra_plots[unit] = gui.add_uplot(
                 data=(x, y, tr, bl),
-                series=self._spectrum_series(mode, None, self._model_hz(mode)),
+                series=self._spectrum_series(unit, None, self._model_freqs(unit)),
                 scales={"x": {"time": False}, "y": {"distr": 3}},
-                title=self._mode_label(mode),
+                title=self._unit_label(unit),
                 height=150,
                 padding=(12, 16, 0, 0),
                 axes=({"ticks": {"show": False}}, {"size": 52, "ticks": {"show": False}}),
                 legend={"show": True, "live": False},
             )
 
-    def _spectrum_series(self, mode: int, tracked: object, baseline: object) -> tuple:
-        colour = MODE_COLOURS[(mode - 1) % len(MODE_COLOURS)]
+    def _spectrum_series(self, unit: int, tracked: object, baseline: object) -> tuple:
+        colour = MODE_COLOURS[(unit - 1) % len(MODE_COLOURS)]
 
         def label(values: object) -> str:
             fs = frequencies_of(values)
@@ -304,7 +312,7 @@ class ClientView:
 
         return (
             {"label": "Hz"},
-            {"label": f"|b{mode}| µm", "stroke": colour, "width": 1.5, "fill": colour + "22"},
+            {"label": f"|b{unit}| µm", "stroke": colour, "width": 1.5, "fill": colour + "22"},
             {"label": f"tracked {label(tracked)} Hz", "stroke": "#111111", "width": 1.5, "points": {"show": False}},
             {"label": f"baseline {label(baseline)} Hz", "stroke": "#2e8b57", "width": 1.5, "dash": (5, 4), "points": {"show": False}},
         )
@@ -312,10 +320,12 @@ class ClientView:
     def _build_trends(self, gui: Any) -> None:
         self.trend_info = gui.add_html("<p>Waiting for the first analysis window…</p>")
         self.freq_plots = {}
+        mm = self.dash.mode_map
+        modes = mm.modes
         x0 = np.array([0.0, 1.0])
         z = np.zeros(2)
-        for mode in range(1, self.dash.gamma + 1):
-            colour = MODE_COLOURS[(mode - 1) % len(MODE_COLOURS)]
+        for mode in modes:
+            colour = _colour(mode)
             self.freq_plots[mode] = gui.add_uplot(
                 data=(x0, z, z, z, z),
                 series=(
@@ -327,29 +337,22 @@ class ClientView:
                 ),
                 bands=({"series": (4, 3), "fill": "rgba(46,139,87,0.15)"},),
                 scales={"x": {"time": False}},
-                title=f"b{mode} eigenfrequency (Hz) with baseline band",
+                title=f"{mm.mode_label(mode)} eigenfrequency (Hz) with baseline band",
                 height=140, visible=False, legend={"live": False},
             )
-        g = self.dash.gamma
         self.damping_plot = gui.add_uplot(
-            data=(x0,) + (z,) * g,
+            data=(x0,) + (z,) * len(modes),
             series=({"label": "time"},) + tuple(
-                {"label": f"ζ{m} %", "stroke": MODE_COLOURS[(m - 1) % 5], "width": 1.5, "points": {"show": True, "size": 4}}
-                for m in range(1, g + 1)
+                {"label": f"ζ {mm.mode_label(m)} %", "stroke": _colour(m), "width": 1.5, "points": {"show": True, "size": 4}}
+                for m in modes
             ),
             scales={"x": {"time": False}}, title="Damping ratio (%)", height=150, visible=False, legend={"live": False},
         )
         self.score_plot = gui.add_uplot(
-            data=(x0,) + (z,) * (g + 4),
+            data=(x0,) + (z,) * (len(modes) + 4),
             series=({"label": "time"},) + tuple(
-                {"label": f"b{m} σ", "stroke": MODE_COLOURS[(m - 1) % 5], "width": 1.5}
-                for m in range(1, g + 1)
-            ) + (
-                {"label": "warning +", "stroke": "#ffaa00", "dash": (6, 4), "width": 1},
-                {"label": "warning −", "stroke": "#ffaa00", "dash": (6, 4), "width": 1},
-                {"label": "alarm +", "stroke": "#dc2626", "dash": (6, 4), "width": 1.5},
-                {"label": "alarm −", "stroke": "#dc2626", "dash": (6, 4), "width": 1.5},
-            ),
+                {"label": f"{mm.mode_label(m)} σ", "stroke": _colour(m), "width": 1.5} for m in modes
+            ) + _threshold_series(),
             scales={"x": {"time": False}}, title="Frequency control charts: EWMA score (σ) and alarm thresholds",
             height=170, visible=False, legend={"live": False},
         )
@@ -374,8 +377,15 @@ class ClientView:
             series=({"label": "time"}, {"label": "index (RMS)", "stroke": "#7c3aed", "width": 1.5, "points": {"show": True, "size": 4}}),
             scales={"x": {"time": False}}, title="Curvature-change index over time", height=120, visible=False, legend={"live": False},
         )
+        self.curv_score_plot = gui.add_uplot(
+            data=(x0, z, z, z, z, z),
+            series=({"label": "time"}, {"label": "curvature σ", "stroke": "#7c3aed", "width": 1.5}) + _threshold_series(),
+            scales={"x": {"time": False}}, title="Curvature control chart: score (σ) and alarm thresholds", height=140,
+            visible=False, legend={"live": False},
+        )
 
     def _build_alarms(self, gui: Any) -> None:
+        self._alarm_options: dict[str, int] = {}  # dropdown label -> alarm id
         self.alarm_html = gui.add_html("<p>No alarms.</p>")
         self.alarm_choice = gui.add_dropdown("Alarm", ("(none)",), initial_value="(none)")
         self.token = gui.add_text("Operator token", "", hint="Required to acknowledge (same rules as the HTTP API)")
@@ -387,14 +397,13 @@ class ClientView:
             self._acknowledge()
 
     def _acknowledge(self) -> None:
-        choice = str(self.alarm_choice.value)
-        if not choice.startswith("#"):
+        alarm_id = self._alarm_options.get(str(self.alarm_choice.value))
+        if alarm_id is None:
             self.ack_result.content = "<p style='color:#b45309'>Choose an alarm first.</p>"
             return
-        alarm_id = int(choice[1:].split()[0])
         token = str(self.token.value)
         try:
-            result = self.dash.service.acknowledge(alarm_id, token)
+            result = self.dash.service.acknowledge(alarm_id, token, by="dashboard")
         except PermissionError as exc:
             self.ack_result.content = f"<p style='color:#dc2626'>Not acknowledged: {html.escape(str(exc) or 'token missing or wrong')}</p>"
             return
@@ -405,11 +414,8 @@ class ClientView:
             log.exception("acknowledge(%s) failed", alarm_id)
             self.ack_result.content = f"<p style='color:#dc2626'>Acknowledge failed: {html.escape(type(exc).__name__)}: {html.escape(str(exc))}</p>"
             return
-        if isinstance(result, dict):
-            try:
-                self.dash.push_alarm(result)
-            except ValueError:
-                pass
+        if isinstance(result, AlarmDocument):
+            self.dash.push_alarm(result)
         self.ack_result.content = f"<p style='color:#15803d'>Alarm #{alarm_id} acknowledged.</p>"
 
     def _build_settings(self, gui: Any) -> None:
@@ -424,7 +430,7 @@ class ClientView:
         self.show_rays = gui.add_checkbox("Show ToF rays", True)
         self.show_labels = gui.add_checkbox("Show sensor labels", True)
         gui.add_markdown("**Modes shown** (spectra and trends)")
-        self.mode_boxes = {m: gui.add_checkbox(self._mode_label(m), True) for m in range(1, self.dash.gamma + 1)}
+        self.unit_boxes = {u: gui.add_checkbox(self._unit_label(u), True) for u in range(1, self.dash.gamma + 1)}
         self.trend_window = gui.add_dropdown("Trend window", tuple(TREND_WINDOWS), initial_value="1 h")
         gui.add_markdown(
             "Marker colours: <span style='color:#28a745'>●</span> ok, <span style='color:#ffaa00'>●</span> degraded, "
@@ -439,14 +445,14 @@ class ClientView:
             handle.on_update(scene_changed)
 
         def modes_changed(_: Any) -> None:
-            self.modes_shown = {m for m, box in self.mode_boxes.items() if box.value}
+            self.units_shown = {u for u, box in self.unit_boxes.items() if box.value}
             self.trend_window_s = TREND_WINDOWS.get(str(self.trend_window.value), math.inf)
             for m, plot in self.spectra_plots.items():
-                plot.visible = m in self.modes_shown
+                plot.visible = m in self.units_shown
             self.dirty_trends = True
             self._spec_version = -1
 
-        for handle in (*self.mode_boxes.values(), self.trend_window):
+        for handle in (*self.unit_boxes.values(), self.trend_window):
             handle.on_update(modes_changed)
 
     # ------------------------------------------------------------------ rendering
@@ -563,12 +569,12 @@ class ClientView:
     def _render_spectra(self, snap: "Snapshot") -> None:
         spec = snap.spectra
         f_max = max(self._f_max(), 1.2 * max([f for fs in (*spec.tracked_hz, *spec.baseline_hz) for f in fs] or [0.0]))
-        for mode, plot in self.spectra_plots.items():
-            if mode not in self.modes_shown:
+        for unit, plot in self.spectra_plots.items():
+            if unit not in self.units_shown:
                 continue
-            tracked, baseline = spec.tracked_hz[mode - 1], spec.baseline_hz[mode - 1]
-            plot.data = spectrum_plot(spec.frequencies_hz, 1e6 * spec.amplitudes[:, mode - 1], tracked, baseline, f_max=f_max)
-            series = self._spectrum_series(mode, tracked, baseline)
+            tracked, baseline = spec.tracked_hz[unit - 1], spec.baseline_hz[unit - 1]
+            plot.data = spectrum_plot(spec.frequencies_hz, 1e6 * spec.amplitudes[:, unit - 1], tracked, baseline, f_max=f_max)
+            series = self._spectrum_series(unit, tracked, baseline)
             if plot.series != series:
                 plot.series = series
 
@@ -590,47 +596,50 @@ class ClientView:
         shown = [w for w in windows if w.t_s >= t_end - self.trend_window_s]
         if len(shown) > 2000:  # keep the browser fast: thin evenly
             shown = shown[:: math.ceil(len(shown) / 2000)]
-        trend_plots = [*self.freq_plots.values(), self.damping_plot, self.score_plot, self.temperature_plot, self.curv_trend_plot]
+        trend_plots = [*self.freq_plots.values(), self.damping_plot, self.score_plot, self.temperature_plot,
+                       self.curv_trend_plot, self.curv_score_plot]
         x = self._x(np.array([w.t_s for w in shown]), trend_plots)
         if x.size == 1:  # uPlot needs two x values to draw a range
             x = np.array([x[0] - 1.0, x[0]])
             shown = [shown[0], shown[0]]
+        visible_modes = set(self._modes_shown())
         for mode, plot in self.freq_plots.items():
-            visible = mode in self.modes_shown
+            visible = mode in visible_modes
             plot.visible = visible
             if not visible:
                 continue
             f = _arr([w.frequency_hz.get(mode) for w in shown])
             bands = [dash.band(snap, w, mode) for w in shown]
             plot.data = (x, f, _arr([b[0] for b in bands]), _arr([b[1] for b in bands]), _arr([b[2] for b in bands]))
-        g = dash.gamma
-        damping = [_arr([None if w.damping_ratio.get(m) is None else 100 * w.damping_ratio[m] for w in shown]) for m in range(1, g + 1)]
+        modes = dash.mode_map.modes
+        damping = [_arr([None if w.damping_ratio.get(m) is None else 100 * w.damping_ratio[m] for w in shown]) for m in modes]
         self.damping_plot.data = (x, *damping)
         self.damping_plot.visible = any(np.isfinite(d).any() for d in damping)
         th = dash.thresholds(snap)
-        scores = [_arr([w.score_sigma.get(m) for w in shown]) for m in range(1, g + 1)]
-        ones = np.ones(x.size)
-        self.score_plot.data = (x, *scores, th["warning_sigma"] * ones, -th["warning_sigma"] * ones, th["alarm_sigma"] * ones, -th["alarm_sigma"] * ones)
+        scores = [_arr([w.score_sigma.get(m) for w in shown]) for m in modes]
+        self.score_plot.data = (x, *scores, *_threshold_lines(th.get("frequency"), x.size))
         self.score_plot.visible = any(np.isfinite(s).any() for s in scores)
-        series = list(self.damping_plot.series)
-        changed = False
-        for m in range(1, g + 1):
-            want = m in self.modes_shown
-            if series[m].get("show", True) != want:
-                series[m] = {**series[m], "show": want}
-                changed = True
-        if changed:
-            self.damping_plot.series = tuple(series)
-            score_series = list(self.score_plot.series)
-            for m in range(1, g + 1):
-                score_series[m] = {**score_series[m], "show": m in self.modes_shown}
-            self.score_plot.series = tuple(score_series)
+        for plot, levels in ((self.damping_plot, None), (self.score_plot, th.get("frequency"))):
+            series = list(plot.series)
+            for i, m in enumerate(modes, start=1):
+                if series[i].get("show", True) != (m in visible_modes):
+                    series[i] = {**series[i], "show": m in visible_modes}
+            if plot is self.score_plot:
+                series[len(modes) + 1:] = _threshold_series(levels)
+            if tuple(series) != tuple(plot.series):
+                plot.series = tuple(series)
         temps = _arr([w.temperature_c for w in shown])
         self.temperature_plot.data = (x, temps)
         self.temperature_plot.visible = bool(np.isfinite(temps).any())
         totals = _arr([w.curvature_total for w in shown])
         self.curv_trend_plot.data = (x, totals)
         self.curv_trend_plot.visible = bool(np.isfinite(totals).any())
+        curv_scores = _arr([w.curvature_score_sigma for w in shown])
+        self.curv_score_plot.data = (x, curv_scores, *_threshold_lines(th.get("curvature"), x.size))
+        self.curv_score_plot.visible = bool(np.isfinite(curv_scores).any())
+        curv_series = (*self.curv_score_plot.series[:2], *_threshold_series(th.get("curvature")))
+        if tuple(self.curv_score_plot.series) != curv_series:
+            self.curv_score_plot.series = curv_series
         profiles = [w.curvature_profile for w in shown if w.curvature_profile is not None]
         if profiles:
             stack = np.array(profiles)
@@ -639,13 +648,15 @@ class ClientView:
         self.trend_info.content = self._trend_info_html(windows[-1], len(windows))
 
     def _trend_info_html(self, w: WindowRecord, count: int) -> str:
+        mm = self.dash.mode_map
         cells = []
-        for m in sorted(w.frequency_hz):
-            level = w.levels.get(f"mode{m}", "ok")
+        for m in mm.modes:
+            if m not in w.frequency_hz:
+                continue
             cells.append(
-                f"<tr><td>b{m}</td><td>{_fmt(w.frequency_hz.get(m), '{:.4f}')}</td>"
+                f"<tr><td>{html.escape(mm.mode_label(m))}</td><td>{_fmt(w.frequency_hz.get(m), '{:.4f}')}</td>"
                 f"<td>{_fmt(None if w.damping_ratio.get(m) is None else 100 * w.damping_ratio[m], '{:.2f}')}</td>"
-                f"<td>{_fmt(w.score_sigma.get(m), '{:+.1f}')}</td><td>{_level_badge(level)}</td></tr>"
+                f"<td>{_fmt(w.score_sigma.get(m), '{:+.1f}')}</td><td>{_level_badge(w.level.get(m))}</td></tr>"
             )
         where = ""
         if w.curvature_eta_m is not None:
@@ -657,8 +668,14 @@ class ClientView:
             f"<table style='width:100%;font-size:12px'><tr><th>mode</th><th>f Hz</th><th>ζ %</th><th>score σ</th><th>chart</th></tr>"
             + "".join(cells)
             + f"</table>Curvature-change index {_fmt(w.curvature_total, '{:.3g}')}"
-            f" (score {_fmt(w.curvature_score_sigma, '{:+.1f}')} σ){where}</div>"
+            f" (score {_fmt(w.curvature_score_sigma, '{:+.1f}')} σ, {_level_badge(w.curvature_level)}){where}</div>"
         )
+
+    def _alarm_label(self, a: AlarmDocument) -> str:
+        mm = self.dash.mode_map
+        if a.kind == "frequency" and a.mode is not None and a.mode in mm.modes:
+            return mm.mode_label(a.mode)
+        return a.chart
 
     def _render_alarms(self, snap: "Snapshot") -> None:
         alarms = snap.alarms
@@ -669,23 +686,22 @@ class ClientView:
             for a in alarms[:ALARM_ROWS]:
                 state = "active" if a.active else "cleared"
                 if a.acknowledged:
-                    state += ", ack"
+                    by = f" by {a.acknowledged_by}" if a.acknowledged_by else ""
+                    state += f", acknowledged{by} {fmt_time(a.acknowledged_at_s)}"
                 rows.append(
                     f"<tr style='{_alarm_style(a)}'><td>#{a.id}</td><td>{_level_badge(a.level)}</td>"
-                    f"<td>{_fmt(a.mode)}</td><td>{state}</td><td>{fmt_time(a.since_s)}</td>"
+                    f"<td>{html.escape(self._alarm_label(a))}</td><td>{html.escape(state)}</td><td>{fmt_time(a.raised_at_s)}</td>"
                     f"<td>{html.escape(a.message)}</td></tr>"
                 )
             active = sum(1 for a in alarms if a.active)
             self.alarm_html.content = (
                 f"<div style='font-size:12px'><b>{active} active</b>, {len(alarms)} in the list."
                 "<table style='width:100%;font-size:12px;border-collapse:collapse'>"
-                "<tr><th>id</th><th>level</th><th>mode</th><th>state</th><th>since</th><th>message</th></tr>"
+                "<tr><th>id</th><th>level</th><th>chart</th><th>state</th><th>since</th><th>message</th></tr>"
                 + "".join(rows) + "</table></div>"
             )
-        options = tuple(
-            f"#{a.id} {a.level} mode {a.mode if a.mode is not None else '-'}"
-            for a in alarms if not a.acknowledged
-        ) or ("(none)",)
+        self._alarm_options = {f"#{a.id} {a.level} {self._alarm_label(a)}": a.id for a in alarms if not a.acknowledged}
+        options = tuple(self._alarm_options) or ("(none)",)
         if tuple(self.alarm_choice.options) != options:
             current = self.alarm_choice.value
             self.alarm_choice.options = options
@@ -721,8 +737,8 @@ class ClientView:
         if n_alarm and n_warn:
             badge += f" <span style='background:#ffaa00;color:black;padding:1px 6px;border-radius:4px'>{n_warn} warning</span>"
         degraded = []
-        if isinstance(snap.status, dict) and isinstance(snap.status.get("degraded_sensors"), list):
-            degraded = [str(t) for t in snap.status["degraded_sensors"]]
+        if snap.status is not None:
+            degraded = list(snap.status.degraded_sensors)
         elif snap.estimate is not None:
             degraded = [t for t, v in snap.estimate.sensor_states.items() if v != "ok"]
         sensors = (
@@ -735,6 +751,28 @@ class ClientView:
         )
 
 
+def _colour(index: int) -> str:
+    return MODE_COLOURS[(index - 1) % len(MODE_COLOURS)]
+
+
+def _threshold_series(levels: tuple[float, float] | None = None) -> tuple[dict, ...]:
+    """The four level lines of a control chart; their legend names the levels (σ) in force."""
+    warning, alarm = ("?", "?") if levels is None else (f"{levels[0]:g}", f"{levels[1]:g}")
+    return (
+        {"label": f"warning +{warning} σ", "stroke": "#ffaa00", "dash": (6, 4), "width": 1},
+        {"label": f"warning −{warning} σ", "stroke": "#ffaa00", "dash": (6, 4), "width": 1},
+        {"label": f"alarm +{alarm} σ", "stroke": "#dc2626", "dash": (6, 4), "width": 1.5},
+        {"label": f"alarm −{alarm} σ", "stroke": "#dc2626", "dash": (6, 4), "width": 1.5},
+    )
+
+
+def _threshold_lines(levels: tuple[float, float] | None, n: int) -> tuple[np.ndarray, ...]:
+    """±warning, ±alarm as constant series (NaN, i.e. not drawn, while the levels are unknown)."""
+    warning, alarm = levels if levels is not None else (NAN, NAN)
+    ones = np.ones(n)
+    return warning * ones, -warning * ones, alarm * ones, -alarm * ones
+
+
 def _nice(x: float) -> float:
     """Round down to 1, 2 or 5 × 10^k (a steady overscale factor that does not flicker)."""
     k = math.floor(math.log10(x))
@@ -744,13 +782,16 @@ def _nice(x: float) -> float:
     return 10.0**k
 
 
-def _level_badge(level: str) -> str:
+def _level_badge(level: str | None) -> str:
+    """A chart level's badge; "not charted" for a mode without a chart (no baseline, too few cycles)."""
+    if level is None:
+        return "<span style='color:#888'>not charted</span>"
     colours = {"alarm": ("#dc2626", "white"), "warning": ("#ffaa00", "black"), "ok": ("#15803d", "white")}
     bg, fg = colours.get(level, ("#888", "white"))
     return f"<span style='background:{bg};color:{fg};padding:0 5px;border-radius:3px'>{html.escape(level)}</span>"
 
 
-def _alarm_style(a: AlarmRecord) -> str:
+def _alarm_style(a: AlarmDocument) -> str:
     if not a.active:
         return "color:#777"
     return "background:#fee2e2" if a.level == "alarm" else "background:#fef3c7"
@@ -758,45 +799,57 @@ def _alarm_style(a: AlarmRecord) -> str:
 
 def _status_html(snap: "Snapshot", dash: "Dashboard") -> str:
     parts = []
-    status = snap.status if isinstance(snap.status, dict) else None
+    status: StatusDocument | None = snap.status
     if snap.status_error:
         parts.append(f"<p style='color:#dc2626'>Service status unavailable: {html.escape(snap.status_error)}</p>")
     if status is None:
         parts.append("<p>No status from the service yet.</p>")
     else:
-        service = status.get("service") if isinstance(status.get("service"), dict) else {}
+        service = status.service
+        error = ""
+        if service.pipeline_errors:
+            error = (f" · <span style='color:#dc2626'>{service.pipeline_errors} failed batches"
+                     f"{', now: ' + html.escape(service.pipeline_error) if service.pipeline_error else ' (recovered)'}</span>")
         parts.append(
-            f"<p><b>Service</b> {html.escape(str(service.get('version', '')))} · up {_fmt(service.get('uptime_s'), '{:.0f}')} s · "
-            f"pushes {'paused' if service.get('paused') else 'live'}</p>"
+            f"<p><b>Service</b> {html.escape(service.version)} · up {_fmt(service.uptime_s, '{:.0f}')} s · "
+            f"pushes {'paused' if service.paused else 'live'}{error}</p>"
         )
-        sources = status.get("sources") if isinstance(status.get("sources"), list) else []
-        if sources:
+        if status.sources:
             rows = "".join(
-                f"<tr><td>{html.escape(str(s.get('id', '?')))}</td><td>{html.escape(str(s.get('kind', '')))}</td>"
-                f"<td>{html.escape(str(s.get('state', '')))}</td><td>{_fmt(s.get('rate_hz'), '{:.0f}')}</td>"
-                f"<td>{_fmt(s.get('latency_s'), '{:.3f}')}</td><td>{_fmt(s.get('messages'), '{:.0f}')}</td>"
-                f"<td>{_fmt(s.get('dropped'), '{:.0f}')}</td><td>{_fmt(s.get('rejected'), '{:.0f}')}</td></tr>"
-                for s in sources if isinstance(s, dict)
+                f"<tr><td>{html.escape(s.id)}</td><td>{html.escape(s.kind)}</td>"
+                f"<td>{html.escape(s.state)}</td><td>{_fmt(s.rate_hz, '{:.0f}')}</td>"
+                f"<td>{_fmt(s.latency_s, '{:.3f}')}</td><td>{_fmt(s.messages, '{:.0f}')}</td>"
+                f"<td>{_fmt(s.dropped, '{:.0f}')}</td><td>{_fmt(s.rejected, '{:.0f}')}</td></tr>"
+                for s in status.sources
             )
             parts.append(
                 "<table style='width:100%;font-size:12px'><tr><th>source</th><th>kind</th><th>state</th><th>msg/s</th>"
                 "<th>latency s</th><th>messages</th><th>dropped</th><th>rejected</th></tr>" + rows + "</table>"
             )
-        pipeline = status.get("pipeline")
-        if isinstance(pipeline, dict) and pipeline:
-            parts.append("<p><b>Pipeline</b> " + " · ".join(f"{html.escape(str(k))}: {_fmt(v)}" for k, v in pipeline.items()) + "</p>")
-        sensors = status.get("sensors")
-        if isinstance(sensors, dict) and sensors:
+        p = status.pipeline
+        parts.append(
+            f"<p><b>Pipeline</b> samples {p.samples} · estimates {p.estimates} ({html.escape(p.estimator.state)}) · "
+            f"windows {p.windows_committed} committed, {p.windows_skipped_warmup} warm-up, "
+            f"{p.windows_skipped_incomplete} incomplete · queue {p.queue_depth}/{p.queue_capacity} · "
+            f"latency {_fmt(p.pipeline_latency_s, '{:.3f}')} s · {_fmt(p.realtime_factor, '{:.1f}')}× real time</p>"
+        )
+        sinks = [f"{html.escape(name)}: {sink.errors} ({html.escape(', '.join(f'{k} {v}' for k, v in sink.errors_by_kind.items()))})"
+                 for name, sink in status.sinks.items() if sink.errors]
+        if sinks:
+            parts.append(f"<p><b>Sink failures</b> <span style='color:#b45309'>{'; '.join(sinks)}</span></p>")
+        if status.sensors:
             cells = " ".join(
-                f"<span style='color:{_rgb(v)}'>●</span>&nbsp;{html.escape(str(t))}" for t, v in sorted(sensors.items())
+                f"<span style='color:{_rgb(v)}'>●</span>&nbsp;{html.escape(t)}" for t, v in sorted(status.sensors.items())
             )
             parts.append(f"<p><b>Sensors</b> {cells}</p>")
-        baseline = status.get("baseline")
-        if isinstance(baseline, dict):
-            parts.append(f"<p><b>Baseline</b> {html.escape(str(baseline.get('state', '')))}</p>")
-        storage = status.get("storage")
-        if isinstance(storage, dict) and storage:
-            parts.append("<p><b>Storage</b> " + " · ".join(f"{html.escape(str(k))}: {_fmt(v)}" for k, v in storage.items()) + "</p>")
+        th = status.thresholds
+        parts.append(
+            f"<p><b>Baseline</b> {html.escape(status.baseline.state)} · charts: frequency warning "
+            f"{th.frequency.warning_sigma:g} σ, alarm {th.frequency.alarm_sigma:g} σ; curvature warning "
+            f"{th.curvature.warning_sigma:g} σ, alarm {th.curvature.alarm_sigma:g} σ</p>"
+        )
+        st = status.storage
+        parts.append(f"<p><b>Storage</b> {html.escape(st.db)} · schema {st.schema_version} · {st.trend_rows} trend rows</p>")
     parts.append(
         f"<p style='color:#666'>Dashboard: {dash.client_count} browser(s), {1 / max(dash.last_frame_s, 1e-3):.0f} frames/s possible "
         f"(last frame {1e3 * dash.last_frame_s:.1f} ms), estimates arriving at {snap.estimate_rate_hz:.0f} Hz.</p>"

@@ -3,13 +3,15 @@ JSON messages, a ``rig.json`` attachment and optional ``truth`` metadata.
 
 ``RecordingWriter`` writes them; ``read_recording`` is the one reader for everything downstream
 (it checks the contract, keeps what is valid and reports what is not); ``inspect_recording`` and
-``format_inspection`` summarise a file for ``shm inspect``.
+``format_inspection`` summarise a file for ``shm inspect``. Topics, schemas and payload layouts
+are the contract package's (re-exported here for the readers' users).
 """
+
+from contract import ESTIMATE_TOPIC, PAYLOAD_FIELDS, SCHEMAS, TRUTH_TOPIC, classify_topic
 
 from ._follow import FollowBlock, RecordingFollower
 from ._inspect import format_inspection, inspect_recording
 from ._reader import Channel, ReadReport, Recording, RecordingError, TopicReport, read_recording
-from ._schemas import ESTIMATE_TOPIC, PAYLOAD_FIELDS, SCHEMAS, TRUTH_TOPIC, classify_topic
 from ._writer import RecordingWriter
 
 __all__ = [

@@ -15,7 +15,7 @@ from typing import Final
 
 import numpy as np
 
-from estimator._rig import RigDescription
+from contract import RigDescription
 
 from ._reader import (
     _RECORD_HEAD,

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from estimator._rig import RigDescription
+from contract import RigDescription
 
 from ._reader import read_recording
 

@@ -24,9 +24,19 @@ import numpy as np
 import orjson
 import zstandard
 
-from estimator._rig import RigDescription, RigError, load_rig, parse_rig
+from contract import (
+    NOMINAL_PERIOD_NS,
+    PAYLOAD_FIELDS,
+    FieldSpec,
+    Kind,
+    RigDescription,
+    RigError,
+    TopicInfo,
+    classify_topic,
+    load_rig,
+    parse_rig,
+)
 
-from ._schemas import NOMINAL_PERIOD_NS, PAYLOAD_FIELDS, FieldSpec, Kind, TopicInfo, classify_topic
 from ._writer import MAGIC, RIG_ATTACHMENT
 
 __all__ = ["Channel", "ReadReport", "Recording", "RecordingError", "TopicReport", "read_recording"]

@@ -39,9 +39,7 @@ from mcap.records import (
     SummaryOffset,
 )
 
-from estimator._rig import RigDescription, parse_rig
-
-from ._schemas import SCHEMAS, classify_topic
+from contract import SCHEMAS, RigDescription, classify_topic, parse_rig
 
 __all__ = ["RecordingWriter"]
 

@@ -18,6 +18,19 @@ from typing import Any, Literal, Protocol
 from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
 from fastapi.responses import JSONResponse, PlainTextResponse, Response
 
+from contract import (
+    AlarmDocument,
+    AlarmsDocument,
+    BaselineRequestDocument,
+    ErrorDocument,
+    HealthDocument,
+    IngestResultDocument,
+    SpectrumDocument,
+    StatusDocument,
+    TrendRow,
+    TrendsDocument,
+)
+
 from ._docs import serve_docs_offline
 from ._ingest import IngestError, parse_body
 
@@ -30,18 +43,17 @@ class ApiService(Protocol):
     token: str | None
 
     def check_token(self, token: str | None) -> None: ...
-    def status(self) -> dict[str, Any]: ...
+    def status(self) -> StatusDocument: ...
     def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
-               limit: int = 100_000) -> list[dict[str, Any]]: ...
-    def alarms(self, state: str | None = None) -> list[dict[str, Any]]: ...
-    def acknowledge(self, alarm_id: int, token: str, by: str = "api") -> dict[str, Any]: ...
-    def request_baseline(self) -> dict[str, Any]: ...
-    def spectra(self) -> dict[str, Any] | None: ...
-    def ingest(self, document: Any) -> dict[str, Any] | None: ...
+               limit: int = 100_000) -> list[TrendRow]: ...
+    def alarms(self, state: str | None = None) -> list[AlarmDocument]: ...
+    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument: ...
+    def request_baseline(self) -> BaselineRequestDocument: ...
+    def spectra(self) -> SpectrumDocument | None: ...
+    def ingest(self, document: Any) -> IngestResultDocument | None: ...
 
 
-_TREND_FIELDS = ("source", "window_start_s", "window_end_s", "mode", "unit", "kind", "frequency_hz", "damping_ratio",
-                 "amplitude", "confidence", "temperature_c", "curvature_index", "score_sigma", "level")
+_TREND_FIELDS = tuple(TrendRow.model_fields)
 
 
 class _BodyLimit:
@@ -127,20 +139,16 @@ def _parse_time(name: str, value: str | None) -> float | None:
     return x
 
 
-def _json_safe(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    return value
+def _error(description: str) -> dict[str, Any]:
+    return {"model": ErrorDocument, "description": description}
 
 
 _AUTH_RESPONSES: dict[int | str, dict[str, Any]] = {
-    401: {"description": "missing or wrong token"},
-    403: {"description": "no token is configured: the action is disabled"},
+    401: _error("missing or wrong token"),
+    403: _error("no token is configured: the action is disabled"),
 }
+#: Our own 422s say in a sentence what is wrong with a parameter; FastAPI's list what does not parse.
+_INVALID = {422: _error("a parameter is invalid")}
 
 
 def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: int = 64 * 1024,
@@ -167,18 +175,19 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
     )
     serve_docs_offline(app)  # /docs and /redoc from the installed packages, not a CDN
 
-    @app.get("/healthz", summary="liveness", responses=_AUTH_RESPONSES)
-    def healthz() -> dict[str, Any]:
-        st = service.status()["service"]
-        return {"status": "ok" if st.get("pipeline_error") is None else "degraded", "uptime_s": st["uptime_s"]}
+    @app.get("/healthz", summary="liveness: 'degraded' while the pipeline's batches fail", response_model=HealthDocument,
+             responses=_AUTH_RESPONSES)
+    def healthz() -> HealthDocument:
+        st = service.status().service
+        return HealthDocument(status="ok" if st.pipeline_error is None else "degraded", uptime_s=st.uptime_s)
 
     @app.get("/api/status", summary="sources, rates, latency, dropped and rejected samples, degraded sensors",
-             responses=_AUTH_RESPONSES)
-    def status() -> dict[str, Any]:
-        return _json_safe(service.status())
+             response_model=StatusDocument, responses=_AUTH_RESPONSES)
+    def status() -> StatusDocument:
+        return service.status()
 
-    @app.get("/api/trends", summary="the modal trend export (one row per window and mode)",
-             responses={**_AUTH_RESPONSES, 200: {"content": {"application/json": {}, "text/csv": {}}}})
+    @app.get("/api/trends", summary="the modal trend export (one row per window and mode)", response_model=TrendsDocument,
+             responses={**_AUTH_RESPONSES, **_INVALID, 200: {"content": {"text/csv": {"schema": {"type": "string"}}}}})
     def trends(
         from_: str | None = Query(None, alias="from", max_length=64, description="UNIX s or ISO 8601 (inclusive)"),
         to: str | None = Query(None, max_length=64, description="UNIX s or ISO 8601 (exclusive)"),
@@ -195,45 +204,46 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
             buf = io.StringIO()
             writer = csv.DictWriter(buf, fieldnames=_TREND_FIELDS, extrasaction="ignore", lineterminator="\n")
             writer.writeheader()
-            writer.writerows(rows)
+            writer.writerows(row.model_dump() for row in rows)
             return Response(buf.getvalue(), media_type="text/csv",
                             headers={"Content-Disposition": 'attachment; filename="trends.csv"'})
-        return {"rows": _json_safe(rows), "count": len(rows)}
+        return TrendsDocument(rows=rows, count=len(rows))
 
-    @app.get("/api/alarms", summary="alarms, newest first", responses=_AUTH_RESPONSES)
-    def alarms(state: Literal["active", "cleared"] | None = Query(None, description="only alarms in this state")) -> dict[str, Any]:
+    @app.get("/api/alarms", summary="alarms, newest first", response_model=AlarmsDocument, responses={**_AUTH_RESPONSES, **_INVALID})
+    def alarms(state: Literal["active", "cleared"] | None = Query(None, description="only alarms in this state")) -> AlarmsDocument:
         items = service.alarms(state)
-        return {"alarms": _json_safe(items), "count": len(items)}
+        return AlarmsDocument(alarms=items, count=len(items))
 
-    @app.post("/api/alarms/{alarm_id}/ack", summary="acknowledge an alarm (token required)",
-              responses={**_AUTH_RESPONSES, 404: {"description": "no such alarm"}})
-    def acknowledge(request: Request, alarm_id: int = Path(..., ge=1, le=2**62)) -> dict[str, Any]:
+    @app.post("/api/alarms/{alarm_id}/ack", summary="acknowledge an alarm (token required)", response_model=AlarmDocument,
+              responses={**_AUTH_RESPONSES, **_INVALID, 404: _error("no such alarm")})
+    def acknowledge(request: Request, alarm_id: int = Path(..., ge=1, le=2**62)) -> AlarmDocument:
         authorize(request)
         try:
-            return _json_safe(service.acknowledge(alarm_id, _token_of(request) or "", by="api"))
+            return service.acknowledge(alarm_id, _token_of(request) or "", by="api")
         except KeyError:
             raise HTTPException(404, f"alarm {alarm_id} does not exist") from None
         except PermissionError as exc:
             raise HTTPException(401, str(exc)) from None
 
-    @app.get("/api/spectra/latest", summary="amplitude spectra of b of the latest window",
-             responses={**_AUTH_RESPONSES, 404: {"description": "no window analysed yet"}})
-    def spectra() -> dict[str, Any]:
+    @app.get("/api/spectra/latest", summary="amplitude spectra of b of the latest window", response_model=SpectrumDocument,
+             responses={**_AUTH_RESPONSES, 404: _error("no window analysed yet")})
+    def spectra() -> SpectrumDocument:
         spec = service.spectra()
         if spec is None:
             raise HTTPException(404, "no analysis window yet")
-        return _json_safe(spec)
+        return spec
 
     @app.post("/api/baseline", summary="start learning a new baseline (token required)", status_code=202,
-              responses=_AUTH_RESPONSES)
-    def baseline(request: Request) -> dict[str, Any]:
+              response_model=BaselineRequestDocument, responses=_AUTH_RESPONSES)
+    def baseline(request: Request) -> BaselineRequestDocument:
         authorize(request)
         return service.request_baseline()
 
     @app.post(
         "/api/ingest", summary="ingest a batch of samples in the recording format (token required)",
-        responses={**_AUTH_RESPONSES, 400: {"description": "body is not a valid batch"}, 409: {"description": "source is not ingest"},
-                   413: {"description": "body too large"}, 503: {"description": "pipeline full, retry later"}},
+        response_model=IngestResultDocument,
+        responses={**_AUTH_RESPONSES, 400: _error("body is not a valid batch"), 409: _error("source is not ingest"),
+                   413: _error("body too large"), 503: _error("pipeline full, retry later")},
         openapi_extra={"requestBody": {"required": True, "content": {"application/json": {"schema": {
             "type": "object", "required": ["messages"], "additionalProperties": False,
             "properties": {"messages": {"type": "array", "items": {
@@ -243,7 +253,7 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
                                "publish_time_ns": {"type": "integer", "minimum": 0},
                                "payload": {"type": "object"}}}}}}}}}},
     )
-    async def ingest(request: Request) -> Any:
+    async def ingest(request: Request) -> IngestResultDocument | JSONResponse:
         authorize(request)
         body = await request.body()
         try:
@@ -264,7 +274,7 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
         return result
 
     @app.get("/metrics", summary="Prometheus metrics (text format)", response_class=PlainTextResponse,
-             responses=_AUTH_RESPONSES)
+             responses={**_AUTH_RESPONSES, 200: {"content": {"text/plain": {"schema": {"type": "string"}}}}})
     def metrics() -> PlainTextResponse:
         return PlainTextResponse(_metrics(service.status()), media_type="text/plain; version=0.0.4; charset=utf-8")
 
@@ -276,7 +286,7 @@ def _label(value: Any) -> str:
     return str(value).replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
 
 
-def _metrics(st: dict[str, Any]) -> str:
+def _metrics(st: StatusDocument) -> str:
     lines: list[str] = []
 
     def metric(name: str, kind: str, help_text: str, samples: list[tuple[dict[str, Any], Any]]) -> None:
@@ -288,26 +298,30 @@ def _metrics(st: dict[str, Any]) -> str:
             text = ",".join(f'{k}="{_label(v)}"' for k, v in labels.items())
             lines.append(f"{name}{{{text}}} {float(value):.17g}" if text else f"{name} {float(value):.17g}")
 
-    p = st["pipeline"]
-    srcs = st["sources"]
-    metric("shm_uptime_seconds", "gauge", "seconds since the service started", [({}, st["service"]["uptime_s"])])
+    p = st.pipeline
+    srcs = st.sources
+    n = st.notifications
+    metric("shm_uptime_seconds", "gauge", "seconds since the service started", [({}, st.service.uptime_s)])
+    metric("shm_pipeline_errors_total", "counter", "batches the pipeline failed on (skipped)", [({}, st.service.pipeline_errors)])
     metric("shm_source_messages_total", "counter", "samples accepted from the source",
-           [({"source": s["id"], "kind": s["kind"]}, s["messages"]) for s in srcs])
+           [({"source": s.id, "kind": s.kind}, s.messages) for s in srcs])
     metric("shm_source_rejected_total", "counter", "samples rejected by reason",
-           [({"source": s["id"], "reason": r}, n) for s in srcs for r, n in s["rejected_by_reason"].items()])
+           [({"source": s.id, "reason": r}, v) for s in srcs for r, v in s.rejected_by_reason.items()])
     metric("shm_source_dropped_total", "counter", "samples dropped (late, or without the reference IMU)",
-           [({"source": s["id"]}, s["dropped"]) for s in srcs])
-    metric("shm_source_rate_hz", "gauge", "incoming samples per second", [({"source": s["id"]}, s["rate_hz"]) for s in srcs])
-    metric("shm_source_data_time_seconds", "gauge", "newest sample time (UNIX s)", [({"source": s["id"]}, s["data_time_s"]) for s in srcs])
-    metric("shm_pipeline_latency_seconds", "gauge", "time from a batch's arrival to its processing", [({}, p["pipeline_latency_s"])])
-    metric("shm_queue_depth", "gauge", "batches waiting in the pipeline queue", [({}, p["queue_depth"])])
-    metric("shm_estimates_total", "counter", "estimator outputs", [({}, p["estimates"])])
-    metric("shm_windows_total", "counter", "analysis windows processed", [({}, p["windows"])])
-    metric("shm_windows_skipped_total", "counter", "windows skipped for incomplete data", [({}, p["windows_skipped_incomplete"])])
+           [({"source": s.id}, s.dropped) for s in srcs])
+    metric("shm_source_rate_hz", "gauge", "incoming samples per second", [({"source": s.id}, s.rate_hz) for s in srcs])
+    metric("shm_source_data_time_seconds", "gauge", "newest sample time (UNIX s)", [({"source": s.id}, s.data_time_s) for s in srcs])
+    metric("shm_pipeline_latency_seconds", "gauge", "time from a batch's arrival to its processing", [({}, p.pipeline_latency_s)])
+    metric("shm_queue_depth", "gauge", "batches waiting in the pipeline queue", [({}, p.queue_depth)])
+    metric("shm_estimates_total", "counter", "estimator outputs", [({}, p.estimates)])
+    metric("shm_windows_total", "counter", "analysis windows processed", [({}, p.windows)])
+    metric("shm_windows_skipped_total", "counter", "windows skipped for incomplete data", [({}, p.windows_skipped_incomplete)])
     metric("shm_sensor_degraded", "gauge", "1 when a sensor is degraded or silent",
-           [({"topic": t}, 0 if s == "ok" else 1) for t, s in st["sensors"].items()])
-    metric("shm_alarms_active", "gauge", "active alarms by level", [({"level": k}, v) for k, v in st["alarms"]["active"].items()])
+           [({"topic": t}, 0 if v == "ok" else 1) for t, v in st.sensors.items()])
+    metric("shm_alarms_active", "gauge", "active alarms by level", [({"level": k}, v) for k, v in st.alarms.active.items()])
     metric("shm_notifications", "gauge", "notifications in the outbox by status",
-           [({"status": k}, v) for k, v in st["notifications"].items() if k in ("pending", "sent", "failed")])
-    metric("shm_trend_rows", "gauge", "trend rows stored", [({}, st["storage"]["trend_rows"])])
+           [({"status": "pending"}, n.pending), ({"status": "sent"}, n.sent), ({"status": "failed"}, n.failed)])
+    metric("shm_sink_errors_total", "counter", "failures of a sink (dashboard, notifier) by what it was doing",
+           [({"sink": name, "kind": kind}, v) for name, sink in st.sinks.items() for kind, v in sink.errors_by_kind.items()])
+    metric("shm_trend_rows", "gauge", "trend rows stored", [({}, st.storage.trend_rows)])
     return "\n".join(lines) + "\n"

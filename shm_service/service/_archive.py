@@ -16,7 +16,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from estimator import RigDescription
+from contract import RigDescription
 
 from ..recording import ESTIMATE_TOPIC, RecordingWriter
 from ._config import ArchiveSettings

@@ -129,17 +129,20 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         status = service.status()
         service.stop(drain_s=5.0 if service.done else 1.0)
         api.stop()
-    p = status["pipeline"]
-    src = status["sources"][0]
-    if src["state"] == "failed" or status["service"]["pipeline_error"]:
+    p = status.pipeline
+    src = status.sources[0]
+    # A batch that failed was skipped: the run is not clean even if later batches succeeded.
+    if src.state == "failed" or status.service.pipeline_errors:
         code = 1
     summary = {
-        "source": src["id"], "state": src["state"], "error": src["error"], "messages": src["messages"],
-        "rejected": src["rejected"], "dropped": src["dropped"], "estimates": p["estimates"], "windows": p["windows"],
-        "trend_rows": status["storage"]["trend_rows"], "processed_data_s": p["processed_data_s"],
-        "wall_s": round(elapsed, 2),
-        "realtime_factor": None if not p["processed_data_s"] else round(p["processed_data_s"] / max(elapsed, 1e-9), 1),
-        "active_alarms": status["alarms"]["active"], "problems": src["problems"][-5:],
+        "source": src.id, "state": src.state, "error": src.error, "messages": src.messages,
+        "rejected": src.rejected, "dropped": src.dropped, "estimates": p.estimates, "windows": p.windows,
+        "windows_committed": p.windows_committed, "trend_rows": status.storage.trend_rows,
+        "processed_data_s": p.processed_data_s, "wall_s": round(elapsed, 2),
+        "realtime_factor": None if not p.processed_data_s else round(p.processed_data_s / max(elapsed, 1e-9), 1),
+        "pipeline_errors": status.service.pipeline_errors,
+        "sink_errors": {name: sink.errors_by_kind for name, sink in status.sinks.items() if sink.errors},
+        "active_alarms": status.alarms.active, "problems": src.problems[-5:],
     }
     if args.json:
         print(json.dumps(summary), flush=True)

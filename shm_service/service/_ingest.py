@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import orjson
 
-from estimator import RigDescription
+from contract import RigDescription
 
 from ..recording import PAYLOAD_FIELDS, FollowBlock, classify_topic
 

@@ -22,6 +22,7 @@ from typing import Any
 import httpx
 
 from ._config import NotifySettings
+from ._sinks import SinkGuard
 from ._storage import Storage
 
 __all__ = ["Notifier", "notify_targets"]
@@ -46,6 +47,8 @@ class Notifier:
         self._thread: threading.Thread | None = None
         self.sent = 0
         self.failed_attempts = 0
+        # Failed deliveries by channel and errors of the loop itself: counted, logged once per kind.
+        self.guard = SinkGuard("notifier", log)
         self._client = httpx.Client(timeout=settings.webhook_timeout_s, follow_redirects=False)
 
     def start(self) -> None:
@@ -69,8 +72,8 @@ class Notifier:
         while not self._stop.is_set():
             try:
                 self.deliver_due()
-            except Exception:  # never let the notifier die
-                log.exception("notification loop error")
+            except Exception as exc:  # never let the notifier die
+                self.guard.record("loop", exc)
             self._wake.wait(0.2)
             self._wake.clear()
 
@@ -89,12 +92,12 @@ class Notifier:
                 done += 1
             else:
                 self.failed_attempts += 1
-                log.warning("notification %s to %s failed (attempt %d): %s", row["id"], row["target"], attempt, detail)
+                self.guard.record(str(row["channel"]), f"notification {row['id']} to {row['target']} (attempt {attempt}): {detail}")
         return done
 
     def _send(self, row: dict[str, Any]) -> tuple[bool, str]:
-        payload = json.loads(row["payload"])
         try:
+            payload = json.loads(row["payload"])
             if row["channel"] == "webhook":
                 r = self._client.post(row["target"], content=row["payload"].encode(),
                                       headers={"Content-Type": "application/json", "Idempotency-Key": payload["id"]})
@@ -102,7 +105,8 @@ class Notifier:
             if row["channel"] == "email":
                 return self._mail(row["target"].split(","), payload)
             return False, f"unknown channel {row['channel']!r}"
-        except (httpx.HTTPError, OSError, smtplib.SMTPException) as exc:
+        except (httpx.HTTPError, OSError, smtplib.SMTPException, ValueError, KeyError) as exc:
+            # A bad stored row (malformed payload) fails this row's attempt, not the others'.
             return False, f"{type(exc).__name__}: {exc}"
 
     def _mail(self, to: list[str], payload: dict[str, Any]) -> tuple[bool, str]:

@@ -14,12 +14,31 @@ import math
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 import orjson
 
 from analytics import AnalysisConfig, ModalMonitor, WindowResult, amplitude_spectrum, random_decrement
+from contract import (
+    BEARING_TOPIC,
+    CURVATURE_CHART,
+    IMU_PLANAR_COLUMNS,
+    TEMPERATURE_TOPIC,
+    AlarmDocument,
+    ChartDocument,
+    CurvatureDocument,
+    EstimatorStatusDocument,
+    FlagDocument,
+    LocationDocument,
+    ModeDocument,
+    PipelineStatusDocument,
+    SpectrumDocument,
+    TrendRow,
+    WindowDocument,
+    chart_name,
+    estimate_payloads,
+)
 from estimator import (
     FilterOutput,
     ImmsFilter,
@@ -35,7 +54,8 @@ from estimator import (
 from ..recording import FollowBlock
 from ._alarms import AlarmLogic
 from ._archive import Archive
-from ._storage import Storage, TrendRow, WindowCommit
+from ._sinks import SinkGuard
+from ._storage import Storage, WindowCommit
 
 __all__ = ["Batch", "Pipeline", "PipelineSink"]
 
@@ -59,12 +79,13 @@ class Batch:
 
 
 class PipelineSink(Protocol):
-    """Where the pipeline pushes live data (the dashboard adapter)."""
+    """Where the pipeline pushes live data (the dashboard adapter). ``x`` is a state vector in
+    the model's ``StateLayout``. Whatever a sink raises is counted and never stops the pipeline."""
 
     def estimate(self, t_s: float, x: np.ndarray, truth_deflection: np.ndarray | None) -> None: ...
-    def spectra(self, frequencies_hz: np.ndarray, amplitudes: np.ndarray, tracked: list, baseline: list) -> None: ...
-    def window(self, window: dict) -> None: ...
-    def alarm(self, alarm: dict) -> None: ...
+    def spectra(self, spectrum: SpectrumDocument) -> None: ...
+    def window(self, window: WindowDocument) -> None: ...
+    def alarm(self, alarm: AlarmDocument) -> None: ...
 
 
 # -- merge ------------------------------------------------------------------------------------
@@ -162,7 +183,7 @@ class _Estimator:
             kind, name = self.topics.get(topic, (None, None))
             ts = (t - epoch) * 1e-9
             if kind == "imu":
-                imu[name] = SensorSeries(ts, v[:, [0, 1, 5]])
+                imu[name] = SensorSeries(ts, v[:, IMU_PLANAR_COLUMNS])
             elif kind == "tof":
                 tof[name] = SensorSeries(ts, v[:, :1])
             elif kind == "strain":
@@ -238,10 +259,11 @@ class _Estimator:
             return None
         return self.filter.flush()
 
-    def diagnostics(self) -> dict:
+    def diagnostics(self) -> EstimatorStatusDocument:
         diag = self.filter.diagnostics() if self.filter is not None else {}
-        return {"state": self.state, "dropped_samples": self.dropped, "filter_restarts": self.resets,
-                "rest_calibration": None if self.calibration is None else self.calibration.as_dict(), **diag}
+        return EstimatorStatusDocument(
+            state=self.state, dropped_samples=self.dropped, filter_restarts=self.resets,
+            rest_calibration=None if self.calibration is None else self.calibration.as_dict(), **diag)
 
 
 # -- analytics --------------------------------------------------------------------------------
@@ -251,8 +273,9 @@ class _Estimator:
 class WindowOutput:
     result: WindowResult
     rows: list[TrendRow]
-    spectrum: tuple[np.ndarray, np.ndarray]
+    spectrum: SpectrumDocument
     start_s: float
+    new_baseline: bool
 
 
 class _Chunks:
@@ -291,9 +314,10 @@ class _Analytics:
     gives the same windows (and the unique key of the trend rows holds)."""
 
     def __init__(self, model: ImmsModel, config: AnalysisConfig, monitor_state: dict | None, last_window_start: float | None,
-                 min_coverage: float = 0.8) -> None:
+                 source_id: str, min_coverage: float = 0.8) -> None:
         self.model = model
         self.config = config
+        self.source_id = source_id
         self.gamma = model.gamma
         self.window_s = config.window_s
         self.step_s = config.window_s * (1 - config.overlap)
@@ -309,7 +333,7 @@ class _Analytics:
         self.skipped_incomplete = 0
         self.skipped_warmup = 0
         self.not_before: float | None = None  # windows starting earlier are not analysed (filter converging)
-        self.latest_spectrum: dict | None = None
+        self.latest_spectrum: SpectrumDocument | None = None
         self.learning_baseline = self.monitor.baseline is None
 
     def _monitor(self, state: dict | None) -> ModalMonitor:
@@ -387,7 +411,6 @@ class _Analytics:
             return None
         self.windows += 1
         self.learning_baseline = self.monitor.baseline is None
-        d = res.as_dict()
         rows = []
         for i, e in enumerate(res.estimates):
             damping = None
@@ -397,17 +420,39 @@ class _Analytics:
                 except (ValueError, FloatingPointError, np.linalg.LinAlgError):
                     damping = None
             score = res.frequency_scores[i] if i < len(res.frequency_scores) else None
-            rows.append(TrendRow(start, end, e.mode, e.unit, res.kind, e.frequency_hz, damping, e.amplitude, e.confidence,
-                                 res.temperature_c, d["curvature_index"], score, res.levels.get(f"mode{e.mode}")))
+            rows.append(TrendRow(
+                source=self.source_id, window_start_s=start, window_end_s=end, mode=e.mode, unit=e.unit, kind=res.kind,
+                frequency_hz=e.frequency_hz, damping_ratio=damping, amplitude=e.amplitude, confidence=e.confidence,
+                temperature_c=res.temperature_c, curvature_index=None if res.curvature is None else res.curvature.total,
+                score_sigma=score, level=res.levels.get(chart_name("frequency", e.mode)),
+            ))
         spec = amplitude_spectrum(B, FS, pad_factor=1)
         keep = spec.frequencies <= 12.0
-        self.latest_spectrum = {
-            "window_start_s": start, "window_end_s": end, "frequencies_hz": spec.frequencies[keep],
-            "amplitudes": spec.amplitude[keep], "tracked_hz": self._per_unit([float(f) for f in self.monitor.ref]),
-            "baseline_hz": None if self.monitor.baseline is None else self._per_unit([m.f_ref_hz for m in self.monitor.baseline.modes]),
-            "new_baseline": self.monitor.baseline is not None and not had_baseline,
-        }
-        return WindowOutput(res, rows, (spec.frequencies[keep], spec.amplitude[keep]), start)
+        baseline = self.monitor.baseline
+        self.latest_spectrum = SpectrumDocument.from_arrays(
+            source=self.source_id, window_start_s=start, window_end_s=end, frequencies_hz=spec.frequencies[keep],
+            amplitudes=spec.amplitude[keep], tracked_hz=self._per_unit([float(f) for f in self.monitor.ref]),
+            baseline_hz=None if baseline is None else self._per_unit([m.f_ref_hz for m in baseline.modes]),
+        )
+        return WindowOutput(res, rows, self.latest_spectrum, start, baseline is not None and not had_baseline)
+
+    def charts(self, res: WindowResult) -> list[ChartDocument]:
+        """The charts the window judged, with the levels they were judged against."""
+        out: list[ChartDocument] = []
+        warning, alarm = self.config.chart_levels("frequency")
+        for i, e in enumerate(res.estimates):
+            name = chart_name("frequency", e.mode)
+            level = res.levels.get(name)
+            if level is not None:
+                score = res.frequency_scores[i] if i < len(res.frequency_scores) else None
+                out.append(ChartDocument(name=name, kind="frequency", mode=e.mode, unit=e.unit, level=level, score_sigma=score,
+                                         warning_sigma=warning, alarm_sigma=alarm))
+        level = res.levels.get(CURVATURE_CHART)
+        if level is not None:
+            warning, alarm = self.config.chart_levels("curvature")
+            out.append(ChartDocument(name=CURVATURE_CHART, kind="curvature", level=level, score_sigma=res.curvature_score,
+                                     warning_sigma=warning, alarm_sigma=alarm))
+        return out
 
 
 # -- the pipeline -----------------------------------------------------------------------------
@@ -421,7 +466,7 @@ class Pipeline:
                  calibration_s: float, chunk_s: float, lateness_s: float, silent_after_s: float,
                  raise_windows: int, clear_windows: int, archive: Archive | None = None, archive_raw: bool = False,
                  archive_estimates: bool = True, estimate_decimation: int = 1, sink: PipelineSink | None = None,
-                 sink_estimate_hz: float = 15.0, warmup_s: float = 120.0) -> None:
+                 sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0) -> None:
         self.model = model
         self.rig = model.rig
         self.warmup_s = warmup_s
@@ -440,10 +485,8 @@ class Pipeline:
         topics = {s.topic: (s.kind, s.name) for s in self.rig.sensors if s.kind in ("imu", "tof", "strain", "bearing")}
         self.merger = _Merger(lateness_s)
         self.estimator = _Estimator(model, topics, calibration_s, calibration)
-        self.analytics = _Analytics(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"))
-        self.alarms = AlarmLogic(raise_windows=raise_windows, clear_windows=clear_windows,
-                                 warning_sigma=analysis.warning_sigma, alarm_sigma=analysis.alarm_sigma,
-                                 state=blob.get("alarms"))
+        self.analytics = _Analytics(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id)
+        self.alarms = AlarmLogic(raise_windows=raise_windows, clear_windows=clear_windows, state=blob.get("alarms"))
         self.chunk_ns = int(chunk_s * _NS)
         self.silent_after_ns = int(silent_after_s * _NS)
         self.archive = archive
@@ -451,6 +494,8 @@ class Pipeline:
         self.archive_estimates = archive_estimates and archive is not None
         self.decimation = estimate_decimation
         self.sink = sink
+        # A failing sink is counted and logged once per kind; it never stops a batch.
+        self.sink_guard = sink_guard or SinkGuard("dashboard", log)
         self.sink_period = 1.0 / sink_estimate_hz
         self._last_push = -math.inf
         self._truth: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=8)
@@ -465,7 +510,7 @@ class Pipeline:
         self.busy_s = 0.0
         self.started = time.monotonic()
         self.windows_committed = 0
-        self.last_window: dict | None = None
+        self.last_window: WindowDocument | None = None
         self.latest_x: np.ndarray | None = None
         self._temperature_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._bearing_cache: tuple[np.ndarray, np.ndarray] | None = None
@@ -522,8 +567,8 @@ class Pipeline:
                 out = FilterOutput.concatenate([out, tail], self.model.state_size)
             elif tail is not None:
                 out = tail
-        temp = data.get("/env/temperature")
-        bearing = data.get("/bearing/displacement")
+        temp = data.get(TEMPERATURE_TOPIC)
+        bearing = data.get(BEARING_TOPIC)
         self._emit(out, temp, bearing)
 
     def _emit(self, out: FilterOutput | None, temp, bearing) -> None:
@@ -540,9 +585,8 @@ class Pipeline:
         self.estimates += len(out.t)
         if self.analytics.not_before is None and self.estimator.calibration is not None:
             self.analytics.not_before = epoch_s + float(self.estimator.calibration.rest_end) + self.warmup_s
-        gamma = self.model.gamma
         t_abs = epoch_s + out.t
-        b = out.x[:, 5:5 + gamma]
+        b = self.model.state_layout.b_of(out.x)
         self.latest_x = out.x[-1]
         if self.archive_estimates:
             self._archive_estimates(out)
@@ -550,9 +594,8 @@ class Pipeline:
         if self._reset_requested:
             self._reset_requested = False
             self.analytics.reset()
-            changes = [self.alarms._change("clear", chart, level, float(t_abs[0]), None)
-                       for chart, level in self.alarms.active().items()]
-            self.alarms.charts.clear()
+            active = [a for a in self.storage.alarms(state="active") if a.source == self.source_id]
+            changes = self.alarms.clear_all(active, float(t_abs[0]))
             if changes:
                 self._commit_alarm_only(changes, float(t_abs[0]))
         for window in self.analytics.add(t_abs, b, temperature, bearing_abs):
@@ -564,18 +607,13 @@ class Pipeline:
         if not len(t):
             return
         m = self.model
-        b = x[:, 5:5 + m.gamma]
-        deflection = (b @ m.units.shape(m.stations).T).tolist()
-        curvature = (b @ m.units.curvature(m.stations).T).tolist()
-        e = (b @ m.tip_row()).tolist()
+        layout = m.state_layout
+        b = layout.b_of(x)
+        rows = estimate_payloads(layout, x, P, b @ m.tip_row(), b @ m.units.shape(m.stations).T,
+                                 b @ m.units.curvature(m.stations).T)
         stamps = (self.estimator.epoch_ns + np.round(t * 1e9).astype(np.int64)).tolist()
         dumps = orjson.dumps
-        payloads = [
-            dumps({"d": xx[0], "h": xx[1], "phi": xx[4], "e": ee, "b": xx[5:5 + m.gamma], "deflection": w, "curvature": c,
-                   "covariance_diagonal": pp})
-            for xx, ee, w, c, pp in zip(x.tolist(), e, deflection, curvature, P.tolist())
-        ]
-        self.archive.write_estimates(stamps, payloads)
+        self.archive.write_estimates(stamps, [dumps(row) for row in rows])
 
     def _push_estimates(self, t_abs: np.ndarray, out: FilterOutput) -> None:
         if self.sink is None:
@@ -591,7 +629,7 @@ class Pipeline:
             k = int(np.clip(np.searchsorted(tt, target), 0, len(tt) - 1))
             if abs(int(tt[k]) - target) < 50_000_000:
                 truth = defl[k]
-        self.sink.estimate(float(t_abs[-1]), out.x[-1].copy(), truth)
+        self.sink_guard.call("estimate", self.sink.estimate, float(t_abs[-1]), out.x[-1].copy(), truth)
 
     def _commit_alarm_only(self, changes, at_s: float) -> None:
         commit = WindowCommit(self.source_id, self.analytics.next_start - self.analytics.step_s if self.analytics.next_start else at_s,
@@ -600,16 +638,14 @@ class Pipeline:
 
     def _commit(self, window: WindowOutput) -> None:
         res = window.result
-        levels = dict(res.levels)
-        scores = {f"mode{e.mode}": s for e, s in zip(res.estimates, res.frequency_scores)}
-        scores["curvature"] = res.curvature_score
-        changes = self.alarms.update(levels, scores, res.end_s)
-        spectrum = self.analytics.latest_spectrum or {}
-        baseline = self.analytics.monitor.baseline.to_dict() if spectrum.get("new_baseline") else None
+        charts = self.analytics.charts(res)
+        changes = self.alarms.update(charts, res.end_s)
+        baseline = self.analytics.monitor.baseline.to_dict() if window.new_baseline else None
         calibration = None
         if self.estimator.new_calibration and self.estimator.calibration is not None:
             calibration = calibration_to_dict(self.estimator.calibration)
             self.estimator.new_calibration = False
+        document = window_document(self.source_id, res, window.rows, charts)
         commit = WindowCommit(
             source=self.source_id, window_start_s=window.start_s, data_time_s=res.end_s, rows=window.rows,
             monitor_state={"monitor": self.analytics.monitor.state_dict(), "alarms": self.alarms.state_dict()},
@@ -617,15 +653,16 @@ class Pipeline:
         )
         self.storage.commit_window(commit)
         self.windows_committed += 1
-        self.last_window = window_dict(self.source_id, res, window.rows)
+        self.last_window = document
         if self.sink is not None:
-            self.sink.window(self.last_window)
-            self.sink.spectra(spectrum.get("frequencies_hz"), spectrum.get("amplitudes"), spectrum.get("tracked_hz"),
-                              spectrum.get("baseline_hz"))
+            guard = self.sink_guard
+            guard.call("window", self.sink.window, self.last_window)
+            guard.call("spectra", self.sink.spectra, window.spectrum)
             if changes:
+                changed = {c.chart for c in changes}
                 for alarm in self.storage.alarms(limit=len(changes) + 5):
-                    if any(alarm["chart"] == c.chart for c in changes):
-                        self.sink.alarm(alarm)
+                    if alarm.source == self.source_id and alarm.chart in changed:
+                        guard.call("alarm", self.sink.alarm, alarm)
 
     def finish(self) -> None:
         """The source ended: release everything, flush the filter, close the recording."""
@@ -649,41 +686,56 @@ class Pipeline:
                 states[topic] = "ok"
         return states
 
-    def status(self) -> dict[str, Any]:
+    def status(self, *, queue_depth: int, queue_capacity: int) -> PipelineStatusDocument:
         elapsed = max(time.monotonic() - self.started, 1e-9)
         span = None
         if self.estimator.epoch_ns is not None and self.processed_ns is not None:
             span = (self.processed_ns - self.estimator.epoch_ns) / _NS
-        return {
-            "samples": sum(self.samples.values()),
-            "samples_by_topic": dict(self.samples),
-            "late_samples": sum(self.merger.late.values()),
-            "late_by_topic": dict(self.merger.late),
-            "estimates": self.estimates,
-            "estimator": self.estimator.diagnostics(),
-            "windows": self.analytics.windows,
-            "windows_committed": self.windows_committed,
-            "windows_skipped_incomplete": self.analytics.skipped_incomplete,
-            "windows_skipped_warmup": self.analytics.skipped_warmup,
-            "baseline": "learning" if self.analytics.learning_baseline else "active",
-            "data_time_s": None if self.newest_ns is None else self.newest_ns / _NS,
-            "processed_data_s": span,
-            "realtime_factor": None if span is None else round(span / elapsed, 2),
-            "pipeline_latency_s": round(self.latency_s, 4),
-            "busy_fraction": round(self.busy_s / elapsed, 3),
-            "active_alarms": self.alarms.active(),
-        }
+        return PipelineStatusDocument(
+            queue_depth=queue_depth,
+            queue_capacity=queue_capacity,
+            samples=sum(self.samples.values()),
+            samples_by_topic=dict(self.samples),
+            late_samples=sum(self.merger.late.values()),
+            late_by_topic=dict(self.merger.late),
+            estimates=self.estimates,
+            estimator=self.estimator.diagnostics(),
+            windows=self.analytics.windows,
+            windows_committed=self.windows_committed,
+            windows_skipped_incomplete=self.analytics.skipped_incomplete,
+            windows_skipped_warmup=self.analytics.skipped_warmup,
+            baseline="learning" if self.analytics.learning_baseline else "active",
+            data_time_s=None if self.newest_ns is None else self.newest_ns / _NS,
+            processed_data_s=span,
+            realtime_factor=None if span is None else round(span / elapsed, 2),
+            pipeline_latency_s=round(self.latency_s, 4),
+            busy_fraction=round(self.busy_s / elapsed, 3),
+            active_alarms=self.alarms.active(),
+        )
 
 
-def window_dict(source: str, res: WindowResult, rows: list[TrendRow] | tuple = ()) -> dict:
-    """The window as the API and the dashboard show it: the analytics' result plus each mode's
-    damping (computed per window by the pipeline) and the curvature-change index along η."""
-    d = res.as_dict()
-    d["source"] = source
+def window_document(source: str, res: WindowResult, rows: list[TrendRow] | tuple = (),
+                    charts: list[ChartDocument] | tuple = ()) -> WindowDocument:
+    """The window as the dashboard shows it: the analytics' result with each mode's damping
+    (computed per window by the pipeline), its chart, and the curvature change along η."""
     damping = {row.mode: row.damping_ratio for row in rows}
-    for entry in d["modes"]:
-        entry["damping_ratio"] = damping.get(entry["mode"])
+    by_mode = {c.mode: c for c in charts if c.kind == "frequency"}
+    modes = []
+    for i, e in enumerate(res.estimates):
+        chart = by_mode.get(e.mode)
+        modes.append(ModeDocument(
+            mode=e.mode, unit=e.unit, frequency_hz=e.frequency_hz, amplitude=e.amplitude, confidence=round(e.confidence, 4),
+            damping_ratio=damping.get(e.mode), score_sigma=res.frequency_scores[i] if i < len(res.frequency_scores) else None,
+            level=None if chart is None else chart.level,
+        ))
+    curvature = None
     if res.curvature is not None:
-        d["curvature"] = {"index": [float(v) for v in res.curvature.index], "total": float(res.curvature.total),
-                          "eta_m": res.curvature.eta_m, "third": res.curvature.third}
-    return d
+        c = res.curvature
+        curvature = CurvatureDocument(index=[float(v) for v in c.index], total=float(c.total), eta_m=float(c.eta_m),
+                                      third=c.third, score_sigma=res.curvature_score)
+    return WindowDocument(
+        source=source, start_s=res.start_s, end_s=res.end_s, kind=res.kind, trusted=res.trusted,
+        temperature_c=res.temperature_c, modes=modes, charts=list(charts), curvature=curvature,
+        flags=[FlagDocument(**f) for f in res.flags],
+        location=None if res.location is None else LocationDocument(**res.location.as_dict()),
+    )

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hmac
 import logging
-import math
 import queue
 import threading
 import time
@@ -15,7 +14,28 @@ from typing import Any
 
 import numpy as np
 
-from estimator import RigDescription, build_model, load_rig
+from contract import (
+    AlarmCountsDocument,
+    AlarmDocument,
+    BaselineModeDocument,
+    BaselineRequestDocument,
+    BaselineStatusDocument,
+    ChartLevelsDocument,
+    IngestResultDocument,
+    ModelDocument,
+    NotificationStatusDocument,
+    RigDescription,
+    ServiceStatusDocument,
+    SourceStatusDocument,
+    SpectrumDocument,
+    StatusDocument,
+    StorageStatusDocument,
+    ThresholdsDocument,
+    TrendRow,
+    WindowDocument,
+    load_rig,
+)
+from estimator import build_model
 
 from ..recording import RecordingError
 from ._archive import Archive
@@ -23,6 +43,7 @@ from ._config import ServiceSettings, SettingsError, resolve_token
 from ._notify import Notifier, notify_targets
 from ._pipeline import Pipeline
 from ._retention import RetentionWorker
+from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
 from ._storage import Storage
 
@@ -37,38 +58,31 @@ class ServiceError(RuntimeError):
 
 
 class _DashboardSink:
-    """Adapts the pipeline's pushes to ``web.Dashboard``; a failing dashboard never stops the
-    monitoring (errors are counted and logged once)."""
+    """Adapts the pipeline's pushes to ``web.Dashboard`` (the pipeline's ``SinkGuard`` counts
+    and isolates what it raises). Nothing is pushed while every browser has paused."""
 
     def __init__(self, dashboard: Any, service: "MonitoringService") -> None:
         self.dashboard = dashboard
         self.service = service
-        self.errors = 0
-
-    def _call(self, name: str, *args: Any) -> None:
-        if self.service.paused:
-            return
-        try:
-            getattr(self.dashboard, name)(*args)
-        except Exception as exc:
-            self.errors += 1
-            if self.errors <= 3:
-                log.warning("dashboard %s failed: %s", name, exc)
 
     def estimate(self, t_s: float, x: np.ndarray, truth: np.ndarray | None) -> None:
+        if self.service.paused:
+            return
         pipeline = self.service.pipeline
         states = pipeline.sensor_states() if pipeline is not None else {}
-        self._call("push_estimate", t_s, x, states, truth)
+        self.dashboard.push_estimate(t_s, x, states, truth)
 
-    def spectra(self, f, a, tracked, baseline) -> None:
-        if f is not None and a is not None:
-            self._call("push_spectra", f, a, list(tracked), list(baseline))
+    def spectra(self, spectrum: SpectrumDocument) -> None:
+        if not self.service.paused:
+            self.dashboard.push_spectra(spectrum)
 
-    def window(self, window: dict) -> None:
-        self._call("push_window", window)
+    def window(self, window: WindowDocument) -> None:
+        if not self.service.paused:
+            self.dashboard.push_window(window)
 
-    def alarm(self, alarm: dict) -> None:
-        self._call("push_alarm", alarm)
+    def alarm(self, alarm: AlarmDocument) -> None:
+        # Alarms reach the dashboard while paused too: pausing freezes the picture, not the alarms.
+        self.dashboard.push_alarm(alarm)
 
 
 class MonitoringService:
@@ -103,6 +117,7 @@ class MonitoringService:
         raw = settings.archive.raw == "always" or (settings.archive.raw == "auto" and self.source.kind in ("sim", "ingest"))
         self.dashboard = None
         sink = None
+        self.dashboard_guard = SinkGuard("dashboard", log)
         if settings.dashboard.enabled:
             self.dashboard = self._start_dashboard()
             if self.dashboard is not None:
@@ -113,7 +128,7 @@ class MonitoringService:
             silent_after_s=src.silent_after_s, raise_windows=settings.alarms.raise_windows,
             clear_windows=settings.alarms.clear_windows, archive=archive, archive_raw=raw,
             archive_estimates=settings.archive.estimates, estimate_decimation=settings.archive.estimate_decimation,
-            sink=sink, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
+            sink=sink, sink_guard=self.dashboard_guard, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
         )
         self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
         self.retention = RetentionWorker(settings.retention, storage=self.storage,
@@ -123,7 +138,19 @@ class MonitoringService:
         self._done = threading.Event()
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
-        self.pipeline_error: str | None = None
+        self.pipeline_error: str | None = None  # the last batch's error; None once a batch succeeds again
+        self.pipeline_errors = 0
+        self.last_pipeline_error: str | None = None
+        a = settings.analytics
+        self.thresholds = ThresholdsDocument(
+            frequency=ChartLevelsDocument(**dict(zip(("warning_sigma", "alarm_sigma"), a.chart_levels("frequency")))),
+            curvature=ChartLevelsDocument(**dict(zip(("warning_sigma", "alarm_sigma"), a.chart_levels("curvature")))),
+            clear_sigma=a.clear_sigma,
+        )
+        m = self.model
+        self.model_document = ModelDocument(peripheral=m.selection.peripheral, support=m.rig.support, gamma=m.gamma,
+                                            state_names=list(m.state_layout.names),
+                                            unit_modes=[list(g) for g in m.mode_map.unit_modes])
         self.api = None
 
     # -- construction -----------------------------------------------------------------------
@@ -174,7 +201,7 @@ class MonitoringService:
         d = self.settings.dashboard
         try:
             dashboard = Dashboard(host=d.host, port=d.port, rig=self.rig, units=self.model.units,
-                                  stations=self.model.stations, service=self)
+                                  layout=self.model.state_layout, stations=self.model.stations, service=self)
         except Exception as exc:
             log.warning("dashboard failed to start (%s); running without it", exc)
             return None
@@ -199,16 +226,26 @@ class MonitoringService:
                 try:
                     self.pipeline.process(item)
                 except Exception as exc:
-                    log.exception("pipeline error on a batch; batch skipped")
-                    self.pipeline_error = f"{type(exc).__name__}: {exc}"
+                    self._batch_failed(exc)
+                else:
+                    self.pipeline_error = None
                 self.notifier.wake()
             self.pipeline.finish()
         except Exception as exc:
-            log.exception("pipeline failed")
-            self.pipeline_error = f"{type(exc).__name__}: {exc}"
+            self._batch_failed(exc, what="pipeline failed at the end of the source")
         finally:
             self.notifier.wake()
             self._done.set()
+
+    def _batch_failed(self, exc: Exception, what: str = "pipeline error on a batch; batch skipped") -> None:
+        text = f"{type(exc).__name__}: {exc}"
+        self.pipeline_errors += 1
+        self.pipeline_error = self.last_pipeline_error = text
+        # The same error on every batch would flood the log: its first time with the traceback.
+        if self.pipeline_errors <= 3:
+            log.exception(what)
+        else:
+            log.error("%s: %s (%d batches failed so far)", what, text, self.pipeline_errors)
 
     def wait(self, timeout: float | None = None) -> bool:
         """Wait until the source ended and everything was processed and stored."""
@@ -243,47 +280,51 @@ class MonitoringService:
         if not token or not hmac.compare_digest(token.encode(), self.token.encode()):
             raise PermissionError("missing or wrong token")
 
-    def status(self) -> dict[str, Any]:
-        p = self.pipeline.status()
+    def status(self) -> StatusDocument:
+        p = self.pipeline.status(queue_depth=self.queue.qsize(), queue_capacity=self.queue.maxsize)
         src = self.source.status()
-        src["dropped"] = src["dropped"] + p["late_samples"] + p["estimator"].get("dropped_samples", 0)
-        src["latency_s"] = p["pipeline_latency_s"]
+        src["dropped"] = src["dropped"] + p.late_samples + p.estimator.dropped_samples
+        src["latency_s"] = p.pipeline_latency_s
         states = self.pipeline.sensor_states()
-        active = self.storage.alarms(state="active")
         counts = {"warning": 0, "alarm": 0}
-        for a in active:
-            counts[a["level"]] += 1
-        return {
-            "service": {"version": VERSION, "started_at": self.started_at, "uptime_s": round(time.time() - self.started_at, 1),
-                        "paused": self.paused, "done": self.done, "pipeline_error": self.pipeline_error},
-            "sources": [src],
-            "pipeline": {"queue_depth": self.queue.qsize(), "queue_capacity": self.queue.maxsize, **p},
-            "degraded_sensors": sorted(t for t, s in states.items() if s != "ok"),
-            "sensors": states,
-            "baseline": {"state": p["baseline"], "modes": self._baseline_modes()},
-            "alarms": {"active": counts},
-            "notifications": {**self.storage.outbox_counts(), "sent_this_run": self.notifier.sent,
-                              "failed_attempts_this_run": self.notifier.failed_attempts},
-            "storage": {"db": str(self.settings.db), "schema_version": self.storage.schema_version,
-                        "trend_rows": self.storage.count("trends"),
-                        "archive": None if self.pipeline.archive is None else self.pipeline.archive.status()},
-        }
+        for a in self.storage.alarms(state="active"):
+            counts[a.level] += 1
+        return StatusDocument(
+            service=ServiceStatusDocument(
+                version=VERSION, started_at=self.started_at, uptime_s=round(time.time() - self.started_at, 1),
+                paused=self.paused, done=self.done, pipeline_error=self.pipeline_error, pipeline_errors=self.pipeline_errors,
+                last_pipeline_error=self.last_pipeline_error),
+            sources=[SourceStatusDocument(**src)],
+            pipeline=p,
+            degraded_sensors=sorted(t for t, s in states.items() if s != "ok"),
+            sensors=states,
+            baseline=BaselineStatusDocument(state=p.baseline, modes=self._baseline_modes()),
+            alarms=AlarmCountsDocument(active=counts),
+            notifications=NotificationStatusDocument(**self.storage.outbox_counts(), sent_this_run=self.notifier.sent,
+                                                     failed_attempts_this_run=self.notifier.failed_attempts),
+            storage=StorageStatusDocument(db=str(self.settings.db), schema_version=self.storage.schema_version,
+                                          trend_rows=self.storage.count("trends"),
+                                          archive=None if self.pipeline.archive is None else self.pipeline.archive.status()),
+            sinks={"dashboard": self.dashboard_guard.status(), "notifier": self.notifier.guard.status()},
+            thresholds=self.thresholds,
+            model=self.model_document,
+        )
 
-    def _baseline_modes(self) -> list[dict] | None:
+    def _baseline_modes(self) -> list[BaselineModeDocument] | None:
         bl = self.pipeline.analytics.monitor.baseline
         if bl is None:
             return None
-        return [{"mode": m.mode, "unit": m.unit + 1, "f_ref_hz": m.f_ref_hz, "temperature_ref_c": m.temperature_ref_c,
-                 "slope_per_k": m.slope_per_k, "sigma_rel": m.sigma_rel} for m in bl.modes]
+        return [BaselineModeDocument(mode=m.mode, unit=m.unit + 1, f_ref_hz=m.f_ref_hz, temperature_ref_c=m.temperature_ref_c,
+                                     slope_per_k=m.slope_per_k, sigma_rel=m.sigma_rel) for m in bl.modes]
 
     def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
-               limit: int = 100_000) -> list[dict[str, Any]]:
+               limit: int = 100_000) -> list[TrendRow]:
         return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit)
 
-    def alarms(self, state: str | None = None) -> list[dict[str, Any]]:
+    def alarms(self, state: str | None = None) -> list[AlarmDocument]:
         return self.storage.alarms(state=state)
 
-    def acknowledge(self, alarm_id: int, token: str, by: str = "api") -> dict[str, Any]:
+    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         self.check_token(token)
         alarm = self.storage.acknowledge(alarm_id, by)
         if alarm is None:
@@ -293,29 +334,20 @@ class MonitoringService:
     def set_paused(self, paused: bool) -> None:
         self.paused = bool(paused)
 
-    def request_baseline(self) -> dict[str, Any]:
+    def request_baseline(self) -> BaselineRequestDocument:
         baseline_id = self.storage.request_baseline(self.source.id)
         self.pipeline.request_baseline()
-        return {"baseline_id": baseline_id, "state": "learning", "source": self.source.id,
-                "learn_s": self.settings.analytics.baseline_s}
+        return BaselineRequestDocument(baseline_id=baseline_id, state="learning", source=self.source.id,
+                                       learn_s=self.settings.analytics.baseline_s)
 
-    def spectra(self) -> dict[str, Any] | None:
-        spec = self.pipeline.analytics.latest_spectrum
-        if spec is None:
-            return None
-        amps = np.asarray(spec["amplitudes"])
-        return {
-            "source": self.source.id, "window_start_s": spec["window_start_s"], "window_end_s": spec["window_end_s"],
-            "frequencies_hz": np.asarray(spec["frequencies_hz"]).tolist(),
-            "amplitudes": [[a if math.isfinite(a) else None for a in row] for row in amps.tolist()],
-            "tracked_hz": spec["tracked_hz"], "baseline_hz": spec["baseline_hz"],
-        }
+    def spectra(self) -> SpectrumDocument | None:
+        return self.pipeline.analytics.latest_spectrum
 
-    def ingest(self, document: Any) -> dict[str, Any] | None:
+    def ingest(self, document: Any) -> IngestResultDocument | None:
         if not isinstance(self.source, IngestSource):
             raise LookupError(f"the service's source is {self.source.kind}, not ingest")
         result = self.source.submit(document)
-        return None if result is None else result.as_dict()
+        return None if result is None else IngestResultDocument(**result.as_dict())
 
 
 def _check_sensor_counts(rig: RigDescription, est: Any) -> None:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from estimator import RigDescription
+from contract import RigDescription, row_layout
 
 from ..recording import FollowBlock, RecordingError, RecordingFollower, classify_topic, read_recording
 from ._config import ServiceSettings
@@ -288,9 +288,10 @@ class FileSource(Source):
         pacer.wait(max(int(b.log_time_ns[-1]) for b in data_blocks))
         self._count(data_blocks)
         truth = None
-        if truth_block is not None and self.truth:
-            n = (truth_block.values.shape[1] - 4) // 2
-            truth = (truth_block.log_time_ns, truth_block.values[:, 4:4 + n])
+        if truth_block is not None and self.truth and self.rig is not None:
+            layout = row_layout("shm.TruthState", stations=len(self.rig.truth_stations))
+            if truth_block.values.shape[1] == layout.width:
+                truth = (truth_block.log_time_ns, truth_block.values[:, layout.columns("deflection")])
         return self._put(Batch(data_blocks, None, truth))
 
     def _interleaved(self) -> bool:

@@ -20,7 +20,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["AlarmChange", "SCHEMA_VERSION", "Storage", "TrendRow", "WindowCommit"]
+from contract import AlarmDocument, AlarmEventDocument, TrendRow
+
+__all__ = ["AlarmChange", "SCHEMA_VERSION", "Storage", "WindowCommit"]
 
 _MIGRATIONS: tuple[str, ...] = (
     # 1: the first schema
@@ -122,18 +124,17 @@ _MIGRATIONS: tuple[str, ...] = (
         detail TEXT NOT NULL
     );
     """,
+    # 2: one spelling of the acknowledgement time, like the alarm's other times (UNIX s)
+    """
+    ALTER TABLE alarms RENAME COLUMN acknowledged_at TO acknowledged_at_s;
+    """,
 )
 
 SCHEMA_VERSION = len(_MIGRATIONS)
 
-TREND_COLUMNS = (
-    "source", "window_start_s", "window_end_s", "mode", "unit", "kind", "frequency_hz", "damping_ratio",
-    "amplitude", "confidence", "temperature_c", "curvature_index", "score_sigma", "level",
-)
-ALARM_COLUMNS = (
-    "id", "source", "chart", "kind", "mode", "level", "state", "raised_at_s", "cleared_at_s", "acknowledged_at",
-    "acknowledged_by", "value", "threshold", "message",
-)
+#: The trend table's columns are the trend row document's fields, the alarm table's the alarm document's.
+TREND_COLUMNS = tuple(TrendRow.model_fields)
+ALARM_COLUMNS = tuple(AlarmDocument.model_fields)
 
 
 def _finite(x: Any) -> float | None:
@@ -141,25 +142,6 @@ def _finite(x: Any) -> float | None:
         return None
     x = float(x)
     return x if math.isfinite(x) else None
-
-
-@dataclass(frozen=True)
-class TrendRow:
-    """One mode of one analysis window (times in UNIX seconds)."""
-
-    window_start_s: float
-    window_end_s: float
-    mode: int
-    unit: int
-    kind: str
-    frequency_hz: float | None
-    damping_ratio: float | None
-    amplitude: float | None
-    confidence: float | None
-    temperature_c: float | None
-    curvature_index: float | None
-    score_sigma: float | None
-    level: str | None
 
 
 @dataclass(frozen=True)
@@ -328,14 +310,12 @@ class Storage:
         now = time.time()
         events: list[int] = []
         with self.transaction() as db:
+            for r in commit.rows:
+                if r.source != commit.source:
+                    raise ValueError(f"trend row of source {r.source!r} in a commit of source {commit.source!r}")
             db.executemany(
                 f"INSERT OR IGNORE INTO trends ({', '.join(TREND_COLUMNS)}, created_at) VALUES ({', '.join('?' * (len(TREND_COLUMNS) + 1))})",
-                [
-                    (commit.source, r.window_start_s, r.window_end_s, r.mode, r.unit, r.kind, _finite(r.frequency_hz),
-                     _finite(r.damping_ratio), _finite(r.amplitude), _finite(r.confidence), _finite(r.temperature_c),
-                     _finite(r.curvature_index), _finite(r.score_sigma), r.level, now)
-                    for r in commit.rows
-                ],
+                [(*(getattr(r, c) for c in TREND_COLUMNS), now) for r in commit.rows],
             )
             db.execute(
                 "INSERT INTO monitor_state (source, last_window_start_s, data_time_s, monitor, calibration, updated_at) "
@@ -405,11 +385,10 @@ class Storage:
         event_id = int(cur.lastrowid)
         notify = (event in ("raised", "escalated") and level in self.notify_levels) or (event == "cleared" and self.notify_cleared)
         if notify and self.notify_targets:
-            alarm = dict(db.execute("SELECT * FROM alarms WHERE id=?", (alarm_id,)).fetchone())
-            payload = json.dumps({
-                "id": f"shm-{self.instance}-{event_id}", "event": event, "level": level, "at_s": at_s,
-                "alarm": {k: alarm[k] for k in ALARM_COLUMNS},
-            })
+            alarm = AlarmDocument.model_validate(dict(db.execute(
+                f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE id=?", (alarm_id,)).fetchone()))
+            payload = AlarmEventDocument(id=f"shm-{self.instance}-{event_id}", event=event, level=level, at_s=at_s,
+                                         alarm=alarm).model_dump_json()
             db.executemany(
                 "INSERT OR IGNORE INTO outbox (event_id, channel, target, payload, status, next_attempt_at, created_at) "
                 "VALUES (?, ?, ?, ?, 'pending', ?, ?)",
@@ -420,7 +399,7 @@ class Storage:
     # -- queries --------------------------------------------------------------------------------
 
     def trends(self, *, from_s: float | None = None, to_s: float | None = None, mode: int | None = None,
-               source: str | None = None, limit: int = 100_000) -> list[dict[str, Any]]:
+               source: str | None = None, limit: int = 100_000) -> list[TrendRow]:
         where, args = [], []
         if from_s is not None:
             where.append("window_start_s >= ?")
@@ -440,7 +419,8 @@ class Storage:
         sql += " ORDER BY window_start_s, source, mode LIMIT ?"
         args.append(int(limit))
         with self._lock:
-            return [dict(r) for r in self._db.execute(sql, args).fetchall()]
+            rows = self._db.execute(sql, args).fetchall()
+        return [TrendRow.model_validate(dict(r)) for r in rows]
 
     def delete_trends_older_than(self, age_s: float) -> int:
         """Delete the trend rows whose window starts more than ``age_s`` before the newest window of
@@ -459,7 +439,8 @@ class Storage:
         with self._lock:
             return int(self._db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0])
 
-    def alarms(self, *, state: str | None = None, limit: int = 1000) -> list[dict[str, Any]]:
+    def alarms(self, *, state: str | None = None, limit: int = 1000) -> list[AlarmDocument]:
+        """Alarms, newest first (only those in ``state``: "active" or "cleared")."""
         with self._lock:
             if state is None:
                 rows = self._db.execute(f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms ORDER BY id DESC LIMIT ?", (limit,))
@@ -467,22 +448,23 @@ class Storage:
                 rows = self._db.execute(
                     f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE state=? ORDER BY id DESC LIMIT ?", (state, limit)
                 )
-            return [dict(r) for r in rows.fetchall()]
+            rows = rows.fetchall()
+        return [AlarmDocument.model_validate(dict(r)) for r in rows]
 
-    def alarm(self, alarm_id: int) -> dict[str, Any] | None:
+    def alarm(self, alarm_id: int) -> AlarmDocument | None:
         with self._lock:
             row = self._db.execute(f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE id=?", (alarm_id,)).fetchone()
-        return None if row is None else dict(row)
+        return None if row is None else AlarmDocument.model_validate(dict(row))
 
-    def acknowledge(self, alarm_id: int, by: str) -> dict[str, Any] | None:
+    def acknowledge(self, alarm_id: int, by: str) -> AlarmDocument | None:
         """Acknowledge an alarm (idempotent: a second acknowledgement keeps the first)."""
         now = time.time()
         with self.transaction() as db:
             row = db.execute("SELECT * FROM alarms WHERE id=?", (alarm_id,)).fetchone()
             if row is None:
                 return None
-            if row["acknowledged_at"] is None:
-                db.execute("UPDATE alarms SET acknowledged_at=?, acknowledged_by=? WHERE id=?", (now, by, alarm_id))
+            if row["acknowledged_at_s"] is None:
+                db.execute("UPDATE alarms SET acknowledged_at_s=?, acknowledged_by=? WHERE id=?", (now, by, alarm_id))
                 db.execute(
                     "INSERT INTO alarm_events (alarm_id, event, level, at_s, created_at) VALUES (?, 'acknowledged', ?, ?, ?)",
                     (alarm_id, row["level"], now, now),

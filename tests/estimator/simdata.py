@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from contract import IMU_PLANAR_COLUMNS
 from estimator import Measurements, SensorSeries
 from shm_service.virtual_rig import SensorErrors, SimulationSettings, VirtualRig
 
@@ -21,7 +22,7 @@ def simulate(duration=40.0, *, rest=10.0, seed=1, ideal=True, errors=None, rig=N
     data = {t: (np.concatenate([b.measurements[t][0] for b in blocks]), np.concatenate([b.measurements[t][1] for b in blocks])) for t in topics}
     truth = {k: np.concatenate([b.truth[k] for b in blocks]) for k in blocks[0].truth}
     truth["t"] = np.concatenate([b.times for b in blocks])
-    imu = {t.split("/")[-1]: SensorSeries(v[0], v[1][:, [0, 1, 5]]) for t, v in data.items() if t.startswith("/imu/")}
+    imu = {t.split("/")[-1]: SensorSeries(v[0], v[1][:, IMU_PLANAR_COLUMNS]) for t, v in data.items() if t.startswith("/imu/")}
     tof = {t.split("/")[-1]: SensorSeries(*v) for t, v in data.items() if t.startswith("/tof/")}
     strain = {t.split("/")[-1]: SensorSeries(*v) for t, v in data.items() if t.startswith("/strain/")}
     bearing = SensorSeries(*data["/bearing/displacement"])

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from simdata import NO_ERRORS, simulate
 
-from estimator import FilterConfig, Measurements, SensorSeries, build_model, calibrate_at_rest, estimate
-from estimator._imms import KIND_ACC, KIND_GYRO, _least_squares_map, propagate, tof_measurement
+from estimator import FilterConfig, Measurements, RestCalibration, SensorSeries, build_model, calibrate_at_rest, estimate
+from estimator._filter import model_arrays
+from estimator._imms import least_squares_map, propagate, tof_measurement
 from shm_service.rig_layouts import default_rig
 from shm_service.virtual_rig import SensorErrors, SimulationSettings, VirtualRig
 from shm_service.virtual_rig._kinematics import point_motion
@@ -38,45 +39,39 @@ def plant_run():
     return vr, t, y, d, motions
 
 
-def _model_params(model, kind):
-    gamma = model.gamma
-    S1 = model.units.slope(model.imu_eta)
-    S = model.units.shape(model.imu_eta)
-    active = np.ones(len(model.imu_eta), dtype=np.bool_)
-    Pinv, null = _least_squares_map(S1 if kind == KIND_GYRO else S, active, gamma)
-    c = Pinv @ model.imu_eta
-    params = np.zeros(17)
-    params[0] = model.rig.gravity
-    params[14] = 1.0
-    nu = len(model.imu_eta)
-    return dict(active=active, Pinv=Pinv, c=c, S=S, S1=S1, params=params, null=null,
-                sig_fj=np.zeros((nu, 2)), sig_wj=np.zeros(nu))
+def _zero_calibration(model):
+    """No biases, offsets or noise: the propagation's mean is what these tests check."""
+    nu, n_tof, n_gauge = len(model.selection.imus), len(model.selection.tofs), len(model.selection.gauges)
+    return RestCalibration(rest_end=0.0, rested=False, bias_D=np.zeros(3), bias_imu=np.zeros((nu, 3)), noise_D=np.zeros(3),
+                           noise_imu=np.zeros((nu, 3)), tof_offset=np.zeros(n_tof), tof_std=np.zeros(n_tof),
+                           strain_offset=np.zeros(n_gauge), strain_std=np.zeros(n_gauge), bearing_std=float("nan"))
 
 
-def _rates(model, kind, x, fD, wD, fj, wj):
+def _rates(model, x, fD, wD, fj, wj):
     """State derivative the model's propagation implies (tiny step)."""
-    p = _model_params(model, kind)
+    arrays = model_arrays(model, _zero_calibration(model), FilterConfig(max_step_s=1.0))
+    active = np.ones(len(model.imu_eta), dtype=np.bool_)
     h = 1e-7
-    xn, _, _ = propagate(x, h, kind, model.gamma, fD, wD, fj, wj, p["active"], p["Pinv"], p["c"], p["S"], p["S1"],
-                         p["sig_fj"], p["sig_wj"], p["params"], p["null"])
+    xn, _, _ = propagate(arrays, x, h, fD, wD, fj, wj, active, least_squares_map(arrays, active))
     return (xn - x) / h
 
 
 def test_rigid_kinematics_match_finite_differences_of_truth(plant_run):
     vr, t, y, d, motions = plant_run
     model = build_model(vr.nominal_rig, peripheral="gyro")
+    layout = model.state_layout
     D = motions[0.0]
     acc_d_fd = second_difference(d)
     phi_rate_fd = central_difference(y[:, 0])
     errors_acc, errors_rate = [], []
     for k in range(500, t.size - 500, 97):
-        x = np.zeros(model.state_size)
-        x[4] = y[k, 0]
-        rates = _rates(model, KIND_GYRO, x, np.array([D.specific_force_x[k], D.specific_force_y[k]]), D.rate[k],
+        x = np.zeros(layout.size)
+        x[layout.phi] = y[k, 0]
+        rates = _rates(model, x, np.array([D.specific_force_x[k], D.specific_force_y[k]]), D.rate[k],
                        np.zeros((4, 2)), np.zeros(4))
         # ḋ⁺ − ḋ over the tiny step is d̈ · h; the state rate of ḋ is d̈ = sin φ f_x + cos φ f_y.
-        errors_acc.append(rates[2] - acc_d_fd[k])
-        errors_rate.append(rates[4] - phi_rate_fd[k])
+        errors_acc.append(rates[layout.d_rate] - acc_d_fd[k])
+        errors_rate.append(rates[layout.phi] - phi_rate_fd[k])
     scale_acc = np.abs(acc_d_fd[500:-500]).max()
     assert scale_acc > 0.1
     assert np.abs(errors_acc).max() < 2e-3 * scale_acc
@@ -92,8 +87,8 @@ def test_gyro_relation_matches_slope_rates_of_truth(plant_run):
     for k in range(500, t.size - 500, 131):
         wj = np.array([motions[eta].rate[k] for eta in model.imu_eta])
         x = np.zeros(model.state_size)
-        rates = _rates(model, KIND_GYRO, x, np.zeros(2), D.rate[k], np.zeros((4, 2)), wj)
-        bdot = rates[5:9]
+        rates = _rates(model, x, np.zeros(2), D.rate[k], np.zeros((4, 2)), wj)
+        bdot = rates[model.state_layout.b]
         slope_rate_fd = np.array([central_difference(motions[eta].slope_angle)[k] for eta in model.imu_eta])
         worst = max(worst, np.abs(model.units.slope(model.imu_eta) @ bdot - slope_rate_fd).max())
         scale = max(scale, np.abs(slope_rate_fd).max())
@@ -105,6 +100,7 @@ def test_accelerometer_relation_matches_deflection_accelerations(plant_run):
     # Eq. (8) per sensor: Δ̈_j = f_jζ − f_Dζ − ω̇ η_j + ω² Δ_j, with f_jζ = sin α_j f_jx + cos α_j f_jy.
     vr, t, y, d, motions = plant_run
     model = build_model(vr.nominal_rig, peripheral="acc")
+    layout = model.state_layout
     S = model.units.shape(model.imu_eta)
     D = motions[0.0]
     omega_dot = central_difference(D.rate)
@@ -115,14 +111,14 @@ def test_accelerometer_relation_matches_deflection_accelerations(plant_run):
         fj = np.array([[motions[eta].specific_force_x[k], motions[eta].specific_force_y[k]] for eta in model.imu_eta])
         fD = np.array([D.specific_force_x[k], D.specific_force_y[k]])
         ddelta_fd = np.array([fd[eta][k] for eta in model.imu_eta])
-        x = np.zeros(model.state_size)
-        x[5:9] = np.linalg.solve(S, lateral)
-        rates = _rates(model, KIND_ACC, x, fD, D.rate[k], fj, np.zeros(4))
-        err_tilt.append(S @ rates[9:13] - omega_dot[k] * model.imu_eta - ddelta_fd)
+        x = np.zeros(layout.size)
+        x[layout.b] = np.linalg.solve(S, lateral)
+        rates = _rates(model, x, fD, D.rate[k], fj, np.zeros(4))
+        err_tilt.append(S @ rates[layout.v] - omega_dot[k] * model.imu_eta - ddelta_fd)
         # The same with the sensors taken as aligned with the body frame (α_j = 0): the tilt term is lost.
-        x[5:9] = 0.0
-        rates = _rates(model, KIND_ACC, x, fD, D.rate[k], fj, np.zeros(4))
-        err_no_tilt.append(S @ rates[9:13] - omega_dot[k] * model.imu_eta + D.rate[k] ** 2 * lateral - ddelta_fd)
+        x[layout.b] = 0.0
+        rates = _rates(model, x, fD, D.rate[k], fj, np.zeros(4))
+        err_no_tilt.append(S @ rates[layout.v] - omega_dot[k] * model.imu_eta + D.rate[k] ** 2 * lateral - ddelta_fd)
         reference.append(ddelta_fd)
     rms = lambda a: np.sqrt(np.mean(np.square(a)))  # noqa: E731
     assert rms(reference) > 0.05
@@ -134,25 +130,27 @@ def test_accelerometer_relation_matches_deflection_accelerations(plant_run):
 def test_tof_model_and_jacobian(plant_run):
     vr, t, y, d, motions = plant_run
     model = build_model(vr.nominal_rig)
+    layout = model.state_layout
+    ix = layout.index
     rig = vr.nominal_rig
     S = model.units.shape(model.tof_eta)
     S1 = model.units.slope(model.tof_eta)
     worst = 0.0
     for k in range(500, t.size - 500, 173):
-        x = np.zeros(model.state_size)
-        x[0], x[4] = d[k], y[k, 0]
-        x[5:9] = np.linalg.solve(S, [motions[eta].lateral[k] for eta in model.tof_eta])
+        x = np.zeros(layout.size)
+        x[layout.d], x[layout.phi] = d[k], y[k, 0]
+        x[layout.b] = np.linalg.solve(S, [motions[eta].lateral[k] for eta in model.tof_eta])
         for j, eta in enumerate(model.tof_eta):
             m = motions[eta]
             exact = (rig.reflector_distance - m.inertial_zeta[k]) / np.cos(y[k, 0] + m.slope_angle[k])
-            rho, H = tof_measurement(x, eta, S[j], S1[j], rig.reflector_distance)
+            rho, H = tof_measurement(ix, x, eta, S[j], S1[j], rig.reflector_distance)
             worst = max(worst, abs(rho - exact))
             numeric = np.zeros_like(H)
             for i in range(x.size):
                 step = np.zeros_like(x)
                 step[i] = 1e-6
-                numeric[i] = (tof_measurement(x + step, eta, S[j], S1[j], rig.reflector_distance)[0]
-                              - tof_measurement(x - step, eta, S[j], S1[j], rig.reflector_distance)[0]) / 2e-6
+                numeric[i] = (tof_measurement(ix, x + step, eta, S[j], S1[j], rig.reflector_distance)[0]
+                              - tof_measurement(ix, x - step, eta, S[j], S1[j], rig.reflector_distance)[0]) / 2e-6
             np.testing.assert_allclose(H, numeric, rtol=1e-6, atol=1e-9)
     # The remaining difference is the slope of modes beyond Γ and the foreshortening: sub-millimetre.
     assert worst < 5e-4
@@ -216,7 +214,7 @@ def test_without_rest_the_gyro_bias_at_d_is_estimated():
     # A rest phase is required to be longer than the recording: nothing is calibrated.
     result = estimate(meas, model, FilterConfig(q_beta=1e-9, rest_min_s=1e3))
     assert not result.calibration.rested
-    estimated_bias = result.x[-1, -1]
+    estimated_bias = result.x[-1, model.state_layout.bias_d]
     assert estimated_bias == pytest.approx(2e-3, rel=0.3)
 
 
@@ -293,3 +291,39 @@ def test_model_refuses_bad_configurations():
 
     with pytest.raises(ValueError, match="no IMU named 'D'"):
         build_model(parse_rig(no_d))
+
+
+@pytest.mark.parametrize("peripheral", ["gyro", "acc"])
+def test_kernels_read_every_offset_from_the_layout(peripheral):
+    """The same model run through a layout without φ and β_D (a support that fixes φ ≡ 0) gives,
+    at φ = 0, ω_D = 0 and β_D = 0, exactly the propagation and ToF Jacobian of the full layout on
+    the states both have: no offset is hard-wired in the compiled kernels."""
+    from contract import StateLayout
+
+    model = build_model(default_rig(), peripheral=peripheral)
+    full = model.state_layout
+    fixed = StateLayout(full.peripheral, full.gamma, full.nu, attitude=False, imu_names=full.imu_names)
+    common = [full.position(name) for name in fixed.names]
+    assert len(common) == full.size - 2
+    arrays = model_arrays(model, _zero_calibration(model), FilterConfig())
+    rng = np.random.default_rng(5)
+    x_full = np.zeros(full.size)
+    x_full[common] = rng.normal(scale=1e-2, size=fixed.size)
+    x_fixed = x_full[common].copy()
+    nu = full.nu
+    active = np.ones(nu, dtype=np.bool_)
+    inputs = (np.array([-9.7, 0.3]), 0.0, rng.normal(scale=0.1, size=(nu, 2)) + [-9.81, 0.0], rng.normal(scale=1e-2, size=nu))
+    results = []
+    for layout, x in ((full, x_full), (fixed, x_fixed)):
+        m = arrays._replace(index=layout.index)
+        xn, F, Q = propagate(m, x, 0.005, *inputs, active, least_squares_map(m, active))
+        rho, H = tof_measurement(layout.index, x, model.tof_eta[1], arrays.tof_S[1], arrays.tof_S1[1],
+                                 model.rig.reflector_distance)
+        results.append((xn, F, Q, rho, H))
+    (xn_a, F_a, Q_a, rho_a, H_a), (xn_b, F_b, Q_b, rho_b, H_b) = results
+    assert np.abs(xn_a[full.b] - x_full[full.b]).max() > 1e-6  # b moved: not a trivial comparison
+    np.testing.assert_array_equal(xn_a[common], xn_b)
+    np.testing.assert_array_equal(F_a[np.ix_(common, common)], F_b)
+    np.testing.assert_allclose(Q_a[np.ix_(common, common)], Q_b, rtol=1e-12, atol=1e-30)
+    assert rho_a == rho_b
+    np.testing.assert_array_equal(H_a[common], H_b)

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dashboard_feeder import TOKEN, DemoFeeder, FakeService, history_rows, simulated_estimates
+from contract import ModeDocument, WindowDocument
+from dashboard_feeder import TOKEN, DemoFeeder, FakeService, alarm, history_rows, simulated_estimates
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [
@@ -60,23 +61,22 @@ def chromium() -> str:
 def live_dashboard():
     from web import Dashboard
 
-    rig, units, stations, times, states, truth = simulated_estimates(20.0)
+    rig, units, layout, stations, times, states, truth = simulated_estimates(20.0)
     sensor_states = {s.topic: "ok" for s in rig.sensors}
     sensor_states["/tof/s3"] = "degraded"
     sensor_states["/strain/g2"] = "rejected"
-    service = FakeService(history=history_rows(40, units.count, stations, t0=-40 * 30.0), sensors=sensor_states)
-    dash = Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, stations=stations, service=service)
+    service = FakeService(history=history_rows(40, units, t0=-40 * 30.0), sensors=sensor_states)
+    dash = Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=layout, stations=stations, service=service)
     feeder = DemoFeeder(dash, times, states, truth, sensor_states, rate_hz=20.0)
     feeder.push_spectra(len(times) - 1)
-    dash.push_window({
-        "start_s": 0.0, "end_s": 30.0, "kind": "ambient", "trusted": True, "temperature_c": 20.5,
-        "modes": [{"mode": m, "frequency_hz": f, "damping_ratio": 0.004, "confidence": 0.9}
-                  for m, f in zip(range(1, 5), (0.861, 1.885, 3.507, 5.645))],
-        "frequency_scores_sigma": [0.4, -6.2, 0.1, -0.3],
-        "curvature_index": np.linspace(0.02, 0.35, stations.size).tolist(),
-        "curvature_eta_m": float(stations[-1]), "curvature_third": "lower",
-        "levels": {"mode1": "ok", "mode2": "alarm", "mode3": "ok", "mode4": "ok"},
-    })
+    dash.push_window(WindowDocument(
+        source="virtual-rig", start_s=0.0, end_s=30.0, kind="ambient", trusted=True, temperature_c=20.5,
+        modes=[ModeDocument(mode=m, unit=u, frequency_hz=f, damping_ratio=0.004, confidence=0.9, score_sigma=z, level=lvl)
+               for m, u, f, z, lvl in zip(range(1, 6), (1, 1, 2, 3, 4), (0.301, 0.861, 1.885, 3.507, 5.645),
+                                          (0.2, -6.2, 0.1, -0.3, 0.5), ("ok", "alarm", "ok", "ok", "ok"))],
+        curvature={"index": np.linspace(0.02, 0.35, stations.size).tolist(), "total": 0.2, "eta_m": float(stations[-1]),
+                   "third": "lower"},
+    ))
     feeder.start()
     yield dash, service, feeder
     feeder.stop()
@@ -129,10 +129,8 @@ def test_dashboard_in_headless_chromium(chromium, live_dashboard, tmp_path):
             assert _rss_bytes() - rss0 < 30 * 2**20
 
             # An alarm raised by the service shows up as a notification and in the header.
-            alarm = {"id": 42, "level": "alarm", "state": "raised", "mode": 2,
-                     "message": "mode 2 frequency 1.1 % below baseline (6.2 σ)", "since_s": 25.0}
-            service.add_alarm({**alarm, "state": "active"})
-            dash.push_alarm(alarm)
+            service.add_alarm(alarm(42))
+            dash.push_alarm(alarm(42))
             _visible(page, "ALARM #42 raised").wait_for(timeout=10_000)
             _visible(page, "1 ALARM").wait_for(timeout=10_000)
             try:  # the browser's own notice about software WebGL only hides the picture
@@ -201,11 +199,12 @@ def test_dashboard_in_headless_chromium(chromium, live_dashboard, tmp_path):
             type_token("wrong")
             page.get_by_role("button", name="Acknowledge").click()
             _visible(page, "Not acknowledged").wait_for(timeout=10_000)
-            assert service.alarms()[0].get("acknowledged_at_s") is None
+            assert not service.alarms()[0].acknowledged
             type_token(TOKEN)
             page.get_by_role("button", name="Acknowledge").click()
             _visible(page, "Alarm #42 acknowledged").wait_for(timeout=10_000)
-            assert service.alarms()[0]["acknowledged_at_s"] is not None
+            assert service.alarms()[0].acknowledged
+            _visible(page, "active, acknowledged by dashboard", exact=False).wait_for(timeout=10_000)
 
             # Pause freezes this browser's view and, with no live browser left, the pushes.
             page.get_by_text("Spectra", exact=True).first.click()
@@ -277,3 +276,149 @@ def test_alarm_raised_by_the_service_shows_on_the_page(chromium, tmp_path):
                 context.close()
     finally:
         service.stop(drain_s=0)
+
+
+def _wait(predicate, timeout: float, what: str, poll: float = 0.25):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(poll)
+    raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
+
+
+@pytest.mark.timeout(480)
+@pytest.mark.parametrize("modes", [3, 5])
+def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, modes):
+    """``shm serve --source sim`` with ``[estimator] modes = Γ`` as a subprocess, its dashboard in
+    Chromium: the beam drawn, spectra before and after the baseline, the configured chart levels
+    drawn, trends labelled like the spectra, an alarm acknowledged over the HTTP API shown as such."""
+    import contextlib
+    import re
+    import signal
+    import sys
+
+    import httpx
+    import tomli_w
+    from playwright.sync_api import sync_playwright
+
+    token = "browser-test-token"
+    (tmp_path / "token").write_text(token + "\n")
+    config = _service_test_helpers().fast_overrides(tmp_path, **{
+        # Levels unlike the analytics' defaults (3, 5, 6 σ): the page must show these.
+        "analytics.warning_sigma": 0.5, "analytics.alarm_sigma": 1.0, "analytics.curvature_alarm_sigma": 1.5,
+        # A learning phase long enough to look at the spectra before the baseline exists.
+        "analytics.baseline_s": 80.0,
+        "estimator.modes": modes, "estimator.imus": max(4, modes),
+        "sim.layout": "dense" if modes == 5 else "benchmark", "sim.duration_s": 900.0, "sim.damage_at_s": 150.0,
+        "dashboard.enabled": True, "dashboard.port": 0, "archive.enabled": False,
+    })
+    (tmp_path / "serve.toml").write_text(tomli_w.dumps(config))
+    out, log = tmp_path / "serve.out", tmp_path / "serve.log"
+    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(tmp_path / "serve.toml"), "--source", "sim",
+           "--speed", "4", "--port", "0", "--token-file", str(tmp_path / "token")]
+    root = Path(__file__).resolve().parents[2]
+    with open(out, "w") as stdout, open(log, "w") as stderr:
+        proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=stdout, stderr=stderr, env={**os.environ, "PYTHONPATH": str(root)})
+    stack = contextlib.ExitStack()
+    try:
+        def urls():
+            text = out.read_text()
+            api = re.search(r"API at (http://\S+?) ", text)
+            dash = re.search(r"dashboard at (http://\S+)", text)
+            if proc.poll() is not None:
+                raise AssertionError(f"shm serve ended early ({proc.returncode}): {log.read_text()[-2000:]}")
+            return (api.group(1), dash.group(1)) if api and dash else None
+
+        api_url, dash_url = _wait(urls, 180, "shm serve to print its API and dashboard addresses")
+        api = stack.enter_context(httpx.Client(base_url=api_url, timeout=10))
+        gamma_text = {3: "b3 · mode 4", 5: "b5 · mode 6"}[modes]
+        with sync_playwright() as p:
+            context = p.chromium.launch_persistent_context(
+                str(tmp_path / "profile"), executable_path=chromium, headless=True, args=CHROMIUM_ARGS, viewport=VIEWPORT,
+            )
+            try:
+                page = context.pages[0] if context.pages else context.new_page()
+                page.goto(dash_url)
+                page.wait_for_selector("canvas", timeout=60_000)
+                _visible(page, "Pause live view").wait_for(timeout=60_000)
+                # One spectrum per unit deformation, labelled by the modes it carries (the last: Γ's).
+                _visible(page, gamma_text, exact=False).wait_for(timeout=30_000)
+                assert page.get_by_text(f"b{modes + 1} · mode", exact=False).count() == 0
+
+                # Spectra before the baseline exists: tracked frequencies drawn, no baseline yet.
+                def learning_with_spectra():
+                    st = api.get("/api/status").json()
+                    return st["pipeline"]["baseline"] == "learning" and api.get("/api/spectra/latest").status_code == 200
+
+                _wait(learning_with_spectra, 120, "a committed window while the baseline is being learnt")
+                combimode = re.compile(r"tracked \d+\.\d{3} / \d+\.\d{3} Hz")  # b1 carries modes 1 and 2
+                page.get_by_text(combimode).filter(visible=True).first.wait_for(timeout=30_000)
+                _visible(page, "baseline – Hz").wait_for(timeout=30_000)
+                assert api.get("/api/status").json()["baseline"]["modes"] is None, "the baseline came before the check"
+                chart_box = page.evaluate(
+                    "() => { const r = document.querySelector('.uplot canvas').getBoundingClientRect();"
+                    " return [r.x, r.y, r.width, r.height]; }"
+                )
+                chart = _image(page.screenshot(clip=dict(zip(("x", "y", "width", "height"), chart_box))))
+                assert (np.abs(chart - 255).sum(axis=-1) > 60).sum() > 300, "the spectrum canvas is blank"
+
+                # The beam: blue pixels in a tall vertical strip of the 3D canvas.
+                try:
+                    page.locator(".mantine-Notification-root", has_text="Software WebGL").locator("button").first.click(timeout=2_000)
+                except Exception:
+                    pass
+                box = page.evaluate(
+                    "() => { const c = [...document.querySelectorAll('canvas')]"
+                    ".sort((a, b) => b.width * b.height - a.width * a.height)[0];"
+                    " const r = c.getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; }"
+                )
+                x0, y0, w, h = (int(round(v)) for v in box)
+                scene = _image(page.screenshot(clip={"x": x0, "y": y0, "width": int(0.62 * w), "height": h}))
+                r, g, b = scene[..., 0], scene[..., 1], scene[..., 2]
+                blue = (b > 120) & (b - r > 70) & (b - g > 30)
+                rows = np.flatnonzero(blue.any(axis=1))
+                assert blue.sum() > 400, f"beam not drawn: {blue.sum()} blue pixels"
+                assert rows[-1] - rows[0] > 0.3 * h, "the beam should hang as a tall vertical ribbon"
+
+                # After the baseline: its frequencies are marked too (both of the combimode's modes).
+                _wait(lambda: api.get("/api/status").json()["baseline"]["modes"] is not None, 180, "the baseline")
+                page.get_by_text(re.compile(r"baseline \d+\.\d{3} / \d+\.\d{3} Hz")).filter(visible=True).first.wait_for(timeout=30_000)
+
+                # Trends: labelled per eigenmode like the spectra, with the configured chart levels.
+                page.get_by_text("Trends", exact=True).first.click()
+                _visible(page, "mode 2 (b1) eigenfrequency", exact=False).wait_for(timeout=60_000)
+                _visible(page, f"mode {modes + 1} (b{modes}) eigenfrequency", exact=False).wait_for(timeout=60_000)
+                _visible(page, "alarm +1 σ").wait_for(timeout=60_000)  # frequency charts: alarm_sigma
+                _visible(page, "alarm +1.5 σ").wait_for(timeout=120_000)  # the curvature chart's own level
+
+                # An alarm acknowledged over the HTTP API shows as acknowledged on the page.
+                alarms = _wait(lambda: api.get("/api/alarms").json()["alarms"], 180, "an alarm")
+                first = alarms[-1]
+                ack = api.post(f"/api/alarms/{first['id']}/ack", headers={"Authorization": f"Bearer {token}"})
+                assert ack.status_code == 200 and ack.json()["acknowledged_at_s"] is not None
+                page.get_by_text("Alarms", exact=True).first.click()
+                _visible(page, "acknowledged by api", exact=False).wait_for(timeout=30_000)
+            except BaseException:
+                page.screenshot(path=str(tmp_path / "failure.png"))
+                print("failure screenshot:", tmp_path / "failure.png")
+                raise
+            finally:
+                context.close()
+        st = api.get("/api/status").json()
+        assert st["service"]["pipeline_errors"] == 0 and st["sinks"]["dashboard"]["errors"] == 0, st["sinks"]
+        assert st["pipeline"]["windows_committed"] == st["pipeline"]["windows"] > 0
+        assert st["model"]["gamma"] == modes and len(st["model"]["state_names"]) == 5 + modes + max(4, modes) + 1
+    finally:
+        stack.close()
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(10)
+    text = log.read_text()
+    assert proc.returncode == 0, text[-3000:]
+    assert "Traceback" not in text and " ERROR " not in text, text[-3000:]

@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 import estimator
+from contract import SpectrumDocument, StateLayout, TrendRow, WindowDocument
 from shm_service.rig_layouts import default_rig
 from web import BeamState, Dashboard, centreline, parse_state, ribbon, ribbon_faces, tangent_angle, tof_rays, to_world
-from web._data import normalise_alarm, normalise_window, spectrum_plot, windows_from_trend_rows
+from web._data import spectrum_plot, thresholds_of, window_record, windows_from_trend_rows
 from web._view import _nice
 
-from dashboard_feeder import FakeService
+from dashboard_feeder import THRESHOLDS, FakeService, alarm
 
 
 class Parabola:
@@ -34,8 +35,8 @@ PHI = math.atan2(0.6, 0.8)  # cos φ = 0.8, sin φ = 0.6
 
 
 def test_ribbon_vertices_for_known_b_and_phi_are_exact():
-    # x = [d, h, d_rate, h_rate, phi, b1, gyro_bias]
-    state = parse_state([0.2, 0.1, 9.0, 9.0, PHI, 0.5, 7.0], 1)
+    # x = [d, h, d_rate, h_rate, phi, b1, gyro_bias_D]: gyro, Γ = 1, no peripheral IMU
+    state = parse_state([0.2, 0.1, 9.0, 9.0, PHI, 0.5, 7.0], StateLayout("gyro", 1, 0))
     line = centreline(state, Parabola(), np.array([0.0, 2.0, 4.0]))
     # η_I = h + cos φ η − sin φ Δ, ζ_I = d + sin φ η + cos φ Δ with Δ = 0.5 (η/4)²
     np.testing.assert_allclose(line, [[0.1, 0.2], [1.625, 1.5], [3.0, 3.0]], atol=1e-12)
@@ -93,22 +94,35 @@ def test_tof_rays_end_on_the_reflector_along_the_sensor_y_axis():
 @pytest.mark.parametrize(
     ("x", "message"),
     [
-        (np.zeros(8), "needs 10"),
-        (np.zeros((2, 10)), "1-D"),
-        (np.full(10, np.nan), "NaN"),
+        (np.zeros(8), "needs 14"),
+        (np.zeros((2, 14)), "1-D"),
+        (np.full(14, np.nan), "NaN"),
         ("abc", "numeric"),
     ],
 )
 def test_bad_state_vectors_are_refused_clearly(x, message):
     with pytest.raises(ValueError, match=message):
-        parse_state(x, 4)
+        parse_state(x, StateLayout("gyro", 4, 4))
+    with pytest.raises(ValueError, match="StateLayout"):
+        parse_state(np.zeros(14), 4)
 
 
-def test_accelerometer_state_layout_is_accepted():
-    x = np.arange(5 + 2 * 4 + 1, dtype=float)
-    state = parse_state(x, 4)
-    assert state.d == 0 and state.h == 1 and state.phi == 4
-    np.testing.assert_array_equal(state.b, [5, 6, 7, 8])
+# (configuration, Γ, ν, state size): gyro [d, h, ḋ, ḣ, φ, b1..bΓ, β1..βν, β_D], acc [d, h, ḋ, ḣ, φ, b1..bΓ, v1..vΓ, β_D]
+LAYOUTS = [("gyro", 1, 0, 7), ("acc", 1, 0, 8), ("gyro", 2, 3, 11), ("acc", 2, 3, 10), ("gyro", 3, 4, 13), ("acc", 3, 4, 12),
+           ("gyro", 4, 4, 14), ("acc", 4, 4, 14), ("gyro", 5, 6, 17), ("acc", 5, 6, 16), ("gyro", 5, 17, 28)]
+
+
+@pytest.mark.parametrize(("peripheral", "gamma", "nu", "size"), LAYOUTS)
+def test_every_configuration_reads_the_beam_through_its_layout(peripheral, gamma, nu, size):
+    layout = StateLayout(peripheral, gamma, nu)
+    assert layout.size == size
+    state = parse_state(np.arange(size, dtype=float), layout)
+    assert (state.d, state.h, state.phi) == (0.0, 1.0, 4.0)
+    b_start = 5  # after d, h, ḋ, ḣ, φ
+    np.testing.assert_array_equal(state.b, b_start + np.arange(gamma))
+    for wrong in (size - 1, size + 1):
+        with pytest.raises(ValueError, match=f"needs {size} entries"):
+            parse_state(np.zeros(wrong), layout)
 
 
 def test_bad_geometry_inputs():
@@ -124,44 +138,47 @@ def test_bad_geometry_inputs():
         centreline(BeamState(0, 0, 0, np.zeros(1)), Parabola(), [1.0, 2.0], deflection=np.zeros(3))
 
 
-def test_window_and_trend_rows_are_read():
-    window = {
-        "start_s": 0.0, "end_s": 60.0, "kind": "ambient", "trusted": True, "temperature_c": 21.0,
-        "modes": [{"mode": 1, "unit": 1, "frequency_hz": 0.86, "damping_ratio": 0.004, "confidence": 0.9},
-                  {"mode": 2, "unit": 2, "frequency_hz": None, "amplitude": None, "confidence": 0.0}],
-        "frequency_scores_sigma": [1.5, None],
-        "curvature_index": [0.1, 0.2, 0.3], "curvature_eta_m": 3.5, "curvature_third": "lower",
-        "levels": {"mode1": "ok"},
+def _window(**extra):
+    doc = {
+        "source": "a", "start_s": 0.0, "end_s": 60.0, "kind": "ambient", "trusted": True, "temperature_c": 21.0,
+        "modes": [{"mode": 1, "unit": 1, "frequency_hz": 0.30, "damping_ratio": 0.004, "confidence": 0.9, "score_sigma": 1.5,
+                   "level": "ok"},
+                  {"mode": 2, "unit": 1, "frequency_hz": None, "amplitude": None, "confidence": 0.0}],
+        "charts": [{"name": "mode1", "kind": "frequency", "mode": 1, "unit": 1, "level": "ok", "score_sigma": 1.5,
+                    "warning_sigma": 3.0, "alarm_sigma": 5.0},
+                   {"name": "curvature", "kind": "curvature", "level": "warning", "score_sigma": 3.5,
+                    "warning_sigma": 3.0, "alarm_sigma": 6.0}],
+        "curvature": {"index": [0.1, 0.2, 0.3], "total": 0.216, "eta_m": 3.5, "third": "lower", "score_sigma": 3.5},
     }
-    rec = normalise_window(window, n_stations=3)
-    assert rec.frequency_hz == {1: 0.86, 2: None} and rec.score_sigma == {1: 1.5, 2: None}
+    return WindowDocument.model_validate({**doc, **extra})
+
+
+def test_window_and_trend_rows_are_read():
+    rec = window_record(_window(), n_stations=3)
+    assert rec.frequency_hz == {1: 0.30, 2: None} and rec.score_sigma == {1: 1.5, 2: None}
+    assert rec.level == {1: "ok", 2: None} and rec.curvature_level == "warning"
     np.testing.assert_allclose(rec.curvature_profile, [0.1, 0.2, 0.3])
-    assert rec.curvature_total == pytest.approx(math.sqrt((0.01 + 0.04 + 0.09) / 3))
+    assert rec.curvature_total == 0.216 and rec.curvature_score_sigma == 3.5
+    # the levels each chart was judged against, by kind (the curvature chart's own 6 σ)
+    assert rec.levels_sigma == {"frequency": (3.0, 5.0), "curvature": (3.0, 6.0)}
     with pytest.raises(ValueError, match="one per station"):
-        normalise_window(window, n_stations=4)
-    with pytest.raises(ValueError, match="start_s"):
-        normalise_window({"modes": []})
-    with pytest.raises(ValueError, match="must be a dict"):
-        normalise_window([1, 2])
+        window_record(_window(), n_stations=4)
+    with pytest.raises(ValueError, match="WindowDocument"):
+        window_record({"start_s": 0.0})
     rows = [
-        {"source": "a", "window_start_s": 0.0, "window_end_s": 30.0, "mode": m, "frequency_hz": f, "damping_ratio": 0.01,
-         "temperature_c": 20.0, "curvature_index": 0.1}
-        for m, f in ((1, 0.8), (2, 1.9))
-    ] + [{"source": "a", "window_start_s": "bad"}]
+        TrendRow(source="a", window_start_s=0.0, window_end_s=30.0, mode=m, unit=u, kind="ambient", frequency_hz=f,
+                 damping_ratio=0.01, temperature_c=20.0, curvature_index=0.1, level="ok")
+        for m, u, f in ((1, 1, 0.3), (2, 1, 0.86), (3, 2, 1.9))
+    ]
     (merged,) = windows_from_trend_rows(rows)
-    assert merged.frequency_hz == {1: 0.8, 2: 1.9} and merged.t_s == 30.0
+    assert merged.frequency_hz == {1: 0.3, 2: 0.86, 3: 1.9} and merged.t_s == 30.0 and merged.curvature_total == 0.1
 
 
-def test_alarm_states_and_bad_alarms():
-    a = normalise_alarm({"id": 3, "level": "alarm", "state": "raised", "mode": 2, "message": "m", "since_s": 5.0})
-    assert a.active and not a.acknowledged and a.since_s == 5.0
-    b = normalise_alarm({"id": 3, "level": "alarm", "state": "active", "acknowledged_at_s": 9.0, "raised_at_s": 5.0})
-    assert b.active and b.acknowledged
-    c = normalise_alarm({"id": 3, "level": "warning", "state": "cleared"})
-    assert not c.active
-    for bad, message in (({"level": "alarm"}, "integer 'id'"), ({"id": 1, "level": "fire"}, "level"), ({"id": 1, "state": "x"}, "state")):
-        with pytest.raises(ValueError, match=message):
-            normalise_alarm(bad)
+def test_thresholds_are_the_services_never_made_up():
+    windows = (window_record(_window(), n_stations=3),)
+    assert thresholds_of(THRESHOLDS, windows) == {"frequency": (2.5, 4.0), "curvature": (2.5, 6.0)}
+    assert thresholds_of(None, windows) == {"frequency": (3.0, 5.0), "curvature": (3.0, 6.0)}
+    assert thresholds_of(None, (window_record(_window(charts=[]), n_stations=3),)) == {}
 
 
 def test_spectrum_plot_marks_tracked_and_baseline_frequencies():
@@ -183,47 +200,57 @@ def test_nice_overscale_steps():
 @pytest.fixture(scope="module")
 def dashboard():
     rig = default_rig()
-    units = estimator.unit_deformations(estimator.assemble_beam(rig), 4)
+    units = estimator.unit_deformations(estimator.assemble_beam(rig), 3)
     stations = np.asarray(rig.truth_stations, dtype=float)
-    dash = Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, stations=stations, service=FakeService())
+    dash = Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=StateLayout("gyro", 3, 4), stations=stations,
+                     service=FakeService())
     yield dash
     dash.stop()
 
 
+def _spectrum(gamma, n=50, **extra):
+    f = np.linspace(0, 10, n)
+    doc = dict(source="a", window_start_s=0.0, window_end_s=60.0, frequencies_hz=f, amplitudes=np.ones((n, gamma)),
+               tracked_hz=[[1.0]] * gamma, baseline_hz=None)
+    return SpectrumDocument.from_arrays(**{**doc, **extra})
+
+
 def test_dashboard_refuses_bad_pushes_with_clear_messages(dashboard):
-    dash = dashboard
+    dash = dashboard  # Γ = 3 with four peripheral gyroscopes: 5 + 3 + 4 + 1 = 13 states
     assert dash.url == f"http://127.0.0.1:{dash.port}/" and dash.port > 0
-    ok_x = np.zeros(10)
+    ok_x = np.zeros(13)
     dash.push_estimate(1.0, ok_x, {"/imu/s1": "ok"})
-    with pytest.raises(ValueError, match="needs 10"):
-        dash.push_estimate(1.0, np.zeros(7), {})
+    with pytest.raises(ValueError, match="needs 13"):
+        dash.push_estimate(1.0, np.zeros(9), {})  # 5 + Γ + 1: the length the dashboard once assumed
     with pytest.raises(ValueError, match="must be one of"):
         dash.push_estimate(1.0, ok_x, {"/imu/s1": "broken"})
     with pytest.raises(ValueError, match="t_s"):
         dash.push_estimate(float("nan"), ok_x, {})
     with pytest.raises(ValueError, match="truth_deflection must have shape"):
         dash.push_estimate(1.0, ok_x, {}, truth_deflection=np.zeros(3))
-    f = np.linspace(0, 10, 50)
-    dash.push_spectra(f, np.ones((50, 4)), [1.0, None, 3.0, 5.0], [None] * 4)
+    dash.push_spectra(_spectrum(3))  # before a baseline: tracked frequencies only
+    assert dash.snapshot().spectra.baseline_hz == ((), (), ())
     with pytest.raises(ValueError, match=r"shape \(len\(frequencies_hz\), Γ\)"):
-        dash.push_spectra(f, np.ones((50, 3)), [None] * 4, [None] * 4)
-    with pytest.raises(ValueError, match="tracked_hz"):
-        dash.push_spectra(f, np.ones((50, 4)), [1.0], [None] * 4)
-    with pytest.raises(ValueError, match="strictly increasing"):
-        dash.push_spectra(f[::-1], np.ones((50, 4)), [None] * 4, [None] * 4)
-    with pytest.raises(ValueError, match="start_s"):
+        dash.push_spectra(_spectrum(4))
+    with pytest.raises(ValueError, match="WindowDocument"):
         dash.push_window({"kind": "ambient"})
-    with pytest.raises(ValueError, match="integer 'id'"):
-        dash.push_alarm({"level": "alarm"})
-    dash.push_alarm({"id": 1, "level": "warning", "state": "raised", "message": "x"})
+    with pytest.raises(ValueError, match="AlarmDocument"):
+        dash.push_alarm({"id": 1, "level": "alarm"})
+    dash.push_window(_window(curvature=None))
+    dash.push_alarm(alarm(1, level="warning"))
     snap = dash.snapshot()
-    assert snap.estimate.t_s == 1.0 and snap.alarms[0].id == 1 and snap.spectra.amplitudes.shape == (50, 4)
+    assert snap.estimate.t_s == 1.0 and snap.alarms[0].id == 1 and snap.spectra.amplitudes.shape == (50, 3)
+    assert snap.windows[-1].frequency_hz[1] == 0.30
 
 
 def test_dashboard_constructor_checks_its_arguments():
     rig = default_rig()
     units = estimator.unit_deformations(estimator.assemble_beam(rig), 2)
+    layout = StateLayout("gyro", 2, 4)
     with pytest.raises(ValueError, match="stations"):
-        Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, stations=np.array([0.5, 9.0]), service=FakeService())
+        Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=layout, stations=np.array([0.5, 9.0]), service=FakeService())
     with pytest.raises(TypeError, match="DashboardService"):
-        Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, stations=np.array([1.0, 2.0]), service=object())
+        Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=layout, stations=np.array([1.0, 2.0]), service=object())
+    with pytest.raises(ValueError, match="Γ=3"):
+        Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=StateLayout("gyro", 3, 4), stations=np.array([1.0, 2.0]),
+                  service=FakeService())

@@ -121,15 +121,61 @@ def test_non_loopback_requires_the_token_everywhere(tmp_path):
         service.stop(drain_s=0)
 
 
-def test_openapi_property_based(running):
+@pytest.fixture()
+def replayed(tmp_path, short_recording):
+    """A service that replayed a recording and keeps serving it: trends, alarms, spectra and a
+    baseline to describe (the ingest service above has none of them)."""
+    settings = load_settings(None, fast_overrides(tmp_path, **{"source.spec": f"replay:{short_recording}", "source.speed": "max",
+                                                                "source.keep_running": True, "archive.enabled": False}))
+    service = MonitoringService(settings, environ={"SHM_TOKEN": TOKEN})
+    service.start()
+    assert service.wait(240)
+    api = ApiServer(create_app(service), "127.0.0.1", 0).start()
+    yield service, api.url
+    api.stop()
+    service.stop(drain_s=0)
+
+
+def test_openapi_describes_every_success_response(running):
+    service, url = running
+    with httpx.Client(base_url=url) as c:
+        doc = c.get("/openapi.json").json()
+    described = 0
+    for path, operations in doc["paths"].items():
+        for method, operation in operations.items():
+            ok = {code: r for code, r in operation["responses"].items() if code.startswith("2")}
+            assert ok, f"{method.upper()} {path} documents no success response"
+            for code, response in ok.items():
+                content = response.get("content")
+                assert content, f"{method.upper()} {path} {code}: no content described"
+                for media, body in content.items():
+                    assert body.get("schema"), f"{method.upper()} {path} {code} {media}: no schema"
+                    described += 1
+    assert described >= 10
+    schemas = doc["components"]["schemas"]
+    # The documents of the contract, by name: what a client generates its types from.
+    for name in ("StatusDocument", "TrendsDocument", "AlarmsDocument", "AlarmDocument", "SpectrumDocument", "HealthDocument",
+                 "BaselineRequestDocument", "IngestResultDocument"):
+        assert name in schemas, name
+    pipeline = schemas["PipelineStatusDocument"]["properties"]
+    assert {"samples", "estimates", "queue_depth", "estimator"} <= set(pipeline)
+
+
+@pytest.mark.parametrize("which", ["running", "replayed"])
+def test_openapi_property_based(which, request):
     """Every operation of the OpenAPI document, with generated parameters and bodies, answers
-    without a server error and conforms to the document."""
+    without a server error, with a documented status code and content type, and a body that
+    conforms to the documented schema; against an empty ingest service and against one with
+    trends, alarms, spectra and a baseline."""
     import schemathesis
     from hypothesis import HealthCheck, given, settings
 
-    service, url = running
+    service, url = request.getfixturevalue(which)
     schema = schemathesis.openapi.from_url(f"{url}/openapi.json")
+    checks = [schemathesis.checks.not_a_server_error, schemathesis.checks.status_code_conformance,
+              schemathesis.checks.content_type_conformance, schemathesis.checks.response_schema_conformance]
     failures = []
+    statuses = set()
 
     def make(operation):
         @given(case=operation.as_strategy())
@@ -137,9 +183,10 @@ def test_openapi_property_based(running):
         def check(case):
             case.headers = {**(case.headers or {}), "Authorization": f"Bearer {TOKEN}"}
             response = case.call()
+            statuses.add((operation.label, response.status_code))
             if response.status_code >= 500:
                 failures.append((operation.label, response.status_code, response.text[:200]))
-            case.validate_response(response, checks=[schemathesis.checks.not_a_server_error])
+            case.validate_response(response, checks=checks)
 
         return check
 
@@ -148,3 +195,6 @@ def test_openapi_property_based(running):
     for operation in operations:
         make(operation)()
     assert not failures
+    if which == "replayed":  # the documents were checked with data in them, not only empty
+        for label in ("GET /api/trends", "GET /api/alarms", "GET /api/spectra/latest", "GET /api/status"):
+            assert (label, 200) in statuses, label

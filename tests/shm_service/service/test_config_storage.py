@@ -9,7 +9,8 @@ import tomllib
 import pytest
 
 from shm_service.service._config import ServiceSettings, SettingsError, load_settings, render_toml, resolve_token
-from shm_service.service._storage import SCHEMA_VERSION, AlarmChange, Storage, TrendRow, WindowCommit
+from contract import TrendRow
+from shm_service.service._storage import SCHEMA_VERSION, AlarmChange, Storage, WindowCommit
 
 
 def test_rendered_defaults_parse_back_to_the_defaults():
@@ -48,7 +49,9 @@ def test_token_from_environment_or_file(tmp_path):
 
 
 def _row(start, mode, f=1.0):
-    return TrendRow(start, start + 20, mode, mode, "ambient", f, 0.01, 1e-3, 0.9, 20.0, 0.1, 0.5, "ok")
+    return TrendRow(source="src", window_start_s=start, window_end_s=start + 20, mode=mode, unit=mode, kind="ambient",
+                    frequency_hz=f, damping_ratio=0.01, amplitude=1e-3, confidence=0.9, temperature_c=20.0,
+                    curvature_index=0.1, score_sigma=0.5, level="ok")
 
 
 def test_migrations_and_idempotent_windows(tmp_path):
@@ -65,10 +68,29 @@ def test_migrations_and_idempotent_windows(tmp_path):
     st = Storage(db)  # reopening does not migrate again
     assert st.schema_version == SCHEMA_VERSION and st.count("trends") == 2
     assert st.load_state("src")["last_window_start_s"] == 100.0
+    assert st.trends() == [_row(100.0, 1), _row(100.0, 2)]  # what was stored is what is read, typed
     acked = st.acknowledge(1, "op")
-    assert acked["acknowledged_by"] == "op"
-    assert st.acknowledge(1, "other")["acknowledged_by"] == "op"
+    assert acked.acknowledged_by == "op" and acked.acknowledged and acked.acknowledged_at_s > 0
+    assert st.acknowledge(1, "other").acknowledged_by == "op"
     assert st.acknowledge(99, "op") is None
+
+
+def test_version_1_database_keeps_its_acknowledgements(tmp_path):
+    """Schema 2 spells the acknowledgement time like the alarm's other times (acknowledged_at_s)."""
+    from shm_service.service._storage import _MIGRATIONS
+
+    db = tmp_path / "v1.sqlite"
+    con = sqlite3.connect(db)
+    con.executescript(_MIGRATIONS[0])
+    con.execute("INSERT INTO alarms (source, chart, kind, mode, level, state, raised_at_s, acknowledged_at, acknowledged_by, "
+                "message) VALUES ('src', 'mode2', 'frequency', 2, 'alarm', 'active', 10.0, 12.5, 'op', 'm')")
+    con.execute("PRAGMA user_version = 1")
+    con.commit()
+    con.close()
+    st = Storage(db)
+    assert st.schema_version == SCHEMA_VERSION == 2
+    (alarm,) = st.alarms()
+    assert alarm.acknowledged_at_s == 12.5 and alarm.acknowledged_by == "op" and alarm.acknowledged
 
 
 def test_a_failing_window_commit_leaves_nothing(tmp_path):

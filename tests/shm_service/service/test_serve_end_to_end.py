@@ -36,7 +36,7 @@ def _replay(tmp_path, recording, **extra):
 
 def test_replay_stores_trends_once_and_records_estimates(tmp_path, short_recording):
     st = _replay(tmp_path, short_recording)
-    assert st["sources"][0]["state"] == "finished" and st["service"]["pipeline_error"] is None
+    assert st.sources[0].state == "finished" and st.service.pipeline_error is None and st.service.pipeline_errors == 0
     con = sqlite3.connect(tmp_path / "shm.sqlite")
     rows = con.execute("SELECT window_start_s, mode, frequency_hz FROM trends ORDER BY window_start_s, mode").fetchall()
     starts = sorted({r[0] for r in rows})
@@ -45,7 +45,7 @@ def test_replay_stores_trends_once_and_records_estimates(tmp_path, short_recordi
     alarms = con.execute("SELECT COUNT(*) FROM alarms").fetchone()[0]
     con.close()
     st2 = _replay(tmp_path, short_recording, **{"archive.enabled": False})
-    assert st2["pipeline"]["windows"] == 0  # every window already stored
+    assert st2.pipeline.windows == 0  # every window already stored
     con = sqlite3.connect(tmp_path / "shm.sqlite")
     assert con.execute("SELECT window_start_s, mode, frequency_hz FROM trends ORDER BY window_start_s, mode").fetchall() == rows
     assert con.execute("SELECT COUNT(*) FROM alarms").fetchone()[0] == alarms
@@ -62,9 +62,9 @@ def test_truncated_replay_keeps_what_is_valid(tmp_path, short_recording):
     data = short_recording.read_bytes()
     cut.write_bytes(data[: len(data) // 2])
     st = _replay(tmp_path, cut)
-    src = st["sources"][0]
-    assert src["state"] == "finished" and src["messages"] > 100_000
-    assert any("cut off" in p for p in src["problems"])
+    src = st.sources[0]
+    assert src.state == "finished" and src.messages > 100_000
+    assert any("cut off" in p for p in src.problems)
 
 
 def test_silent_sensor_is_degraded_and_estimation_goes_on(tmp_path):
@@ -83,10 +83,9 @@ def test_silent_sensor_is_degraded_and_estimation_goes_on(tmp_path):
                 for t, p in zip(times.tolist(), encode_payloads(topic, values)):
                     w.write(topic, start + int(round(t * 1e9)), p)
     st = _replay(tmp_path, path)
-    assert "/imu/s2" in st["degraded_sensors"]
-    assert st["pipeline"]["estimates"] > 7000  # the estimator carried on (40 s at 200 Hz, less the tail)
-    degraded = st["pipeline"]["estimator"]["degraded_imus"]
-    assert any(d["sensor"] == "/imu/s2" for d in degraded)
+    assert "/imu/s2" in st.degraded_sensors
+    assert st.pipeline.estimates > 7000  # the estimator carried on (40 s at 200 Hz, less the tail)
+    assert any(d.sensor == "/imu/s2" for d in st.pipeline.estimator.degraded_imus)
 
 
 def _serve(tmp_path, recording, webhook, speed, *extra):
@@ -165,6 +164,40 @@ def test_replay_of_a_recording_written_channel_after_channel(tmp_path):
     path = tmp_path / "other.mcap"
     write_other_tool_recording(path, SimulationSettings(duration=60.0, rest=10.0, excitation="ambient", seed=4, ideal=True))
     st = _replay(tmp_path, path)
-    src = st["sources"][0]
-    assert src["state"] == "finished" and src["dropped"] == 0 and src["rejected"] == 0
-    assert st["pipeline"]["estimates"] > 59 * 200
+    src = st.sources[0]
+    assert src.state == "finished" and src.dropped == 0 and src.rejected == 0
+    assert st.pipeline.estimates > 59 * 200
+
+
+def test_replay_with_the_dashboard_on_commits_every_window_and_logs_no_error(tmp_path, short_recording):
+    """``shm serve`` as a subprocess with its dashboard on (free port), the log read afterwards."""
+    import tomli_w
+
+    cfg = fast_overrides(tmp_path)
+    cfg.pop("db")
+    cfg["dashboard"] = {"enabled": True, "port": 0}
+    toml = tmp_path / "serve.toml"
+    toml.write_text(tomli_w.dumps(cfg))
+    db = tmp_path / "shm.sqlite"
+    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(toml), "--source", f"replay:{short_recording}",
+           "--speed", "max", "--port", "0", "--db", str(db), "--json"]
+    proc = subprocess.run(cmd, cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
+                          timeout=300)
+    log = proc.stderr
+    assert proc.returncode == 0, log[-3000:]
+    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert summary["state"] == "finished" and summary["pipeline_errors"] == 0 and summary["sink_errors"] == {}, summary
+    # every analysed window was committed, and the committed windows reach the end of the recording
+    assert summary["windows"] == summary["windows_committed"] >= 8, summary
+    con = sqlite3.connect(db)
+    starts = [r[0] for r in con.execute("SELECT DISTINCT window_start_s FROM trends ORDER BY window_start_s")]
+    con.close()
+    assert len(starts) == summary["windows_committed"]
+    rec = read_recording(short_recording)
+    window = cfg["analytics"]["window_s"]
+    step = window * (1 - cfg["analytics"]["overlap"])
+    assert rec.end_ns / 1e9 - (starts[-1] + window) < step + 1e-6
+    assert all(abs(b - a - step) < 1e-6 for a, b in zip(starts, starts[1:])), "a window is missing"
+    levels = [line.split()[2] for line in log.splitlines() if len(line.split()) > 2]
+    assert "Traceback" not in log and "ERROR" not in levels and "WARNING" not in levels, log[-3000:]
+    assert "dashboard at http://" in proc.stdout

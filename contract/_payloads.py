@@ -1,4 +1,4 @@
-"""JSON schemas of the recording contract and the mapping from topics to them.
+"""Topics, JSON schemas and payload layouts of the recording contract (recording-format.md).
 
 Every channel of a recording carries a ``jsonschema`` schema whose title names the payload type.
 ``PAYLOAD_FIELDS`` gives, per title, the payload keys in the order in which readers lay them out
@@ -15,6 +15,7 @@ from typing import Any, Final, Literal
 __all__ = [
     "BEARING_TOPIC",
     "ESTIMATE_TOPIC",
+    "IMU_PLANAR_COLUMNS",
     "NOMINAL_PERIOD_NS",
     "PAYLOAD_FIELDS",
     "SCHEMAS",
@@ -22,8 +23,10 @@ __all__ = [
     "TRUTH_TOPIC",
     "FieldSpec",
     "Kind",
+    "RowLayout",
     "TopicInfo",
     "classify_topic",
+    "row_layout",
 ]
 
 TRUTH_TOPIC: Final = "/truth/state"
@@ -181,3 +184,79 @@ def classify_topic(topic: str) -> TopicInfo | None:
             if name and "/" not in name:
                 return TopicInfo(kind, name, title)
     return None
+
+
+@dataclass(frozen=True, slots=True)
+class RowLayout:
+    """Where each payload key of a schema sits in a row of numbers (``PAYLOAD_FIELDS`` order).
+
+    ``widths`` holds per field its number of columns (1 for a number, n for a vector of n, the
+    ``"stations"`` and ``"free"`` lengths resolved); ``row_layout`` builds it.
+    """
+
+    title: str
+    widths: tuple[int, ...]
+
+    @property
+    def fields(self) -> tuple[FieldSpec, ...]:
+        return PAYLOAD_FIELDS[self.title]
+
+    @property
+    def width(self) -> int:
+        return sum(self.widths)
+
+    def columns(self, name: str) -> slice:
+        """The columns of payload key ``name`` (one column for a number)."""
+        start = 0
+        for spec, width in zip(self.fields, self.widths):
+            stop = start + width
+            if spec.name == name:
+                return slice(start, stop)
+            start = stop
+        raise KeyError(f"{self.title} has no payload key {name!r}; it has {[f.name for f in self.fields]}")
+
+    def column(self, name: str, index: int = 0) -> int:
+        """The column of entry ``index`` of payload key ``name``."""
+        cols = self.columns(name)
+        if not 0 <= index < cols.stop - cols.start:
+            raise IndexError(f"{self.title}.{name} has {cols.stop - cols.start} entries, no index {index}")
+        return cols.start + index
+
+    def names(self) -> tuple[str, ...]:
+        """Column names: a number's key, or ``key[i]`` for the entries of a vector."""
+        out: list[str] = []
+        for spec, width in zip(self.fields, self.widths):
+            out.extend([spec.name] if spec.size == 0 else [f"{spec.name}[{i}]" for i in range(width)])
+        return tuple(out)
+
+
+def row_layout(title: str, *, stations: int | None = None, free: dict[str, int] | None = None) -> RowLayout:
+    """The row layout of schema ``title`` with ``stations`` truth stations and the ``free``
+    lengths (by key) of the estimate's vectors. Raises KeyError for an unknown title and
+    ValueError when a size the schema needs is not given."""
+    if title not in PAYLOAD_FIELDS:
+        raise KeyError(f"unknown payload schema {title!r}; known: {sorted(PAYLOAD_FIELDS)}")
+    free = dict(free or {})
+    widths: list[int] = []
+    for spec in PAYLOAD_FIELDS[title]:
+        if spec.size == "stations":
+            if stations is None or stations < 0:
+                raise ValueError(f"{title}.{spec.name} has one entry per truth station: give {stations=} >= 0")
+            widths.append(int(stations))
+        elif spec.size == "free":
+            if free.get(spec.name, -1) < 0:
+                raise ValueError(f"{title}.{spec.name} has a free length: give free={{{spec.name!r}: n}}")
+            widths.append(int(free.pop(spec.name)))
+        elif isinstance(spec.size, int):
+            widths.append(max(spec.size, 1))
+        else:
+            raise ValueError(f"{title}.{spec.name}: unknown field size {spec.size!r}")
+    if free:
+        raise ValueError(f"{title} has no free-length keys {sorted(free)}")
+    return RowLayout(title, tuple(widths))
+
+
+_IMU = row_layout("shm.Imu")
+#: Columns of an IMU row that the planar model uses: f_x, f_y (specific force in the beam's plane,
+#: m/s²) and ω_z (rate about the axis normal to the plane, rad/s).
+IMU_PLANAR_COLUMNS: Final[tuple[int, int, int]] = (_IMU.column("accel", 0), _IMU.column("accel", 1), _IMU.column("gyro", 2))

@@ -1,0 +1,604 @@
+"""Typed documents exchanged at the seams: pipeline → storage, HTTP API, dashboard, notifiers.
+
+Every document is a frozen pydantic model that refuses unknown keys, so a field added on one
+side and not the other fails loudly instead of drifting. Measured quantities that may be
+undefined (no peak found, no baseline yet) are ``None``; non-finite numbers become ``None`` on
+the way in, so every document serialises to strict JSON.
+
+Times are UNIX seconds (``*_s``) unless a name says otherwise; units are 1-based (b1 is unit
+deformation 1) and modes are numbered as in :class:`contract.ModeMap`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Annotated, Any, Final, Literal
+
+import numpy as np
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+
+from ._payloads import PAYLOAD_FIELDS
+from ._state import StateLayout
+
+__all__ = [
+    "CURVATURE_CHART",
+    "SENSOR_STATES",
+    "AidingChannelDocument",
+    "AlarmCountsDocument",
+    "AlarmDocument",
+    "AlarmEventDocument",
+    "AlarmLevel",
+    "AlarmsDocument",
+    "ArchiveStatusDocument",
+    "BaselineModeDocument",
+    "BaselineRequestDocument",
+    "BaselineStatusDocument",
+    "ChartDocument",
+    "ChartKind",
+    "ChartLevelsDocument",
+    "CurvatureDocument",
+    "DegradedImuDocument",
+    "EstimateDocument",
+    "ErrorDocument",
+    "EstimatorStatusDocument",
+    "FlagDocument",
+    "HealthDocument",
+    "IngestErrorDocument",
+    "IngestResultDocument",
+    "Level",
+    "LocationDocument",
+    "ModeDocument",
+    "ModelDocument",
+    "NotificationStatusDocument",
+    "PipelineStatusDocument",
+    "RestCalibrationDocument",
+    "SensorState",
+    "ServiceStatusDocument",
+    "SinkStatusDocument",
+    "SourceStatusDocument",
+    "SpectrumDocument",
+    "StatusDocument",
+    "StorageStatusDocument",
+    "ThresholdsDocument",
+    "TrendRow",
+    "TrendsDocument",
+    "WindowDocument",
+    "WindowKind",
+    "chart_name",
+    "estimate_payloads",
+]
+
+Level = Literal["ok", "warning", "alarm"]
+AlarmLevel = Literal["warning", "alarm"]
+ChartKind = Literal["frequency", "curvature"]
+WindowKind = Literal["forced", "free_decay", "ambient", "quiet"]
+SensorState = Literal["ok", "degraded", "rejected"]
+#: What a sensor can be: delivering ("ok"), silent or left out of the solution ("degraded"),
+#: or with its samples refused ("rejected").
+SENSOR_STATES: Final[tuple[str, ...]] = ("ok", "degraded", "rejected")
+
+#: Name of the curvature control chart (the frequency charts are ``chart_name("frequency", m)``).
+CURVATURE_CHART: Final = "curvature"
+
+
+def chart_name(kind: ChartKind, mode: int | None = None) -> str:
+    """The stored name of a control chart: ``mode3`` for mode 3's frequency, ``curvature``."""
+    if kind == "frequency":
+        if isinstance(mode, bool) or not isinstance(mode, (int, np.integer)) or mode < 1:
+            raise ValueError(f"a frequency chart needs a 1-based integer mode, got {mode=}")
+        return f"mode{int(mode)}"
+    if kind == "curvature":
+        if mode is not None:
+            raise ValueError(f"the curvature chart has no mode, got {mode=}")
+        return CURVATURE_CHART
+    raise ValueError(f"{kind=} must be 'frequency' or 'curvature'")
+
+
+def _finite_or_none(value: Any) -> Any:
+    if value is None or isinstance(value, bool):
+        return value
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        f = float(value)
+        return f if math.isfinite(f) else None
+    return value
+
+
+def _finite(value: float) -> float:
+    if not math.isfinite(value):
+        raise ValueError(f"{value} must be finite")
+    return value
+
+
+#: A measured number that may be undefined: non-finite values become None.
+Num = Annotated[float | None, BeforeValidator(_finite_or_none)]
+#: A number that must be defined.
+Finite = Annotated[float, AfterValidator(_finite)]
+Count = Annotated[int, Field(ge=0)]
+
+
+class _Document(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+# -- estimates -----------------------------------------------------------------------------
+
+
+class EstimateDocument(_Document):
+    """One ``/estimate/state`` payload (the contract's ``shm.EstimateState``): the body state,
+    the tip deflection e = Δ(L), b, Δ and its curvature at the rig's truth stations (body frame),
+    and the diagonal of the state covariance in the order of the estimator's StateLayout."""
+
+    d: float = Field(description="ζ position of the support D, m")
+    h: float = Field(description="η position of the support D, m")
+    phi: float = Field(description="attitude of the body frame, rad (0 for a support that fixes it)")
+    e: float = Field(description="tip deflection Δ(L) in the body frame, m")
+    b: list[float] = Field(description="amplitudes of the unit deformations")
+    deflection: list[float] = Field(description="Δ(η_k) at truth_stations, m")
+    curvature: list[float] = Field(description="Δ''(η_k) at truth_stations, 1/m")
+    covariance_diagonal: list[float] = Field(description="diagonal of the state covariance (StateLayout order)")
+
+
+if tuple(EstimateDocument.model_fields) != tuple(f.name for f in PAYLOAD_FIELDS["shm.EstimateState"]):
+    raise ImportError("EstimateDocument and PAYLOAD_FIELDS['shm.EstimateState'] disagree on the payload keys")
+
+
+def estimate_payloads(layout: StateLayout, x: np.ndarray, covariance_diagonal: np.ndarray, e: np.ndarray,
+                      deflection: np.ndarray, curvature: np.ndarray) -> list[dict[str, Any]]:
+    """``EstimateDocument`` payloads as plain dicts (for bulk writing: no per-sample validation).
+
+    Parameters
+    ----------
+    layout : the estimator's state layout.
+    x, covariance_diagonal : (N, n) states and covariance diagonals.
+    e : (N,) tip deflection, m. deflection, curvature : (N, k) at the truth stations.
+
+    Returns
+    -------
+    N dicts with the keys of :class:`EstimateDocument`, in its order.
+
+    Raises
+    ------
+    ValueError
+        When the shapes do not agree with each other or with the layout.
+    """
+    x = layout.check(x)
+    P = layout.check(covariance_diagonal, name="covariance_diagonal")
+    x, P = np.atleast_2d(x), np.atleast_2d(P)
+    e = np.asarray(e, dtype=float).reshape(-1)
+    deflection = np.atleast_2d(np.asarray(deflection, dtype=float))
+    curvature = np.atleast_2d(np.asarray(curvature, dtype=float))
+    n = x.shape[0]
+    if not (P.shape[0] == e.shape[0] == deflection.shape[0] == curvature.shape[0] == n):
+        raise ValueError(f"x ({n}), covariance_diagonal ({P.shape[0]}), e ({e.shape[0]}), deflection ({deflection.shape[0]}) "
+                         f"and curvature ({curvature.shape[0]}) need one row per estimate")
+    d, h, phi = x[:, layout.d].tolist(), x[:, layout.h].tolist(), layout.phi_of(x).tolist()
+    b = layout.b_of(x).tolist()
+    return [
+        {"d": dd, "h": hh, "phi": pp, "e": ee, "b": bb, "deflection": w, "curvature": k, "covariance_diagonal": c}
+        for dd, hh, pp, ee, bb, w, k, c in zip(d, h, phi, e.tolist(), b, deflection.tolist(), curvature.tolist(), P.tolist())
+    ]
+
+
+# -- analysis windows ----------------------------------------------------------------------
+
+
+class ModeDocument(_Document):
+    """One eigenmode in one window."""
+
+    mode: int = Field(ge=1, description="eigenmode number (1-based)")
+    unit: int = Field(ge=1, description="unit deformation that carries the mode (1-based)")
+    frequency_hz: Num = Field(None, description="identified eigenfrequency, Hz (None: no peak)")
+    amplitude: Num = Field(None, description="spectral peak amplitude, unit of b")
+    confidence: float = Field(0.0, ge=0.0, le=1.0, description="confidence of the peak, 0..1")
+    damping_ratio: Num = Field(None, description="damping ratio (random decrement), 1")
+    score_sigma: Num = Field(None, description="EWMA score of the frequency chart, σ (None before a baseline)")
+    level: Level | None = Field(None, description="level of the mode's frequency chart (None: not charted)")
+
+
+class ChartDocument(_Document):
+    """One control chart's state after a window, with the levels it was judged against."""
+
+    name: str = Field(description="stored chart name (alarms.chart): mode<k> or curvature")
+    kind: ChartKind
+    mode: int | None = Field(None, ge=1, description="eigenmode of a frequency chart")
+    unit: int | None = Field(None, ge=1, description="unit deformation of a frequency chart's mode")
+    level: Level
+    score_sigma: Num = None
+    warning_sigma: Finite = Field(description="warning level of this chart, σ")
+    alarm_sigma: Finite = Field(description="alarm level of this chart, σ")
+
+    @model_validator(mode="after")
+    def _named(self) -> "ChartDocument":
+        expected = chart_name(self.kind, self.mode)
+        if self.name != expected:
+            raise ValueError(f"chart name {self.name!r} does not match kind={self.kind!r}, mode={self.mode!r} ({expected!r})")
+        return self
+
+
+class CurvatureDocument(_Document):
+    """Change of the curvature shapes against the baseline along the beam."""
+
+    index: list[Num] = Field(description="curvature-change index per truth station (dimensionless)")
+    total: Num = Field(description="RMS of the index over the stations")
+    eta_m: Num = Field(description="η of the largest change, m from the support")
+    third: Literal["upper", "middle", "lower"] | None = None
+    score_sigma: Num = Field(None, description="score of the curvature chart, σ (None while its average settles)")
+
+
+class LocationDocument(_Document):
+    """The model-assisted location of a change (``analytics.DamageLocation``)."""
+
+    eta_m: Num
+    kind: str | None
+    third: Literal["upper", "middle", "lower"] | None
+    match: Num
+    severity: Num
+    next_best_other_third: Num
+
+
+class FlagDocument(_Document):
+    """A chart in alarm, with where the change points to."""
+
+    kind: ChartKind
+    mode: int | None = None
+    unit: int | None = None
+    level: AlarmLevel
+    sigma: Num = None
+    percent: Num = None
+    since_s: Num = None
+    eta_m: Num = None
+    third: Literal["upper", "middle", "lower"] | None = None
+    located_by: Literal["signatures", "curvature"] | None = None
+    damage_kind: str | None = None
+    location_match: Num = None
+
+
+class WindowDocument(_Document):
+    """The figures of one analysis window (live to the dashboard; the API's trends hold its rows)."""
+
+    source: str
+    start_s: Finite
+    end_s: Finite
+    kind: WindowKind
+    trusted: bool = Field(description="used for eigenfrequencies (free decay or ambient)")
+    temperature_c: Num = None
+    modes: list[ModeDocument]
+    charts: list[ChartDocument] = Field(default_factory=list, description="charts judged in this window")
+    curvature: CurvatureDocument | None = None
+    flags: list[FlagDocument] = Field(default_factory=list)
+    location: LocationDocument | None = None
+
+
+class TrendRow(_Document):
+    """One mode of one window as stored and exported (``GET /api/trends``)."""
+
+    source: str
+    window_start_s: Finite
+    window_end_s: Finite
+    mode: int = Field(ge=1)
+    unit: int = Field(ge=1)
+    kind: WindowKind
+    frequency_hz: Num = None
+    damping_ratio: Num = None
+    amplitude: Num = None
+    confidence: Num = None
+    temperature_c: Num = None
+    curvature_index: Num = Field(None, description="RMS curvature-change index of the window")
+    score_sigma: Num = None
+    level: Level | None = None
+
+
+class TrendsDocument(_Document):
+    rows: list[TrendRow]
+    count: Count
+
+
+class SpectrumDocument(_Document):
+    """Amplitude spectra of b of the latest window, with the tracked and baseline
+    eigenfrequencies of each unit deformation (several for the combimode)."""
+
+    source: str
+    window_start_s: Finite
+    window_end_s: Finite
+    frequencies_hz: list[Finite]
+    amplitudes: list[list[Num]] = Field(description="(len(frequencies_hz), Γ) amplitudes of b, unit of b")
+    tracked_hz: list[list[Finite]] = Field(description="per unit deformation the tracked frequencies of its modes")
+    baseline_hz: list[list[Finite]] | None = Field(None, description="per unit deformation the baseline frequencies; None before a baseline")
+
+    @model_validator(mode="after")
+    def _shapes(self) -> "SpectrumDocument":
+        f = self.frequencies_hz
+        gamma = len(self.tracked_hz)
+        if len(f) < 2 or any(b <= a for a, b in zip(f, f[1:])):
+            raise ValueError(f"frequencies_hz needs at least 2 strictly increasing values, got {len(f)}")
+        if gamma < 1:
+            raise ValueError("tracked_hz needs one entry per unit deformation (Γ >= 1)")
+        if len(self.amplitudes) != len(f) or any(len(row) != gamma for row in self.amplitudes):
+            raise ValueError(f"amplitudes must be (len(frequencies_hz), Γ) = ({len(f)}, {gamma})")
+        if self.baseline_hz is not None and len(self.baseline_hz) != gamma:
+            raise ValueError(f"baseline_hz has {len(self.baseline_hz)} entries for Γ={gamma}")
+        return self
+
+    @classmethod
+    def from_arrays(cls, *, source: str, window_start_s: float, window_end_s: float, frequencies_hz: np.ndarray,
+                    amplitudes: np.ndarray, tracked_hz: Sequence[Sequence[float]],
+                    baseline_hz: Sequence[Sequence[float]] | None) -> "SpectrumDocument":
+        """From numpy spectra: frequencies (n,), amplitudes (n, Γ)."""
+        a = np.asarray(amplitudes, dtype=float)
+        if a.ndim == 1:
+            a = a[:, None]
+        return cls(source=source, window_start_s=window_start_s, window_end_s=window_end_s,
+                   frequencies_hz=np.asarray(frequencies_hz, dtype=float).tolist(), amplitudes=a.tolist(),
+                   tracked_hz=[list(g) for g in tracked_hz],
+                   baseline_hz=None if baseline_hz is None else [list(g) for g in baseline_hz])
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(frequencies (n,), amplitudes (n, Γ)) with undefined amplitudes as NaN."""
+        a = np.array([[np.nan if v is None else v for v in row] for row in self.amplitudes], dtype=float)
+        return np.asarray(self.frequencies_hz, dtype=float), a.reshape(len(self.frequencies_hz), len(self.tracked_hz))
+
+
+# -- alarms --------------------------------------------------------------------------------
+
+
+class AlarmDocument(_Document):
+    """An alarm of one chart (``GET /api/alarms``)."""
+
+    id: int = Field(ge=1)
+    source: str
+    chart: str = Field(description="the chart's name: mode<k> or curvature")
+    kind: ChartKind
+    mode: int | None = Field(None, ge=1)
+    level: AlarmLevel
+    state: Literal["active", "cleared"]
+    raised_at_s: Finite
+    cleared_at_s: Num = None
+    acknowledged_at_s: Num = None
+    acknowledged_by: str | None = None
+    value: Num = Field(None, description="the chart's score when raised or escalated, σ")
+    threshold: Num = Field(None, description="the chart's level the score crossed, σ")
+    message: str
+
+    @model_validator(mode="after")
+    def _named(self) -> "AlarmDocument":
+        expected = chart_name(self.kind, self.mode)
+        if self.chart != expected:
+            raise ValueError(f"alarm chart {self.chart!r} does not match kind={self.kind!r}, mode={self.mode!r} ({expected!r})")
+        return self
+
+    @property
+    def acknowledged(self) -> bool:
+        return self.acknowledged_at_s is not None
+
+    @property
+    def active(self) -> bool:
+        return self.state == "active"
+
+
+class AlarmsDocument(_Document):
+    alarms: list[AlarmDocument]
+    count: Count
+
+
+class AlarmEventDocument(_Document):
+    """A notification of an alarm event (webhook body; e-mail attachment). ``id`` is stable
+    across retries: receivers recognise a repeat by it (also the ``Idempotency-Key`` header)."""
+
+    id: str
+    event: Literal["raised", "escalated", "cleared", "acknowledged"]
+    level: AlarmLevel
+    at_s: Finite
+    alarm: AlarmDocument
+
+
+# -- status --------------------------------------------------------------------------------
+
+
+class ChartLevelsDocument(_Document):
+    warning_sigma: Finite
+    alarm_sigma: Finite
+
+
+class ThresholdsDocument(_Document):
+    """The configured levels of the control charts (σ), as the analytics apply them."""
+
+    frequency: ChartLevelsDocument
+    curvature: ChartLevelsDocument
+    clear_sigma: Finite
+
+    def of(self, kind: ChartKind) -> ChartLevelsDocument:
+        if kind == "frequency":
+            return self.frequency
+        if kind == "curvature":
+            return self.curvature
+        raise ValueError(f"{kind=} must be 'frequency' or 'curvature'")
+
+
+class ServiceStatusDocument(_Document):
+    version: str
+    started_at: Finite = Field(description="UNIX s")
+    uptime_s: Finite
+    paused: bool = Field(description="pushes to the dashboard paused (monitoring never pauses)")
+    done: bool = Field(description="the source ended and everything was processed")
+    pipeline_error: str | None = Field(None, description="the error of the last batch, None once a batch succeeds again")
+    pipeline_errors: Count = Field(0, description="batches that failed since the start")
+    last_pipeline_error: str | None = None
+
+
+class SourceStatusDocument(_Document):
+    id: str
+    kind: Literal["sim", "replay", "follow", "ingest"]
+    state: str
+    error: str | None = None
+    messages: Count
+    rate_hz: Finite
+    data_time_s: Num = None
+    lag_s: Num = None
+    rejected: Count
+    rejected_by_reason: dict[str, Count]
+    dropped: Count
+    problems: list[str]
+    latency_s: Num = None
+
+
+class RestCalibrationDocument(_Document):
+    rest_end_s: Finite
+    rested: bool
+    gyro_bias_D_rad_s: Num
+    accel_bias_D_m_s2: list[Num]
+    gyro_bias_peripheral_rad_s: list[Num]
+    tof_offset_m: list[Num]
+    strain_offset: list[Num]
+
+
+class AidingChannelDocument(_Document):
+    accepted: Count
+    rejected: Count
+    mean_nis: Num = None
+
+
+class DegradedImuDocument(_Document):
+    sensor: str
+    silent_s: Finite
+    active: bool
+
+
+class EstimatorStatusDocument(_Document):
+    state: str
+    dropped_samples: Count
+    filter_restarts: Count
+    rest_calibration: RestCalibrationDocument | None = None
+    aiding: dict[str, AidingChannelDocument] = Field(default_factory=dict)
+    rejected: Count = 0
+    degraded_imus: list[DegradedImuDocument] = Field(default_factory=list)
+
+
+class PipelineStatusDocument(_Document):
+    queue_depth: Count
+    queue_capacity: Count
+    samples: Count
+    samples_by_topic: dict[str, Count]
+    late_samples: Count
+    late_by_topic: dict[str, Count]
+    estimates: Count
+    estimator: EstimatorStatusDocument
+    windows: Count
+    windows_committed: Count
+    windows_skipped_incomplete: Count
+    windows_skipped_warmup: Count
+    baseline: Literal["learning", "active"]
+    data_time_s: Num = None
+    processed_data_s: Num = None
+    realtime_factor: Num = None
+    pipeline_latency_s: Finite
+    busy_fraction: Finite
+    active_alarms: dict[str, AlarmLevel]
+
+
+class BaselineModeDocument(_Document):
+    mode: int = Field(ge=1)
+    unit: int = Field(ge=1)
+    f_ref_hz: Finite
+    temperature_ref_c: Finite
+    slope_per_k: Finite
+    sigma_rel: Finite
+
+
+class BaselineStatusDocument(_Document):
+    state: Literal["learning", "active"]
+    modes: list[BaselineModeDocument] | None = None
+
+
+class AlarmCountsDocument(_Document):
+    active: dict[AlarmLevel, Count]
+
+
+class NotificationStatusDocument(_Document):
+    pending: Count = 0
+    sent: Count = 0
+    failed: Count = 0
+    sent_this_run: Count
+    failed_attempts_this_run: Count
+
+
+class ArchiveStatusDocument(_Document):
+    directory: str
+    current: str | None
+    files: Count
+    messages: Count
+    errors: Count
+
+
+class StorageStatusDocument(_Document):
+    db: str
+    schema_version: Count
+    trend_rows: Count
+    archive: ArchiveStatusDocument | None
+
+
+class SinkStatusDocument(_Document):
+    """Failures of one sink (the dashboard, the notifier), counted by what was being done."""
+
+    errors: Count = 0
+    errors_by_kind: dict[str, Count] = Field(default_factory=dict)
+    last_error: str | None = None
+
+
+class ModelDocument(_Document):
+    """The estimator's model: how to read a state vector and which modes b carries."""
+
+    peripheral: Literal["gyro", "acc"]
+    support: Literal["pinned", "clamped"]
+    gamma: int = Field(ge=1)
+    state_names: list[str]
+    unit_modes: list[list[int]]
+
+
+class StatusDocument(_Document):
+    """``GET /api/status`` (and the dashboard's status)."""
+
+    service: ServiceStatusDocument
+    sources: list[SourceStatusDocument]
+    pipeline: PipelineStatusDocument
+    degraded_sensors: list[str]
+    sensors: dict[str, SensorState]
+    baseline: BaselineStatusDocument
+    alarms: AlarmCountsDocument
+    notifications: NotificationStatusDocument
+    storage: StorageStatusDocument
+    sinks: dict[str, SinkStatusDocument]
+    thresholds: ThresholdsDocument
+    model: ModelDocument
+
+
+class HealthDocument(_Document):
+    status: Literal["ok", "degraded"]
+    uptime_s: Finite
+
+
+class BaselineRequestDocument(_Document):
+    baseline_id: int = Field(ge=1)
+    state: Literal["learning"]
+    source: str
+    learn_s: Finite
+
+
+class ErrorDocument(_Document):
+    """The body of every error response: a sentence saying what is wrong, or (for a request
+    that does not match the API's parameter types) FastAPI's list of validation errors."""
+
+    detail: str | list[dict[str, Any]]
+
+
+class IngestErrorDocument(_Document):
+    index: Count = Field(description="position of the message in the request")
+    reason: str
+    detail: str
+
+
+class IngestResultDocument(_Document):
+    accepted: Count
+    rejected: Count
+    rejected_by_reason: dict[str, Count]
+    errors: list[IngestErrorDocument]

@@ -1,0 +1,208 @@
+"""The estimator's state vector: which entry is what, for every configuration.
+
+The estimator builds one :class:`StateLayout` per model and everything downstream (the
+pipeline, the recorded estimates, the dashboard, the tests' truth) reads states through it,
+so a layout is defined here once and never re-derived from a length.
+
+Entries, in order (absent groups take no room)::
+
+    d, h, ḋ, ḣ        position and velocity of the support D (ζ and η, m and m/s)
+    φ                 attitude of the body frame (rad); only with an attitude state
+    b_1..b_Γ          amplitudes of the unit deformations (dimensionless)
+    v_1..v_Γ          acc: v = ḃ + c·ω_D, the integrated velocity state (1/s)
+    β_1..β_ν          gyro: biases of the peripheral gyroscopes (rad/s)
+    β_D               bias of the gyroscope at D (rad/s); only with an attitude state
+
+A support that fixes the attitude (the clamped beam of the paper's Section 3.5, φ ≡ 0) has no
+φ and no β_D: β_D only ever enters through ω = ω_D − β_D, the attitude's rate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, NamedTuple
+
+import numpy as np
+
+__all__ = ["Peripheral", "StateIndex", "StateLayout"]
+
+Peripheral = Literal["gyro", "acc"]
+
+
+class StateIndex(NamedTuple):
+    """Start indices of a layout's groups as plain integers (−1: the group is absent), for
+    compiled code that cannot hold a Python object. Group lengths: b and v have Γ entries,
+    the peripheral biases ν."""
+
+    size: int
+    d: int
+    h: int
+    d_rate: int
+    h_rate: int
+    phi: int
+    b: int
+    v: int
+    peripheral_bias: int
+    bias_d: int
+    gamma: int
+    nu: int
+
+
+@dataclass(frozen=True)
+class StateLayout:
+    """Named positions in the state vector of one estimator configuration.
+
+    Parameters
+    ----------
+    peripheral : "gyro" or "acc", the kinematic model of the peripheral IMUs.
+    gamma : Γ, the number of unit deformations (>= 1).
+    nu : ν, the number of peripheral IMUs (>= 0).
+    attitude : whether φ (and with it β_D) is a state; False for a support that fixes φ ≡ 0.
+    imu_names : names of the ν peripheral IMUs (state names of their biases); default "1".."ν".
+
+    Raises
+    ------
+    ValueError
+        For an unknown configuration, Γ < 1, ν < 0 or names that do not match ν.
+    """
+
+    peripheral: Peripheral
+    gamma: int
+    nu: int
+    attitude: bool = True
+    imu_names: tuple[str, ...] = ()
+    _index: StateIndex = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.peripheral not in ("gyro", "acc"):
+            raise ValueError(f"peripheral={self.peripheral!r} must be 'gyro' or 'acc'")
+        for name in ("gamma", "nu"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise ValueError(f"{name}={value!r} must be an integer")
+        if self.gamma < 1:
+            raise ValueError(f"gamma={self.gamma} must be >= 1 (at least one unit deformation)")
+        if self.nu < 0:
+            raise ValueError(f"nu={self.nu} must be >= 0")
+        if not isinstance(self.attitude, bool):
+            raise ValueError(f"attitude={self.attitude!r} must be True or False")
+        names = tuple(str(n) for n in self.imu_names) or tuple(str(j + 1) for j in range(self.nu))
+        if len(names) != self.nu:
+            raise ValueError(f"imu_names has {len(names)} names for nu={self.nu} peripheral IMUs")
+        object.__setattr__(self, "gamma", int(self.gamma))
+        object.__setattr__(self, "nu", int(self.nu))
+        object.__setattr__(self, "imu_names", names)
+        i = 4
+        phi = -1
+        if self.attitude:
+            phi, i = i, i + 1
+        b, i = i, i + self.gamma
+        v = peripheral_bias = -1
+        if self.peripheral == "acc":
+            v, i = i, i + self.gamma
+        else:
+            peripheral_bias, i = i, i + self.nu
+        bias_d = -1
+        if self.attitude:
+            bias_d, i = i, i + 1
+        object.__setattr__(self, "_index", StateIndex(i, 0, 1, 2, 3, phi, b, v, peripheral_bias, bias_d, self.gamma, self.nu))
+
+    # -- sizes and positions ----------------------------------------------------------------
+
+    @property
+    def index(self) -> StateIndex:
+        """The start indices as a tuple of integers (for compiled code)."""
+        return self._index
+
+    @property
+    def size(self) -> int:
+        return self._index.size
+
+    @property
+    def d(self) -> int:
+        return self._index.d
+
+    @property
+    def h(self) -> int:
+        return self._index.h
+
+    @property
+    def d_rate(self) -> int:
+        return self._index.d_rate
+
+    @property
+    def h_rate(self) -> int:
+        return self._index.h_rate
+
+    @property
+    def phi(self) -> int | None:
+        """Index of φ, None without an attitude state."""
+        return None if self._index.phi < 0 else self._index.phi
+
+    @property
+    def b(self) -> slice:
+        return slice(self._index.b, self._index.b + self.gamma)
+
+    @property
+    def v(self) -> slice | None:
+        """The acc configuration's velocity states v (Γ); None for gyro (ḃ is an input there)."""
+        return None if self._index.v < 0 else slice(self._index.v, self._index.v + self.gamma)
+
+    @property
+    def peripheral_bias(self) -> slice | None:
+        """The gyro configuration's peripheral gyro biases (ν); None for acc."""
+        i = self._index.peripheral_bias
+        return None if i < 0 else slice(i, i + self.nu)
+
+    @property
+    def bias_d(self) -> int | None:
+        """Index of β_D, the gyro bias at D; None without an attitude state."""
+        return None if self._index.bias_d < 0 else self._index.bias_d
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """State names in order (``d``, ``h``, ``d_rate``, ``h_rate``, ``phi``, ``b1``.., ``v1``..,
+        ``gyro_bias_<imu>``.., ``gyro_bias_D``)."""
+        out = ["d", "h", "d_rate", "h_rate"]
+        if self.attitude:
+            out.append("phi")
+        out += [f"b{k + 1}" for k in range(self.gamma)]
+        if self.peripheral == "acc":
+            out += [f"v{k + 1}" for k in range(self.gamma)]
+        else:
+            out += [f"gyro_bias_{name}" for name in self.imu_names]
+        if self.attitude:
+            out.append("gyro_bias_D")
+        return tuple(out)
+
+    def position(self, name: str) -> int:
+        """Index of the state called ``name`` (see :attr:`names`)."""
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"no state {name!r} in this layout; states: {list(self.names)}") from None
+
+    # -- reading states ---------------------------------------------------------------------
+
+    def check(self, x: object, *, name: str = "x") -> np.ndarray:
+        """``x`` as a float array whose last axis is one state vector; ValueError otherwise."""
+        try:
+            arr = np.asarray(x, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"state vector {name} must be numeric: {exc}") from None
+        if arr.ndim not in (1, 2) or arr.shape[-1] != self.size:
+            raise ValueError(
+                f"state vector {name} has shape {arr.shape}; this layout ({self.peripheral}, Γ={self.gamma}, ν={self.nu}"
+                f"{'' if self.attitude else ', no attitude'}) needs {self.size} entries: {', '.join(self.names)}"
+            )
+        return arr
+
+    def phi_of(self, x: np.ndarray) -> np.ndarray:
+        """φ of state(s) ``x`` (…, n); zeros without an attitude state."""
+        x = np.asarray(x)
+        i = self.phi
+        return np.zeros(x.shape[:-1]) if i is None else x[..., i]
+
+    def b_of(self, x: np.ndarray) -> np.ndarray:
+        """b (…, Γ) of state(s) ``x`` (…, n)."""
+        return np.asarray(x)[..., self.b]

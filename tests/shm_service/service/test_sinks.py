@@ -1,0 +1,130 @@
+"""Sinks never break the pipeline: a dashboard whose every push raises and a webhook that always
+fails are isolated, counted by kind in /api/status and /metrics and logged once per kind, and not
+one sample, estimate or window is lost; /healthz follows the pipeline and recovers with it."""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import httpx
+import pytest
+from svc_helpers import Receiver, fast_overrides
+
+from shm_service.service._api import create_app
+from shm_service.service._config import load_settings
+from shm_service.service._server import ApiServer
+from shm_service.service._service import MonitoringService
+
+TOKEN = "sink-test-token"
+
+
+def _replay(tmp_path, recording, *, dashboard: bool, webhook: str | None = None, break_dashboard: bool = False):
+    extra = {"source.spec": f"replay:{recording}", "source.speed": "max", "dashboard.enabled": dashboard, "dashboard.port": 0,
+             "archive.enabled": False, "db": str(tmp_path / f"shm-{dashboard}.sqlite")}
+    if webhook is not None:
+        extra.update({"notify.webhooks": [webhook], "notify.retry_initial_s": 0.05, "notify.retry_max_s": 0.1})
+    service = MonitoringService(load_settings(None, fast_overrides(tmp_path, **extra)), environ={})
+    if break_dashboard:
+        assert service.dashboard is not None
+
+        def broken(*args, **kwargs):
+            raise RuntimeError("the dashboard is broken")
+
+        for name in ("push_estimate", "push_spectra", "push_window", "push_alarm"):
+            setattr(service.dashboard, name, broken)
+    api = ApiServer(create_app(service), "127.0.0.1", 0).start()
+    service.start()
+    try:
+        assert service.wait(240)
+        if webhook is not None:  # a few more delivery attempts after the last window
+            time.sleep(0.5)
+        with httpx.Client(base_url=api.url) as c:
+            status, metrics, health = c.get("/api/status").json(), c.get("/metrics").text, c.get("/healthz").json()
+    finally:
+        api.stop()
+        service.stop(drain_s=0)
+    return status, metrics, health
+
+
+def test_a_failing_dashboard_and_notifier_lose_nothing(tmp_path, short_recording, caplog):
+    reference, _, _ = _replay(tmp_path / "ref", short_recording, dashboard=False)
+    receiver = Receiver(fail_first=10**9)  # answers 500 to every notification
+    try:
+        with caplog.at_level(logging.WARNING):
+            status, metrics, health = _replay(tmp_path, short_recording, dashboard=True, webhook=receiver.url,
+                                              break_dashboard=True)
+    finally:
+        receiver.close()
+    p, ref = status["pipeline"], reference["pipeline"]
+    # nothing lost: the same samples, estimates and windows as without a dashboard
+    for key in ("samples", "estimates", "windows", "windows_committed"):
+        assert p[key] == ref[key] > 0, key
+    assert status["storage"]["trend_rows"] == reference["storage"]["trend_rows"]
+    assert status["service"]["pipeline_errors"] == 0 and health["status"] == "ok"
+    # counted by kind
+    dashboard = status["sinks"]["dashboard"]
+    assert set(dashboard["errors_by_kind"]) == {"estimate", "spectra", "window", "alarm"}
+    assert dashboard["errors_by_kind"]["window"] == p["windows_committed"]
+    assert dashboard["errors"] == sum(dashboard["errors_by_kind"].values())
+    notifier = status["sinks"]["notifier"]
+    assert notifier["errors_by_kind"]["webhook"] == status["notifications"]["failed_attempts_this_run"] >= 2
+    assert f'shm_sink_errors_total{{sink="dashboard",kind="window"}} {p["windows_committed"]}' in metrics
+    assert 'shm_sink_errors_total{sink="notifier",kind="webhook"}' in metrics
+    # logged once per kind
+    failures = [r.getMessage() for r in caplog.records if "failed (" in r.getMessage()]
+    for sink, kind in [("dashboard", k) for k in ("estimate", "spectra", "window", "alarm")] + [("notifier", "webhook")]:
+        assert sum(m.startswith(f"{sink} {kind} failed") for m in failures) == 1, (sink, kind, failures)
+
+
+@pytest.fixture()
+def ingest_service(tmp_path):
+    settings = load_settings(None, fast_overrides(tmp_path, **{"source.spec": "ingest"}))
+    service = MonitoringService(settings, environ={"SHM_TOKEN": TOKEN})
+    service.start()
+    api = ApiServer(create_app(service), "127.0.0.1", 0).start()
+    yield service, api.url
+    api.stop()
+    service.stop(drain_s=0)
+
+
+def test_healthz_follows_the_pipeline_and_recovers(ingest_service):
+    service, url = ingest_service
+    original = service.pipeline.process
+    failures = iter([RuntimeError("injected fault")])
+
+    def flaky(batch):
+        fault = next(failures, None)
+        if fault is not None:
+            raise fault
+        original(batch)
+
+    service.pipeline.process = flaky
+    t0 = 1_767_225_600_000_000_000
+
+    def post(start: int) -> None:
+        batch = {"messages": [{"topic": "/imu/D", "log_time_ns": start + i * 5_000_000,
+                               "payload": {"accel": [-9.81, 0.0, 0.0], "gyro": [0.0, 0.0, 0.0]}} for i in range(20)]}
+        assert c.post("/api/ingest", json=batch, headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 200
+
+    def wait_for(predicate) -> dict:
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            st = c.get("/api/status").json()
+            if predicate(st):
+                return st
+            time.sleep(0.05)
+        raise AssertionError(f"status never matched: {st['service']}")
+
+    with httpx.Client(base_url=url) as c:
+        assert c.get("/healthz").json()["status"] == "ok"
+        post(t0)
+        st = wait_for(lambda st: st["service"]["pipeline_errors"] == 1)
+        assert st["service"]["pipeline_error"] == "RuntimeError: injected fault"
+        assert c.get("/healthz").json()["status"] == "degraded"
+        post(t0 + 10**9)
+        st = wait_for(lambda st: st["pipeline"]["samples"] == 20)
+        assert c.get("/healthz").json()["status"] == "ok"
+        assert st["service"]["pipeline_error"] is None and st["service"]["pipeline_errors"] == 1
+        assert st["service"]["last_pipeline_error"] == "RuntimeError: injected fault"
+        assert "shm_pipeline_errors_total 1" in c.get("/metrics").text
