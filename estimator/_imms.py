@@ -178,7 +178,7 @@ class LeastSquares(NamedTuple):
     c_acc: np.ndarray
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, sig, acc_ws):
     """Propagate x over dt with the given inputs into the buffers xn (n,), F (n, n), Q (n, n).
 
@@ -193,8 +193,10 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
     n = x.shape[0]
     g = p.gravity
     i_phi, i_bd, i_b = ix.phi, ix.bias_d, ix.b
-    imu_S, imu_S1 = m.imu_S, m.imu_S1
-    Pinv, c_acc = lsq.Pinv, lsq.c_acc
+    # Fields read into locals once: each access of a structure's array field in a loop costs a
+    # reference count (atomic) in compiled code.
+    imu_S, imu_S1, sig_fj, sig_wj = m.imu_S, m.imu_S1, m.sig_fj, m.sig_wj
+    Pinv, c_acc, null_proj = lsq.Pinv, lsq.c_acc, lsq.null_proj
     phi = x[i_phi] if i_phi >= 0 else 0.0
     omega = omegaD - (x[i_bd] if i_bd >= 0 else 0.0)
     cp, sp = np.cos(phi), np.sin(phi)
@@ -262,7 +264,7 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
             Gm[i_b + k, 2] = -dt * row_sum
             Q[i_b + k, i_b + k] += p.q_b * dt
         for j in range(nu):
-            sig[3 + j] = m.sig_wj[j]
+            sig[3 + j] = sig_wj[j]
             Q[ibj + j, ibj + j] += p.q_beta_peripheral * dt
     else:
         # Eq. (8) per sensor: Δ̈_j = f_j,ζ − f_D,ζ − ω̇ η_j + ω² Δ_j with f_j,ζ = sin α_j f_j,x + cos α_j f_j,y.
@@ -283,8 +285,8 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
             ddelta = sa * fj[j, 0] + ca * fj[j, 1] - fD[1] + w2 * delta
             tilt = ca * fj[j, 0] - sa * fj[j, 1]
             dbeta = -2.0 * omega * delta
-            sig[3 + 2 * j] = m.sig_fj[j, 0]
-            sig[4 + 2 * j] = m.sig_fj[j, 1]
+            sig[3 + 2 * j] = sig_fj[j, 0]
+            sig[4 + 2 * j] = sig_fj[j, 1]
             for k in range(gamma):
                 pk = Pinv[k, j]
                 acc_ws[k, gamma] += pk * ddelta
@@ -315,7 +317,6 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
             Q[iv + k, iv + k] += p.q_v * dt
     # Unobservable directions of b (fewer active sensors than Γ) random-walk instead of freezing.
     if p.q_null > 0:
-        null_proj = lsq.null_proj
         for k in range(gamma):
             for mm in range(gamma):
                 Q[i_b + k, i_b + mm] += p.q_null * dt * null_proj[k, mm]
@@ -442,16 +443,16 @@ def least_squares_map(m, active):
     return LeastSquares(Pinv, null_proj, c_acc)
 
 
-@numba.njit(cache=True)
-def _aid(x, P, innovation, H, R, gate, ubuf, channel, counters):
+@numba.njit(cache=True, inline="always")
+def _aid(x, P, innovation, H, R, gate, ubuf, channel, accepted, rejected, nis_sum, last_innovation):
     """One gated aiding update of channel ``channel`` with its counters."""
     S, d2, ok = update_scalar_into(x, P, innovation, H, R, gate, ubuf)
-    counters.last_innovation[channel] = innovation
+    last_innovation[channel] = innovation
     if ok:
-        counters.accepted[channel] += 1
-        counters.nis_sum[channel] += d2
+        accepted[channel] += 1
+        nis_sum[channel] += d2
     else:
-        counters.rejected[channel] += 1
+        rejected[channel] += 1
 
 
 @numba.njit(cache=True)
@@ -471,14 +472,19 @@ def run_events(ev, m, st, out, counters):
     p = m.params
     gamma = ix.gamma
     nu = ix.nu
-    n_tof = m.tof_eta.shape[0]
+    n_tof = m.tof_eta.shape[0]  # channels: [ToF..., strain..., bearing, pseudo h, pseudo ḣ]
     i_b = ix.b
     x, P = st.x, st.P
     held_fD, held_wD, held_fj, held_wj = st.held_fD, st.held_wD, st.held_fj, st.held_wj
     last_seen, active = st.last_seen, st.active
     t_ev, kind_ev, index_ev, values_ev, next_d = ev.t, ev.kind, ev.index, ev.values, ev.next_d
-    bias_D, bias_j = m.bias_D, m.bias_j
-    t_now = st.clock[0]
+    bias_D, bias_j, tip_row = m.bias_D, m.bias_j, m.tip_row
+    tof_eta, tof_S, tof_S1, tof_offset, tof_var = m.tof_eta, m.tof_S, m.tof_S1, m.tof_offset, m.tof_var
+    strain_K, strain_offset, strain_var, aided = m.strain_K, m.strain_offset, m.strain_var, m.aided
+    accepted, rejected, nis_sum, last_innovation = counters.accepted, counters.rejected, counters.nis_sum, counters.last_innovation
+    degraded_time, clock = counters.degraded_time, st.clock
+    out_t, out_x, out_P, out_var_e = out.t, out.x, out.P, out.var_e
+    t_now = clock[0]
     pending = st.pending[0]
     n_out = 0
     lsq = least_squares_map(m, active)
@@ -508,14 +514,14 @@ def run_events(ev, m, st, out, counters):
         t = t_ev[e]
         if t > t_now:
             if pending:
-                out.t[n_out] = t_now
-                out.x[n_out] = x
+                out_t[n_out] = t_now
+                out_x[n_out] = x
                 for i in range(n):
-                    out.P[n_out, i] = P[i, i]
-                out.var_e[n_out] = tip_variance(P, m.tip_row, i_b)
+                    out_P[n_out, i] = P[i, i]
+                out_var_e[n_out] = tip_variance(P, tip_row, i_b)
                 n_out += 1
                 pending = False
-            held_t = st.clock[1]
+            held_t = clock[1]
             nd = next_d[e]
             have_next = nd >= 0 and t_ev[nd] > held_t
             t_next = t
@@ -578,7 +584,7 @@ def run_events(ev, m, st, out, counters):
                 held_fD[0] = v0
                 held_fD[1] = v1
                 held_wD[0] = v2
-            st.clock[1] = t
+            clock[1] = t
             pending = True
             # Peripheral sensors that stopped delivering leave the least-squares solution.
             changed = False
@@ -594,7 +600,7 @@ def run_events(ev, m, st, out, counters):
             v2 = values_ev[e, 2] - bias_j[j, 2]
             if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2):
                 if not active[j]:
-                    counters.degraded_time[j] += t - last_seen[j]
+                    degraded_time[j] += t - last_seen[j]
                     active[j] = True
                     lsq = least_squares_map(m, active)
                 held_fj[j, 0] = v0
@@ -602,43 +608,43 @@ def run_events(ev, m, st, out, counters):
                 held_wj[j] = v2
                 last_seen[j] = t
         elif k == EVENT_TOF:
-            z = values_ev[e, 0] - m.tof_offset[j]
+            z = values_ev[e, 0] - tof_offset[j]
             if not np.isfinite(z):
-                counters.rejected[j] += 1
+                rejected[j] += 1
                 continue
-            rho = tof_measurement_into(ix, x, m.tof_eta[j], m.tof_S[j], m.tof_S1[j], p.reflector_distance, H)
-            _aid(x, P, z - rho, H, m.tof_var[j], p.gate, ubuf, j, counters)
+            rho = tof_measurement_into(ix, x, tof_eta[j], tof_S[j], tof_S1[j], p.reflector_distance, H)
+            _aid(x, P, z - rho, H, tof_var[j], p.gate, ubuf, j, accepted, rejected, nis_sum, last_innovation)
         elif k == EVENT_STRAIN:
             ch = n_tof + j
-            z = values_ev[e, 0] - m.strain_offset[j]
+            z = values_ev[e, 0] - strain_offset[j]
             if not np.isfinite(z):
-                counters.rejected[ch] += 1
+                rejected[ch] += 1
                 continue
             H[:] = 0.0
             pred = 0.0
             for mm in range(gamma):
-                if m.aided[mm] > 0:
-                    H[i_b + mm] = m.strain_K[j, mm]
+                if aided[mm] > 0:
+                    H[i_b + mm] = strain_K[j, mm]
                 # Eq. (22): the strain of unaided unit deformations is subtracted at its estimate.
-                pred += m.strain_K[j, mm] * x[i_b + mm]
-            _aid(x, P, z - pred, H, m.strain_var[j], p.gate, ubuf, ch, counters)
+                pred += strain_K[j, mm] * x[i_b + mm]
+            _aid(x, P, z - pred, H, strain_var[j], p.gate, ubuf, ch, accepted, rejected, nis_sum, last_innovation)
         elif k == EVENT_BEARING:
             z = values_ev[e, 0]
             if not np.isfinite(z):
-                counters.rejected[i_bear] += 1
+                rejected[i_bear] += 1
                 continue
             H[:] = 0.0
             H[ix.d] = 1.0
-            _aid(x, P, z - x[ix.d], H, p.bearing_var, p.gate, ubuf, i_bear, counters)
+            _aid(x, P, z - x[ix.d], H, p.bearing_var, p.gate, ubuf, i_bear, accepted, rejected, nis_sum, last_innovation)
             # The bearing runs on a rail: h = 0 and ḣ = 0 as pseudo-measurements.
             H[:] = 0.0
             H[ix.h] = 1.0
             S, d2, ok = update_scalar_into(x, P, -x[ix.h], H, p.pseudo_h_var, 1e300, ubuf)
-            counters.accepted[i_bear + 1] += 1
+            accepted[i_bear + 1] += 1
             H[:] = 0.0
             H[ix.h_rate] = 1.0
             S, d2, ok = update_scalar_into(x, P, -x[ix.h_rate], H, p.pseudo_h_rate_var, 1e300, ubuf)
-            counters.accepted[i_bear + 2] += 1
-    st.clock[0] = t_now
+            accepted[i_bear + 2] += 1
+    clock[0] = t_now
     st.pending[0] = pending
     return n_out

@@ -137,6 +137,7 @@ class ClientView:
         self._last_spectra = -math.inf
         self._last_text = -math.inf
         self._time_axis: bool | None = None
+        self._drawn_thresholds: dict[str, tuple[float, float]] | None = None
         self._envelope = 0.0
         self._eta = np.linspace(0.0, dash.length, N_BEAM_POINTS)
         self._faces = ribbon_faces(N_BEAM_POINTS)
@@ -472,6 +473,8 @@ class ClientView:
                 self._spec_version = snap.spectra_version
                 self._last_spectra = now
                 self._render_spectra(snap)
+            if self.dash.thresholds(snap) != self._drawn_thresholds:  # the service's levels arrived or changed
+                self.dirty_trends = True
             if (not self.paused and snap.windows_version != self._win_version) or (self.dirty_trends and snap.windows):
                 self._win_version = snap.windows_version
                 self.dirty_trends = False
@@ -615,7 +618,7 @@ class ClientView:
         damping = [_arr([None if w.damping_ratio.get(m) is None else 100 * w.damping_ratio[m] for w in shown]) for m in modes]
         self.damping_plot.data = (x, *damping)
         self.damping_plot.visible = any(np.isfinite(d).any() for d in damping)
-        th = dash.thresholds(snap)
+        th = self._drawn_thresholds = dash.thresholds(snap)
         scores = [_arr([w.score_sigma.get(m) for w in shown]) for m in modes]
         self.score_plot.data = (x, *scores, *_threshold_lines(th.get("frequency"), x.size))
         self.score_plot.visible = any(np.isfinite(s).any() for s in scores)
