@@ -285,7 +285,7 @@ def happened(settings: Any) -> str:
     try:
         storage = Storage(settings.db)
         try:
-            alarms = sorted(storage.alarms(), key=lambda a: a["raised_at_s"])
+            alarms = sorted(storage.alarms(), key=lambda a: a.raised_at_s)
             windows = storage.count("trends")
         finally:
             storage.close()
@@ -293,5 +293,5 @@ def happened(settings: Any) -> str:
         return f"shm demo: cannot read {settings.db}: {exc}"
     lines = [f"shm demo: {windows} trend rows stored; {len(alarms) or 'no'} alarm{'s' if len(alarms) != 1 else ''} raised"]
     for a in alarms:
-        lines.append(f"  {a['raised_at_s'] - start_s:7.0f} s  {a['level']:<7} {a['chart']}: {a['message']}")
+        lines.append(f"  {a.raised_at_s - start_s:7.0f} s  {a.level:<7} {a.chart}: {a.message}")
     return "\n".join(lines)

@@ -79,7 +79,9 @@ def test_age_limit_is_in_data_time_per_source(tmp_path):
 
 
 def _trend_commit(source: str, start_s: float) -> WindowCommit:
-    row = TrendRow(start_s, start_s + 60, 2, 1, "ambient", 0.86, 0.005, 1e-3, 0.9, 20.0, 0.1, 0.2, "ok")
+    row = TrendRow(source=source, window_start_s=start_s, window_end_s=start_s + 60, mode=2, unit=1, kind="ambient",
+                   frequency_hz=0.86, damping_ratio=0.005, amplitude=1e-3, confidence=0.9, temperature_c=20.0,
+                   curvature_index=0.1, score_sigma=0.2, level="ok")
     return WindowCommit(source, start_s, start_s + 60, [row], None, None)
 
 
@@ -89,7 +91,7 @@ def test_trend_rows_older_than_the_limit_before_their_sources_newest_window_go(t
         st.commit_window(_trend_commit("sim", T0 + day * DAY))
     st.commit_window(_trend_commit("old-replay", T0 - 365 * DAY))
     assert st.delete_trends_older_than(3 * DAY) == 6  # days 0..5 are more than 3 days before day 9
-    kept = [r["window_start_s"] for r in st.trends(source="sim")]
+    kept = [r.window_start_s for r in st.trends(source="sim")]
     assert kept == [T0 + d * DAY for d in range(6, 10)]
     assert st.count("trends") == 5  # the replay's single row is its own newest
     with pytest.raises(ValueError, match="age_s"):
