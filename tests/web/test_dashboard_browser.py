@@ -271,7 +271,7 @@ def test_alarm_raised_by_the_service_shows_on_the_page(chromium, tmp_path):
                 _visible(page, "Pause live view").wait_for(timeout=30_000)
                 # The pipeline raises the alarm from the data; the page shows its notification.
                 page.get_by_text(re.compile(r"ALARM #\d+ raised")).filter(visible=True).first.wait_for(timeout=150_000)
-                assert any(a["level"] == "alarm" for a in service.alarms())
+                assert any(a.level == "alarm" for a in service.alarms())
             finally:
                 context.close()
     finally:
