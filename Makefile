@@ -19,8 +19,9 @@ DEMO_ARGS ?=
 demo: $(STAMP)
 	$(VENV)/bin/shm demo $(DEMO_ARGS)
 
+# One worker per core, a test file per worker at a time (module fixtures such as the quick study run once).
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --dist loadfile
 
 bench: $(STAMP)
 	$(PY) -m benchmarks
