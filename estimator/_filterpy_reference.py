@@ -47,9 +47,9 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
     active = np.ones(nu, dtype=np.bool_)
     lsq = least_squares_map(arrays, active)
     bias_D, bias_j = arrays.bias_D, arrays.bias_j
-    held_fD = np.array([-model.rig.gravity, 0.0])
+    held_fD = np.array([-model.gravity_eta, 0.0])
     held_wD = 0.0
-    held_fj = np.tile([-model.rig.gravity, 0.0], (nu, 1))
+    held_fj = np.tile([-model.gravity_eta, 0.0], (nu, 1))
     held_wj = np.zeros(nu)
     held_t = t0
     t_now = t0

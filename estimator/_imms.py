@@ -6,8 +6,13 @@ Python-facing class. Frames and signs follow the recording contract (see planar-
 State layout (``x``): ``contract.StateLayout``, read through its ``StateIndex`` (no offset is
 written here)::
 
-    gyro: [d, h, ḋ, ḣ, φ, b_1..b_Γ, β_1..β_ν, β_D]
-    acc:  [d, h, ḋ, ḣ, φ, b_1..b_Γ, v_1..v_Γ, β_D]
+    gyro: [d, h, ḋ, ḣ, φ, b_1..b_Γ, r_1..r_R, β_1..β_ν, β_D]
+    acc:  [d, h, ḋ, ḣ, φ, b_1..b_Γ, r_1..r_R, v_1..v_Γ+R, β_D]
+
+The residual modes r (R ≥ 0, eigenmodes beyond the Γ unit deformations) are modal amplitudes
+like b: the kernels treat b and r as one block of Γ + R (below "Γ" means that block). With fewer
+peripheral IMUs than Γ + R their least squares leaves a null space, which random-walks (q_null)
+and is fixed by the ToFs and gauges.
 
 β_D is the bias of the gyroscope at D and β_j those of the peripheral gyroscopes (random walks:
 what the rest phase cannot calibrate, the wander of low-cost MEMS, goes straight into ḃ). For accelerometers the velocity state is
@@ -15,7 +20,9 @@ v = ḃ + c·ω_D with c = S⁺η: Eq. (8) contains ω̇·η_j with ω̇ the num
 and integrating that term once gives exactly c·(ω_D,k − ω_D,k−1). Carrying v keeps the
 differentiated gyro noise what it is — a difference of two samples, not white noise of
 1/dt size — and ḃ = v − c·ω_D is reported. A layout without an attitude state (φ ≡ 0) has
-neither φ nor β_D; the kernels then read φ = 0 and β_D = 0 and write no entry of theirs.
+neither φ nor β_D; the kernels then read φ = 0 and ω = 0 (the gyro at D is not used: a clamp
+does not turn) and write no entry of theirs. Gravity is g_η along inertial η (+g for a hanging
+beam, −g for a standing one), so the model holds for both orientations.
 
 Events (``kind``): 0 IMU at D, 1 peripheral IMU, 2 ToF, 3 strain gauge, 4 bearing displacement.
 IMU values are [f_x, f_y, ω_z] in the sensor frame; the others carry their value in column 0.
@@ -69,7 +76,7 @@ EVENT_IMU_D, EVENT_IMU_PERIPHERAL, EVENT_TOF, EVENT_STRAIN, EVENT_BEARING = 0, 1
 class FilterParams(NamedTuple):
     """Scalar tuning and rig constants of the loop (SI units; variances in the unit squared)."""
 
-    gravity: float  # m/s²
+    gravity_eta: float  # m/s², gravity along inertial η: +g hanging, −g standing (η up the beam)
     reflector_distance: float  # m
     gate: float  # innovation gate, squared Mahalanobis distance
     stale_after: float  # s
@@ -189,16 +196,18 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
     """
     ix = m.index
     p = m.params
-    gamma = ix.gamma
+    gamma = ix.gamma + ix.residual  # b and the residual modes: one block of modal amplitudes
     n = x.shape[0]
-    g = p.gravity
+    g = p.gravity_eta
     i_phi, i_bd, i_b = ix.phi, ix.bias_d, ix.b
     # Fields read into locals once: each access of a structure's array field in a loop costs a
     # reference count (atomic) in compiled code.
     imu_S, imu_S1, sig_fj, sig_wj = m.imu_S, m.imu_S1, m.sig_fj, m.sig_wj
     Pinv, c_acc, null_proj = lsq.Pinv, lsq.c_acc, lsq.null_proj
     phi = x[i_phi] if i_phi >= 0 else 0.0
-    omega = omegaD - (x[i_bd] if i_bd >= 0 else 0.0)
+    # Without an attitude state the support fixes φ ≡ 0, so ω ≡ 0 exactly: the gyro at D would
+    # only add its noise and bias wander to ḃ.
+    omega = (omegaD - (x[i_bd] if i_bd >= 0 else 0.0)) if i_phi >= 0 else 0.0
     cp, sp = np.cos(phi), np.sin(phi)
     for i in range(n):
         xn[i] = x[i]
@@ -212,7 +221,7 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
             Gm[i, j] = 0.0
     for j in range(n_in):
         sig[j] = 0.0
-    # Rigid part: inertial acceleration of D from its specific force (η down, gravity +g).
+    # Rigid part: inertial acceleration of D from its specific force (gravity g_η along η).
     i_d, i_h, i_dr, i_hr = ix.d, ix.h, ix.d_rate, ix.h_rate
     acc_h = cp * fD[0] - sp * fD[1] + g
     acc_d = sp * fD[0] + cp * fD[1]
@@ -237,7 +246,7 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
     nu = fj.shape[0]
     sig[0] = p.sigma_f_d_x
     sig[1] = p.sigma_f_d_y
-    sig[2] = p.sigma_omega_d
+    sig[2] = p.sigma_omega_d if i_phi >= 0 else 0.0
     Gm[i_d, 0] = half * sp
     Gm[i_d, 1] = half * cp
     Gm[i_h, 0] = half * cp
@@ -346,7 +355,7 @@ def propagate(m, x, dt, fD, omegaD, fj, omegaj, active, lsq):
     """Pure form of ``propagate_into``: returns (x⁺, F, Q) as new arrays."""
     n = x.shape[0]
     n_in = _input_count(m, fj.shape[0])
-    gamma = m.index.gamma
+    gamma = m.index.gamma + m.index.residual
     xn = np.empty(n)
     F = np.empty((n, n))
     Q = np.empty((n, n))
@@ -434,7 +443,7 @@ def _least_squares_map(S, active, gamma):
 def least_squares_map(m, active):
     """The ``LeastSquares`` map of the ``active`` peripheral IMUs of model ``m``: gyroscopes see
     the slopes s'(η_j) (Eq. 9), accelerometers the deflections s(η_j) (Eq. 8)."""
-    gamma = m.index.gamma
+    gamma = m.index.gamma + m.index.residual
     S_map = m.imu_S1 if m.kind == KIND_GYRO else m.imu_S
     Pinv, null_proj = _least_squares_map(S_map, active, gamma)
     c_acc = np.zeros(gamma)
@@ -470,7 +479,7 @@ def run_events(ev, m, st, out, counters):
     """
     ix = m.index
     p = m.params
-    gamma = ix.gamma
+    gamma = ix.gamma + ix.residual  # b and the residual modes: one block of modal amplitudes
     nu = ix.nu
     n_tof = m.tof_eta.shape[0]  # channels: [ToF..., strain..., bearing, pseudo h, pseudo ḣ]
     i_b = ix.b
