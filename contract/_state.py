@@ -9,18 +9,20 @@ Entries, in order (absent groups take no room)::
     d, h, ḋ, ḣ        position and velocity of the support D (ζ and η, m and m/s)
     φ                 attitude of the body frame (rad); only with an attitude state
     b_1..b_Γ          amplitudes of the unit deformations (dimensionless)
-    r_1..r_R          amplitudes of residual modes (the next R eigenmodes), when carried
-    v_1..v_Γ, vr_1..  acc: v = ḃ + c·ω_D, the integrated velocity state (1/s), of b and r
+    r_1..r_R          amplitudes of the residual modes (dimensionless); only when carried
+    v_1..v_Γ          acc: v = ḃ + c·ω_D, the integrated velocity state (1/s)
+    vr_1..vr_R        rates ṙ of the residual modes (1/s)
     β_1..β_ν          gyro: biases of the peripheral gyroscopes (rad/s)
     β_D               bias of the gyroscope at D (rad/s); only with an attitude state
 
 A support that fixes the attitude (the clamped beam of the paper's Section 3.5, φ ≡ 0) has no
 φ and no β_D: β_D only ever enters through ω = ω_D − β_D, the attitude's rate.
 
-Residual modes are eigenmodes beyond the Γ unit deformations that the estimator carries so
-that a driven mode it does not report cannot alias into b (a clamped beam's base motion drives
-every mode); they follow b directly, so b and r are one block of Γ + R modal amplitudes for the
-kernels, and they are not unit deformations: ``b`` and the mode labels stay Γ.
+Residual modes are the R eigenmodes after the Γ unit deformations, carried (with their FE
+dynamics) so that a driven mode the estimator does not report cannot alias into b: a clamped
+beam's base motion drives every mode. r follows b directly, so b and r form one block of Γ + R
+modal amplitudes that the aiding equations see alike; they are not unit deformations, so ``b``
+and the mode labels stay Γ.
 """
 
 from __future__ import annotations
@@ -37,8 +39,9 @@ Peripheral = Literal["gyro", "acc"]
 
 class StateIndex(NamedTuple):
     """Start indices of a layout's groups as plain integers (−1: the group is absent), for
-    compiled code that cannot hold a Python object. Group lengths: b has Γ entries followed by the
-    ``residual`` R ones, v (acc) Γ + R, the peripheral biases ν."""
+    compiled code that cannot hold a Python object. Group lengths: b and v have Γ entries, the
+    peripheral biases ν; the R residual amplitudes follow b directly (from b + Γ) and their rates
+    start at ``residual_rate``."""
 
     size: int
     d: int
@@ -53,6 +56,7 @@ class StateIndex(NamedTuple):
     gamma: int
     nu: int
     residual: int = 0
+    residual_rate: int = -1
 
 
 @dataclass(frozen=True)
@@ -108,18 +112,19 @@ class StateLayout:
         phi = -1
         if self.attitude:
             phi, i = i, i + 1
-        modal = self.gamma + self.residual
-        b, i = i, i + modal
-        v = peripheral_bias = -1
+        b, i = i, i + self.gamma + self.residual
+        v = peripheral_bias = residual_rate = -1
         if self.peripheral == "acc":
-            v, i = i, i + modal
-        else:
+            v, i = i, i + self.gamma
+        if self.residual:
+            residual_rate, i = i, i + self.residual
+        if self.peripheral == "gyro":
             peripheral_bias, i = i, i + self.nu
         bias_d = -1
         if self.attitude:
             bias_d, i = i, i + 1
         object.__setattr__(self, "_index", StateIndex(i, 0, 1, 2, 3, phi, b, v, peripheral_bias, bias_d, self.gamma, self.nu,
-                                                        self.residual))
+                                                        self.residual, residual_rate))
 
     # -- sizes and positions ----------------------------------------------------------------
 
@@ -164,14 +169,20 @@ class StateLayout:
         return slice(start, start + self.residual)
 
     @property
+    def residual_rates(self) -> slice:
+        """The residual modes' rates ṙ (R entries; empty for R = 0)."""
+        start = self._index.residual_rate
+        return slice(0, 0) if start < 0 else slice(start, start + self.residual)
+
+    @property
     def modal(self) -> slice:
         """b and r together: every modal amplitude the estimator carries (Γ + R)."""
         return slice(self._index.b, self._index.b + self.gamma + self.residual)
 
     @property
     def v(self) -> slice | None:
-        """The acc configuration's velocity states v of b and r (Γ + R); None for gyro (ḃ is an input there)."""
-        return None if self._index.v < 0 else slice(self._index.v, self._index.v + self.gamma + self.residual)
+        """The acc configuration's velocity states v (Γ); None for gyro (ḃ is an input there)."""
+        return None if self._index.v < 0 else slice(self._index.v, self._index.v + self.gamma)
 
     @property
     def peripheral_bias(self) -> slice | None:
@@ -195,8 +206,8 @@ class StateLayout:
         out += [f"r{k + 1}" for k in range(self.residual)]
         if self.peripheral == "acc":
             out += [f"v{k + 1}" for k in range(self.gamma)]
-            out += [f"vr{k + 1}" for k in range(self.residual)]
-        else:
+        out += [f"vr{k + 1}" for k in range(self.residual)]
+        if self.peripheral == "gyro":
             out += [f"gyro_bias_{name}" for name in self.imu_names]
         if self.attitude:
             out.append("gyro_bias_D")

@@ -77,6 +77,10 @@ class FilterConfig(BaseModel):
     )
     q_rigid: float = Field(1e-4, ge=0, description="model error of the bearing's acceleration, m²/s³")
     q_null: float = Field(1e-2, ge=0, description="random walk of unit deformations no sensor sees, 1/s")
+    q_residual: float = Field(
+        1e-4, ge=0, description="model error of the residual modes' dynamics: random walk of their rates, 1/s³")
+    residual_damping: float = Field(
+        0.01, ge=0, lt=1, description="damping ratio assumed for the residual modes (the FE model has none), 1")
     tof_model_std: float = Field(0.002, ge=0, description="ToF model error (higher modes, beam surface), m")
     strain_model_std: float = Field(3e-6, ge=0, description="strain model error (higher modes), m/m")
     bearing_std: float = Field(1e-4, gt=0, description="floor of the bearing sensor's noise, m")
@@ -135,7 +139,9 @@ class ImmsModel:
 
     ``units`` are the Γ unit deformations it reports (b, the mode labels); ``modal_units`` the
     Γ + R modal shapes the filter carries, the unit deformations followed by R residual modes
-    (None: R = 0). Deflection, tip deflection and curvature are read from all of them.
+    (None: R = 0), whose participation p of the support's lateral acceleration (r̈ + … + ω² r =
+    −p a_D) is ``residual_participation``. Deflection, tip deflection and curvature are read from
+    all of them.
     """
 
     rig: RigDescription
@@ -146,6 +152,7 @@ class ImmsModel:
     gauge_eta: np.ndarray
     stations: np.ndarray
     modal_units: UnitDeformations | None = None
+    residual_participation: tuple[float, ...] = ()
 
     @property
     def kind(self) -> int:
@@ -247,13 +254,14 @@ def build_model(
     IMU at D measures the support's acceleration, and each unit deformation is one eigenmode.
     Hanging and standing beams differ in the sign of gravity along η (``ImmsModel.gravity_eta``).
 
-    ``residual_modes`` (R) eigenmodes beyond the Γ unit deformations are carried as states, not
+    ``residual_modes`` (R): eigenmodes after the Γ unit deformations carried as states with their
+    FE dynamics (r̈ + 2ζω ṙ + ω² r = −p a_D, driven by the support's measured acceleration), not
     reported as unit deformations. None (default): 1 for a clamped support, 0 for a pinned one. The
     clamp passes the support's motion to every mode, so the paper's excitation drives mode Γ + 1
     near resonance, and the least squares of the peripheral gyros and of the gauges would read it
-    as b1..bΓ many times over (for the benchmark layout −7.7 and −99 times its tip deflection); as
-    a state it is told apart by the ToFs and gauges. The pendulum's bearing motion mostly swings it,
-    and its modes beyond Γ + 1 alias about once, so pinned models carry none by default.
+    as b1..bΓ many times over (for the benchmark layout −7.7 and −99 times its tip deflection). A
+    pinned beam's modes beyond Γ + 1 alias about once; its body frame turns, which the residual
+    model (a support that only translates) does not describe, so a pinned model carries none.
     """
     if rig.support not in ("pinned", "clamped"):
         raise ValueError(f"support={rig.support!r} must be 'pinned' or 'clamped'")
@@ -263,9 +271,18 @@ def build_model(
         residual_modes = 1 if rig.support == "clamped" else 0
     if isinstance(residual_modes, bool) or not isinstance(residual_modes, (int, np.integer)) or not 0 <= residual_modes <= 3:
         raise ValueError(f"{residual_modes=} must be an integer in [0, 3] (or None: from the support)")
+    if residual_modes and rig.support != "clamped":
+        raise ValueError(f"{residual_modes=}: residual modes are modelled for a clamped support (one that only "
+                         f"translates); support={rig.support!r} turns with the beam")
     beam = assemble_beam(rig, temperature_c=temperature_c)
     units = unit_deformations(beam, modes)
     modal_units = with_residual_modes(beam, modes, int(residual_modes)) if residual_modes else None
+    participation: tuple[float, ...] = ()
+    if modal_units is not None:
+        # r̈ + ω² r = −p a_D: the support's acceleration loads every mass with −m a_D (M s_r · t / M s_r · s_r).
+        t = beam.uniform_translation()
+        shapes = modal_units.shapes.dofs[:, modes:]
+        participation = tuple(float((s @ beam.mass @ t) / (s @ beam.mass @ s)) for s in shapes.T)
     selection = select_sensors(rig, units, peripheral=peripheral, imus=imus, tofs=tofs, gauges=gauges, aided=aided)
     by_name = {(s.kind, s.name): s for s in rig.sensors}
     return ImmsModel(
@@ -277,6 +294,7 @@ def build_model(
         gauge_eta=np.array([by_name["strain", n].position for n in selection.gauges], dtype=float),
         stations=np.asarray(rig.truth_stations, dtype=float),
         modal_units=modal_units,
+        residual_participation=participation,
     )
 
 
@@ -493,7 +511,7 @@ def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterC
         q_v=cfg.q_v if cfg.q_v is not None else (1e-4 if m.selection.gauges else 1e-3), q_beta=cfg.q_beta,
         q_rigid=cfg.q_rigid, bearing_var=bearing_std**2, pseudo_h_var=cfg.pseudo_h_std**2,
         pseudo_h_rate_var=cfg.pseudo_h_rate_std**2, max_step=cfg.max_step_s, q_null=cfg.q_null,
-        q_beta_peripheral=cfg.q_beta_peripheral,
+        q_beta_peripheral=cfg.q_beta_peripheral, q_residual=cfg.q_residual,
     )
     gamma = units.count
     empty = np.zeros((0, gamma))
@@ -526,6 +544,9 @@ def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterC
         strain_var=arr(c.strain_std**2 + cfg.strain_model_std**2),
         aided=arr(aided),
         tip_row=arr(units.shape(m.rig.beam.length)),
+        res_omega=arr([2 * np.pi * f for group in units.frequencies_hz[m.gamma:] for f in group]),
+        res_damping=arr(np.full(m.residual, cfg.residual_damping)),
+        res_participation=arr(m.residual_participation),
     )
 
 

@@ -121,8 +121,8 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
         elif k == EVENT_STRAIN:
             K = arrays.strain_K[j]
             H = np.zeros(n)
-            H[layout.b] = K * arrays.aided
-            update(v[0] - arrays.strain_offset[j] - K @ ekf.x[layout.b], H, arrays.strain_var[j], params.gate)
+            H[layout.modal] = K * arrays.aided
+            update(v[0] - arrays.strain_offset[j] - K @ ekf.x[layout.modal], H, arrays.strain_var[j], params.gate)
         elif k == EVENT_BEARING:
             for index, z, R, gate in ((layout.d, v[0], params.bearing_var, params.gate), (layout.h, 0.0, params.pseudo_h_var, np.inf),
                                       (layout.h_rate, 0.0, params.pseudo_h_rate_var, np.inf)):
