@@ -9,12 +9,20 @@ Entries, in order (absent groups take no room)::
     d, h, ḋ, ḣ        position and velocity of the support D (ζ and η, m and m/s)
     φ                 attitude of the body frame (rad); only with an attitude state
     b_1..b_Γ          amplitudes of the unit deformations (dimensionless)
+    r_1..r_R          amplitudes of the residual modes (dimensionless); only when carried
     v_1..v_Γ          acc: v = ḃ + c·ω_D, the integrated velocity state (1/s)
+    vr_1..vr_R        rates ṙ of the residual modes (1/s)
     β_1..β_ν          gyro: biases of the peripheral gyroscopes (rad/s)
     β_D               bias of the gyroscope at D (rad/s); only with an attitude state
 
 A support that fixes the attitude (the clamped beam of the paper's Section 3.5, φ ≡ 0) has no
 φ and no β_D: β_D only ever enters through ω = ω_D − β_D, the attitude's rate.
+
+Residual modes are the R eigenmodes after the Γ unit deformations, carried (with their FE
+dynamics) so that a driven mode the estimator does not report cannot alias into b: a clamped
+beam's base motion drives every mode. r follows b directly, so b and r form one block of Γ + R
+modal amplitudes that the aiding equations see alike; they are not unit deformations, so ``b``
+and the mode labels stay Γ.
 """
 
 from __future__ import annotations
@@ -31,8 +39,9 @@ Peripheral = Literal["gyro", "acc"]
 
 class StateIndex(NamedTuple):
     """Start indices of a layout's groups as plain integers (−1: the group is absent), for
-    compiled code that cannot hold a Python object. Group lengths: b and v have Γ entries,
-    the peripheral biases ν."""
+    compiled code that cannot hold a Python object. Group lengths: b and v have Γ entries, the
+    peripheral biases ν; the R residual amplitudes follow b directly (from b + Γ) and their rates
+    start at ``residual_rate``."""
 
     size: int
     d: int
@@ -46,6 +55,8 @@ class StateIndex(NamedTuple):
     bias_d: int
     gamma: int
     nu: int
+    residual: int = 0
+    residual_rate: int = -1
 
 
 @dataclass(frozen=True)
@@ -59,11 +70,12 @@ class StateLayout:
     nu : ν, the number of peripheral IMUs (>= 0).
     attitude : whether φ (and with it β_D) is a state; False for a support that fixes φ ≡ 0.
     imu_names : names of the ν peripheral IMUs (state names of their biases); default "1".."ν".
+    residual : R, the number of residual modes carried after b (>= 0; default 0).
 
     Raises
     ------
     ValueError
-        For an unknown configuration, Γ < 1, ν < 0 or names that do not match ν.
+        For an unknown configuration, Γ < 1, ν < 0, R < 0 or names that do not match ν.
     """
 
     peripheral: Peripheral
@@ -71,12 +83,13 @@ class StateLayout:
     nu: int
     attitude: bool = True
     imu_names: tuple[str, ...] = ()
+    residual: int = 0
     _index: StateIndex = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.peripheral not in ("gyro", "acc"):
             raise ValueError(f"peripheral={self.peripheral!r} must be 'gyro' or 'acc'")
-        for name in ("gamma", "nu"):
+        for name in ("gamma", "nu", "residual"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
                 raise ValueError(f"{name}={value!r} must be an integer")
@@ -84,6 +97,8 @@ class StateLayout:
             raise ValueError(f"gamma={self.gamma} must be >= 1 (at least one unit deformation)")
         if self.nu < 0:
             raise ValueError(f"nu={self.nu} must be >= 0")
+        if self.residual < 0:
+            raise ValueError(f"residual={self.residual} must be >= 0")
         if not isinstance(self.attitude, bool):
             raise ValueError(f"attitude={self.attitude!r} must be True or False")
         names = tuple(str(n) for n in self.imu_names) or tuple(str(j + 1) for j in range(self.nu))
@@ -91,21 +106,25 @@ class StateLayout:
             raise ValueError(f"imu_names has {len(names)} names for nu={self.nu} peripheral IMUs")
         object.__setattr__(self, "gamma", int(self.gamma))
         object.__setattr__(self, "nu", int(self.nu))
+        object.__setattr__(self, "residual", int(self.residual))
         object.__setattr__(self, "imu_names", names)
         i = 4
         phi = -1
         if self.attitude:
             phi, i = i, i + 1
-        b, i = i, i + self.gamma
-        v = peripheral_bias = -1
+        b, i = i, i + self.gamma + self.residual
+        v = peripheral_bias = residual_rate = -1
         if self.peripheral == "acc":
             v, i = i, i + self.gamma
-        else:
+        if self.residual:
+            residual_rate, i = i, i + self.residual
+        if self.peripheral == "gyro":
             peripheral_bias, i = i, i + self.nu
         bias_d = -1
         if self.attitude:
             bias_d, i = i, i + 1
-        object.__setattr__(self, "_index", StateIndex(i, 0, 1, 2, 3, phi, b, v, peripheral_bias, bias_d, self.gamma, self.nu))
+        object.__setattr__(self, "_index", StateIndex(i, 0, 1, 2, 3, phi, b, v, peripheral_bias, bias_d, self.gamma, self.nu,
+                                                        self.residual, residual_rate))
 
     # -- sizes and positions ----------------------------------------------------------------
 
@@ -144,6 +163,23 @@ class StateLayout:
         return slice(self._index.b, self._index.b + self.gamma)
 
     @property
+    def residual_modes(self) -> slice:
+        """The residual modes' amplitudes r (R entries, right after b; empty for R = 0)."""
+        start = self._index.b + self.gamma
+        return slice(start, start + self.residual)
+
+    @property
+    def residual_rates(self) -> slice:
+        """The residual modes' rates ṙ (R entries; empty for R = 0)."""
+        start = self._index.residual_rate
+        return slice(0, 0) if start < 0 else slice(start, start + self.residual)
+
+    @property
+    def modal(self) -> slice:
+        """b and r together: every modal amplitude the estimator carries (Γ + R)."""
+        return slice(self._index.b, self._index.b + self.gamma + self.residual)
+
+    @property
     def v(self) -> slice | None:
         """The acc configuration's velocity states v (Γ); None for gyro (ḃ is an input there)."""
         return None if self._index.v < 0 else slice(self._index.v, self._index.v + self.gamma)
@@ -161,15 +197,17 @@ class StateLayout:
 
     @property
     def names(self) -> tuple[str, ...]:
-        """State names in order (``d``, ``h``, ``d_rate``, ``h_rate``, ``phi``, ``b1``.., ``v1``..,
-        ``gyro_bias_<imu>``.., ``gyro_bias_D``)."""
+        """State names in order (``d``, ``h``, ``d_rate``, ``h_rate``, ``phi``, ``b1``.., ``r1``..,
+        ``v1``.., ``vr1``.., ``gyro_bias_<imu>``.., ``gyro_bias_D``)."""
         out = ["d", "h", "d_rate", "h_rate"]
         if self.attitude:
             out.append("phi")
         out += [f"b{k + 1}" for k in range(self.gamma)]
+        out += [f"r{k + 1}" for k in range(self.residual)]
         if self.peripheral == "acc":
             out += [f"v{k + 1}" for k in range(self.gamma)]
-        else:
+        out += [f"vr{k + 1}" for k in range(self.residual)]
+        if self.peripheral == "gyro":
             out += [f"gyro_bias_{name}" for name in self.imu_names]
         if self.attitude:
             out.append("gyro_bias_D")
@@ -193,7 +231,7 @@ class StateLayout:
         if arr.ndim not in (1, 2) or arr.shape[-1] != self.size:
             raise ValueError(
                 f"state vector {name} has shape {arr.shape}; this layout ({self.peripheral}, Γ={self.gamma}, ν={self.nu}"
-                f"{'' if self.attitude else ', no attitude'}) needs {self.size} entries: {', '.join(self.names)}"
+                f"{'' if self.attitude else ', no attitude'}{f', {self.residual} residual' if self.residual else ''}) needs {self.size} entries: {', '.join(self.names)}"
             )
         return arr
 

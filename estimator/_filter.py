@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from contract import BEARING_TOPIC, ModeMap, RigDescription, StateLayout
 
-from ._beam import assemble_beam
+from ._beam import _axial_gravity, assemble_beam
 from ._imms import (
     EVENT_BEARING,
     EVENT_IMU_D,
@@ -32,7 +32,7 @@ from ._imms import (
     tip_variance,
 )
 from ._selection import SensorSelection, select_sensors
-from ._unit_deformations import UnitDeformations, unit_deformations
+from ._unit_deformations import UnitDeformations, unit_deformations, with_residual_modes
 
 __all__ = [
     "EstimateResult",
@@ -77,6 +77,10 @@ class FilterConfig(BaseModel):
     )
     q_rigid: float = Field(1e-4, ge=0, description="model error of the bearing's acceleration, m²/s³")
     q_null: float = Field(1e-2, ge=0, description="random walk of unit deformations no sensor sees, 1/s")
+    q_residual: float = Field(
+        1e-4, ge=0, description="model error of the residual modes' dynamics: random walk of their rates, 1/s³")
+    residual_damping: float = Field(
+        0.01, ge=0, lt=1, description="damping ratio assumed for the residual modes (the FE model has none), 1")
     tof_model_std: float = Field(0.002, ge=0, description="ToF model error (higher modes, beam surface), m")
     strain_model_std: float = Field(3e-6, ge=0, description="strain model error (higher modes), m/m")
     bearing_std: float = Field(1e-4, gt=0, description="floor of the bearing sensor's noise, m")
@@ -131,7 +135,14 @@ class Measurements:
 
 @dataclass(frozen=True)
 class ImmsModel:
-    """The estimator's model of one configuration, built from rig.json and a sensor selection."""
+    """The estimator's model of one configuration, built from rig.json and a sensor selection.
+
+    ``units`` are the Γ unit deformations it reports (b, the mode labels); ``modal_units`` the
+    Γ + R modal shapes the filter carries, the unit deformations followed by R residual modes
+    (None: R = 0), whose participation p of the support's lateral acceleration (r̈ + … + ω² r =
+    −p a_D) is ``residual_participation``. Deflection, tip deflection and curvature are read from
+    all of them.
+    """
 
     rig: RigDescription
     units: UnitDeformations
@@ -140,6 +151,8 @@ class ImmsModel:
     tof_eta: np.ndarray
     gauge_eta: np.ndarray
     stations: np.ndarray
+    modal_units: UnitDeformations | None = None
+    residual_participation: tuple[float, ...] = ()
 
     @property
     def kind(self) -> int:
@@ -150,10 +163,34 @@ class ImmsModel:
         return self.units.count
 
     @property
+    def modal(self) -> UnitDeformations:
+        """The Γ + R shapes of the state's modal block (b, then the residual modes r)."""
+        return self.units if self.modal_units is None else self.modal_units
+
+    @property
+    def residual(self) -> int:
+        """R, the residual modes carried beyond the Γ unit deformations."""
+        return self.modal.count - self.gamma
+
+    @property
     def state_layout(self) -> StateLayout:
         """Which entry of the state vector is what (the one layout every consumer reads)."""
-        return StateLayout(self.selection.peripheral, self.gamma, len(self.selection.imus), attitude=True,
-                           imu_names=tuple(self.selection.imus))
+        return StateLayout(self.selection.peripheral, self.gamma, len(self.selection.imus), attitude=self.has_attitude,
+                           imu_names=tuple(self.selection.imus), residual=self.residual)
+
+    @property
+    def has_attitude(self) -> bool:
+        """φ is a state (pinned bearing); a clamped support fixes φ ≡ 0 and has none."""
+        if self.rig.support == "pinned":
+            return True
+        if self.rig.support == "clamped":
+            return False
+        raise ValueError(f"support={self.rig.support!r} must be 'pinned' or 'clamped'")
+
+    @property
+    def gravity_eta(self) -> float:
+        """Gravity along inertial η (m/s²): +g hanging, −g standing (η points up the mast)."""
+        return _axial_gravity(self.rig)
 
     @property
     def mode_map(self) -> ModeMap:
@@ -174,13 +211,28 @@ class ImmsModel:
                 + [BEARING_TOPIC, "pseudo:h", "pseudo:h_rate"])
 
     def tip_row(self) -> np.ndarray:
+        """s_χ(L) of the Γ unit deformations: e = b · tip_row() without residual modes."""
         return self.units.shape(self.rig.beam.length)
 
     def strain_matrix(self) -> np.ndarray:
-        """Eq. (19): ε = −(h*/2) S'' b, rows for the selected gauges."""
+        """Eq. (19): ε = −(h*/2) S'' [b, r], rows for the selected gauges (Γ + R columns)."""
         if self.gauge_eta.size == 0:
-            return np.zeros((0, self.gamma))
-        return -0.5 * self.rig.beam.thickness * self.units.curvature(self.gauge_eta)
+            return np.zeros((0, self.modal.count))
+        return -0.5 * self.rig.beam.thickness * self.modal.curvature(self.gauge_eta)
+
+    def tip_deflection(self, x: np.ndarray) -> np.ndarray:
+        """e = Δ(L) (m) of state(s) ``x`` (…, n), residual modes included."""
+        return self.state_layout.check(x)[..., self.state_layout.modal] @ self.modal.shape(self.rig.beam.length)
+
+    def deflection(self, x: np.ndarray, eta: np.ndarray | None = None) -> np.ndarray:
+        """Δ(η) (m) of state(s) ``x`` (…, n) at ``eta`` (default: the truth stations), residual modes included."""
+        eta = self.stations if eta is None else np.asarray(eta, dtype=float)
+        return self.state_layout.check(x)[..., self.state_layout.modal] @ self.modal.shape(eta).T
+
+    def curvature(self, x: np.ndarray, eta: np.ndarray | None = None) -> np.ndarray:
+        """∂²Δ/∂η² (1/m) of state(s) ``x`` (…, n) at ``eta`` (default: the truth stations), residual modes included."""
+        eta = self.stations if eta is None else np.asarray(eta, dtype=float)
+        return self.state_layout.check(x)[..., self.state_layout.modal] @ self.modal.curvature(eta).T
 
 
 def build_model(
@@ -193,14 +245,44 @@ def build_model(
     gauges=4,
     aided=None,
     temperature_c: float | None = None,
+    residual_modes: int | None = None,
 ) -> ImmsModel:
-    """Unit deformations (Γ = ``modes``) of the rig's FE model and the selected sensors (EfI for counts)."""
-    if rig.support != "pinned":
-        raise ValueError(f"support={rig.support!r} is not yet supported by the estimator (it models the pinned bearing, "
-                         "φ a state); a clamped support needs the layout without an attitude state")
+    """Unit deformations (Γ = ``modes``) of the rig's FE model and the selected sensors (EfI for counts).
+
+    A pinned support (the plain bearing) has the attitude φ as a state and the combimode; a clamped
+    one (the fixed bearing, a mast's root) fixes φ ≡ 0: its state has no φ and no gyro bias at D, the
+    IMU at D measures the support's acceleration, and each unit deformation is one eigenmode.
+    Hanging and standing beams differ in the sign of gravity along η (``ImmsModel.gravity_eta``).
+
+    ``residual_modes`` (R): eigenmodes after the Γ unit deformations carried as states with their
+    FE dynamics (r̈ + 2ζω ṙ + ω² r = −p a_D, driven by the support's measured acceleration), not
+    reported as unit deformations. None (default): 1 for a clamped support, 0 for a pinned one. The
+    clamp passes the support's motion to every mode, so the paper's excitation drives mode Γ + 1
+    near resonance, and the least squares of the peripheral gyros and of the gauges would read it
+    as b1..bΓ many times over (for the benchmark layout −7.7 and −99 times its tip deflection). A
+    pinned beam's modes beyond Γ + 1 alias about once; its body frame turns, which the residual
+    model (a support that only translates) does not describe, so a pinned model carries none.
+    """
+    if rig.support not in ("pinned", "clamped"):
+        raise ValueError(f"support={rig.support!r} must be 'pinned' or 'clamped'")
     if not any(s.kind == "imu" and s.name == "D" for s in rig.sensors):
         raise ValueError("rig.json has no IMU named 'D' at the bearing: the IMMS needs it")
-    units = unit_deformations(assemble_beam(rig, temperature_c=temperature_c), modes)
+    if residual_modes is None:
+        residual_modes = 1 if rig.support == "clamped" else 0
+    if isinstance(residual_modes, bool) or not isinstance(residual_modes, (int, np.integer)) or not 0 <= residual_modes <= 3:
+        raise ValueError(f"{residual_modes=} must be an integer in [0, 3] (or None: from the support)")
+    if residual_modes and rig.support != "clamped":
+        raise ValueError(f"{residual_modes=}: residual modes are modelled for a clamped support (one that only "
+                         f"translates); support={rig.support!r} turns with the beam")
+    beam = assemble_beam(rig, temperature_c=temperature_c)
+    units = unit_deformations(beam, modes)
+    modal_units = with_residual_modes(beam, modes, int(residual_modes)) if residual_modes else None
+    participation: tuple[float, ...] = ()
+    if modal_units is not None:
+        # r̈ + ω² r = −p a_D: the support's acceleration loads every mass with −m a_D (M s_r · t / M s_r · s_r).
+        t = beam.uniform_translation()
+        shapes = modal_units.shapes.dofs[:, modes:]
+        participation = tuple(float((s @ beam.mass @ t) / (s @ beam.mass @ s)) for s in shapes.T)
     selection = select_sensors(rig, units, peripheral=peripheral, imus=imus, tofs=tofs, gauges=gauges, aided=aided)
     by_name = {(s.kind, s.name): s for s in rig.sensors}
     return ImmsModel(
@@ -211,6 +293,8 @@ def build_model(
         tof_eta=np.array([by_name["tof", n].position for n in selection.tofs], dtype=float),
         gauge_eta=np.array([by_name["strain", n].position for n in selection.gauges], dtype=float),
         stations=np.asarray(rig.truth_stations, dtype=float),
+        modal_units=modal_units,
+        residual_participation=participation,
     )
 
 
@@ -273,18 +357,20 @@ def _rest_end(meas: Measurements, config: FilterConfig) -> float:
 
 
 def calibrate_at_rest(meas: Measurements, model: ImmsModel, config: FilterConfig = FilterConfig()) -> RestCalibration:
-    """Learn biases, offsets and noise levels from the initial rest phase (hanging still, φ = 0, b = 0).
+    """Learn biases, offsets and noise levels from the initial rest phase (still, φ = 0, b = 0).
 
     Without a usable rest phase biases start at zero and noise levels at the floors; the
     gyro bias at D is estimated by the filter in any case.
     """
     if "D" not in meas.imu:
         raise ValueError("measurements have no IMU 'D' (the IMU at the bearing)")
-    g = model.rig.gravity
+    g_eta = model.gravity_eta
     start = meas.start
     end = _rest_end(meas, config)
     rested = end - start >= config.rest_min_s
-    expected = np.array([-g, 0.0, 0.0])  # specific force along the hanging beam, nothing across, no rate
+    # Specific force along the beam at rest (−g hanging, +g standing: x points from D along the
+    # beam, up a mast), nothing across, no rate.
+    expected = np.array([-g_eta, 0.0, 0.0])
 
     def stats(series: SensorSeries | None, columns: int) -> tuple[np.ndarray, np.ndarray]:
         if series is None or not rested:
@@ -415,22 +501,24 @@ def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterC
     models of a configuration.
     """
     m, c, cfg = model, calibration, config
-    units = m.units
+    units = m.modal  # b and the residual modes: the kernels' modal block
     noise_D = c.noise_D
     bearing_std = max(cfg.bearing_std, c.bearing_std if np.isfinite(c.bearing_std) else 0.0)
     params = FilterParams(
-        gravity=float(m.rig.gravity), reflector_distance=float(m.rig.reflector_distance), gate=cfg.gate,
+        gravity_eta=float(m.gravity_eta), reflector_distance=float(m.rig.reflector_distance), gate=cfg.gate,
         stale_after=cfg.stale_after_s, sigma_f_d_x=float(noise_D[0]), sigma_f_d_y=float(noise_D[1]),
         sigma_omega_d=float(noise_D[2]), q_b=cfg.q_b,
         q_v=cfg.q_v if cfg.q_v is not None else (1e-4 if m.selection.gauges else 1e-3), q_beta=cfg.q_beta,
         q_rigid=cfg.q_rigid, bearing_var=bearing_std**2, pseudo_h_var=cfg.pseudo_h_std**2,
         pseudo_h_rate_var=cfg.pseudo_h_rate_std**2, max_step=cfg.max_step_s, q_null=cfg.q_null,
-        q_beta_peripheral=cfg.q_beta_peripheral,
+        q_beta_peripheral=cfg.q_beta_peripheral, q_residual=cfg.q_residual,
     )
-    gamma = m.gamma
+    gamma = units.count
     empty = np.zeros((0, gamma))
     aided = np.zeros(gamma)
     aided[[a - 1 for a in m.selection.aided]] = 1.0
+    if m.selection.gauges:
+        aided[m.gamma:] = 1.0  # the gauges see the residual modes' strain: they must correct them
 
     def arr(value: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(value, dtype=np.float64)
@@ -455,7 +543,10 @@ def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterC
         strain_offset=arr(c.strain_offset),
         strain_var=arr(c.strain_std**2 + cfg.strain_model_std**2),
         aided=arr(aided),
-        tip_row=arr(m.tip_row()),
+        tip_row=arr(units.shape(m.rig.beam.length)),
+        res_omega=arr([2 * np.pi * f for group in units.frequencies_hz[m.gamma:] for f in group]),
+        res_damping=arr(np.full(m.residual, cfg.residual_damping)),
+        res_participation=arr(m.residual_participation),
     )
 
 
@@ -468,7 +559,7 @@ class ImmsFilter:
         self.config = config
         n = model.state_size
         nu = len(model.selection.imus)
-        g = model.rig.gravity
+        g = model.gravity_eta
         self.state = FilterState(
             x=np.zeros(n), P=np.eye(n) * config.initial_std**2, clock=np.array([float(t0), float(t0)]),
             held_fD=np.array([-g, 0.0]), held_wD=np.zeros(1), held_fj=np.tile([-g, 0.0], (nu, 1)), held_wj=np.zeros(nu),
@@ -612,16 +703,16 @@ class EstimateResult:
 
     @property
     def e(self) -> np.ndarray:
-        """Tip deflection Δ(L) in the body frame (m)."""
-        return self.b @ self.model.tip_row()
+        """Tip deflection Δ(L) in the body frame (m), residual modes included."""
+        return self.model.tip_deflection(self.x)
 
     def deflection(self, eta: np.ndarray | None = None) -> np.ndarray:
-        eta = self.model.stations if eta is None else np.asarray(eta, dtype=float)
-        return self.b @ self.model.units.shape(eta).T
+        """Δ(η) (m) at ``eta`` (default: the truth stations), residual modes included."""
+        return self.model.deflection(self.x, eta)
 
     def curvature(self, eta: np.ndarray | None = None) -> np.ndarray:
-        eta = self.model.stations if eta is None else np.asarray(eta, dtype=float)
-        return self.b @ self.model.units.curvature(eta).T
+        """∂²Δ/∂η² (1/m) at ``eta`` (default: the truth stations), residual modes included."""
+        return self.model.curvature(self.x, eta)
 
 
 def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = FilterConfig(), *, chunk_events: int = 500_000) -> EstimateResult:

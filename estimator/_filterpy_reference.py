@@ -47,9 +47,9 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
     active = np.ones(nu, dtype=np.bool_)
     lsq = least_squares_map(arrays, active)
     bias_D, bias_j = arrays.bias_D, arrays.bias_j
-    held_fD = np.array([-model.rig.gravity, 0.0])
+    held_fD = np.array([-model.gravity_eta, 0.0])
     held_wD = 0.0
-    held_fj = np.tile([-model.rig.gravity, 0.0], (nu, 1))
+    held_fj = np.tile([-model.gravity_eta, 0.0], (nu, 1))
     held_wj = np.zeros(nu)
     held_t = t0
     t_now = t0
@@ -121,8 +121,8 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
         elif k == EVENT_STRAIN:
             K = arrays.strain_K[j]
             H = np.zeros(n)
-            H[layout.b] = K * arrays.aided
-            update(v[0] - arrays.strain_offset[j] - K @ ekf.x[layout.b], H, arrays.strain_var[j], params.gate)
+            H[layout.modal] = K * arrays.aided
+            update(v[0] - arrays.strain_offset[j] - K @ ekf.x[layout.modal], H, arrays.strain_var[j], params.gate)
         elif k == EVENT_BEARING:
             for index, z, R, gate in ((layout.d, v[0], params.bearing_var, params.gate), (layout.h, 0.0, params.pseudo_h_var, np.inf),
                                       (layout.h_rate, 0.0, params.pseudo_h_rate_var, np.inf)):

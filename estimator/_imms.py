@@ -6,8 +6,15 @@ Python-facing class. Frames and signs follow the recording contract (see planar-
 State layout (``x``): ``contract.StateLayout``, read through its ``StateIndex`` (no offset is
 written here)::
 
-    gyro: [d, h, ḋ, ḣ, φ, b_1..b_Γ, β_1..β_ν, β_D]
-    acc:  [d, h, ḋ, ḣ, φ, b_1..b_Γ, v_1..v_Γ, β_D]
+    gyro: [d, h, ḋ, ḣ, φ, b_1..b_Γ, r_1..r_R, ṙ_1..ṙ_R, β_1..β_ν, β_D]
+    acc:  [d, h, ḋ, ḣ, φ, b_1..b_Γ, r_1..r_R, v_1..v_Γ, ṙ_1..ṙ_R, β_D]
+
+Residual modes r (R ≥ 0, the eigenmodes after the Γ unit deformations, for a support that does
+not turn) are carried with their FE dynamics, r̈ + 2ζω ṙ + ω² r = −p·a_D (p the participation of
+the support's lateral acceleration a_D), integrated exactly over each step. Their share of the
+peripheral readings (S_r ṙ of the gyros, S_r r̈ of the accelerometers) is taken out before the
+least squares for b, so a driven mode the unit deformations do not cover does not alias into b;
+the aiding equations see b and r alike (one modal block of Γ + R).
 
 β_D is the bias of the gyroscope at D and β_j those of the peripheral gyroscopes (random walks:
 what the rest phase cannot calibrate, the wander of low-cost MEMS, goes straight into ḃ). For accelerometers the velocity state is
@@ -15,7 +22,9 @@ v = ḃ + c·ω_D with c = S⁺η: Eq. (8) contains ω̇·η_j with ω̇ the num
 and integrating that term once gives exactly c·(ω_D,k − ω_D,k−1). Carrying v keeps the
 differentiated gyro noise what it is — a difference of two samples, not white noise of
 1/dt size — and ḃ = v − c·ω_D is reported. A layout without an attitude state (φ ≡ 0) has
-neither φ nor β_D; the kernels then read φ = 0 and β_D = 0 and write no entry of theirs.
+neither φ nor β_D; the kernels then read φ = 0 and ω = 0 (the gyro at D is not used: a clamp
+does not turn) and write no entry of theirs. Gravity is g_η along inertial η (+g for a hanging
+beam, −g for a standing one), so the model holds for both orientations.
 
 Events (``kind``): 0 IMU at D, 1 peripheral IMU, 2 ToF, 3 strain gauge, 4 bearing displacement.
 IMU values are [f_x, f_y, ω_z] in the sensor frame; the others carry their value in column 0.
@@ -69,7 +78,7 @@ EVENT_IMU_D, EVENT_IMU_PERIPHERAL, EVENT_TOF, EVENT_STRAIN, EVENT_BEARING = 0, 1
 class FilterParams(NamedTuple):
     """Scalar tuning and rig constants of the loop (SI units; variances in the unit squared)."""
 
-    gravity: float  # m/s²
+    gravity_eta: float  # m/s², gravity along inertial η: +g hanging, −g standing (η up the beam)
     reflector_distance: float  # m
     gate: float  # innovation gate, squared Mahalanobis distance
     stale_after: float  # s
@@ -86,6 +95,7 @@ class FilterParams(NamedTuple):
     max_step: float  # s
     q_null: float
     q_beta_peripheral: float
+    q_residual: float  # random walk of the residual modes' rates (model error of their dynamics), 1/s³
 
 
 class ModelArrays(NamedTuple):
@@ -95,7 +105,10 @@ class ModelArrays(NamedTuple):
     (ν, 3) as [f_x, f_y, ω_z]; imu_eta (ν,); imu_S, imu_S1 (ν, Γ) shape and slope at the IMUs;
     sig_fj (ν, 2), sig_wj (ν,) noise; tof_eta (T,), tof_S, tof_S1 (T, Γ), tof_offset, tof_var (T,);
     strain_K (G, Γ) of Eq. (19), strain_offset, strain_var (G,); aided (Γ,) 1 for unit
-    deformations the gauges aid; tip_row (Γ,) = s(L).
+    deformations the gauges aid; tip_row (Γ,) = s(L). The modal block has Γ + R columns (b, then
+    the R residual modes) in imu_S, imu_S1, tof_S, tof_S1, strain_K, aided and tip_row; res_omega,
+    res_damping, res_participation (R,) are the residual modes' ω (rad/s), damping ratio and
+    participation p of the support's lateral acceleration.
     """
 
     index: StateIndex
@@ -118,6 +131,9 @@ class ModelArrays(NamedTuple):
     strain_var: np.ndarray
     aided: np.ndarray
     tip_row: np.ndarray
+    res_omega: np.ndarray
+    res_damping: np.ndarray
+    res_participation: np.ndarray
 
 
 class EventArrays(NamedTuple):
@@ -171,34 +187,40 @@ class AidingCounters(NamedTuple):
 
 class LeastSquares(NamedTuple):
     """The least-squares map of the active peripheral IMUs: Pinv (Γ, ν) = S⁺ (zero columns for
-    inactive sensors), null_proj (Γ, Γ) the projector on what they cannot see, c_acc (Γ,) = S⁺η."""
+    inactive sensors), null_proj (Γ, Γ) the projector on what they cannot see, c_acc (Γ,) = S⁺η,
+    c_res (Γ, R) = S⁺ S_r, what the residual modes' readings add to the solution."""
 
     Pinv: np.ndarray
     null_proj: np.ndarray
     c_acc: np.ndarray
+    c_res: np.ndarray
 
 
 @numba.njit(cache=True, inline="always")
-def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, sig, acc_ws):
+def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, sig, acc_ws, res_ws):
     """Propagate x over dt with the given inputs into the buffers xn (n,), F (n, n), Q (n, n).
 
     ``m`` is the ``ModelArrays``; fD (2,), omegaD: bias-corrected inputs at D; fj (ν, 2),
     omegaj (ν,): bias-corrected peripheral inputs of the ``active`` (ν,) sensors, whose
-    ``LeastSquares`` map is ``lsq``. Gm (n, n_in), sig (n_in,) and acc_ws (Γ, Γ + 2) are scratch
-    buffers (n_in = 3 + ν for gyro, 3 + 2ν for acc).
+    ``LeastSquares`` map is ``lsq``. Gm (n, n_in), sig (n_in,), acc_ws (Γ, Γ + R + 2) and res_ws
+    (R, 8) are scratch buffers (n_in = 3 + ν for gyro, 3 + 2ν for acc).
     """
     ix = m.index
     p = m.params
-    gamma = ix.gamma
+    gamma = ix.gamma  # unit deformations: what the least squares solves for
+    n_res = ix.residual
+    n_modal = gamma + n_res  # b and r: the modal amplitudes the readings see
     n = x.shape[0]
-    g = p.gravity
+    g = p.gravity_eta
     i_phi, i_bd, i_b = ix.phi, ix.bias_d, ix.b
     # Fields read into locals once: each access of a structure's array field in a loop costs a
     # reference count (atomic) in compiled code.
     imu_S, imu_S1, sig_fj, sig_wj = m.imu_S, m.imu_S1, m.sig_fj, m.sig_wj
-    Pinv, c_acc, null_proj = lsq.Pinv, lsq.c_acc, lsq.null_proj
+    Pinv, c_acc, null_proj, c_res = lsq.Pinv, lsq.c_acc, lsq.null_proj, lsq.c_res
     phi = x[i_phi] if i_phi >= 0 else 0.0
-    omega = omegaD - (x[i_bd] if i_bd >= 0 else 0.0)
+    # Without an attitude state the support fixes φ ≡ 0, so ω ≡ 0 exactly: the gyro at D would
+    # only add its noise and bias wander to ḃ.
+    omega = (omegaD - (x[i_bd] if i_bd >= 0 else 0.0)) if i_phi >= 0 else 0.0
     cp, sp = np.cos(phi), np.sin(phi)
     for i in range(n):
         xn[i] = x[i]
@@ -212,7 +234,7 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
             Gm[i, j] = 0.0
     for j in range(n_in):
         sig[j] = 0.0
-    # Rigid part: inertial acceleration of D from its specific force (η down, gravity +g).
+    # Rigid part: inertial acceleration of D from its specific force (gravity g_η along η).
     i_d, i_h, i_dr, i_hr = ix.d, ix.h, ix.d_rate, ix.h_rate
     acc_h = cp * fD[0] - sp * fD[1] + g
     acc_d = sp * fD[0] + cp * fD[1]
@@ -237,7 +259,7 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
     nu = fj.shape[0]
     sig[0] = p.sigma_f_d_x
     sig[1] = p.sigma_f_d_y
-    sig[2] = p.sigma_omega_d
+    sig[2] = p.sigma_omega_d if i_phi >= 0 else 0.0
     Gm[i_d, 0] = half * sp
     Gm[i_d, 1] = half * cp
     Gm[i_h, 0] = half * cp
@@ -246,6 +268,42 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
     Gm[i_dr, 1] = dt * cp
     Gm[i_hr, 0] = dt * cp
     Gm[i_hr, 1] = -dt * sp
+    # Residual modes: r̈ + 2ζω ṙ + ω² r = −p a_D over the step, a_D = f_D,y (held constant), exactly.
+    i_r, i_vr = i_b + gamma, ix.residual_rate
+    for i in range(n_res):
+        w = m.res_omega[i]
+        zeta = m.res_damping[i]
+        sigma = zeta * w
+        wd = w * np.sqrt(1.0 - zeta * zeta)
+        decay = np.exp(-sigma * dt)
+        c, s = np.cos(wd * dt), np.sin(wd * dt)
+        f00 = decay * (c + sigma / wd * s)
+        f01 = decay * s / wd
+        f10 = -decay * w * w * s / wd
+        f11 = decay * (c - sigma / wd * s)
+        static = -m.res_participation[i] * fD[1] / (w * w)  # the deflection the acceleration holds
+        r0, v0 = x[i_r + i], x[i_vr + i]
+        r1 = f00 * (r0 - static) + f01 * v0 + static
+        v1 = f10 * (r0 - static) + f11 * v0
+        xn[i_r + i] = r1
+        xn[i_vr + i] = v1
+        F[i_r + i, i_r + i] = f00
+        F[i_r + i, i_vr + i] = f01
+        F[i_vr + i, i_r + i] = f10
+        F[i_vr + i, i_vr + i] = f11
+        dr_da = -m.res_participation[i] * (1.0 - f00) / (w * w)
+        dv_da = m.res_participation[i] * f10 / (w * w)
+        Gm[i_r + i, 1] = dr_da
+        Gm[i_vr + i, 1] = dv_da
+        Q[i_vr + i, i_vr + i] += p.q_residual * dt
+        res_ws[i, 0] = f00 - 1.0
+        res_ws[i, 1] = f01
+        res_ws[i, 2] = f10
+        res_ws[i, 3] = f11 - 1.0
+        res_ws[i, 4] = r1 - r0  # ∫ṙ over the step
+        res_ws[i, 5] = v1 - v0  # ∫r̈ over the step
+        res_ws[i, 6] = dr_da
+        res_ws[i, 7] = dv_da
     if m.kind == KIND_GYRO:
         # Eq. (9): ω_j − ω_D = Σ ḃ s'_χ(η_j), solved in the least-squares sense.
         ibj = ix.peripheral_bias
@@ -262,6 +320,13 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
             if i_bd >= 0:
                 F[i_b + k, i_bd] = dt * row_sum
             Gm[i_b + k, 2] = -dt * row_sum
+            # The residual modes turn the gyros by s'_r ṙ: their share, integrated, is Δr.
+            for i in range(n_res):
+                cr = c_res[k, i]
+                xn[i_b + k] -= cr * res_ws[i, 4]
+                F[i_b + k, i_r + i] -= cr * res_ws[i, 0]
+                F[i_b + k, i_vr + i] -= cr * res_ws[i, 1]
+                Gm[i_b + k, 1] -= cr * res_ws[i, 6]
             Q[i_b + k, i_b + k] += p.q_b * dt
         for j in range(nu):
             sig[3 + j] = sig_wj[j]
@@ -270,15 +335,15 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
         # Eq. (8) per sensor: Δ̈_j = f_j,ζ − f_D,ζ − ω̇ η_j + ω² Δ_j with f_j,ζ = sin α_j f_j,x + cos α_j f_j,y.
         iv = ix.v
         for k in range(gamma):
-            for mm in range(gamma + 2):
-                acc_ws[k, mm] = 0.0  # [dB (Γ) | b̈ | ∂b̈/∂β_D]
+            for mm in range(n_modal + 2):
+                acc_ws[k, mm] = 0.0  # [dB (Γ + R) | b̈ | ∂b̈/∂β_D]
         w2 = omega * omega
         for j in range(nu):
             if not active[j]:
                 continue
             alpha = 0.0
             delta = 0.0
-            for k in range(gamma):
+            for k in range(n_modal):
                 alpha += imu_S1[j, k] * x[i_b + k]
                 delta += imu_S[j, k] * x[i_b + k]
             ca, sa = np.cos(alpha), np.sin(alpha)
@@ -289,24 +354,36 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
             sig[4 + 2 * j] = sig_fj[j, 1]
             for k in range(gamma):
                 pk = Pinv[k, j]
-                acc_ws[k, gamma] += pk * ddelta
-                acc_ws[k, gamma + 1] += pk * dbeta
-                for mm in range(gamma):
+                acc_ws[k, n_modal] += pk * ddelta
+                acc_ws[k, n_modal + 1] += pk * dbeta
+                for mm in range(n_modal):
                     acc_ws[k, mm] += pk * (tilt * imu_S1[j, mm] + w2 * imu_S[j, mm])
                 Gm[iv + k, 3 + 2 * j] = dt * pk * sa
                 Gm[iv + k, 4 + 2 * j] = dt * pk * ca
         for k in range(gamma):
             v = x[iv + k]
-            bddot = acc_ws[k, gamma]
+            bddot = acc_ws[k, n_modal]
             xn[i_b + k] = x[i_b + k] + dt * (v - c_acc[k] * omega) + half * bddot
             xn[iv + k] = v + dt * bddot
             F[i_b + k, iv + k] += dt
             if i_bd >= 0:
-                F[i_b + k, i_bd] = dt * c_acc[k] + half * acc_ws[k, gamma + 1]
-                F[iv + k, i_bd] = dt * acc_ws[k, gamma + 1]
-            for mm in range(gamma):
+                F[i_b + k, i_bd] = dt * c_acc[k] + half * acc_ws[k, n_modal + 1]
+                F[iv + k, i_bd] = dt * acc_ws[k, n_modal + 1]
+            for mm in range(n_modal):
                 F[i_b + k, i_b + mm] += half * acc_ws[k, mm]
                 F[iv + k, i_b + mm] += dt * acc_ws[k, mm]
+            # The residual modes move the accelerometers by s_r r̈: their share, integrated once
+            # (Δṙ) for v and twice (Δr − dt ṙ) for b.
+            for i in range(n_res):
+                cr = c_res[k, i]
+                xn[i_b + k] -= cr * (res_ws[i, 4] - dt * x[i_vr + i])
+                xn[iv + k] -= cr * res_ws[i, 5]
+                F[i_b + k, i_r + i] -= cr * res_ws[i, 0]
+                F[i_b + k, i_vr + i] -= cr * (res_ws[i, 1] - dt)
+                F[iv + k, i_r + i] -= cr * res_ws[i, 2]
+                F[iv + k, i_vr + i] -= cr * res_ws[i, 3]
+                Gm[i_b + k, 1] -= cr * res_ws[i, 6]
+                Gm[iv + k, 1] -= cr * res_ws[i, 7]
             Gm[i_b + k, 2] = -dt * c_acc[k]
             row_sum = 0.0
             for j in range(nu):
@@ -346,12 +423,12 @@ def propagate(m, x, dt, fD, omegaD, fj, omegaj, active, lsq):
     """Pure form of ``propagate_into``: returns (x⁺, F, Q) as new arrays."""
     n = x.shape[0]
     n_in = _input_count(m, fj.shape[0])
-    gamma = m.index.gamma
+    gamma, n_res = m.index.gamma, m.index.residual
     xn = np.empty(n)
     F = np.empty((n, n))
     Q = np.empty((n, n))
     propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, np.empty((n, n_in)), np.empty(n_in),
-                   np.empty((gamma, gamma + 2)))
+                   np.empty((gamma, gamma + n_res + 2)), np.empty((n_res, 8)))
     return xn, F, Q
 
 
@@ -433,14 +510,17 @@ def _least_squares_map(S, active, gamma):
 @numba.njit(cache=True)
 def least_squares_map(m, active):
     """The ``LeastSquares`` map of the ``active`` peripheral IMUs of model ``m``: gyroscopes see
-    the slopes s'(η_j) (Eq. 9), accelerometers the deflections s(η_j) (Eq. 8)."""
+    the slopes s'(η_j) (Eq. 9), accelerometers the deflections s(η_j) (Eq. 8). The least squares
+    solves for the Γ unit deformations; the residual modes' share of the readings is known from
+    their states and taken out through ``c_res`` = S⁺ S_r."""
     gamma = m.index.gamma
-    S_map = m.imu_S1 if m.kind == KIND_GYRO else m.imu_S
-    Pinv, null_proj = _least_squares_map(S_map, active, gamma)
+    S_all = m.imu_S1 if m.kind == KIND_GYRO else m.imu_S
+    Pinv, null_proj = _least_squares_map(np.ascontiguousarray(S_all[:, :gamma]), active, gamma)
     c_acc = np.zeros(gamma)
     if m.kind == KIND_ACC:
         c_acc = Pinv @ m.imu_eta
-    return LeastSquares(Pinv, null_proj, c_acc)
+    c_res = Pinv @ np.ascontiguousarray(S_all[:, gamma:])
+    return LeastSquares(Pinv, null_proj, c_acc, c_res)
 
 
 @numba.njit(cache=True, inline="always")
@@ -470,7 +550,7 @@ def run_events(ev, m, st, out, counters):
     """
     ix = m.index
     p = m.params
-    gamma = ix.gamma
+    gamma = ix.gamma + ix.residual  # the modal block (b and r) the aiding equations see
     nu = ix.nu
     n_tof = m.tof_eta.shape[0]  # channels: [ToF..., strain..., bearing, pseudo h, pseudo ḣ]
     i_b = ix.b
@@ -506,7 +586,8 @@ def run_events(ev, m, st, out, counters):
     Q = np.empty((n, n))
     Gm = np.empty((n, n_in))
     sig = np.empty(n_in)
-    acc_ws = np.empty((gamma, gamma + 2))
+    acc_ws = np.empty((ix.gamma, gamma + 2))
+    res_ws = np.empty((ix.residual, 8))
     work = np.empty((n, n))
     H = np.zeros(n)
     ubuf = np.empty(n)
@@ -568,7 +649,7 @@ def run_events(ev, m, st, out, counters):
                     u_wD = held_wD[0]
                     u_fj[:, :] = held_fj
                     u_wj[:] = held_wj
-                propagate_into(m, x, dt, u_fD, u_wD, u_fj, u_wj, active, lsq, xn, F, Q, Gm, sig, acc_ws)
+                propagate_into(m, x, dt, u_fD, u_wD, u_fj, u_wj, active, lsq, xn, F, Q, Gm, sig, acc_ws, res_ws)
                 x[:] = xn
                 predict_covariance_into(P, F, Q, work)
                 start += dt

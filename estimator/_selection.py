@@ -120,8 +120,13 @@ def select_sensors(
 
     imu_sensitivity = units.slope if peripheral == "gyro" else units.shape
     chosen_imus = _choose("imus", peripheral_imus, cap(imus, peripheral_imus), imu_sensitivity)
-    chosen_tofs = _choose("tofs", tof_sensors, cap(tofs, tof_sensors),
-                          lambda eta: np.column_stack([eta, units.shape(eta)]))
+    if rig.support == "pinned":
+        tof_sensitivity = lambda eta: np.column_stack([eta, units.shape(eta)])  # noqa: E731 (φ moves ζ by η)
+    elif rig.support == "clamped":
+        tof_sensitivity = units.shape  # φ ≡ 0
+    else:
+        raise ValueError(f"support={rig.support!r} must be 'pinned' or 'clamped'")
+    chosen_tofs = _choose("tofs", tof_sensors, cap(tofs, tof_sensors), tof_sensitivity)
     n_gauges = len(gauge_sensors) if gauges is None else (
         min(gauges, len(gauge_sensors)) if isinstance(gauges, (int, np.integer)) else len(tuple(gauges)))
     aided_units = tuple(aided) if aided is not None else default_aided(gamma, n_gauges)

@@ -117,6 +117,27 @@ def unit_deformations(
     """
     if not isinstance(count, (int, np.integer)) or not 1 <= count <= MAX_UNIT_DEFORMATIONS:
         raise ValueError(f"{count=} must be an integer in [1, {MAX_UNIT_DEFORMATIONS}]")
+    return _unit_deformations(model_or_modes, int(count), combimode)
+
+
+def with_residual_modes(model: BeamModel, count: int, residual: int) -> UnitDeformations:
+    """The ``count`` unit deformations followed by ``residual`` more (the next eigenmodes in the
+    same body frame), for an estimator that carries residual modes: its first ``count`` columns
+    are the shapes of ``unit_deformations(model, count)``.
+
+    Raises
+    ------
+    ValueError
+        ``count`` out of 1..5 or ``residual`` not a non-negative integer.
+    """
+    if not isinstance(count, (int, np.integer)) or not 1 <= count <= MAX_UNIT_DEFORMATIONS:
+        raise ValueError(f"{count=} must be an integer in [1, {MAX_UNIT_DEFORMATIONS}]")
+    if isinstance(residual, bool) or not isinstance(residual, (int, np.integer)) or residual < 0:
+        raise ValueError(f"{residual=} must be a non-negative integer")
+    return _unit_deformations(model, int(count) + int(residual), None)
+
+
+def _unit_deformations(model_or_modes: BeamModel | NaturalModes, count: int, combimode: bool | None) -> UnitDeformations:
     support = model_or_modes.support
     if support not in ("pinned", "clamped"):
         raise ValueError(f"{support=} must be 'pinned' or 'clamped'")

@@ -146,7 +146,8 @@ class Dashboard:
     ----------
     host, port : where viser listens (``port=0`` picks a free port; a taken port is replaced by
         the next free one; :attr:`url` and :attr:`port` give the real one).
-    rig : ``contract.RigDescription`` (beam length and width, reflector distance, sensors).
+    rig : ``contract.RigDescription`` (beam length and width, reflector distance, sensors; support and
+        orientation: a pin or a clamp at D, the beam hanging or standing upright).
     units : ``estimator.UnitDeformations`` (shape/slope of the Γ unit deformations; their
         ``modes`` label trends and spectra).
     layout : ``contract.StateLayout`` of the estimator's state vector (how ``push_estimate`` reads x).
@@ -183,6 +184,14 @@ class Dashboard:
         if not (self.length > 0 and self.width > 0):
             raise ValueError(f"rig beam length and width must be > 0, got {self.length}, {self.width}")
         self.reflector_distance = float(rig.reflector_distance)
+        # How the beam is held and drawn: a pin or a clamp at D; hanging below it or standing up.
+        support, orientation = getattr(rig, "support", "pinned"), getattr(rig, "orientation", "hanging")
+        if support not in ("pinned", "clamped"):
+            raise ValueError(f"rig support={support!r} must be 'pinned' or 'clamped'")
+        if orientation not in ("hanging", "standing"):
+            raise ValueError(f"rig orientation={orientation!r} must be 'hanging' or 'standing'")
+        self.clamped = support == "clamped"
+        self.standing = orientation == "standing"
         stations = np.asarray(stations, dtype=float)
         if stations.ndim != 1 or stations.size < 1 or not np.all(np.isfinite(stations)):
             raise ValueError(f"stations must be a non-empty 1-D array of finite η, got shape {stations.shape}")

@@ -1,13 +1,15 @@
 """Geometry of the live beam: pure numpy, no viser (unit-testable).
 
-Frames (recording contract): the inertial frame has η down along gravity and ζ horizontal
-towards the reflector, origin at the bearing's rest position. The body frame sits at the bearing
+Frames (recording contract): the inertial frame has η along the beam at rest (down along
+gravity for a hanging beam, up for a standing mast) and ζ horizontal towards the reflector,
+origin at the bearing's rest position. The body frame sits at the bearing
 D = (h, d) (h along η, d along ζ) and is turned by φ (positive φ turns η towards ζ). A point at arc
 length η with elastic deflection Δ(η) = Σ b_χ s_χ(η) (body frame, across the beam) sits at
 
     r = D + R(φ) [η, Δ]    i.e.    η_I = h + cos φ·η − sin φ·Δ,   ζ_I = d + sin φ·η + cos φ·Δ.
 
-World (viewer) coordinates: x = ζ, y = across the sheet's width, z = −η (up). Overscaling
+World (viewer) coordinates: x = ζ, y = across the sheet's width, z up: z = −η for a hanging
+beam, z = +η for a standing one (``standing=True``), so a mast is drawn upright. Overscaling
 multiplies the elastic part Δ (and the slope Δ′) by ``elastic_scale`` and the rigid motion
 (h, d, φ) by ``rigid_scale``, like the paper's Figure 15.
 """
@@ -23,6 +25,7 @@ from contract import StateLayout
 
 __all__ = [
     "BeamState",
+    "clamp_boxes",
     "UnitShapes",
     "centreline",
     "parse_state",
@@ -32,6 +35,7 @@ __all__ = [
     "tangent_angle",
     "tof_rays",
     "to_world",
+    "up_sign",
 ]
 
 #: Rays are drawn at most this long (m) when a ToF's axis is nearly parallel to the reflector.
@@ -130,15 +134,25 @@ def tangent_angle(
     return rigid_scale * state.phi + elastic_scale * (units.slope(eta) @ state.b)
 
 
-def to_world(plane: np.ndarray, y: float | np.ndarray = 0.0) -> np.ndarray:
-    """(N, 2) inertial (η, ζ) → (N, 3) world (x = ζ, y, z = −η), float32."""
+def up_sign(standing: bool) -> float:
+    """World z per unit inertial η: −1 hanging (η points down), +1 standing (η points up the mast)."""
+    if standing is True:
+        return 1.0
+    if standing is False:
+        return -1.0
+    raise ValueError(f"standing={standing!r} must be True or False")
+
+
+def to_world(plane: np.ndarray, y: float | np.ndarray = 0.0, *, standing: bool = False) -> np.ndarray:
+    """(N, 2) inertial (η, ζ) → (N, 3) world (x = ζ, y, z = ∓η: −η hanging, +η standing), float32."""
+    sign = up_sign(standing)
     plane = np.asarray(plane, dtype=float)
     if plane.ndim != 2 or plane.shape[1] != 2:
         raise ValueError(f"plane points must have shape (N, 2), got {plane.shape}")
     out = np.empty((plane.shape[0], 3), dtype=np.float32)
     out[:, 0] = plane[:, 1]
     out[:, 1] = y
-    out[:, 2] = -plane[:, 0]
+    out[:, 2] = sign * plane[:, 0]
     return out
 
 
@@ -151,11 +165,11 @@ def ribbon_faces(n: int) -> np.ndarray:
     return np.concatenate([np.stack([a, c, b], axis=1), np.stack([b, c, d], axis=1)]).astype(np.uint32)
 
 
-def ribbon(plane: np.ndarray, width: float) -> np.ndarray:
+def ribbon(plane: np.ndarray, width: float, *, standing: bool = False) -> np.ndarray:
     """Vertices (2N, 3) of the sheet: each centre-line point at y = −w/2 and y = +w/2 (world)."""
     if not np.isfinite(width) or width <= 0:
         raise ValueError(f"width={width!r} must be finite and > 0")
-    centre = to_world(plane)
+    centre = to_world(plane, standing=standing)
     verts = np.repeat(centre, 2, axis=0)
     verts[0::2, 1] = -0.5 * width
     verts[1::2, 1] = 0.5 * width
@@ -176,6 +190,7 @@ def tof_rays(
     *,
     elastic_scale: float = 1.0,
     rigid_scale: float = 1.0,
+    standing: bool = False,
 ) -> np.ndarray:
     """World segments (n, 2, 3) from each ToF at ``eta`` along its +y axis to the reflector plane.
 
@@ -194,4 +209,30 @@ def tof_rays(
         length = np.where(ca > 1e-6, gap / np.where(ca > 1e-6, ca, 1.0), MAX_RAY_LENGTH)
     length = np.clip(length, 0.0, MAX_RAY_LENGTH)
     end = start + length[:, None] * np.stack([-sa, ca], axis=1)
-    return np.stack([to_world(start), to_world(end)], axis=1)
+    return np.stack([to_world(start, standing=standing), to_world(end, standing=standing)], axis=1)
+
+
+#: The clamp's jaws (m): how far they grip along the beam, their thickness across it (ζ) and how
+#: far they reach past the sheet's edges; the carriage block they sit on, on the rail's side of D.
+CLAMP_GRIP, CLAMP_JAW, CLAMP_OVERHANG, CLAMP_BASE = 0.10, 0.035, 0.03, 0.06
+
+
+def clamp_boxes(state: BeamState, width: float, *, rigid_scale: float = 1.0, standing: bool = False,
+                ) -> tuple[tuple[tuple[float, float, float], tuple[float, float, float]], ...]:
+    """(centre, dimensions) in world coordinates of a clamped support's three boxes: the two jaws
+    gripping the root of the sheet on either face (ζ) over ``CLAMP_GRIP`` of its length, and the
+    carriage block below them (on the rail's side of D). They move with the support (d, h); a
+    clamp does not turn (φ ≡ 0)."""
+    if not np.isfinite(width) or width <= 0:
+        raise ValueError(f"width={width!r} must be finite and > 0")
+    _check_scales(1.0, rigid_scale)
+    up = up_sign(standing)
+    x = rigid_scale * state.d
+    z = up * rigid_scale * state.h
+    span_y = width + 2 * CLAMP_OVERHANG
+    jaw_z = z + up * 0.5 * CLAMP_GRIP
+    jaws = tuple(
+        ((x + side * 0.5 * CLAMP_JAW + side * 0.002, 0.0, jaw_z), (CLAMP_JAW, span_y, CLAMP_GRIP)) for side in (-1.0, 1.0)
+    )
+    base = ((x, 0.0, z - up * 0.5 * CLAMP_BASE), (2 * CLAMP_JAW + 0.004 + 0.03, span_y + 0.02, CLAMP_BASE))
+    return (*jaws, base)

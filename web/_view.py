@@ -18,11 +18,13 @@ from ._data import WindowRecord, frequencies_of, spectrum_plot
 from ._geometry import (
     BeamState,
     centreline,
+    clamp_boxes,
     ribbon,
     ribbon_faces,
     segments,
     to_world,
     tof_rays,
+    up_sign,
 )
 
 if TYPE_CHECKING:
@@ -41,6 +43,7 @@ MODE_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"
 BEAM_COLOUR = (30, 100, 200)
 GHOST_COLOUR = (150, 150, 150)
 TRUTH_COLOUR = (235, 120, 20)
+CLAMP_COLOUR = (70, 74, 84)
 N_BEAM_POINTS = 121
 TREND_WINDOWS = {"10 min": 600.0, "1 h": 3600.0, "6 h": 6 * 3600.0, "24 h": 86400.0, "7 days": 7 * 86400.0, "all": math.inf}
 SPECTRA_MIN_PERIOD_S = 0.5
@@ -82,6 +85,7 @@ class ClientView:
     def setup_shared(dash: "Dashboard") -> None:
         server = dash.server
         L, refl = dash.length, dash.reflector_distance
+        up = up_sign(dash.standing)  # world z per unit η: the beam hangs down or stands up from D
         server.gui.configure_theme(
             control_width="large", show_logo=False, show_share_button=False, brand_color=(30, 100, 200)
         )
@@ -92,28 +96,31 @@ class ClientView:
         server.scene.configure_environment_map(None)
         server.scene.add_light_ambient("/lights/ambient", intensity=1.6)
         server.scene.add_light_hemisphere("/lights/sky", sky_color=(255, 255, 255), ground_color=(200, 205, 215), intensity=1.2)
-        # A front view of the beam's plane (ζ to the right, up = −η), slightly from the side; the
-        # look-at point sits right of the beam so the beam is not hidden behind the GUI panel.
+        # A front view of the beam's plane (ζ to the right, z up: −η hanging, +η standing), slightly
+        # from the side; the look-at point sits right of the beam so the beam is not hidden behind
+        # the GUI panel.
         look_x = 0.55 + 0.6 * refl
-        server.initial_camera.position = (look_x + 0.9, -0.95 * L, -0.40 * L)
-        server.initial_camera.look_at = (look_x, 0.0, -0.5 * L)
+        server.initial_camera.position = (look_x + 0.9, -0.95 * L, up * 0.40 * L)
+        server.initial_camera.look_at = (look_x, 0.0, up * 0.5 * L)
+        # The rail the support runs on: above D for a hanging beam, below a standing mast.
         rail_lo, rail_hi = min(-0.6, refl - 1.2), refl + 0.05
         server.scene.add_box(
             "/rig/rail", color=(90, 90, 100), dimensions=(rail_hi - rail_lo, 0.08, 0.04),
-            position=(0.5 * (rail_lo + rail_hi), 0.0, 0.09), cast_shadow=False,
+            position=(0.5 * (rail_lo + rail_hi), 0.0, -up * 0.09), cast_shadow=False,
         )
-        server.scene.add_label("/rig/rail_label", "bearing rail", position=(rail_lo, 0.0, 0.16), font_screen_scale=0.8)
+        server.scene.add_label("/rig/rail_label", "bearing rail", position=(rail_lo, 0.0, -up * 0.16), font_screen_scale=0.8)
         server.scene.add_box(
             "/rig/reflector", color=(150, 175, 205), dimensions=(0.01, 0.9, L + 0.4),
-            position=(refl + 0.005, 0.0, -0.5 * L), opacity=0.35, side="double", cast_shadow=False,
+            position=(refl + 0.005, 0.0, up * 0.5 * L), opacity=0.35, side="double", cast_shadow=False,
         )
-        server.scene.add_label("/rig/reflector_label", f"reflector ζ = {refl:g} m", position=(refl, 0.45, 0.1), font_screen_scale=0.8)
+        server.scene.add_label("/rig/reflector_label", f"reflector ζ = {refl:g} m", position=(refl, 0.45, -up * 0.1),
+                               font_screen_scale=0.8)
         server.scene.add_grid(
             "/rig/grid", width=max(2.0, 2 * refl + 1.5), height=L + 1.0, plane="xz",
-            cell_size=0.1, section_size=0.5, position=(0.5 * refl, 0.45, -0.5 * L), shadow_opacity=0.0,
+            cell_size=0.1, section_size=0.5, position=(0.5 * refl, 0.45, up * 0.5 * L), shadow_opacity=0.0,
         )
         server.scene.add_line_segments(
-            "/rig/plumb", np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -L]]]), (160, 160, 160), thickness=0.004,
+            "/rig/plumb", np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, up * L]]]), (160, 160, 160), thickness=0.004,
         )
 
     # ------------------------------------------------------------------ per client
@@ -165,7 +172,8 @@ class ClientView:
     def _build_scene(self) -> None:
         scene, dash = self.client.scene, self.dash
         rest = BeamState(0.0, 0.0, 0.0, np.zeros(dash.gamma))
-        verts = ribbon(centreline(rest, dash.units, self._eta), dash.width)
+        up = self.up = up_sign(dash.standing)
+        verts = ribbon(centreline(rest, dash.units, self._eta), dash.width, standing=dash.standing)
         self.ghost = scene.add_mesh_simple(
             "/live/ghost", verts, self._faces, color=GHOST_COLOUR, opacity=0.28, side="double", cast_shadow=False
         )
@@ -175,18 +183,33 @@ class ClientView:
         self.truth = scene.add_line_segments(
             "/live/truth", segments(to_world(np.zeros((2, 2)))), TRUTH_COLOUR, thickness=0.015, visible=False
         )
-        self.bearing = scene.add_cylinder(
-            "/live/bearing", radius=0.045, height=dash.width + 0.12, color=(20, 20, 20),
-            wxyz=(math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0), cast_shadow=False,
-        )
+        # The support: a pin (the plain bearing, its axis across the sheet) or a clamp (jaws on
+        # both faces of the root and the carriage they sit on; φ ≡ 0, so no tangent to show).
+        self.bearing = self.tangent = None
+        self.clamp: list[Any] = []
+        if dash.clamped:
+            for name, (centre, dims) in zip(("jaw_minus", "jaw_plus", "carriage"),
+                                            clamp_boxes(rest, dash.width, standing=dash.standing)):
+                self.clamp.append(scene.add_box(f"/live/clamp/{name}", color=CLAMP_COLOUR, dimensions=dims,
+                                                position=centre, cast_shadow=False))
+            self.clamp_label = scene.add_label(
+                "/live/clamp_label", "clamp (φ ≡ 0)", position=(-0.12, 0.0, -up * 0.05), font_screen_scale=0.8,
+                anchor="center-right",
+            )
+        else:
+            self.bearing = scene.add_cylinder(
+                "/live/bearing", radius=0.045, height=dash.width + 0.12, color=(20, 20, 20),
+                wxyz=(math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0), cast_shadow=False,
+            )
         self.bearing_marker = scene.add_point_cloud(
             "/live/sensors/bearing", np.zeros((1, 3), dtype=np.float32), np.array([STATE_COLOURS["unknown"]], dtype=np.uint8),
             point_size=0.07, point_shape="circle", precision="float32", point_shading="flat",
             visible=self.bearing_topic is not None,
         )
-        self.tangent = scene.add_line_segments(
-            "/live/tangent", np.zeros((1, 2, 3)), (20, 20, 20), thickness=0.006
-        )
+        if not dash.clamped:
+            self.tangent = scene.add_line_segments(
+                "/live/tangent", np.zeros((1, 2, 3)), (20, 20, 20), thickness=0.006
+            )
         self.markers: dict[str, Any] = {}
         shapes = {"imu": ("circle", -0.5 * dash.width - 0.03), "tof": ("square", 0.5 * dash.width + 0.03), "strain": ("diamond", 0.0)}
         for kind, items in self.sensor_groups.items():
@@ -208,7 +231,9 @@ class ClientView:
             scene.add_label(f"/live/labels/{i}", name, font_screen_scale=0.75, anchor="center-left")
             for i, name in enumerate(self.label_names)
         ]
-        self.tip_label = scene.add_label("/live/tip_label", "", font_screen_scale=0.8, anchor="top-center")
+        # Beyond the tip: below a hanging beam, above a standing mast.
+        self.tip_label = scene.add_label("/live/tip_label", "", font_screen_scale=0.8,
+                                         anchor="bottom-center" if dash.standing else "top-center")
 
     # ------------------------------------------------------------------ GUI
     def _build_gui(self) -> None:
@@ -495,8 +520,9 @@ class ClientView:
         if self.auto_scale.value:
             self._auto_overscale(state)
         es, rs = self.elastic_scale, self.rigid_scale
+        standing, up = dash.standing, self.up
         line = centreline(state, dash.units, self._eta, elastic_scale=es, rigid_scale=rs)
-        self.beam.vertices = ribbon(line, dash.width)
+        self.beam.vertices = ribbon(line, dash.width, standing=standing)
         ghost_on = bool(self.show_ghost.value)
         self.ghost.visible = ghost_on
         if ghost_on:
@@ -504,26 +530,35 @@ class ClientView:
                 ghost = centreline(mean, dash.units, self._eta, elastic_scale=es, rigid_scale=rs)
             else:
                 ghost = centreline(BeamState(0.0, 0.0, 0.0, np.zeros(dash.gamma)), dash.units, self._eta)
-            self.ghost.vertices = ribbon(ghost, dash.width)
+            self.ghost.vertices = ribbon(ghost, dash.width, standing=standing)
         truth_on = est.truth_deflection is not None and bool(self.show_truth.value)
         self.truth.visible = truth_on
         if truth_on:
             eta = np.concatenate([[0.0], dash.stations]) if dash.stations[0] > 0 else dash.stations
             delta = np.concatenate([[0.0], est.truth_deflection]) if dash.stations[0] > 0 else est.truth_deflection
             tline = centreline(state, dash.units, eta, elastic_scale=es, rigid_scale=rs, deflection=delta)
-            pts = to_world(tline, y=0.5 * dash.width + 0.01)
+            pts = to_world(tline, y=0.5 * dash.width + 0.01, standing=standing)
             self.truth.points = segments(pts)
-        d_world = np.array([rs * state.d, 0.0, -rs * state.h], dtype=np.float32)
-        self.bearing.position = tuple(float(v) for v in d_world)
-        phi = rs * state.phi
-        self.tangent.points = np.array([[d_world, d_world + 1.0 * np.array([math.sin(phi), 0.0, -math.cos(phi)])]], dtype=np.float32)
+        d_world = np.array([rs * state.d, 0.0, up * rs * state.h], dtype=np.float32)
+        if self.bearing is not None:
+            self.bearing.position = tuple(float(v) for v in d_world)
+        if self.tangent is not None:
+            phi = rs * state.phi
+            self.tangent.points = np.array([[d_world, d_world + 1.0 * np.array([math.sin(phi), 0.0, up * math.cos(phi)])]],
+                                           dtype=np.float32)
+        if self.clamp:
+            for handle, (centre, _) in zip(self.clamp, clamp_boxes(state, dash.width, rigid_scale=rs, standing=standing)):
+                handle.position = centre
+            if texts:
+                self.clamp_label.position = (float(d_world[0]) - 0.12, 0.0, float(d_world[2]) - up * 0.05)
         states = est.sensor_states
         if self.bearing_topic is not None:
-            self.bearing_marker.points = (d_world + np.array([0.0, 0.0, 0.13], dtype=np.float32))[None, :]
+            self.bearing_marker.points = (d_world + np.array([0.0, 0.0, -up * 0.13], dtype=np.float32))[None, :]
             self.bearing_marker.colors = np.array([STATE_COLOURS.get(states.get(self.bearing_topic, "unknown"), STATE_COLOURS["unknown"])], dtype=np.uint8)
         for kind, items in self.sensor_groups.items():
             eta = np.array([e for _, e in items])
-            pos = to_world(centreline(state, dash.units, eta, elastic_scale=es, rigid_scale=rs), y=self.marker_offsets[kind])
+            pos = to_world(centreline(state, dash.units, eta, elastic_scale=es, rigid_scale=rs), y=self.marker_offsets[kind],
+                           standing=standing)
             if kind == "strain":  # on the +ζ face
                 pos[:, 0] += 0.01
             self.markers[kind].points = pos
@@ -536,7 +571,8 @@ class ClientView:
             if rays_on:
                 items = self.sensor_groups["tof"]
                 eta = np.array([e for _, e in items])
-                rays = tof_rays(state, dash.units, eta, dash.reflector_distance, elastic_scale=es, rigid_scale=rs)
+                rays = tof_rays(state, dash.units, eta, dash.reflector_distance, elastic_scale=es, rigid_scale=rs,
+                                standing=standing)
                 rays[:, :, 1] = self.marker_offsets["tof"]
                 self.rays.points = rays
                 ray_colours = {"ok": (255, 70, 70), "degraded": (255, 170, 0), "rejected": (150, 150, 150)}
@@ -544,14 +580,15 @@ class ClientView:
                 self.rays.colors = np.repeat(cols[:, None, :], 2, axis=1)
         labels_on = bool(self.show_labels.value)
         if self.labels and texts:  # HTML labels are costly for the browser: at the text rate
-            pos = to_world(centreline(state, dash.units, self.label_eta, elastic_scale=es, rigid_scale=rs), y=0.5 * dash.width + 0.1)
+            pos = to_world(centreline(state, dash.units, self.label_eta, elastic_scale=es, rigid_scale=rs),
+                           y=0.5 * dash.width + 0.1, standing=standing)
             for handle, p in zip(self.labels, pos):
                 handle.visible = labels_on
                 if labels_on:
                     handle.position = (float(p[0]), float(p[1]), float(p[2]))
         tip = line[-1]
         if texts:
-            self.tip_label.position = (float(tip[1]), 0.0, float(-tip[0] - 0.08))
+            self.tip_label.position = (float(tip[1]), 0.0, float(up * (tip[0] + 0.08)))
             delta_tip = float(dash.units.shape(np.array([dash.length]))[0] @ state.b)
             self.tip_label.text = f"tip Δ = {1e3 * delta_tip:+.1f} mm  (×{es:g})"
 
@@ -724,8 +761,9 @@ class ClientView:
             motion = "waiting for estimates"
         else:
             s = est.state
+            phi = "φ ≡ 0 (clamped)" if dash.layout.phi is None else f"φ = {1e3 * s.phi:+.2f} mrad"
             motion = (
-                f"t = {fmt_time(est.t_s)} · d = {1e3 * s.d:+.1f} mm · φ = {1e3 * s.phi:+.2f} mrad · "
+                f"t = {fmt_time(est.t_s)} · d = {1e3 * s.d:+.1f} mm · {phi} · "
                 f"b = [{', '.join(f'{v:+.2e}' for v in s.b)}]"
             )
         active = [a for a in snap.alarms if a.active]

@@ -57,6 +57,23 @@ def test_acc_layout_and_a_layout_without_attitude_by_hand():
     np.testing.assert_array_equal(acc.phi_of(np.arange(12.0)), 4.0)
 
 
+def test_layouts_with_residual_modes_by_hand():
+    # Clamped gyro, Γ = 4, one residual mode: r1 right after b (the modal block the aiding sees), its rate next.
+    gyro = StateLayout("gyro", 4, 4, attitude=False, residual=1)
+    assert gyro.names == ("d", "h", "d_rate", "h_rate", "b1", "b2", "b3", "b4", "r1", "vr1",
+                          "gyro_bias_1", "gyro_bias_2", "gyro_bias_3", "gyro_bias_4")
+    assert gyro.b == slice(4, 8) and gyro.residual_modes == slice(8, 9) and gyro.modal == slice(4, 9)
+    assert gyro.residual_rates == slice(9, 10) and gyro.peripheral_bias == slice(10, 14) and gyro.size == 14
+    assert (gyro.index.residual, gyro.index.residual_rate) == (1, 9)
+    acc = StateLayout("acc", 2, 3, attitude=False, residual=2)
+    assert acc.names == ("d", "h", "d_rate", "h_rate", "b1", "b2", "r1", "r2", "v1", "v2", "vr1", "vr2")
+    assert acc.v == slice(8, 10) and acc.residual_rates == slice(10, 12) and acc.index.residual_rate == 10
+    none = StateLayout("gyro", 2, 3)
+    assert none.residual_modes == slice(7, 7) and none.residual_rates == slice(0, 0) and none.index.residual_rate == -1
+    with pytest.raises(ValueError, match="residual=-1 must be >= 0"):
+        StateLayout("gyro", 2, 3, residual=-1)
+
+
 @pytest.mark.parametrize(("kwargs", "message"), [
     ({"peripheral": "laser", "gamma": 4, "nu": 4}, "peripheral='laser'"),
     ({"peripheral": "gyro", "gamma": 0, "nu": 4}, "gamma=0"),

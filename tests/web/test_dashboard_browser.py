@@ -278,6 +278,17 @@ def test_alarm_raised_by_the_service_shows_on_the_page(chromium, tmp_path):
         service.stop(drain_s=0)
 
 
+def _support_offset(scene: np.ndarray) -> float:
+    """Where the support is drawn against the beam, as a share of the picture's height: the median
+    row of the dark grey pixels (the bearing or clamp and its rail) minus the median row of the
+    beam's blue ones. Negative: above the beam (it hangs); positive: below it (it stands)."""
+    r, g, b = scene[..., 0], scene[..., 1], scene[..., 2]
+    blue = (b > 120) & (b - r > 70) & (b - g > 30)
+    dark = (scene.max(axis=-1) < 110) & (np.ptp(scene, axis=-1) < 30)
+    assert blue.sum() > 400 and dark.sum() > 200, (blue.sum(), dark.sum())
+    return float(np.median(np.nonzero(dark)[0]) - np.median(np.nonzero(blue)[0])) / scene.shape[0]
+
+
 def _wait(predicate, timeout: float, what: str, poll: float = 0.25):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -288,12 +299,23 @@ def _wait(predicate, timeout: float, what: str, poll: float = 0.25):
     raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
 
 
+#: The two rigs of the real-service test: a standing clamped mast (Γ = 3, the benchmark layout scaled
+#: to 1.5 m, a 1 % tip mass that fits the short beam) and the pinned pendulum with Γ = 5 (dense layout).
+SERVICE_CASES = {
+    "mast": {"estimator.modes": 3, "estimator.imus": 4, "sim.layout": "benchmark", "sim.support": "clamped",
+             "sim.orientation": "standing", "sim.length_m": 1.5, "sim.damage": ["mass:0.05@1.5"]},
+    "pendulum": {"estimator.modes": 5, "estimator.imus": 5, "sim.layout": "dense"},
+}
+
+
 @pytest.mark.timeout(480)
-@pytest.mark.parametrize("modes", [3, 5])
-def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, modes):
+@pytest.mark.parametrize("case", list(SERVICE_CASES))
+def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, case):
     """``shm serve --source sim`` with ``[estimator] modes = Γ`` as a subprocess, its dashboard in
-    Chromium: the beam drawn, spectra before and after the baseline, the configured chart levels
-    drawn, trends labelled like the spectra, an alarm acknowledged over the HTTP API shown as such."""
+    Chromium: the beam drawn (a standing clamped mast upright above its clamp, the pendulum hanging
+    from its pin), spectra before and after the baseline, the configured chart levels drawn,
+    trends labelled like the spectra by the model's modes (no combimode for the clamp), an alarm
+    acknowledged over the HTTP API shown as such."""
     import contextlib
     import re
     import signal
@@ -303,6 +325,8 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, modes
     import tomli_w
     from playwright.sync_api import sync_playwright
 
+    mast = case == "mast"
+    modes = SERVICE_CASES[case]["estimator.modes"]
     token = "browser-test-token"
     (tmp_path / "token").write_text(token + "\n")
     config = _service_test_helpers().fast_overrides(tmp_path, **{
@@ -310,8 +334,7 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, modes
         "analytics.warning_sigma": 0.5, "analytics.alarm_sigma": 1.0, "analytics.curvature_alarm_sigma": 1.5,
         # A learning phase long enough to look at the spectra before the baseline exists.
         "analytics.baseline_s": 80.0,
-        "estimator.modes": modes, "estimator.imus": max(4, modes),
-        "sim.layout": "dense" if modes == 5 else "benchmark", "sim.duration_s": 900.0, "sim.damage_at_s": 150.0,
+        **SERVICE_CASES[case], "sim.duration_s": 900.0, "sim.damage_at_s": 150.0,
         "dashboard.enabled": True, "dashboard.port": 0, "archive.enabled": False,
     })
     (tmp_path / "serve.toml").write_text(tomli_w.dumps(config))
@@ -333,7 +356,8 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, modes
 
         api_url, dash_url = _wait(urls, 180, "shm serve to print its API and dashboard addresses")
         api = stack.enter_context(httpx.Client(base_url=api_url, timeout=10))
-        gamma_text = {3: "b3 · mode 4", 5: "b5 · mode 6"}[modes]
+        # The clamped mast: b_k is mode k (no combimode); the pendulum's b1 carries modes 1 and 2.
+        gamma_text = "b3 · mode 3" if mast else "b5 · mode 6"
         with sync_playwright() as p:
             context = p.chromium.launch_persistent_context(
                 str(tmp_path / "profile"), executable_path=chromium, headless=True, args=CHROMIUM_ARGS, viewport=VIEWPORT,
@@ -346,6 +370,9 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, modes
                 # One spectrum per unit deformation, labelled by the modes it carries (the last: Γ's).
                 _visible(page, gamma_text, exact=False).wait_for(timeout=30_000)
                 assert page.get_by_text(f"b{modes + 1} · mode", exact=False).count() == 0
+                assert (page.get_by_text("mode 1+2", exact=False).count() == 0) == mast
+                if mast:
+                    _visible(page, "φ ≡ 0 (clamped)", exact=False).wait_for(timeout=30_000)
 
                 # Spectra before the baseline exists: tracked frequencies drawn, no baseline yet.
                 def learning_with_spectra():
@@ -353,8 +380,9 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, modes
                     return st["pipeline"]["baseline"] == "learning" and api.get("/api/spectra/latest").status_code == 200
 
                 _wait(learning_with_spectra, 120, "a committed window while the baseline is being learnt")
-                combimode = re.compile(r"tracked \d+\.\d{3} / \d+\.\d{3} Hz")  # b1 carries modes 1 and 2
-                page.get_by_text(combimode).filter(visible=True).first.wait_for(timeout=30_000)
+                # b1 carries modes 1 and 2 on the pendulum, mode 1 alone on the mast.
+                tracked = re.compile(r"tracked \d+\.\d{3} Hz" if mast else r"tracked \d+\.\d{3} / \d+\.\d{3} Hz")
+                page.get_by_text(tracked).filter(visible=True).first.wait_for(timeout=30_000)
                 _visible(page, "baseline – Hz").wait_for(timeout=30_000)
                 assert api.get("/api/status").json()["baseline"]["modes"] is None, "the baseline came before the check"
                 chart_box = page.evaluate(
@@ -380,16 +408,23 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, modes
                 blue = (b > 120) & (b - r > 70) & (b - g > 30)
                 rows = np.flatnonzero(blue.any(axis=1))
                 assert blue.sum() > 400, f"beam not drawn: {blue.sum()} blue pixels"
-                assert rows[-1] - rows[0] > 0.3 * h, "the beam should hang as a tall vertical ribbon"
+                assert rows[-1] - rows[0] > 0.3 * h, "the beam should be a tall vertical ribbon"
+                # Upright: the mast's clamp and rail below the beam; the pendulum's pin and rail above it.
+                offset = _support_offset(scene)
+                print(f"{case}: support drawn {offset:+.2f} of the height from the beam")
+                assert offset > 0.1 if mast else offset < -0.1, f"support drawn at {offset:+.2f} of the height from the beam"
 
                 # After the baseline: its frequencies are marked too (both of the combimode's modes).
                 _wait(lambda: api.get("/api/status").json()["baseline"]["modes"] is not None, 180, "the baseline")
-                page.get_by_text(re.compile(r"baseline \d+\.\d{3} / \d+\.\d{3} Hz")).filter(visible=True).first.wait_for(timeout=30_000)
+                baseline = re.compile(r"baseline \d+\.\d{3} Hz" if mast else r"baseline \d+\.\d{3} / \d+\.\d{3} Hz")
+                page.get_by_text(baseline).filter(visible=True).first.wait_for(timeout=30_000)
 
                 # Trends: labelled per eigenmode like the spectra, with the configured chart levels.
                 page.get_by_text("Trends", exact=True).first.click()
-                _visible(page, "mode 2 (b1) eigenfrequency", exact=False).wait_for(timeout=60_000)
-                _visible(page, f"mode {modes + 1} (b{modes}) eigenfrequency", exact=False).wait_for(timeout=60_000)
+                first_mode = "mode 1 (b1) eigenfrequency" if mast else "mode 2 (b1) eigenfrequency"
+                last_mode = f"mode {modes} (b{modes}) eigenfrequency" if mast else f"mode {modes + 1} (b{modes}) eigenfrequency"
+                _visible(page, first_mode, exact=False).wait_for(timeout=60_000)
+                _visible(page, last_mode, exact=False).wait_for(timeout=60_000)
                 _visible(page, "alarm +1 σ").wait_for(timeout=60_000)  # frequency charts: alarm_sigma
                 _visible(page, "alarm +1.5 σ").wait_for(timeout=120_000)  # the curvature chart's own level
 
@@ -409,7 +444,13 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, modes
         st = api.get("/api/status").json()
         assert st["service"]["pipeline_errors"] == 0 and st["sinks"]["dashboard"]["errors"] == 0, st["sinks"]
         assert st["pipeline"]["windows_committed"] == st["pipeline"]["windows"] > 0
-        assert st["model"]["gamma"] == modes and len(st["model"]["state_names"]) == 5 + modes + max(4, modes) + 1
+        assert st["model"]["gamma"] == modes
+        names = st["model"]["state_names"]
+        if mast:  # no φ, no gyro bias at D; the residual mode (mode 4) and its rate; four gyro biases
+            assert st["model"]["support"] == "clamped" and "phi" not in names and {"r1", "vr1"} <= set(names)
+            assert st["model"]["unit_modes"] == [[1], [2], [3]] and len(names) == 4 + modes + 2 + 4
+        else:
+            assert len(names) == 5 + modes + max(4, modes) + 1
     finally:
         stack.close()
         if proc.poll() is None:

@@ -11,6 +11,7 @@ import estimator
 from contract import SpectrumDocument, StateLayout, TrendRow, WindowDocument
 from shm_service.rig_layouts import default_rig
 from web import BeamState, Dashboard, centreline, parse_state, ribbon, ribbon_faces, tangent_angle, tof_rays, to_world
+from web._geometry import CLAMP_GRIP, clamp_boxes, up_sign
 from web._data import spectrum_plot, thresholds_of, window_record, windows_from_trend_rows
 from web._view import _nice
 
@@ -51,6 +52,27 @@ def test_ribbon_vertices_for_known_b_and_phi_are_exact():
     assert faces.shape == (4, 3) and faces.dtype == np.uint32 and faces.max() == 5
     # Every face uses vertices of two neighbouring stations only.
     assert np.all(faces.max(axis=1) - faces.min(axis=1) <= 3)
+
+
+def test_a_standing_mast_is_drawn_upright_from_its_clamp():
+    # The same inertial (η, ζ) points: a hanging beam goes down from D (z = −η), a mast up (z = +η).
+    plane = np.array([[0.0, 0.2], [1.5, 0.25]])
+    np.testing.assert_allclose(to_world(plane), [[0.2, 0.0, 0.0], [0.25, 0.0, -1.5]], atol=1e-6)
+    np.testing.assert_allclose(to_world(plane, standing=True), [[0.2, 0.0, 0.0], [0.25, 0.0, 1.5]], atol=1e-6)
+    np.testing.assert_allclose(ribbon(plane, 0.2, standing=True)[2:, 2], [1.5, 1.5], atol=1e-6)
+    assert (up_sign(True), up_sign(False)) == (1.0, -1.0)
+    with pytest.raises(ValueError, match="standing='yes' must be True or False"):
+        up_sign("yes")
+    state = parse_state([0.03, 0.0, 0.0, 0.0, 0.1], StateLayout("gyro", 1, 0, attitude=False))  # [d, h, ḋ, ḣ, b1]
+    assert state.phi == 0.0 and state.b.tolist() == [0.1]
+    for standing, up in ((True, 1.0), (False, -1.0)):
+        (jaw_a, dims_a), (jaw_b, _), (base, base_dims) = clamp_boxes(state, 0.2, standing=standing)
+        # Jaws on both faces of the sheet at d, gripping its root along the beam; the carriage beyond D.
+        assert jaw_a[0] < 0.03 < jaw_b[0] and jaw_a[2] == pytest.approx(up * 0.5 * CLAMP_GRIP)
+        assert dims_a[1] > 0.2 and dims_a[2] == CLAMP_GRIP
+        assert base[0] == pytest.approx(0.03) and np.sign(base[2]) == -up and base_dims[0] > 2 * dims_a[0]
+    with pytest.raises(ValueError, match="width"):
+        clamp_boxes(state, 0.0)
 
 
 def test_overscale_multiplies_only_the_chosen_part():
@@ -241,6 +263,36 @@ def test_dashboard_refuses_bad_pushes_with_clear_messages(dashboard):
     snap = dash.snapshot()
     assert snap.estimate.t_s == 1.0 and snap.alarms[0].id == 1 and snap.spectra.amplitudes.shape == (50, 3)
     assert snap.windows[-1].frequency_hz[1] == 0.30
+
+
+def test_dashboard_draws_a_standing_clamped_mast_with_its_labels():
+    import json
+
+    from contract import parse_rig
+
+    data = json.loads(default_rig().to_json())
+    data.update(support="clamped", orientation="standing")
+    data["beam"]["length"] = 1.5
+    data["sensors"] = [s for s in data["sensors"] if s.get("position") is None or s["position"] <= 1.5]
+    data["point_masses"] = [m for m in data["point_masses"] if m["position"] <= 1.5]
+    data["truth_stations"] = [0.5, 1.0, 1.5]
+    rig = parse_rig(data)
+    units = estimator.unit_deformations(estimator.assemble_beam(rig), 2)
+    assert units.modes == ((1,), (2,))
+    dash = Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=StateLayout("gyro", 2, 1, attitude=False),
+                     stations=np.array([0.5, 1.0, 1.5]), service=FakeService())
+    try:
+        assert dash.clamped and dash.standing
+        assert dash.mode_map.unit_label(1) == "b1 · mode 1" and dash.mode_map.mode_label(2) == "mode 2 (b2)"
+        dash.push_estimate(1.0, np.array([0.01, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0]), {})
+        assert dash.snapshot().estimate.state.phi == 0.0
+    finally:
+        dash.stop()
+    hinged = type("Rig", (), {"beam": rig.beam, "reflector_distance": 0.5, "sensors": rig.sensors,
+                              "orientation": "standing", "support": "hinged"})()
+    with pytest.raises(ValueError, match="support='hinged' must be 'pinned' or 'clamped'"):
+        Dashboard(host="127.0.0.1", port=0, rig=hinged, units=units, layout=StateLayout("gyro", 2, 1, attitude=False),
+                  stations=np.array([0.5, 1.0]), service=FakeService())
 
 
 def test_dashboard_constructor_checks_its_arguments():
