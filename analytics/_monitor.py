@@ -236,6 +236,8 @@ class WindowResult:
             "curvature_third": None if self.curvature is None else self.curvature.third,
             "levels": dict(self.levels),
             "flags": [dict(f) for f in self.flags],
+            "alarm_events": [{"action": e.action, "chart": e.chart, "level": e.level, "at_s": e.at_s, "since_s": e.since_s,
+                              "score_sigma": _none(e.score_sigma), "threshold_sigma": e.threshold_sigma} for e in self.alarm_events],
             "location": None if self.location is None else self.location.as_dict(),
         }
 
@@ -481,7 +483,7 @@ class ModalMonitor:
                     if dev <= 1:
                         cost[a, k] = dev**2 - 0.1 * math.log(p.amplitude / peaks[0].amplitude)
             rows, cols = linear_sum_assignment(cost)
-            for a, k in zip(rows, cols):
+            for a, k in zip(rows.tolist(), cols.tolist()):
                 if cost[a, k] >= 1e6:
                     continue
                 i, p = idx[a], peaks[k]
@@ -515,7 +517,7 @@ class ModalMonitor:
                         continue
                     cost[i, j] = dev**2 + (1 - sim) - 0.1 * m.contribution
             rows, cols = linear_sum_assignment(cost)
-            for i, j in zip(rows, cols):
+            for i, j in zip(rows.tolist(), cols.tolist()):
                 if cost[i, j] >= 1e6:
                     continue
                 m, u = modes[j], self.units[i]
