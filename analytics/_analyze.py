@@ -258,7 +258,10 @@ def _summaries(mon: ModalMonitor, windows: tuple[WindowResult, ...], B: np.ndarr
                 if fd is not None:
                     damping.insert(0, fd)
             try:
-                damping.append(random_decrement(x, fs, f_hz, rel_half_width=cfg.bandpass_rel, duration_cycles=cfg.rd_cycles))
+                # about nine samples per period are plenty for the band-passed signature: decimate first
+                xb, fsb = prepare_band(x, fs, fmax_hz=min(3.0 * f_hz, 0.45 * fs)) if 3.0 * f_hz < 0.15 * fs else (x, fs)
+                damping.append(random_decrement(xb[:, 0] if xb.ndim == 2 else xb, fsb, f_hz, rel_half_width=cfg.bandpass_rel,
+                                                duration_cycles=cfg.rd_cycles))
             except ValueError:
                 pass
         primary = _preferred(damping, free)

@@ -460,7 +460,7 @@ class ModalMonitor:
         if cfg is None:
             return None
         try:
-            return identify_modes(b, self.fs, config=cfg, inputs=acc, tracked_hz=self.ref)
+            return identify_modes(b, self.fs, config=cfg, inputs=acc, tracked_hz=self.ref, frf_uncertainty=False)
         except (ValueError, np.linalg.LinAlgError):
             return None
 

@@ -236,6 +236,7 @@ def identify_modes(
     reference_shapes: object | None = None,
     tracked_hz: object | None = None,
     band_ready: bool = False,
+    frf_uncertainty: bool = True,
 ) -> ModalIdentification:
     """Modes of one window of outputs y by SSI-cov with automated pole selection.
 
@@ -255,6 +256,9 @@ def identify_modes(
         Frequencies (Hz) the excitation classifier checks lines against (default: the modes found).
     band_ready : bool
         y is already decimated/filtered to the band (:func:`prepare_band`), skip that step.
+    frf_uncertainty : bool
+        With a measured input, give the FRF modes their jackknife 1σ [True]; False fits the FRFs
+        only to cross-check the output-only modes (fewer orders, no jackknife: the monitor's use).
 
     Returns
     -------
@@ -344,7 +348,7 @@ def identify_modes(
         ub = u - u.mean(axis=0) if band_ready else prepare_band(u, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)[0]
         track = [m.frequency_hz for m in modes] if tracked_hz is None else list(np.atleast_1d(tracked_hz))
         exc = classify_excitation(ub, fsb, track)
-        frf, io_modes = _io_modes(ub, yb * scale, fsb, T, cfg, fmax, [m.frequency_hz for m in modes])
+        frf, io_modes = _io_modes(ub, yb * scale, fsb, T, cfg, fmax, [m.frequency_hz for m in modes], full=frf_uncertainty)
         if frf is not None:
             modes, dropped = _confirmed_by_frf(modes, io_modes, frf, resolved_from_hz=3.0 / (T / 6))
             rejected.extend(dropped)
@@ -353,7 +357,7 @@ def identify_modes(
 
 
 def _io_modes(ub: np.ndarray, yb: np.ndarray, fs: float, T: float, cfg: OmaConfig, fmax: float,
-              check_hz: list[float] | None = None, coherence: float = 0.5) -> tuple[Frf | None, tuple[FrfMode, ...]]:
+              check_hz: list[float] | None = None, coherence: float = 0.5, full: bool = True) -> tuple[Frf | None, tuple[FrfMode, ...]]:
     """The H1 FRFs from the (first) measured input to the outputs (segments of T/6: about 11
     Hann averages at 50 % overlap) and the modes fitted to them; (None, ()) if the window is too
     short for a fit or the input is flat. With ``check_hz``, the fit runs only if the input
@@ -371,7 +375,8 @@ def _io_modes(ub: np.ndarray, yb: np.ndarray, fs: float, T: float, cfg: OmaConfi
             coh = [float(frf.coherence[int(np.argmin(np.abs(frf.frequencies - f)))].mean()) for f in resolved]
             if not coh or max(coh) < coherence:
                 return frf, ()
-        return frf, frf_modes(frf, fmin_hz=lo, fmax_hz=hi, max_order=min(24, max(2, int((hi - lo) * seg) // 2 * 2 // 2)))
+        order = min(24 if full else 4 * len(check_hz or ()) + 4, max(2, int((hi - lo) * seg) // 2 * 2 // 2))
+        return frf, frf_modes(frf, fmin_hz=lo, fmax_hz=hi, max_order=max(2, order // 2 * 2), groups=6 if full else 2)
     except (ValueError, np.linalg.LinAlgError):
         return None, ()
 
