@@ -381,12 +381,14 @@ def _io_modes(ub: np.ndarray, yb: np.ndarray, fs: float, T: float, cfg: OmaConfi
         return None, ()
 
 
-def _confirmed_by_frf(modes: list[IdentifiedMode], io_modes: tuple[FrfMode, ...], frf: Frf, *, coherence: float = 0.5,
+def _confirmed_by_frf(modes: list[IdentifiedMode], io_modes: tuple[FrfMode, ...], frf: Frf, *, coherence: float = 0.8,
                       rel: float = 0.02, resolved_from_hz: float = 0.0) -> tuple[list[IdentifiedMode], list[tuple[float, str]]]:
-    """Output-only modes where the measured input explains the outputs (coherence >= 0.5) must
-    show in the FRFs too (the nearest to an FRF mode, within 2 % or 3σ): otherwise the pole is the input's own
-    colour (a support's motion spectrum), not the structure's. Where the coherence is low the
-    response has another, unmeasured excitation, and the output-only mode stands; so does a mode
+    """Output-only modes where the measured input explains the outputs (coherence >= 0.8, the
+    level at which :func:`frf_modes` lists an FRF mode at all) must show in the FRFs too (the
+    nearest to an FRF mode, within 2 % or 3σ): otherwise the pole is the input's own colour (a
+    support's motion spectrum), not the structure's. Where the coherence is lower the response
+    has another, unmeasured excitation as well (a distributed load), the FRFs could not show a
+    resonance there anyway, and the output-only mode stands; so does a mode
     below ``resolved_from_hz``, where the FRFs' segments hold too few of its cycles to fit it (a
     pendulum mode the support drives)."""
     keep, dropped = [], []
