@@ -2,14 +2,16 @@
 curvature change and damage flags (paper Section 3.5). Pure numerics: arrays in, small frozen
 results out; no I/O. Lower layer: imports neither the service nor the web."""
 
-from ._analyze import AnalysisResult, ModeSummary, analyze
-from ._chart import EwmaChart
+from ._alarms import AlarmEvent, AlarmLogic
+from ._analyze import AnalysisResult, ModeSummary, analyze, learn_baseline
+from ._chart import EwmaChart, chart_level
 from ._config import AnalysisConfig
 from ._curvature import CurvatureChange, beam_third, curvature_change, curvature_field, curvature_shape
 from ._damping import DampingEstimate, bandpass, combine_estimates, envelope_decay, find_decay_segments, log_decrement, random_decrement
 from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
 from ._location import DamageLocation, locate_damage
-from ._monitor import Baseline, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model
+from ._engine import EngineWindow, MonitoringEngine
+from ._monitor import Baseline, BaselineError, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model, support_acceleration
 from ._oma import (
     IdentifiedMode, ModalIdentification, OmaConfig, OmaResult, OmaWindow, OperationalModalAnalysis, damping_estimates, identify_modes,
     identify_windows, prepare_band, subspace_damping, tracked_frequency,
@@ -23,6 +25,9 @@ from ._ssi import (
 from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, stabilisation_diagram
 
 __all__ = [
+    # the one engine: window loop, monitor, alarm path
+    "AlarmEvent", "AlarmLogic", "BaselineError", "EngineWindow", "MonitoringEngine", "chart_level", "learn_baseline",
+    "support_acceleration",
     "AnalysisConfig", "AnalysisResult", "Baseline", "BaselineMode", "CurvatureChange", "DamageLocation", "DampingEstimate",
     "EwmaChart", "ModalMonitor", "ModeEstimate", "ModeSummary", "Peak", "Spectrum", "WindowResult",
     "amplitude_spectrum", "analyze", "averaged_spectrum", "bandpass", "beam_third", "combine_estimates",

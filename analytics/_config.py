@@ -20,8 +20,20 @@ class AnalysisConfig(BaseModel):
     min_prominence: float = Field(2.0, ge=1, description="minimum peak prominence, amplitude ratio [2]")
     track_gain: float = Field(0.2, gt=0, le=1, description="gain of the tracked reference frequency update [0.2]")
     min_confidence: float = Field(0.3, ge=0, le=1, description="estimates below this confidence are not used [0.3]")
-    forced_fraction: float = Field(0.05, ge=0, le=1, description="window is 'forced' if the bearing moves this fraction of it [0.05]")
-    bearing_threshold_m: float = Field(5e-4, gt=0, description="bearing displacement counted as motion, m [5e-4]")
+    forced_fraction: float = Field(0.05, ge=0, le=1, description="a window is a free decay only if the support moves at most this fraction of it [0.05]")
+    bearing_threshold_m: float = Field(5e-4, gt=0, description="support displacement counted as motion, m [5e-4]")
+    excitation_floor_ratio: float = Field(
+        30.0, gt=1, description="a window is 'forced' (distrusted) when the support acceleration's spectrum has a line within "
+        "excitation_tolerance of a tracked mode standing this many times above its own floor there, or one line holding half its "
+        "power [30: broadband noise peaks at ~6, at most ~12, over its median in 60 s windows]")
+    excitation_tolerance: float = Field(0.05, gt=0, lt=0.5, description="a line this close (relative) to a tracked mode is 'near' it [0.05]")
+    band_low_fraction: float = Field(0.5, gt=0, lt=1, description="the identification band starts at this fraction of the lowest tracked mode [0.5]")
+    band_high_fraction: float = Field(1.3, gt=1, description="… and ends at this multiple of the highest (at most 0.45·fs) [1.3]")
+    max_order: int | None = Field(None, ge=4, le=200, description="largest SSI model order [None: 4 per tracked mode + 4, 16 … 40]")
+    cross_check_bins: float = Field(1.5, gt=0, description="a subspace mode is confirmed by a spectral peak of its unit deformation within this "
+                                    "many resolution bins (1/window) or 3σ [1.5]")
+    track_similarity_min: float = Field(0.3, ge=0, le=1, description="a subspace mode is assigned to a tracked mode only if its shape's MAC with "
+                                        "the baseline shape (before one: its energy share on the carrying unit deformation) reaches this [0.3]")
     decay_ratio: float = Field(0.6, gt=0, lt=1, description="RMS(last quarter)/RMS(first quarter) below this: 'free_decay' [0.6]")
     quiet_rms: float = Field(1e-9, ge=0, description="RMS of b below this: 'quiet' window, untrusted [1e-9]")
     bandpass_rel: float = Field(0.2, gt=0, lt=1, description="band-pass half width for damping, relative to f [0.2]")
@@ -40,14 +52,15 @@ class AnalysisConfig(BaseModel):
                                          "frequency charts' 5 because the statistic's upper tail is longer than a normal one (healthy simulated "
                                          "30 min runs, ideal and realistic: at most 3.6)")
     clear_sigma: float = Field(2.0, ge=0, description="an alarm clears below this level, σ of the EWMA [2]")
-    hold_windows: int = Field(3, ge=1, description="consecutive windows beyond a level to raise or clear [3]")
+    hold_windows: int = Field(3, ge=1, description="consecutive windows at or beyond a chart's warning (alarm) line to raise a warning (an alarm) [3]")
+    clear_windows: int = Field(3, ge=1, description="consecutive windows below clear_sigma to clear a raised alarm [3]")
     chart_min_cycles: float = Field(30.0, ge=0, description="a mode enters its frequency chart only if a window holds this many of its cycles [30]: "
                                     "with fewer (the 0.3 Hz pendulum mode in a 60 s window: 18) the peak is biased by the window's low-frequency "
                                     "leakage and its scatter heavy-tailed; the mode is still tracked and reported")
     min_sigma_rel: float = Field(2e-4, gt=0, description="floor of a mode's frequency scatter, relative [2e-4]")
     curvature_memory_windows: float = Field(10.0, ge=1, description="time constant of the curvature cross-spectra average, windows [10]")
     curvature_min_std: float = Field(0.005, gt=0, description="floor of one window's curvature-shape scatter (unit-RMS shape) [0.005]: a few high-SNR windows (free decays) underrate the scatter between events")
-    spectrum_memory_windows: float = Field(1.0, ge=1, description="time constant of the power-spectra average the per-window frequencies are read from, windows [1: each window alone]; > 1 smooths the estimates, which the baseline scatter then underrates")
+    spectrum_memory_windows: float = Field(1.0, ge=1, description="time constant of the power-spectra average the spectral fallback reads a mode from when the subspace identification finds none, windows [1: each window alone]")
 
     def chart_levels(self, kind: str) -> tuple[float, float]:
         """(warning, alarm) levels in σ of the ``"frequency"`` or ``"curvature"`` control charts."""

@@ -280,6 +280,7 @@ def classify_excitation(
     line_fraction: float = 0.5,
     tolerance: float = 0.05,
     quiet_rms: float = 0.0,
+    floor_ratio: float | None = None,
 ) -> ExcitationClass:
     """Classify a window's measured input (support acceleration) from its spectrum.
 
@@ -297,6 +298,12 @@ def classify_excitation(
         A line within this relative distance of a tracked mode is "near" it [0.05].
     quiet_rms : float
         Inputs with an RMS at or below this are "quiet" [0].
+    floor_ratio : float, optional
+        Also "deterministic_near_mode" when, within ``tolerance`` (at least two resolution bins)
+        of a tracked mode, the input's periodogram has a line this many times above its median
+        over ±4·tolerance there: a weak sine at a mode forces the response in the mode's
+        bandwidth even when the broadband input carries most of the power. Broadband noise
+        peaks at about 6, rarely 12, times its median [None: off].
 
     Returns
     -------
@@ -334,6 +341,21 @@ def classify_excitation(
     frac = float(P[max(1, k - lobe): k + lobe + 1].sum() / P.sum())
     line = float(f[k])
     near = float(tr[np.argmin(np.abs(tr - line))]) if tr.size else None
+    if floor_ratio is not None:
+        if not floor_ratio > 1:
+            raise ValueError(f"{floor_ratio=} must be > 1")
+        res = fs / n
+        for fm in tr:
+            half = max(tolerance * fm, 2 * res)
+            inner = (f >= fm - half) & (f <= fm + half) & (f > 0)
+            ring = (f >= fm - 4 * half) & (f <= fm + 4 * half) & (f > 0)
+            if not inner.any() or ring.sum() < 8:
+                continue
+            floor = float(np.median(P[ring]))
+            j = int(np.flatnonzero(inner)[np.argmax(P[inner])])
+            if floor > 0 and P[j] >= floor_ratio * floor:
+                share = float(P[max(1, j - lobe): j + lobe + 1].sum() / P.sum())
+                return ExcitationClass("deterministic_near_mode", float(f[j]), share, float(fm), rms)
     if frac < line_fraction:
         return ExcitationClass("broadband", line, frac, near, rms)
     if near is not None and abs(line - near) <= tolerance * near:

@@ -1,25 +1,31 @@
-"""ModalMonitor: window-by-window classification, tracking, curvature, baseline and control charts."""
+"""ModalMonitor: one window at a time — excitation class, identification (SSI-cov cross-checked
+against the amplitude spectra), mode tracking, curvature, baseline, control charts and alarms."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from contract import CURVATURE_CHART, chart_name
+from contract import CURVATURE_CHART, ChartDocument, chart_name
 
+from ._alarms import AlarmEvent, AlarmLogic
 from ._chart import EwmaChart
 from ._config import AnalysisConfig
 from ._curvature import CurvatureChange, curvature_change, curvature_shape
-from ._location import DamageLocation, locate_damage
 from ._damping import _moving
-from ._peaks import find_peaks
+from ._frf import ExcitationClass, classify_excitation
+from ._location import DamageLocation, locate_damage
+from ._oma import IdentifiedMode, ModalIdentification, OmaConfig, identify_modes
+from ._peaks import Peak, find_peaks
 from ._spectrum import Spectrum, amplitude_spectrum, cross_spectra
+from ._ssi import modal_assurance
 from ._validate import as_signal, as_times, check_fs
 
-__all__ = ["Baseline", "BaselineMode", "ModeEstimate", "WindowResult", "ModalMonitor", "fit_temperature_model"]
+__all__ = ["Baseline", "BaselineError", "BaselineMode", "ModeEstimate", "WindowResult", "ModalMonitor", "fit_temperature_model",
+           "support_acceleration"]
 
 WINDOW_KINDS = ("forced", "free_decay", "ambient", "quiet")
 
@@ -28,15 +34,50 @@ def _none(x: float | None) -> float | None:
     return None if x is None or not math.isfinite(x) else float(x)
 
 
+def _round(x: float | None, digits: int = 6) -> float | None:
+    x = _none(x)
+    return None if x is None else round(x, digits)
+
+
 @dataclass(frozen=True)
 class ModeEstimate:
-    """One mode in one window: frequency_hz (Hz, None if no peak), amplitude (unit of b), confidence 0..1."""
+    """One tracked mode in one window.
+
+    frequency_hz : Hz (None if the window shows no such mode); method : "ssi" (a pole cluster of
+    the subspace identification, cross-checked against the spectrum) or "spectrum" (no subspace
+    mode in the band: the amplitude spectrum's peak, reported but neither charted nor learnt).
+    amplitude : the unit deformation's spectral amplitude there (unit of b); confidence 0..1.
+    frequency_std_hz, damping_ratio, damping_std : the subspace estimate and its 1σ (jackknife
+    over data segments and the scatter across model orders). mpc : modal phase collinearity of
+    the shape; mac : MAC of the shape against the baseline's (None before one); shape : (Γ,) real
+    shape over the unit deformations (unit norm). spectral_hz : the amplitude spectrum's peak
+    nearest the estimate (the cross-check; None if it shows none); confirmed : the two agree
+    within the spectrum's resolution (or 3σ).
+    """
 
     mode: int
     unit: int
     frequency_hz: float | None
     amplitude: float | None
     confidence: float
+    frequency_std_hz: float | None = None
+    damping_ratio: float | None = None
+    damping_std: float | None = None
+    mpc: float | None = None
+    mac: float | None = None
+    shape: tuple[float, ...] | None = None
+    spectral_hz: float | None = None
+    confirmed: bool = False
+    method: str | None = None
+
+    def as_dict(self) -> dict:
+        return {
+            "mode": self.mode, "unit": self.unit, "frequency_hz": _none(self.frequency_hz), "amplitude": _none(self.amplitude),
+            "confidence": round(self.confidence, 4), "method": self.method,
+            "frequency_std_hz": _none(self.frequency_std_hz), "damping_ratio": _none(self.damping_ratio),
+            "damping_std": _none(self.damping_std), "damping_method": "ssi" if self.method == "ssi" and self.damping_ratio is not None else None,
+            "mpc": _round(self.mpc, 4), "mac": _round(self.mac, 4), "spectral_hz": _none(self.spectral_hz), "confirmed": self.confirmed,
+        }
 
 
 @dataclass(frozen=True)
@@ -44,7 +85,9 @@ class BaselineMode:
     """Healthy reference of one mode: f = f_ref·(1 + slope·(T − T_ref)) ± sigma_rel·f_ref.
 
     f_ref_hz (Hz), temperature_ref_c (°C), slope_per_k (1/K, relative), sigma_rel (relative 1σ
-    scatter of one window's estimate), rho (lag-1 correlation of successive windows' residuals).
+    scatter of one window's estimate), rho (lag-1 correlation of successive windows' residuals),
+    windows (windows behind it), shape ((Γ,) mean real shape over the unit deformations, unit
+    norm; () when none was learnt).
     """
 
     mode: int
@@ -55,6 +98,7 @@ class BaselineMode:
     sigma_rel: float
     rho: float
     windows: int
+    shape: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -66,7 +110,8 @@ class Baseline:
     statistic's healthy mean and std (1 and √(2/p) of the χ²/p statistic, p its degrees of
     freedom); curvature_index_rho : lag-1 correlation of successive windows' shape deviations;
     curvature_shape_std : (modes,) 1σ of one window's unit-RMS shape per station (pooled over
-    η); curvature_windows : windows behind the baseline shapes; start_s/end_s : the learnt period (s).
+    η); curvature_windows : windows behind the baseline shapes; start_s/end_s : the learnt period
+    (s); trusted_windows, window_s : the trusted windows it was learnt from and their length (s).
     """
 
     modes: tuple[BaselineMode, ...]
@@ -78,10 +123,12 @@ class Baseline:
     end_s: float
     curvature_shape_std: tuple[float, ...] = ()
     curvature_windows: int = 0
+    trusted_windows: int = 0
+    window_s: float = 0.0
 
     def to_dict(self) -> dict:
         return {
-            "modes": [vars(m) | {} for m in self.modes],
+            "modes": [{**vars(m), "shape": list(m.shape)} for m in self.modes],
             "curvature_shapes": np.asarray(self.curvature_shapes).tolist(),
             "curvature_index_mean": self.curvature_index_mean,
             "curvature_index_std": self.curvature_index_std,
@@ -90,6 +137,8 @@ class Baseline:
             "end_s": self.end_s,
             "curvature_shape_std": list(self.curvature_shape_std),
             "curvature_windows": self.curvature_windows,
+            "trusted_windows": self.trusted_windows,
+            "window_s": self.window_s,
         }
 
     @classmethod
@@ -97,8 +146,9 @@ class Baseline:
         if not isinstance(d, dict):
             raise ValueError(f"baseline must be a dict, got {type(d).__name__}")
         try:
+            modes = tuple(BaselineMode(**{**m, "shape": tuple(float(v) for v in m.get("shape", ()))}) for m in d["modes"])
             return cls(
-                tuple(BaselineMode(**m) for m in d["modes"]),
+                modes,
                 np.asarray(d["curvature_shapes"], dtype=float),
                 float(d["curvature_index_mean"]),
                 float(d["curvature_index_std"]),
@@ -107,9 +157,32 @@ class Baseline:
                 float(d["end_s"]),
                 tuple(float(x) for x in d.get("curvature_shape_std", ())),
                 int(d.get("curvature_windows", 0)),
+                int(d.get("trusted_windows", 0)),
+                float(d.get("window_s", 0.0)),
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"baseline dict is malformed: {exc}") from exc
+
+    def problems(self, config: AnalysisConfig) -> dict[int, str]:
+        """Mode → why it is not charted by this baseline (too few windows with an estimate, too
+        few cycles per window); modes that are charted are absent."""
+        out = {}
+        minutes = self.trusted_windows * self.window_s * (1 - config.overlap) / 60.0 if self.window_s else 0.0
+        for m in self.modes:
+            why = []
+            if m.windows < config.baseline_min_windows:
+                why.append(f"{m.windows} windows with a subspace estimate of {self.trusted_windows} trusted "
+                           f"({minutes:.1f} minutes of trusted data), {config.baseline_min_windows} needed")
+            cycles = m.f_ref_hz * self.window_s if self.window_s else float("inf")
+            if cycles < config.chart_min_cycles:
+                why.append(f"{cycles:.0f} cycles per {self.window_s:g} s window, {config.chart_min_cycles:g} needed to chart it")
+            if why:
+                out[m.mode] = "; ".join(why)
+        return out
+
+
+class BaselineError(ValueError):
+    """No baseline could be learnt; the message names each mode and what it lacked."""
 
 
 @dataclass(frozen=True)
@@ -119,9 +192,12 @@ class WindowResult:
     start_s/end_s (s), kind ("forced" | "free_decay" | "ambient" | "quiet"), trusted (used for
     eigenfrequencies), temperature_c (°C or None), estimates per mode, frequency_scores (EWMA
     score in σ per mode, None before a baseline), curvature (change against the baseline or
-    None), curvature_score (σ), levels (chart name → "ok"/"warning"/"alarm"), flags (raised now),
-    location (the model-assisted damage location of the change since the baseline, when damage
-    signatures were given, else None).
+    None), curvature_score (σ), levels (chart name → "ok"/"warning"/"alarm" this window), flags
+    (charts in alarm now), location (the model-assisted damage location of the change since the
+    baseline, when damage signatures were given, else None), excitation (the measured input's
+    class, None without one), charts (the charts judged, as contract documents), alarm_events
+    (alarms raised, escalated or cleared by this window), spectrum (the window's Hamming-windowed,
+    zero-padded amplitude spectra of b: the cross-check and the dashboard's).
     """
 
     start_s: float
@@ -136,18 +212,23 @@ class WindowResult:
     levels: dict
     flags: tuple[dict, ...]
     location: DamageLocation | None = None
+    excitation: ExcitationClass | None = None
+    charts: tuple[ChartDocument, ...] = ()
+    alarm_events: tuple[AlarmEvent, ...] = ()
+    spectrum: Spectrum | None = field(default=None, repr=False, compare=False)
 
     def as_dict(self) -> dict:
+        exc = self.excitation
         return {
             "start_s": self.start_s,
             "end_s": self.end_s,
             "kind": self.kind,
             "trusted": self.trusted,
             "temperature_c": _none(self.temperature_c),
-            "modes": [
-                {"mode": e.mode, "unit": e.unit, "frequency_hz": _none(e.frequency_hz), "amplitude": _none(e.amplitude), "confidence": round(e.confidence, 4)}
-                for e in self.estimates
-            ],
+            "excitation": None if exc is None else {"kind": exc.kind, "line_hz": _none(exc.line_hz),
+                                                    "line_fraction": _round(exc.line_fraction, 4),
+                                                    "nearest_mode_hz": _none(exc.nearest_mode_hz)},
+            "modes": [e.as_dict() for e in self.estimates],
             "frequency_scores_sigma": [_none(s) for s in self.frequency_scores],
             "curvature_index": None if self.curvature is None else _none(self.curvature.total),
             "curvature_score_sigma": _none(self.curvature_score),
@@ -155,8 +236,22 @@ class WindowResult:
             "curvature_third": None if self.curvature is None else self.curvature.third,
             "levels": dict(self.levels),
             "flags": [dict(f) for f in self.flags],
+            "alarm_events": [{"action": e.action, "chart": e.chart, "level": e.level, "at_s": e.at_s, "since_s": e.since_s,
+                              "score_sigma": _none(e.score_sigma), "threshold_sigma": e.threshold_sigma} for e in self.alarm_events],
             "location": None if self.location is None else self.location.as_dict(),
         }
+
+
+def support_acceleration(displacement: object, fs: float) -> np.ndarray:
+    """The support's acceleration (m/s²) from its displacement d(t) (N,) in m at fs Hz: the second
+    central difference (the ends repeat their neighbours). Its gain is sinc²(f/fs) of the exact
+    d̈, 0.995 at fs/27: the band the identification uses is far below."""
+    fs = check_fs(fs)
+    d = as_signal("displacement", displacement, min_len=3, ndim=(1,))
+    a = np.empty_like(d)
+    a[1:-1] = (d[2:] - 2 * d[1:-1] + d[:-2]) * fs * fs
+    a[0], a[-1] = a[1], a[-2]
+    return a
 
 
 def fit_temperature_model(
@@ -198,29 +293,38 @@ class _Record:
     temperature: float | None
     freqs: list
     confs: list
+    shapes: list = field(default_factory=list)
+    stds: list = field(default_factory=list)
 
 
 class ModalMonitor:
     """Incremental modal analytics, one window at a time.
 
     expected_hz : per unit deformation the expected eigenfrequencies (Hz), e.g.
-        ((0.301, 0.859), (1.906,), (3.49,), (5.6,)); modes are numbered 1.. in this order.
+        ((0.301, 0.859), (1.906,), (3.49,), (5.6,)) (the model's ``UnitDeformations.frequencies_hz``);
+        modes are numbered 1.. in this order (the contract's ``ModeMap``).
     curvature_shapes : (len(η), Γ) s''_χ at stations_eta (1/m²); stations_eta (len(η),) m from the bearing.
     fs : sample rate of b (Hz); baseline : a stored Baseline, else one is learnt from the first
-    ``config.baseline_s`` seconds of trusted windows; beam_length : m (default max(stations_eta));
-    signatures : predicted damage signatures (``estimator.damage_signatures`` or an object/dict
-    with eta, kind, frequency_shift (M, modes), curvature_change (M, modes, len(η)) at
-    stations_eta) for the model-assisted location of a change; None: the model-free curvature
-    index locates it.
+    ``config.baseline_s`` seconds of trusted windows (``learn="record"``: from every window until
+    :meth:`fit_baseline` is called); beam_length : m (default max(stations_eta)); signatures :
+    predicted damage signatures (``estimator.damage_signatures`` or an object/dict with eta, kind,
+    frequency_shift (M, modes), curvature_change (M, modes, len(η)) at stations_eta) for the
+    model-assisted location of a change; None: the model-free curvature index locates it.
 
-    Per trusted window the mode frequencies are the peaks of the power spectra averaged over the
-    last ``config.spectrum_memory_windows`` windows (EWMA), curvature shapes come from the cross
-    spectra averaged over ``config.curvature_memory_windows``. The curvature chart watches
-    Q = mean over modes and stations of (Δshape/σ)², Δshape the averaged shapes' change against
-    the baseline's, σ its healthy scatter (a delete-one jackknife over the baseline's windows,
-    scaled to the average's memory, floored by ``config.curvature_min_std``): Q ~ χ²_p/p for a
-    healthy structure, charted as (Q − 1)/√(2/p) without further smoothing (hold and hysteresis
-    as the frequency charts). Curvature shapes use stationary ('ambient') windows only.
+    Per window: the excitation class from the measured support motion (``bearing``: a window is
+    *forced*, so not trusted, only when its input is deterministic with a line at or near a
+    tracked mode — a randomly moving support is operational data and an input), then in trusted
+    windows a covariance-driven SSI of b (band around the tracked modes, automated pole selection
+    and clustering, the support acceleration as a measured input for the FRF cross-check), the
+    subspace modes assigned to the tracked modes by frequency and shape (MAC against the baseline's
+    shapes once there is one) and cross-checked against the Hamming-windowed, zero-padded
+    amplitude spectra of b. Curvature shapes come from the cross spectra at the tracked
+    frequencies averaged over ``config.curvature_memory_windows`` ambient windows. The curvature
+    chart watches Q = mean over modes and stations of (Δshape/σ)², Δshape the averaged shapes'
+    change against the baseline's, σ its healthy scatter (a delete-one jackknife over the
+    baseline's windows, scaled to the average's memory, floored by ``config.curvature_min_std``):
+    Q ~ χ²_p/p for a healthy structure, charted as (Q − 1)/√(2/p) without further smoothing. The
+    charts' levels become alarms in :class:`analytics.AlarmLogic` (the one alarm path).
     """
 
     def __init__(
@@ -234,11 +338,15 @@ class ModalMonitor:
         baseline: Baseline | None = None,
         beam_length: float | None = None,
         signatures: object | None = None,
+        learn: str = "period",
     ):
         self.fs = check_fs(fs)
         self.config = config or AnalysisConfig()
         if not isinstance(self.config, AnalysisConfig):
             raise ValueError(f"config must be an AnalysisConfig, got {type(self.config).__name__}")
+        if learn not in ("period", "record"):
+            raise ValueError(f"{learn=} must be 'period' (the first config.baseline_s of trusted windows) or 'record' (all)")
+        self.learn = learn
         self.S = as_signal("curvature_shapes", curvature_shapes, min_len=2, ndim=(2,))
         self.eta = as_signal("stations_eta", stations_eta, min_len=2, ndim=(1,))
         if self.eta.size != self.S.shape[0]:
@@ -268,14 +376,16 @@ class ModalMonitor:
             raise ValueError(f"baseline has {len(baseline.modes)} modes, expected_hz gives {len(self.f0)}")
         self._records: list[_Record] = []
         self._first_trusted: float | None = None
+        self._trusted = 0  # trusted windows seen while learning
         self._cross = None  # (modes, Γ) complex EWMA of cross spectra
         self._cross_sum = None
         self._cross_windows = 0  # ambient windows in the EWMA (its scatter settles after the memory)
-        self._ci_hist: list[float] = []
+        self._ci_hist: list = []
         self._charts: list[EwmaChart] = []
         self._ci_chart: EwmaChart | None = None
-        self._alarms: dict = {}
-        self._power = None  # EWMA of the trusted windows' power spectra
+        c = self.config
+        self.alarms = AlarmLogic(raise_windows=c.hold_windows, clear_windows=c.clear_windows, clear_sigma=c.clear_sigma)
+        self._power = None  # EWMA of the trusted windows' power spectra (the spectral fallback)
         self.signatures = signatures
         if signatures is not None:
             sc = signatures.get("curvature_change") if isinstance(signatures, dict) else getattr(signatures, "curvature_change", None)
@@ -289,10 +399,20 @@ class ModalMonitor:
     def n_modes(self) -> int:
         return len(self.ref)
 
-    def _chart(self, inflation: float) -> EwmaChart:
+    @property
+    def oma_config(self) -> OmaConfig | None:
+        """The SSI settings of a window: the band around the tracked modes (None before there are modes)."""
+        if not self.f0:
+            return None
         c = self.config
-        warning, alarm = c.chart_levels("frequency")
-        return EwmaChart(c.ewma_lambda, warning, alarm, c.clear_sigma, c.hold_windows, inflation)
+        lo = c.band_low_fraction * min(self.f0)
+        hi = min(c.band_high_fraction * max(self.f0), 0.45 * self.fs)
+        order = c.max_order or min(40, max(16, 4 * len(self.f0) + 4))
+        return OmaConfig(fmin_hz=lo, fmax_hz=hi, max_order=order)
+
+    def _chart(self, inflation: float) -> EwmaChart:
+        warning, alarm = self.config.chart_levels("frequency")
+        return EwmaChart(self.config.ewma_lambda, warning, alarm, inflation)
 
     def _arm(self, baseline: Baseline) -> None:
         if not self.ref:
@@ -300,10 +420,9 @@ class ModalMonitor:
             self.f0 = [m.f_ref_hz for m in baseline.modes]
             self.ref = list(self.f0)
         self._charts = [self._chart(math.sqrt((1 + m.rho) / (1 - m.rho))) for m in baseline.modes]
-        c = self.config
         # the statistic already averages (cross spectra over curvature_memory_windows): no second EWMA
-        warning, alarm = c.chart_levels("curvature")
-        self._ci_chart = EwmaChart(1.0, warning, alarm, c.clear_sigma, c.hold_windows, 1.0)
+        warning, alarm = self.config.chart_levels("curvature")
+        self._ci_chart = EwmaChart(1.0, warning, alarm, 1.0)
 
     def _init_modes(self, spec) -> None:
         for u in range(self.gamma):
@@ -313,50 +432,123 @@ class ModalMonitor:
                 self.f0.append(pk[0].frequency_hz)
         self.ref = list(self.f0)
 
+    def _baseline_shapes(self) -> list[np.ndarray | None]:
+        if self.baseline is None:
+            return [None] * self.n_modes
+        return [np.asarray(m.shape, dtype=float) if len(m.shape) == self.gamma else None for m in self.baseline.modes]
+
     # -- one window ------------------------------------------------------------------------
-    def _classify(self, b: np.ndarray, bearing: np.ndarray | None) -> str:
+    def _classify(self, b: np.ndarray, support: np.ndarray | None, acc: np.ndarray | None) -> tuple[str, ExcitationClass | None]:
         c = self.config
         rms = float(np.sqrt(np.mean((b - b.mean(axis=0)) ** 2)))
+        exc = None
+        if acc is not None and self.ref:
+            exc = classify_excitation(acc, self.fs, self.ref, tolerance=c.excitation_tolerance, floor_ratio=c.excitation_floor_ratio)
         if rms <= c.quiet_rms:
-            return "quiet"
-        if bearing is not None and np.mean(_moving(bearing, self.fs, c.bearing_threshold_m)) > c.forced_fraction:
-            return "forced"
+            return "quiet", exc
+        if exc is not None and exc.kind == "deterministic_near_mode":
+            return "forced", exc
         q = b.shape[0] // 4
         x = b - b.mean(axis=0)
         e = [float(np.sqrt(np.mean(x[k * q : (k + 1) * q] ** 2))) for k in range(4)]
         steady = all(e[k + 1] < e[k] for k in range(3))
-        return "free_decay" if e[0] > 0 and steady and e[3] / e[0] < c.decay_ratio else "ambient"
+        still = support is None or float(np.mean(_moving(support, self.fs, c.bearing_threshold_m))) <= c.forced_fraction
+        return ("free_decay" if e[0] > 0 and steady and e[3] / e[0] < c.decay_ratio and still else "ambient"), exc
 
-    def _estimate(self, spec) -> list[ModeEstimate]:
+    def _identify(self, b: np.ndarray, acc: np.ndarray | None) -> ModalIdentification | None:
+        cfg = self.oma_config
+        if cfg is None:
+            return None
+        try:
+            return identify_modes(b, self.fs, config=cfg, inputs=acc, tracked_hz=self.ref, frf_uncertainty=False)
+        except (ValueError, np.linalg.LinAlgError):
+            return None
+
+    def _spectral(self, spec: Spectrum) -> list[ModeEstimate | None]:
+        """Per tracked mode the peak of its unit deformation's amplitude spectrum (assigned by
+        frequency, peaks of one unit shared out to its modes), or None."""
         c = self.config
         out: list[ModeEstimate | None] = [None] * self.n_modes
         for u in sorted(set(self.units)):
             idx = [i for i, uu in enumerate(self.units) if uu == u]
             lo = min(self.ref[i] for i in idx) * (1 - c.search_rel)
             hi = max(self.ref[i] for i in idx) * (1 + c.search_rel)
-            peaks = [p for p in find_peaks(spec, column=u, fmin=max(lo, 0.0), fmax=min(hi, self.fs / 2), min_prominence=c.min_prominence, max_peaks=12)]
-            if peaks:
-                cost = np.full((len(idx), len(peaks)), 1e6)
-                for a, i in enumerate(idx):
-                    for k, p in enumerate(peaks):
-                        dev = abs(math.log(p.frequency_hz / self.ref[i])) / c.search_rel
-                        if dev <= 1:
-                            cost[a, k] = dev**2 - 0.1 * math.log(p.amplitude / peaks[0].amplitude)
-                rows, cols = linear_sum_assignment(cost)
-                for a, k in zip(rows, cols):
-                    if cost[a, k] >= 1e6:
-                        continue
-                    i, p = idx[a], peaks[k]
+            peaks = list(find_peaks(spec, column=u, fmin=max(lo, 0.0), fmax=min(hi, self.fs / 2), min_prominence=c.min_prominence, max_peaks=12))
+            if not peaks:
+                continue
+            cost = np.full((len(idx), len(peaks)), 1e6)
+            for a, i in enumerate(idx):
+                for k, p in enumerate(peaks):
                     dev = abs(math.log(p.frequency_hz / self.ref[i])) / c.search_rel
-                    rivals = [q.amplitude for q in peaks if q is not p and abs(math.log(q.frequency_hz / p.frequency_hz)) < 0.5 * c.search_rel]
-                    coupling = 1.0 - (max(rivals) / p.amplitude if rivals else 0.0)
-                    conf = (1 - 1 / p.prominence) * max(0.0, coupling) * math.exp(-(dev**2))
-                    out[i] = ModeEstimate(i + 1, u + 1, p.frequency_hz, p.amplitude, float(np.clip(conf, 0, 1)))
+                    if dev <= 1:
+                        cost[a, k] = dev**2 - 0.1 * math.log(p.amplitude / peaks[0].amplitude)
+            rows, cols = linear_sum_assignment(cost)
+            for a, k in zip(rows.tolist(), cols.tolist()):
+                if cost[a, k] >= 1e6:
+                    continue
+                i, p = idx[a], peaks[k]
+                dev = abs(math.log(p.frequency_hz / self.ref[i])) / c.search_rel
+                rivals = [q.amplitude for q in peaks if q is not p and abs(math.log(q.frequency_hz / p.frequency_hz)) < 0.5 * c.search_rel]
+                coupling = 1.0 - (max(rivals) / p.amplitude if rivals else 0.0)
+                conf = (1 - 1 / p.prominence) * max(0.0, coupling) * math.exp(-(dev**2))
+                out[i] = ModeEstimate(i + 1, u + 1, p.frequency_hz, p.amplitude, float(np.clip(conf, 0, 1)), method="spectrum")
+        return out
+
+    def _estimate(self, ident: ModalIdentification | None, spec: Spectrum) -> list[ModeEstimate]:
+        """The subspace modes assigned to the tracked modes and cross-checked against the spectra."""
+        c = self.config
+        modes: tuple[IdentifiedMode, ...] = () if ident is None else ident.modes
+        refs = self._baseline_shapes()
+        n_samples = spec.n_samples
+        resolution = self.fs / n_samples  # Hz, of the window
+        peaks_of: dict[int, tuple[Peak, ...]] = {}
+        out: list[ModeEstimate | None] = [None] * self.n_modes
+        if modes:
+            cost = np.full((self.n_modes, len(modes)), 1e6)
+            for i in range(self.n_modes):
+                u = self.units[i]
+                for j, m in enumerate(modes):
+                    dev = abs(math.log(m.frequency_hz / self.ref[i])) / c.search_rel
+                    if dev > 1:
+                        continue
+                    shape = np.asarray(m.shape)
+                    sim = float(modal_assurance(shape[None], refs[i][None])[0, 0]) if refs[i] is not None else float(shape[u] ** 2 / (shape @ shape))
+                    if sim < c.track_similarity_min:
+                        continue
+                    cost[i, j] = dev**2 + (1 - sim) - 0.1 * m.contribution
+            rows, cols = linear_sum_assignment(cost)
+            for i, j in zip(rows.tolist(), cols.tolist()):
+                if cost[i, j] >= 1e6:
+                    continue
+                m, u = modes[j], self.units[i]
+                if u not in peaks_of:
+                    idx = [k for k, uu in enumerate(self.units) if uu == u]
+                    lo = min(self.ref[k] for k in idx) * (1 - c.search_rel)
+                    hi = max(self.ref[k] for k in idx) * (1 + c.search_rel)
+                    peaks_of[u] = find_peaks(spec, column=u, fmin=max(lo, 0.0), fmax=min(hi, self.fs / 2), min_prominence=c.min_prominence,
+                                             max_peaks=12)
+                near = min(peaks_of[u], key=lambda p: abs(p.frequency_hz - m.frequency_hz), default=None)
+                tol = max(c.cross_check_bins * resolution, 3 * m.frequency_std_hz if math.isfinite(m.frequency_std_hz) else 0.0)
+                confirmed = near is not None and abs(near.frequency_hz - m.frequency_hz) <= tol
+                amp = near.amplitude if confirmed else float(np.interp(m.frequency_hz, spec.frequencies, spec.amplitude[:, u]))
+                dev = abs(math.log(m.frequency_hz / self.ref[i])) / c.search_rel
+                conf = float(np.clip(m.mpc, 0.0, 1.0)) * math.exp(-(dev**2)) * (1.0 if confirmed else 0.5)
+                mac = None if refs[i] is None else float(modal_assurance(np.asarray(m.shape)[None], refs[i][None])[0, 0])
+                out[i] = ModeEstimate(i + 1, u + 1, m.frequency_hz, amp, float(np.clip(conf, 0, 1)), m.frequency_std_hz, m.damping_ratio,
+                                      m.damping_std, m.mpc, mac, tuple(m.shape), None if near is None else near.frequency_hz, confirmed, "ssi")
+        if any(e is None for e in out):
+            fallback = self._spectral(spec)
+            for i, e in enumerate(out):
+                if e is None and fallback[i] is not None:
+                    f = fallback[i]
+                    out[i] = ModeEstimate(f.mode, f.unit, f.frequency_hz, f.amplitude, 0.5 * f.confidence, spectral_hz=f.frequency_hz,
+                                          method="spectrum")
         return [e if e is not None else ModeEstimate(i + 1, self.units[i] + 1, None, None, 0.0) for i, e in enumerate(out)]
 
     def process_window(self, times: object, b: object, temperature: object | None = None, bearing: object | None = None) -> WindowResult:
         """Analyse one window: times (n,) s, b (n, Γ) m, temperature °C (scalar or (n,)) or None,
-        bearing displacement (n,) m or None. Returns the window's WindowResult."""
+        support displacement ``bearing`` (n,) m (the bearing sensor or the estimator's d) or None.
+        Returns the window's WindowResult."""
         B = as_signal("b", b, min_len=16, ndim=(2,))
         if B.shape[1] != self.gamma:
             raise ValueError(f"b has {B.shape[1]} columns, curvature_shapes has Γ={self.gamma}")
@@ -368,27 +560,31 @@ class ModalMonitor:
         if temperature is not None:
             T = float(np.mean(as_signal("temperature", np.atleast_1d(np.asarray(temperature, dtype=float)), min_len=1, ndim=(1,))))
         c = self.config
-        kind = self._classify(B, d)
+        acc = support_acceleration(d, self.fs) if d is not None and float(np.ptp(d)) > 0 else None
+        kind, excitation = self._classify(B, d, acc)
         trusted = kind in ("free_decay", "ambient")
         spec = amplitude_spectrum(B, self.fs, pad_factor=c.pad_factor, window=c.window)
+        fallback_spec = spec
         if trusted and c.spectrum_memory_windows > 1:
             p = spec.amplitude**2
             a = 1.0 / c.spectrum_memory_windows
             self._power = p if self._power is None or self._power.shape != p.shape else (1 - a) * self._power + a * p
-            spec = Spectrum(spec.frequencies, np.sqrt(self._power), spec.resolution_hz, spec.bin_spacing_hz, spec.coherent_gain,
-                            spec.enbw_bins, spec.enbw_hz, spec.window, spec.n_samples, spec.pad_factor, spec.averages)
+            fallback_spec = Spectrum(spec.frequencies, np.sqrt(self._power), spec.resolution_hz, spec.bin_spacing_hz, spec.coherent_gain,
+                                     spec.enbw_bins, spec.enbw_hz, spec.window, spec.n_samples, spec.pad_factor, spec.averages)
         if trusted and not self.ref:
             self._init_modes(spec)
-        est = self._estimate(spec) if (trusted and self.ref) else [ModeEstimate(i + 1, self.units[i] + 1, None, None, 0.0) for i in range(self.n_modes)]
+        if trusted and self.ref:
+            est = self._estimate(self._identify(B, acc), fallback_spec)
+        else:
+            est = [ModeEstimate(i + 1, self.units[i] + 1, None, None, 0.0) for i in range(self.n_modes)]
         t0, t1 = float(t[0]), float(t[-1] + 1 / self.fs)
         tmid = 0.5 * (t0 + t1)
         for i, e in enumerate(est):
             if e.frequency_hz is not None and e.confidence >= c.min_confidence:
                 self.ref[i] += c.track_gain * (e.frequency_hz - self.ref[i])
-        # curvature cross spectra at the tracked frequencies
+        # curvature cross spectra at the tracked frequencies, from stationary (ambient) windows
+        # only: a free decay's modal mix and amplitude change within the window
         change = None
-        # curvature shapes from stationary (ambient) windows only: a free decay's modal mix and
-        # amplitude change within the window, so its cross spectra are not comparable
         G = None
         if kind == "ambient" and self.ref:
             C = cross_spectra(B, self.fs, self.ref, window=c.window)  # (modes, Γ)
@@ -397,18 +593,22 @@ class ModalMonitor:
             self._cross = G if self._cross is None else (1 - a) * self._cross + a * G
             self._cross_sum = G if self._cross_sum is None else self._cross_sum + G
             self._cross_windows += 1
-        flags: list[dict] = []
         location = None
         scores: list[float | None] = [None] * self.n_modes
         ci_score = None
         levels: dict = {}
+        charts: list[ChartDocument] = []
         if trusted and self._first_trusted is None:
             self._first_trusted = t0
         if self.baseline is None and trusted and self.ref:
-            self._records.append(_Record(tmid, T, [e.frequency_hz for e in est], [e.confidence for e in est]))
+            self._trusted += 1
+            charted = [e.method == "ssi" for e in est]
+            self._records.append(_Record(tmid, T, [e.frequency_hz if ok else None for e, ok in zip(est, charted)],
+                                         [e.confidence for e in est], [e.shape if ok else None for e, ok in zip(est, charted)],
+                                         [e.frequency_std_hz if ok else None for e, ok in zip(est, charted)]))
             if G is not None:
                 self._ci_hist.append(G.copy())
-            if t1 - self._first_trusted >= c.baseline_s:
+            if self.learn == "period" and t1 - self._first_trusted >= c.baseline_s:
                 self.baseline = self._fit_baseline(t1)
                 if self.baseline is not None:
                     self._arm(self.baseline)
@@ -428,20 +628,30 @@ class ModalMonitor:
                     q = float(np.mean((delta / dsd[:, None]) ** 2))
                     # One-sided: less shape change than in the healthy period is no damage.
                     z = max((q - bl.curvature_index_mean) / bl.curvature_index_std, 0.0)
-                    ci_score, lvl = self._ci_chart.update(z, tmid)
+                    ci_score, lvl = self._ci_chart.update(z)
                     levels[CURVATURE_CHART] = lvl
+                    warning, alarm = c.chart_levels("curvature")
+                    charts.append(ChartDocument(name=CURVATURE_CHART, kind="curvature", level=lvl, score_sigma=ci_score,
+                                                warning_sigma=warning, alarm_sigma=alarm))
+            warning, alarm = c.chart_levels("frequency")
             for i, (e, m) in enumerate(zip(est, bl.modes)):
-                if e.frequency_hz is None or e.confidence < c.min_confidence or m.windows < c.baseline_min_windows:
+                if e.frequency_hz is None or e.method != "ssi" or e.confidence < c.min_confidence or m.windows < c.baseline_min_windows:
                     continue
                 if m.f_ref_hz * (t1 - t0) < c.chart_min_cycles:
                     continue
                 Tw = m.temperature_ref_c if T is None else T
                 expected = m.f_ref_hz * (1 + m.slope_per_k * (Tw - m.temperature_ref_c))
                 rel = e.frequency_hz / expected - 1
-                scores[i], levels[chart_name("frequency", m.mode)] = self._charts[i].update(rel / m.sigma_rel, tmid)
+                name = chart_name("frequency", m.mode)
+                scores[i], levels[name] = self._charts[i].update(rel / m.sigma_rel)
+                charts.append(ChartDocument(name=name, kind="frequency", mode=m.mode, unit=m.unit + 1, level=levels[name],
+                                            score_sigma=scores[i], warning_sigma=warning, alarm_sigma=alarm))
             location = self._locate(delta, dsd)
-            flags = self._flags(change, scores, ci_score, location)
-        return WindowResult(t0, t1, kind, trusted, T, tuple(est), tuple(scores), change, ci_score, levels, tuple(flags), location)
+        events = self.alarms.update(charts, t1)
+        flags = self._flags(change, scores, ci_score, location)
+        return WindowResult(t0, t1, kind, trusted, T, tuple(est), tuple(scores), change, ci_score, levels, tuple(flags), location,
+                            excitation, tuple(charts), tuple(events), spec)
+
 
     def _shapes(self, G: np.ndarray | None) -> np.ndarray | None:
         if G is None:
@@ -492,40 +702,62 @@ class ModalMonitor:
             return None
 
     def _flags(self, change: CurvatureChange | None, scores: list, ci_score: float | None, location: DamageLocation | None = None) -> list[dict]:
-        out = []
+        """The charts whose alarm (the alarm logic's, not a single window's level) stands at "alarm"."""
+        if self.baseline is None:
+            return []
+        raised = self.alarms.raised()
         if location is not None:
             where = {"eta_m": location.eta_m, "third": location.third, "damage_kind": location.kind_best,
                      "location_match": round(location.best_match, 3), "located_by": "signatures"}
         else:
             where = {"eta_m": None, "third": None} if change is None else {"eta_m": change.eta_m, "third": change.third, "located_by": "curvature"}
+        out = []
         for i, ch in enumerate(self._charts):
-            st = ch.state
-            if st.level == "alarm":
-                m = self.baseline.modes[i]
-                score = scores[i] if scores[i] is not None else st.ewma / ch.sigma()
-                out.append({
-                    "kind": "frequency", "mode": m.mode, "unit": m.unit + 1, "level": "alarm",
-                    "sigma": round(float(score), 2), "percent": round(100 * st.ewma * m.sigma_rel, 4),
-                    "since_s": st.since_s, **where,
-                })
-        if self._ci_chart is not None and self._ci_chart.state.level == "alarm" and change is not None:
-            st = self._ci_chart.state
+            m = self.baseline.modes[i]
+            name = chart_name("frequency", m.mode)
+            if raised.get(name) != "alarm":
+                continue
+            score = scores[i] if scores[i] is not None else ch.state.ewma / ch.sigma()
+            out.append({
+                "kind": "frequency", "mode": m.mode, "unit": m.unit + 1, "level": "alarm",
+                "sigma": round(float(score), 2), "percent": round(100 * ch.state.ewma * m.sigma_rel, 4),
+                "since_s": self.alarms.since(name), **where,
+            })
+        if raised.get(CURVATURE_CHART) == "alarm" and self._ci_chart is not None:
             out.append({
                 "kind": "curvature", "mode": None, "unit": None, "level": "alarm",
                 "sigma": None if ci_score is None else round(float(ci_score), 2),
-                "percent": round(100 * change.total, 2),
-                "since_s": st.since_s, **where,
+                "percent": None if change is None else round(100 * change.total, 2),
+                "since_s": self.alarms.since(CURVATURE_CHART), **where,
             })
         return out
+
+    def fit_baseline(self) -> Baseline | None:
+        """The baseline of every trusted window seen so far (``learn="record"``), without arming it;
+        None if no window held the curvature cross spectra (no ambient window)."""
+        if self._first_trusted is None:
+            return None
+        end = self._records[-1].t_mid if self._records else self._first_trusted
+        return self._fit_baseline(end + 0.5 * self.config.window_s)
 
     def _fit_baseline(self, t_end: float) -> Baseline | None:
         c = self.config
         recs = self._records
         modes = []
         for i in range(self.n_modes):
-            sel = [(r.freqs[i], r.temperature) for r in recs if r.freqs[i] is not None and r.confs[i] >= c.min_confidence]
+            sel = [(r.freqs[i], r.temperature, r.shapes[i] if i < len(r.shapes) else None, r.stds[i] if i < len(r.stds) else None)
+                   for r in recs if r.freqs[i] is not None and r.confs[i] >= c.min_confidence]
+            shape = ()
+            shapes = [np.asarray(s[2], dtype=float) for s in sel if s[2] is not None and len(s[2]) == self.gamma]
+            if shapes:
+                ref = shapes[0]
+                acc = np.sum([s * (1.0 if s @ ref >= 0 else -1.0) for s in shapes], axis=0)
+                nrm = np.linalg.norm(acc)
+                if nrm > 0:
+                    acc = acc / nrm
+                    shape = tuple(float(v) for v in acc * (1.0 if acc[int(np.argmax(np.abs(acc)))] > 0 else -1.0))
             if len(sel) < c.baseline_min_windows:
-                modes.append(BaselineMode(i + 1, self.units[i], self.ref[i], 20.0, 0.0, 1.0, 0.0, len(sel)))
+                modes.append(BaselineMode(i + 1, self.units[i], self.ref[i], 20.0, 0.0, 1.0, 0.0, len(sel), shape))
                 continue
             f = np.array([s[0] for s in sel])
             T = np.array([s[1] if s[1] is not None else 20.0 for s in sel])
@@ -539,7 +771,11 @@ class ModalMonitor:
                 prior, prior_std = model_slope, max(0.2 * abs(model_slope), 0.05 * abs(half), 1e-9)
             a, slope, tm, sig = fit_temperature_model(f / fref0 - 1, T, prior, prior_std)
             res = f / (fref0 * (1 + a)) - 1 - slope * (T - tm)
-            modes.append(BaselineMode(i + 1, self.units[i], fref0 * (1 + a), tm, slope, max(sig, c.min_sigma_rel), _lag1(res), len(sel)))
+            # a few windows underrate the scatter now and then; each window's own jackknife 1σ is
+            # an independent measure of it, so the baseline takes the larger of the two
+            stated = [s[3] / s[0] for s in sel if s[3] is not None and math.isfinite(s[3]) and s[3] > 0]
+            sig = max(sig, float(np.median(stated)) if stated else 0.0, c.min_sigma_rel)
+            modes.append(BaselineMode(i + 1, self.units[i], fref0 * (1 + a), tm, slope, sig, _lag1(res), len(sel), shape))
         base_shapes = self._shapes(self._cross_sum)
         if base_shapes is None:
             return None
@@ -568,22 +804,25 @@ class ModalMonitor:
                 rho = float(np.clip(np.sum(x[:-1] * x[1:]) / den, 0.0, 0.95)) if den > 0 else 0.0
         # Q = mean (Δ/σ)² is ~χ²_p/p; p: the shape of a mode spans Γ − 1 directions once normalised
         p = max(1, self.n_modes * min(self.gamma - 1, self.eta.size))
-        return Baseline(tuple(modes), base_shapes, 1.0, math.sqrt(2.0 / p), rho, float(self._first_trusted), float(t_end), shape_std, n)
+        return Baseline(tuple(modes), base_shapes, 1.0, math.sqrt(2.0 / p), rho, float(self._first_trusted), float(t_end), shape_std, n,
+                        self._trusted, float(c.window_s))
 
     # -- persistence -----------------------------------------------------------------------
     def state_dict(self) -> dict:
-        """JSON-safe state for a restart (tracker, baseline or its learning data, charts)."""
+        """JSON-safe state for a restart (tracker, baseline or its learning data, charts, alarms)."""
         cx = lambda G: None if G is None else {"re": np.real(G).tolist(), "im": np.imag(G).tolist()}  # noqa: E731
         return {
             "fs": self.fs, "config": self.config.model_dump(), "curvature_shapes": self.S.tolist(), "stations_eta": self.eta.tolist(),
-            "length": self.length, "units": self.units, "f0": self.f0, "ref": self.ref,
+            "length": self.length, "units": self.units, "f0": self.f0, "ref": self.ref, "learn": self.learn,
             "baseline": None if self.baseline is None else self.baseline.to_dict(),
-            "records": [vars(r) for r in self._records], "first_trusted": self._first_trusted,
+            "records": [{**vars(r), "shapes": [None if s is None else list(s) for s in r.shapes]} for r in self._records],
+            "first_trusted": self._first_trusted, "trusted": self._trusted,
             "cross": cx(self._cross), "cross_sum": cx(self._cross_sum), "cross_windows": self._cross_windows,
             "ci_hist": [cx(G) for G in self._ci_hist],
             "power": None if self._power is None else self._power.tolist(),
             "charts": [ch.state_dict() for ch in self._charts],
             "ci_chart": None if self._ci_chart is None else self._ci_chart.state_dict(),
+            "alarms": self.alarms.state_dict(),
         }
 
     @classmethod
@@ -592,11 +831,14 @@ class ModalMonitor:
             raise ValueError(f"state must be a dict, got {type(d).__name__}")
         ux = lambda g: None if g is None else np.asarray(g["re"]) + 1j * np.asarray(g["im"])  # noqa: E731
         try:
-            m = cls(None, d["curvature_shapes"], d["stations_eta"], fs=d["fs"], config=AnalysisConfig(**d["config"]), beam_length=d["length"])
+            m = cls(None, d["curvature_shapes"], d["stations_eta"], fs=d["fs"], config=AnalysisConfig(**d["config"]), beam_length=d["length"],
+                    learn=d.get("learn", "period"))
             m.units, m.f0, m.ref = list(d["units"]), list(d["f0"]), list(d["ref"])
             m.baseline = None if d["baseline"] is None else Baseline.from_dict(d["baseline"])
-            m._records = [_Record(**r) for r in d["records"]]
+            m._records = [_Record(r["t_mid"], r["temperature"], r["freqs"], r["confs"],
+                                  [None if s is None else tuple(s) for s in r.get("shapes", [])], list(r.get("stds", []))) for r in d["records"]]
             m._first_trusted = d["first_trusted"]
+            m._trusted = int(d.get("trusted", len(m._records)))
             m._cross, m._cross_sum = ux(d["cross"]), ux(d["cross_sum"])
             # States stored before the counter existed had a settled average.
             m._cross_windows = int(d.get("cross_windows", m.config.curvature_memory_windows))
@@ -604,6 +846,8 @@ class ModalMonitor:
             m._power = None if d.get("power") is None else np.asarray(d["power"], dtype=float)
             m._charts = [EwmaChart.from_state_dict(c) for c in d["charts"]]
             m._ci_chart = None if d["ci_chart"] is None else EwmaChart.from_state_dict(d["ci_chart"])
+            m.alarms = AlarmLogic(raise_windows=m.config.hold_windows, clear_windows=m.config.clear_windows,
+                                  clear_sigma=m.config.clear_sigma, state=d.get("alarms"))
         except KeyError as exc:
             raise ValueError(f"state dict lacks {exc}") from exc
         return m

@@ -236,6 +236,7 @@ def identify_modes(
     reference_shapes: object | None = None,
     tracked_hz: object | None = None,
     band_ready: bool = False,
+    frf_uncertainty: bool = True,
 ) -> ModalIdentification:
     """Modes of one window of outputs y by SSI-cov with automated pole selection.
 
@@ -255,6 +256,9 @@ def identify_modes(
         Frequencies (Hz) the excitation classifier checks lines against (default: the modes found).
     band_ready : bool
         y is already decimated/filtered to the band (:func:`prepare_band`), skip that step.
+    frf_uncertainty : bool
+        With a measured input, give the FRF modes their jackknife 1σ [True]; False fits the FRFs
+        only to cross-check the output-only modes (fewer orders, no jackknife: the monitor's use).
 
     Returns
     -------
@@ -344,18 +348,21 @@ def identify_modes(
         ub = u - u.mean(axis=0) if band_ready else prepare_band(u, fs, fmin_hz=cfg.fmin_hz, fmax_hz=cfg.fmax_hz)[0]
         track = [m.frequency_hz for m in modes] if tracked_hz is None else list(np.atleast_1d(tracked_hz))
         exc = classify_excitation(ub, fsb, track)
-        frf, io_modes = _io_modes(ub, yb * scale, fsb, T, cfg, fmax)
+        frf, io_modes = _io_modes(ub, yb * scale, fsb, T, cfg, fmax, [m.frequency_hz for m in modes], full=frf_uncertainty)
         if frf is not None:
-            modes, dropped = _confirmed_by_frf(modes, io_modes, frf)
+            modes, dropped = _confirmed_by_frf(modes, io_modes, frf, resolved_from_hz=3.0 / (T / 6))
             rejected.extend(dropped)
             kept = [c for c in kept if any(abs(c.frequency_hz - m.frequency_hz) < 1e-12 for m in modes)]
     return ModalIdentification(tuple(modes), tuple(rejected), diag, tuple(kept), fsb, i, tuple(int(o) for o in orders), exc, io_modes)
 
 
-def _io_modes(ub: np.ndarray, yb: np.ndarray, fs: float, T: float, cfg: OmaConfig, fmax: float) -> tuple[Frf | None, tuple[FrfMode, ...]]:
+def _io_modes(ub: np.ndarray, yb: np.ndarray, fs: float, T: float, cfg: OmaConfig, fmax: float,
+              check_hz: list[float] | None = None, coherence: float = 0.5, full: bool = True) -> tuple[Frf | None, tuple[FrfMode, ...]]:
     """The H1 FRFs from the (first) measured input to the outputs (segments of T/6: about 11
     Hann averages at 50 % overlap) and the modes fitted to them; (None, ()) if the window is too
-    short for a fit or the input is flat."""
+    short for a fit or the input is flat. With ``check_hz``, the fit runs only if the input
+    explains the outputs (coherence >= ``coherence``) at one of those frequencies in the resolved
+    band: elsewhere the FRFs could not overrule an output-only mode anyway."""
     seg = T / 6
     lo = max(cfg.fmin_hz, 2.0 / seg)
     hi = min(fmax, 0.45 * fs)
@@ -363,17 +370,27 @@ def _io_modes(ub: np.ndarray, yb: np.ndarray, fs: float, T: float, cfg: OmaConfi
         return None, ()
     try:
         frf = frf_h1(ub[:, :1], yb, fs, segment_s=seg)
-        return frf, frf_modes(frf, fmin_hz=lo, fmax_hz=hi, max_order=min(24, max(2, int((hi - lo) * seg) // 2 * 2 // 2)))
+        if check_hz is not None:
+            resolved = [f for f in check_hz if 3.0 / seg <= f <= hi]
+            coh = [float(frf.coherence[int(np.argmin(np.abs(frf.frequencies - f)))].mean()) for f in resolved]
+            if not coh or max(coh) < coherence:
+                return frf, ()
+        order = min(24 if full else 4 * len(check_hz or ()) + 4, max(2, int((hi - lo) * seg) // 2 * 2 // 2))
+        return frf, frf_modes(frf, fmin_hz=lo, fmax_hz=hi, max_order=max(2, order // 2 * 2), groups=6 if full else 2)
     except (ValueError, np.linalg.LinAlgError):
         return None, ()
 
 
-def _confirmed_by_frf(modes: list[IdentifiedMode], io_modes: tuple[FrfMode, ...], frf: Frf, *, coherence: float = 0.5,
-                      rel: float = 0.02) -> tuple[list[IdentifiedMode], list[tuple[float, str]]]:
-    """Output-only modes where the measured input explains the outputs (coherence >= 0.5) must
-    show in the FRFs too (the nearest to an FRF mode, within 2 % or 3σ): otherwise the pole is the input's own
-    colour (a support's motion spectrum), not the structure's. Where the coherence is low the
-    response has another, unmeasured excitation, and the output-only mode stands."""
+def _confirmed_by_frf(modes: list[IdentifiedMode], io_modes: tuple[FrfMode, ...], frf: Frf, *, coherence: float = 0.8,
+                      rel: float = 0.02, resolved_from_hz: float = 0.0) -> tuple[list[IdentifiedMode], list[tuple[float, str]]]:
+    """Output-only modes where the measured input explains the outputs (coherence >= 0.8, the
+    level at which :func:`frf_modes` lists an FRF mode at all) must show in the FRFs too (the
+    nearest to an FRF mode, within 2 % or 3σ): otherwise the pole is the input's own colour (a
+    support's motion spectrum), not the structure's. Where the coherence is lower the response
+    has another, unmeasured excitation as well (a distributed load), the FRFs could not show a
+    resonance there anyway, and the output-only mode stands; so does a mode
+    below ``resolved_from_hz``, where the FRFs' segments hold too few of its cycles to fit it (a
+    pendulum mode the support drives)."""
     keep, dropped = [], []
     # each FRF mode confirms one output-only mode at most: the nearest within the tolerance
     confirmed = set()
@@ -385,7 +402,7 @@ def _confirmed_by_frf(modes: list[IdentifiedMode], io_modes: tuple[FrfMode, ...]
     for j, m in enumerate(modes):
         k = int(np.argmin(np.abs(frf.frequencies - m.frequency_hz)))
         coh = float(frf.coherence[k].mean())
-        if coh >= coherence and j not in confirmed:
+        if coh >= coherence and j not in confirmed and m.frequency_hz >= resolved_from_hz:
             dropped.append((m.frequency_hz, f"input: the measured input explains the response here (coherence {coh:.2f}) and its FRFs show no resonance"))
         else:
             keep.append(m)

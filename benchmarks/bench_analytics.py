@@ -85,12 +85,17 @@ class Deformations:
     beam_length: float
     estimator_s: float
     path: Path
+    support: np.ndarray | None = None  # the estimator's d(t): the measured input (shm analyze's)
+    origin_ns: int = 0
+    rest_end_s: float | None = None
 
 
 def deformations(settings, *, log=_log) -> Deformations:
     """Simulate (cached) → shm_service.estimation.deformation_record (cached) for ``settings``."""
     path = recording_path(settings, log=log)
     npz = path.with_suffix(".b.npz")
+    if npz.exists() and "support" not in np.load(npz).files:  # cached before the support was kept
+        npz.unlink()
     if not npz.exists():
         from shm_service.estimation import deformation_record
         from shm_service.recording import read_recording
@@ -106,6 +111,7 @@ def deformations(settings, *, log=_log) -> Deformations:
             temp_t=temp[0] if temp else np.zeros(0), temp_v=temp[1] if temp else np.zeros(0),
             bearing=data.bearing if data.bearing is not None else np.zeros(0),
             truth=json.dumps(data.truth_metadata or {}), rig=rec.rig.to_json(), length=rec.rig.beam.length, estimator_s=dt,
+            support=data.support, origin=np.int64(data.origin_ns), rest_end=data.rest_end_s,
         )
         npz.with_suffix(".part.npz").rename(npz)
         log(f"  estimator on {path.name}: {dt:.0f} s")
@@ -114,17 +120,24 @@ def deformations(settings, *, log=_log) -> Deformations:
         z["times"], z["b"], z["curvature"], z["stations"], tuple(tuple(g) for g in json.loads(str(z["expected"]))),
         (z["temp_t"], z["temp_v"]) if z["temp_t"].size >= 2 else None, z["bearing"] if z["bearing"].size else None,
         json.loads(str(z["truth"])), str(z["rig"]), float(z["length"]), float(z["estimator_s"]), path,
+        z["support"], int(z["origin"]), float(z["rest_end"]),
     )
 
 
 
 # -- the chain -----------------------------------------------------------------------------
 def analysis(d: Deformations):
-    """analytics.analyze on the deformation record, with the rig's FE damage signatures."""
+    """analytics.analyze on the deformation record the way ``shm analyze`` runs it
+    (shm_service.analysis): the estimator's support displacement as the measured input, windows
+    aligned in data time, the warm-up after the rest phase skipped, the rig's FE damage signatures."""
+    from shm_service.analysis import DEFAULT_WARMUP_S
+
     t0 = time.perf_counter()
     sig = damage_signatures(parse_rig(d.rig_json), d.stations, gamma=d.b.shape[1])
-    res = analyze(d.times, d.b, d.curvature_shapes, d.stations, temperature=d.temperature, bearing=d.bearing,
-                  expected_hz=d.expected_hz, beam_length=d.beam_length, signatures=sig)
+    res = analyze(d.times, d.b, d.curvature_shapes, d.stations, temperature=d.temperature,
+                  bearing=d.support if d.support is not None else d.bearing, expected_hz=d.expected_hz, beam_length=d.beam_length,
+                  signatures=sig, time_origin_ns=d.origin_ns,
+                  not_before_s=None if d.rest_end_s is None else d.rest_end_s + DEFAULT_WARMUP_S)
     return res, time.perf_counter() - t0
 
 

@@ -189,11 +189,17 @@ class ModeDocument(_Document):
     mode: int = Field(ge=1, description="eigenmode number (1-based)")
     unit: int = Field(ge=1, description="unit deformation that carries the mode (1-based)")
     frequency_hz: Num = Field(None, description="identified eigenfrequency, Hz (None: no peak)")
-    amplitude: Num = Field(None, description="spectral peak amplitude, unit of b")
-    confidence: float = Field(0.0, ge=0.0, le=1.0, description="confidence of the peak, 0..1")
-    damping_ratio: Num = Field(None, description="damping ratio (random decrement), 1")
+    amplitude: Num = Field(None, description="spectral amplitude of the carrying unit deformation at the mode, unit of b")
+    confidence: float = Field(0.0, ge=0.0, le=1.0, description="confidence of the estimate, 0..1")
+    damping_ratio: Num = Field(None, description="damping ratio of the window's subspace pole, 1")
     score_sigma: Num = Field(None, description="EWMA score of the frequency chart, σ (None before a baseline)")
     level: Level | None = Field(None, description="level of the mode's frequency chart (None: not charted)")
+    frequency_std_hz: Num = Field(None, description="1σ of frequency_hz, Hz")
+    damping_std: Num = Field(None, description="1σ of damping_ratio")
+    mpc: Num = Field(None, description="modal phase collinearity of the mode's shape, 0..1")
+    mac: Num = Field(None, description="MAC of the shape against the baseline's, 0..1 (None before a baseline)")
+    method: Literal["ssi", "spectrum"] | None = Field(
+        None, description="ssi: the subspace identification (cross-checked against the spectrum); spectrum: the spectral peak alone")
 
 
 class ChartDocument(_Document):

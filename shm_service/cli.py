@@ -302,62 +302,88 @@ def _cmd_study(args: argparse.Namespace) -> int:
 
 
 # -- shm analyze -------------------------------------------------------------------------
-def _analysis_of(path: str, args: argparse.Namespace, baseline=None):
-    from analytics import analyze
+def _analysis_settings(args: argparse.Namespace):
+    """(AnalysisConfig, warm-up s) of --config (a `shm serve` TOML: its analytics, alarm hysteresis
+    and estimator warm-up), else the defaults, which are serve's."""
+    from .analysis import DEFAULT_WARMUP_S
 
+    if not args.config:
+        return None, DEFAULT_WARMUP_S
+    from .service._config import SettingsError, load_settings
+
+    try:
+        settings = load_settings(args.config)
+    except SettingsError as exc:
+        raise CliError(f"--config {args.config}: {exc}") from None
+    return settings.engine_config(), settings.estimator.warmup_s
+
+
+def _deformations_of(path: str, args: argparse.Namespace):
     from .estimation import deformation_record
     from .recording import read_recording
 
     rec = read_recording(path, rig=args.rig)
     model_args = dict(peripheral=args.peripheral, modes=args.modes, **_sensor_counts(rec.rig, args))
     try:
-        data = deformation_record(rec, model_args=model_args)
+        return rec, deformation_record(rec, model_args=model_args)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    from estimator import damage_signatures
-
-    # FE-predicted damage signatures of the rig: the model-assisted location of flags
-    signatures = damage_signatures(rec.rig, data.stations, gamma=data.b.shape[1])
-    result = analyze(
-        data.times, data.b, data.units.curvature(data.stations), data.stations,
-        temperature=data.temperature, bearing=data.bearing, expected_hz=data.units.frequencies_hz,
-        baseline=baseline, beam_length=rec.rig.beam.length, signatures=signatures,
-    )
-    return rec, data, result
 
 
 def _cmd_analyze(args: argparse.Namespace) -> int:
+    from analytics import BaselineError
+
+    from .analysis import analyze_deformations, baseline_from_deformations
+
+    config, warmup = _analysis_settings(args)
     baseline = None
     if args.baseline:
-        _, _, healthy = _analysis_of(args.baseline, args)
-        if healthy.baseline is None:
-            raise CliError(f"{args.baseline}: too short to learn a baseline from")
-        baseline = healthy.baseline
-    rec, data, result = _analysis_of(args.recording, args, baseline)
+        rec_b, healthy = _deformations_of(args.baseline, args)
+        try:
+            baseline = baseline_from_deformations(rec_b.rig, healthy, config=config, warmup_s=warmup)
+        except BaselineError as exc:
+            raise CliError(f"{args.baseline}: {exc}") from None
+    rec, data = _deformations_of(args.recording, args)
+    try:
+        result = analyze_deformations(rec.rig, data, config=config, baseline=baseline, warmup_s=warmup, not_before_s=args.not_before)
+    except ValueError as exc:
+        raise CliError(f"{args.recording}: {exc}") from None
     output = result.as_dict()
     if data.truth_metadata and "eigenfrequencies_hz" in data.truth_metadata:
         exact = json.loads(data.truth_metadata["eigenfrequencies_hz"])
+        zeta_key = next((k for k in ("modal_damping_ratios", "damping_ratios") if k in data.truth_metadata), None)
+        zeta = json.loads(data.truth_metadata[zeta_key]) if zeta_key else None
         output["truth"] = {
             "eigenfrequencies_hz": exact,
             "relative_error": {
                 str(m["mode"]): (m["frequency_hz"] / exact[m["mode"] - 1] - 1 if m.get("frequency_hz") else None)
                 for m in output["modes"] if m.get("mode") and m["mode"] <= len(exact)
             },
-            **({"damping_ratios": json.loads(data.truth_metadata["modal_damping_ratios"])}
-               if "modal_damping_ratios" in data.truth_metadata else {}),
+            **({"damping_ratios": zeta,
+                "damping_relative_error": {
+                    str(m["mode"]): (m["damping_ratio"] / zeta[m["mode"] - 1] - 1 if m.get("damping_ratio") else None)
+                    for m in output["modes"] if m.get("mode") and m["mode"] <= len(zeta)}} if zeta else {}),
         }
     if args.json:
         _print_json(output)
     else:
         print(f"{rec.path}: {data.times[-1] - data.times[0]:.0f} s of b1..b{data.b.shape[1]}"
-              f"{' (estimated here)' if data.estimated_here else ''}, {len(output['windows'])} windows")
-        print(f"{'unit':>4} {'mode':>4} {'f [Hz]':>9} {'± [Hz]':>8} {'zeta [%]':>9}")
+              f"{' (estimated here)' if data.estimated_here else ''}, {len(output['windows'])} windows"
+              f" ({', '.join(f'{v} {k}' for k, v in output['skipped_windows'].items() if v)} skipped)")
+        print(f"{'unit':>4} {'mode':>4} {'f [Hz]':>9} {'± [Hz]':>8} {'zeta [%]':>9} {'± [%]':>7}  damping by")
         for m in output["modes"]:
             f = m.get("frequency_hz")
             z = m.get("damping_ratio")
+            sf = m.get("frequency_std_hz")
+            sz = m.get("damping_std")
             print(f"{m['unit']:4d} {m.get('mode') or '-':>4} {f if f is None else round(f, 4)!s:>9} "
-                  f"{m.get('frequency_std_hz') if m.get('frequency_std_hz') is None else round(m['frequency_std_hz'], 4)!s:>8} "
-                  f"{'-' if z is None else round(100 * z, 3)!s:>9}")
+                  f"{sf if sf is None else round(sf, 4)!s:>8} {'-' if z is None else round(100 * z, 3)!s:>9} "
+                  f"{'-' if sz is None else round(100 * sz, 3)!s:>7}  {m.get('damping_method') or '-'}")
+        bl = output.get("baseline")
+        if bl:
+            for m in bl["modes"]:
+                if not m["charted"]:
+                    print(f"  mode {m['mode']} not charted: {m['reason']}")
         print(f"flags: {len(output['flags'])}")
         for flag in output["flags"]:
             print("  " + ", ".join(f"{k}={v}" for k, v in flag.items()))
@@ -488,7 +514,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="s, up to a week (default 300)")
     p.add_argument("--seed", type=number(int, low=0), default=1)
     p.add_argument("--out", required=True, type=output_path, help="output .mcap (its directory must exist)")
-    p.add_argument("--excitation", choices=("paper", "ambient", "decay"), default="paper")
+    p.add_argument("--excitation", choices=("paper", "ambient", "decay", "operational"), default="paper",
+                   help="paper: the paper's bearing moves and sine bursts; ambient: random loads, the bearing still; decay: "
+                        "plucks and free decays; operational: the support moving randomly (3 mm RMS, broadband) and a "
+                        "spatially correlated random load along the beam")
     p.add_argument("--layout", choices=("benchmark", "dense"), default="benchmark")
     _add_configuration_arguments(p, rig_file=False)
     p.add_argument("--ideal", action="store_true", help="plant = nominal rig (no mismatch, friction, scale/misalignment)")
@@ -537,8 +566,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_study)
 
     p = sub.add_parser("analyze", help="modal analytics of the deformation variables (runs the estimator on raw recordings)")
-    p.add_argument("recording", help="an estimates recording (shm estimate --out) or a raw recording")
-    p.add_argument("--baseline", help="a healthy recording to compare against")
+    p.add_argument("recording", help="an estimates recording (shm estimate --out, shm serve's archive) or a raw recording")
+    p.add_argument("--baseline", help="a healthy recording to learn the baseline from (all of it; with or without a temperature swing)")
+    p.add_argument("--config", default=None, help="a `shm serve` configuration (TOML): the same analytics, alarm hysteresis and warm-up")
+    p.add_argument("--not-before", type=number(low=0, unit="s"), default=None, metavar="S",
+                   help="analyse windows starting at or after S seconds into the recording (default: the rest phase's end plus "
+                        "the warm-up, when the recording tells the rest phase)")
     p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
     p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
     p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")

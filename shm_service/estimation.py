@@ -173,7 +173,13 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
 
 @dataclass(frozen=True)
 class DeformationRecord:
-    """What the analytics need from a recording: b(t) and its context (times in s from the start)."""
+    """What the analytics need from a recording: b(t) and its context (times in s from the start).
+
+    support : the estimator's support displacement d(t) (m) on the times of b (the fused bearing
+    sensor and IMU at D: the measured input of the identification), or None. origin_ns : data
+    time of times = 0 (the recording's first message, UNIX ns). rest_end_s : end of the rest
+    phase the estimator calibrated on (s), when known.
+    """
 
     times: np.ndarray
     b: np.ndarray
@@ -183,6 +189,9 @@ class DeformationRecord:
     bearing: np.ndarray | None
     truth_metadata: dict[str, str] | None
     estimated_here: bool
+    support: np.ndarray | None = None
+    origin_ns: int = 0
+    rest_end_s: float | None = None
 
 
 def deformation_record(rec: Recording, *, model_args: dict | None = None) -> DeformationRecord:
@@ -195,19 +204,29 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None) -> Def
     from .recording import ESTIMATE_TOPIC
 
     estimates = rec.channels.get(ESTIMATE_TOPIC)
+    rest_end = None
     if estimates is not None and len(estimates):
+        import json
+
         columns = [i for i, name in enumerate(estimates.fields) if name.startswith("b[")]
         if not columns:
             raise ValueError(f"{rec.path}: {ESTIMATE_TOPIC} carries no b")
         times = (estimates.log_time_ns - rec.start_ns) * _NS
         b = estimates.values[:, columns]
+        support = estimates.values[:, estimates.fields.index("d")] if "d" in estimates.fields else None
         units = unit_deformations(assemble_beam(rec.rig), len(columns))
         estimated_here = False
+        try:  # written by `shm estimate --out`: the rest phase the estimator calibrated on
+            rest_end = float(json.loads(rec.metadata["estimator"]["calibration"])["rest_end"])
+        except (KeyError, TypeError, ValueError):
+            rest_end = None
     else:
         model = build_model(rec.rig, **(model_args or {}))
         result = estimate(measurements_from_recording(rec), model)
         times, b, units = result.t, result.b, model.units
+        support = result.d
         estimated_here = True
+        rest_end = float(result.calibration.rest_end)
     temperature = None
     channel = rec.channels.get(TEMPERATURE_TOPIC)
     if channel is not None and len(channel) >= 2:
@@ -218,4 +237,4 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None) -> Def
         bearing = np.interp(times, (channel.log_time_ns - rec.start_ns) * _NS, channel.values[:, 0])
     return DeformationRecord(times, b, units, np.asarray(rec.rig.truth_stations, dtype=float) if rec.rig.truth_stations
                              else np.linspace(0.0, rec.rig.beam.length, 9)[1:], temperature, bearing,
-                             rec.metadata.get("truth"), estimated_here)
+                             rec.metadata.get("truth"), estimated_here, support, int(rec.start_ns), rest_end)

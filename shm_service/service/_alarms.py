@@ -1,26 +1,22 @@
-"""Alarm logic: the analytics' chart levels per window become alarms with hysteresis.
+"""Alarm changes for storage from the engine's alarm events.
 
-A chart (a mode's frequency chart or the curvature chart) at "warning" for ``raise_windows``
-consecutive windows raises a warning alarm; "alarm" (which the chart itself reaches only after
-its own hold windows) raises or escalates at once; a raised alarm clears after
-``clear_windows`` consecutive windows at "ok". Charts come as ``contract.ChartDocument`` (name,
-kind, mode and the levels they were judged against), so an alarm's threshold is the level its
-chart crossed. The state is plain data, stored with the monitor state.
+There is one alarm path: :class:`analytics.AlarmLogic` inside the engine's monitor decides when a
+chart's levels raise, escalate or clear an alarm (``shm analyze`` and ``shm serve`` alike). The
+service only records its events: this module turns them into ``AlarmChange`` rows (the chart,
+its level, the score and the line it crossed, a message) and clears the stored active alarms
+when a new baseline is requested.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Any
 
-from contract import AlarmDocument, ChartDocument, ChartKind
+from analytics import AlarmEvent
+from contract import AlarmDocument, ChartKind
 
 from ._storage import AlarmChange
 
-__all__ = ["AlarmLogic"]
-
-_RANK = {"ok": 0, "warning": 1, "alarm": 2}
-_LEVEL = {1: "warning", 2: "alarm"}
+__all__ = ["alarm_changes", "clear_changes"]
 
 
 def _what(kind: ChartKind, mode: int | None) -> str:
@@ -31,62 +27,20 @@ def _what(kind: ChartKind, mode: int | None) -> str:
     raise ValueError(f"unknown chart kind {kind!r}")
 
 
-class AlarmLogic:
-    def __init__(self, *, raise_windows: int, clear_windows: int, state: dict[str, Any] | None = None) -> None:
-        if raise_windows < 1 or clear_windows < 1:
-            raise ValueError(f"{raise_windows=} and {clear_windows=} must be >= 1")
-        self.raise_windows = raise_windows
-        self.clear_windows = clear_windows
-        self.charts: dict[str, dict[str, int]] = {k: dict(v) for k, v in (state or {}).items()}
+def alarm_changes(events: Iterable[AlarmEvent]) -> list[AlarmChange]:
+    """The storage rows of one window's alarm events."""
+    out = []
+    for e in events:
+        if not isinstance(e, AlarmEvent):
+            raise ValueError(f"events must be analytics.AlarmEvent, got {type(e).__name__}")
+        out.append(AlarmChange(e.action, e.chart, e.kind, e.mode, e.level, e.at_s, e.score_sigma, e.threshold_sigma, e.message()))
+    return out
 
-    def state_dict(self) -> dict[str, Any]:
-        return {k: dict(v) for k, v in self.charts.items()}
 
-    def active(self) -> dict[str, str]:
-        return {k: _LEVEL[v["raised"]] for k, v in self.charts.items() if v["raised"]}
-
-    def update(self, charts: Iterable[ChartDocument], at_s: float) -> list[AlarmChange]:
-        """Feed one window's charts; returns the alarm changes they cause."""
-        changes: list[AlarmChange] = []
-        for chart in sorted(charts, key=lambda c: c.name):
-            rank = _RANK[chart.level]
-            st = self.charts.setdefault(chart.name, {"raised": 0, "up": 0, "down": 0})
-            if rank > st["raised"]:
-                st["up"] += 1
-                st["down"] = 0
-                needed = 1 if rank == 2 else self.raise_windows
-                if st["up"] >= needed:
-                    action = "raise" if st["raised"] == 0 else "escalate"
-                    st["raised"], st["up"] = rank, 0
-                    changes.append(self._change(action, chart, _LEVEL[rank], at_s))
-            elif rank == 0 and st["raised"]:
-                st["up"] = 0
-                st["down"] += 1
-                if st["down"] >= self.clear_windows:
-                    changes.append(self._change("clear", chart, _LEVEL[st["raised"]], at_s))
-                    st["raised"], st["down"] = 0, 0
-            else:
-                st["up"] = 0 if rank <= st["raised"] else st["up"]
-                st["down"] = 0
-        return changes
-
-    def clear_all(self, active: Iterable[AlarmDocument], at_s: float) -> list[AlarmChange]:
-        """Forget every chart (a new baseline starts) and clear the ``active`` alarms."""
-        self.charts.clear()
-        return [
-            AlarmChange("clear", a.chart, a.kind, a.mode, a.level, at_s, None, None,
-                        f"{_what(a.kind, a.mode)}: cleared, a new baseline is being learnt")
-            for a in active if a.state == "active"
-        ]
-
-    @staticmethod
-    def _change(action: str, chart: ChartDocument, level: str, at_s: float) -> AlarmChange:
-        threshold = chart.alarm_sigma if level == "alarm" else chart.warning_sigma
-        what = _what(chart.kind, chart.mode)
-        score = chart.score_sigma
-        score_text = "" if score is None else f" ({score:+.1f} σ)"
-        if action == "clear":
-            message = f"{what}: back within the baseline{score_text}"
-        else:
-            message = f"{what} deviates from the baseline{score_text}: {level}"
-        return AlarmChange(action, chart.name, chart.kind, chart.mode, level, at_s, score, threshold, message)
+def clear_changes(active: Iterable[AlarmDocument], at_s: float) -> list[AlarmChange]:
+    """Clear the stored ``active`` alarms (a new baseline starts; the engine forgets its charts)."""
+    return [
+        AlarmChange("clear", a.chart, a.kind, a.mode, a.level, at_s, None, None,
+                    f"{_what(a.kind, a.mode)}: cleared, a new baseline is being learnt")
+        for a in active if a.state == "active"
+    ]

@@ -91,7 +91,8 @@ class SimSettings(_Closed):
         "hanging", description="hanging below D, or standing above it as a mast (needs support = clamped; must not buckle)")
     length_m: float = Field(
         4.0, gt=0, le=100, description="beam length, m; the layout's sensors scale with it (damage positions do not)")
-    excitation: Literal["paper", "ambient", "decay"] = Field("ambient", description="excitation of the rig")
+    excitation: Literal["paper", "ambient", "decay", "operational"] = Field(
+        "ambient", description="excitation of the rig (operational: the support moving randomly and a random distributed load)")
     damage: tuple[str, ...] = Field(("mass:0.126@4.0",), description="damage specs (mass:KG@POS, stiffness:FACTOR@A-B)")
     damage_at_s: float | None = Field(
         900.0, ge=0,
@@ -189,10 +190,14 @@ class RetentionSettings(_Closed):
 
 
 class AlarmSettings(_Closed):
-    """Alarms from the analytics' control charts, with hysteresis on top of the charts'."""
+    """Alarms from the analytics' control charts. Their hysteresis is the engine's (``shm analyze``
+    raises the same alarms on the same data): ``analytics.hold_windows`` and ``analytics.clear_windows``;
+    the two keys here, when set, override those for the service."""
 
-    raise_windows: int = Field(2, ge=1, le=100, description="consecutive windows at a level before it is raised")
-    clear_windows: int = Field(3, ge=1, le=100, description="consecutive windows below warning before an alarm clears")
+    raise_windows: int | None = Field(None, ge=1, le=100, description="consecutive windows at or beyond a level before it is raised "
+                                      "(default: analytics.hold_windows)")
+    clear_windows: int | None = Field(None, ge=1, le=100, description="consecutive windows below analytics.clear_sigma before an alarm "
+                                      "clears (default: analytics.clear_windows)")
     notify_levels: tuple[Literal["warning", "alarm"], ...] = Field(("warning", "alarm"), description="levels that notify")
     notify_cleared: bool = Field(True, description="notify when an alarm clears")
 
@@ -256,6 +261,13 @@ class ServiceSettings(_Closed):
             raise ValueError(f"retention.recordings_max_gb={self.retention.recordings_max_gb} must hold at least two files of "
                              f"archive.rotate_mb={self.archive.rotate_mb} (the one being written is never deleted)")
         return self
+
+    def engine_config(self) -> AnalysisConfig:
+        """The analytics the engine runs: ``analytics`` with ``alarms.raise_windows``/``clear_windows``
+        as its hysteresis when they are set (``shm analyze --config`` reads the same)."""
+        a = self.alarms
+        update = {k: v for k, v in (("hold_windows", a.raise_windows), ("clear_windows", a.clear_windows)) if v is not None}
+        return self.analytics.model_copy(update=update) if update else self.analytics
 
 
 def _merge(base: dict[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:

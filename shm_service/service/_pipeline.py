@@ -19,10 +19,8 @@ from typing import Protocol
 import numpy as np
 import orjson
 
-from analytics import AnalysisConfig, ModalMonitor, WindowResult, amplitude_spectrum, random_decrement
+from analytics import AnalysisConfig, EngineWindow, ModalMonitor, MonitoringEngine, WindowResult
 from contract import (
-    BEARING_TOPIC,
-    CURVATURE_CHART,
     IMU_PLANAR_COLUMNS,
     TEMPERATURE_TOPIC,
     AlarmDocument,
@@ -52,10 +50,10 @@ from estimator import (
 )
 
 from ..recording import FollowBlock
-from ._alarms import AlarmLogic
+from ._alarms import alarm_changes, clear_changes
 from ._archive import Archive
 from ._sinks import SinkGuard
-from ._storage import Storage, WindowCommit
+from ._storage import AlarmChange, Storage, WindowCommit
 
 __all__ = ["Batch", "Pipeline", "PipelineSink"]
 
@@ -276,42 +274,14 @@ class WindowOutput:
     spectrum: SpectrumDocument
     start_s: float
     new_baseline: bool
-
-
-class _Chunks:
-    """Time-stamped chunks (t (n,), values (n, k)), trimmed from the front."""
-
-    def __init__(self) -> None:
-        self.parts: deque[tuple[np.ndarray, np.ndarray]] = deque()
-
-    def add(self, t: np.ndarray, v: np.ndarray) -> None:
-        if len(t):
-            self.parts.append((t, v))
-
-    def trim(self, before: float) -> None:
-        while self.parts and self.parts[0][0][-1] < before:
-            self.parts.popleft()
-
-    def span(self, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray] | None:
-        sel = [p for p in self.parts if p[0][-1] >= lo and p[0][0] < hi]
-        if not sel:
-            return None
-        t = np.concatenate([p[0] for p in sel])
-        v = np.concatenate([p[1] for p in sel])
-        k0, k1 = np.searchsorted(t, [lo, hi])
-        return t[k0:k1], v[k0:k1]
-
-    @property
-    def newest(self) -> float | None:
-        return float(self.parts[-1][0][-1]) if self.parts else None
-
-    def __len__(self) -> int:
-        return sum(len(p[0]) for p in self.parts)
+    alarm_changes: list[AlarmChange]
 
 
 class _Analytics:
-    """Windows aligned to multiples of the window step in UNIX time, so replaying a period
-    gives the same windows (and the unique key of the trend rows holds)."""
+    """The one engine (``analytics.MonitoringEngine``, the same ``shm analyze`` runs) over the
+    estimator's b(t) and support displacement d(t), and what the service makes of its windows:
+    trend rows, spectra, alarm changes. Windows are aligned to multiples of the step in UNIX
+    time, so replaying a period gives the same windows (and the unique key of the trend rows holds)."""
 
     def __init__(self, model: ImmsModel, config: AnalysisConfig, monitor_state: dict | None, last_window_start: float | None,
                  source_id: str, min_coverage: float = 0.8) -> None:
@@ -321,20 +291,15 @@ class _Analytics:
         self.gamma = model.gamma
         self.window_s = config.window_s
         self.step_s = config.window_s * (1 - config.overlap)
-        self.n = int(round(self.window_s * FS))
         self.min_coverage = min_coverage
         self.signatures = None
         self.monitor = self._monitor(monitor_state)
-        self.b = _Chunks()
-        self.temperature = _Chunks()
-        self.bearing = _Chunks()
-        self.next_start: float | None = None if last_window_start is None else last_window_start + self.step_s
-        self.windows = 0
-        self.skipped_incomplete = 0
-        self.skipped_warmup = 0
-        self.not_before: float | None = None  # windows starting earlier are not analysed (filter converging)
+        self.engine: MonitoringEngine | None = None
+        self._next_start_ns = None if last_window_start is None else int(round(last_window_start * _NS)) + int(round(self.step_s * _NS))
+        self.not_before_ns: int | None = None  # windows starting earlier are not analysed (filter converging)
         self.latest_spectrum: SpectrumDocument | None = None
         self.learning_baseline = self.monitor.baseline is None
+        self._temperature: list[tuple[np.ndarray, np.ndarray]] = []  # samples before the engine starts
 
     def _monitor(self, state: dict | None) -> ModalMonitor:
         m = self.model
@@ -344,6 +309,8 @@ class _Analytics:
         if state is not None:
             try:
                 monitor = ModalMonitor.from_state_dict(state)
+                if monitor.config != self.config:
+                    raise ValueError("the analytics configuration changed")
                 monitor.signatures = self.signatures  # model-derived, not part of the stored state
                 return monitor
             except (ValueError, TypeError) as exc:
@@ -351,108 +318,97 @@ class _Analytics:
         return ModalMonitor(m.units.frequencies_hz, m.units.curvature(m.stations), m.stations, fs=FS, config=self.config,
                             beam_length=m.rig.beam.length, signatures=self.signatures)
 
+    # -- the engine's counters ------------------------------------------------------------------
+    @property
+    def windows(self) -> int:
+        return 0 if self.engine is None else self.engine.windows
+
+    @property
+    def skipped_incomplete(self) -> int:
+        return 0 if self.engine is None else self.engine.skipped_incomplete
+
+    @property
+    def skipped_warmup(self) -> int:
+        return 0 if self.engine is None else self.engine.skipped_warmup
+
+    @property
+    def next_start(self) -> float | None:
+        ns = self._next_start_ns if self.engine is None else self.engine.next_start_ns
+        return None if ns is None else ns / _NS
+
+    def active(self) -> dict[str, str]:
+        return self.monitor.alarms.raised()
+
+    def set_not_before(self, ns: int) -> None:
+        self.not_before_ns = int(ns)
+        if self.engine is not None:
+            self.engine.not_before_ns = self.not_before_ns
+
     def reset(self) -> None:
+        """A new baseline is learnt from the next windows (the alarms are cleared by the caller)."""
         self.monitor = self._monitor(None)
+        if self.engine is not None:
+            self.engine.reset(self.monitor)
         self.learning_baseline = True
 
-    def add(self, t: np.ndarray, b: np.ndarray, temperature: tuple[np.ndarray, np.ndarray] | None,
-            bearing: tuple[np.ndarray, np.ndarray] | None) -> list[WindowOutput]:
-        self.b.add(t, b)
-        if temperature is not None:
-            self.temperature.add(*temperature)
-        if bearing is not None:
-            self.bearing.add(*bearing)
-        newest = self.b.newest
-        if newest is None:
-            return []
+    # -- data ---------------------------------------------------------------------------------
+    def add(self, epoch_ns: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None,
+            temperature: tuple[np.ndarray, np.ndarray] | None) -> list[WindowOutput]:
+        """b (n, Γ) and the support displacement d (n,) at t (n,) s after ``epoch_ns``; temperature
+        (times s after epoch_ns, °C) or None."""
+        if self.engine is None:
+            if temperature is not None:
+                self._temperature.append(temperature)
+            if not len(t):
+                return []
+            self.engine = MonitoringEngine(self.monitor, origin_ns=epoch_ns, time_zero_ns=0, not_before_ns=self.not_before_ns,
+                                           next_start_ns=self._next_start_ns, min_coverage=self.min_coverage)
+            for tt, tv in self._temperature:  # the current chunk's temperature is among them
+                self.engine.add([], np.zeros((0, self.gamma)), temperature=(tt, tv))
+            self._temperature = []
+            temperature_now = None
+        else:
+            temperature_now = temperature
         out: list[WindowOutput] = []
-        if self.next_start is None:
-            first = float(self.b.parts[0][0][0])
-            self.next_start = math.ceil(first / self.step_s) * self.step_s
-        while self.next_start + self.window_s <= newest:
-            start = self.next_start
-            self.next_start = start + self.step_s
-            if self.not_before is not None and start < self.not_before:
-                self.skipped_warmup += 1
-                continue
-            result = self._window(start)
-            if result is not None:
-                out.append(result)
-        keep = self.next_start
-        self.b.trim(keep)
-        self.temperature.trim(keep - 60.0)
-        self.bearing.trim(keep)
+        if not len(t):
+            if temperature_now is not None:
+                self.engine.add([], np.zeros((0, self.gamma)), temperature=temperature_now)
+            return out
+        had = self.monitor.baseline is not None
+        for w in self.engine.add(t, b, support=d, temperature=temperature_now):
+            out.append(self._output(w, had))
+            had = self.monitor.baseline is not None
         return out
 
     def _per_unit(self, per_mode: list[float]) -> list[list[float]]:
         """Per-mode frequencies grouped by unit deformation (unit 1, the combimode, holds modes 1 and 2)."""
-        gamma = self.monitor.S.shape[1]
-        return [[f for f, u in zip(per_mode, self.monitor.units) if u == unit] for unit in range(gamma)]
+        return [[f for f, u in zip(per_mode, self.monitor.units) if u == unit] for unit in range(self.gamma)]
 
-    def _window(self, start: float) -> WindowOutput | None:
-        end = start + self.window_s
-        span = self.b.span(start, end)
-        if span is None or len(span[0]) < self.min_coverage * self.n:
-            self.skipped_incomplete += 1
-            return None
-        t, b = span
-        grid = start + np.arange(self.n) / FS
-        B = np.column_stack([np.interp(grid, t, b[:, k]) for k in range(self.gamma)])
-        temp = self.temperature.span(start - 30.0, end)
-        temperature = float(np.mean(temp[1][:, 0])) if temp is not None and len(temp[0]) else None
-        br = self.bearing.span(start - 0.1, end + 0.1)
-        bearing = np.interp(grid, br[0], br[1][:, 0]) if br is not None and len(br[0]) > 10 else None
-        had_baseline = self.monitor.baseline is not None
-        try:
-            res = self.monitor.process_window(grid, B, temperature, bearing)
-        except ValueError as exc:
-            log.warning("window at %.1f s: analytics refused it (%s)", start, exc)
-            self.skipped_incomplete += 1
-            return None
-        self.windows += 1
+    def _output(self, w: EngineWindow, had_baseline: bool) -> WindowOutput:
+        res = w.result
+        start, end = w.start_ns / _NS, res.end_s
         self.learning_baseline = self.monitor.baseline is None
         rows = []
         for i, e in enumerate(res.estimates):
-            damping = None
-            if e.frequency_hz is not None and res.trusted:
-                try:
-                    damping = random_decrement(B[:, e.unit - 1], FS, e.frequency_hz).damping_ratio
-                except (ValueError, FloatingPointError, np.linalg.LinAlgError):
-                    damping = None
             score = res.frequency_scores[i] if i < len(res.frequency_scores) else None
             rows.append(TrendRow(
                 source=self.source_id, window_start_s=start, window_end_s=end, mode=e.mode, unit=e.unit, kind=res.kind,
-                frequency_hz=e.frequency_hz, damping_ratio=damping, amplitude=e.amplitude, confidence=e.confidence,
+                frequency_hz=e.frequency_hz, damping_ratio=e.damping_ratio, amplitude=e.amplitude, confidence=e.confidence,
                 temperature_c=res.temperature_c, curvature_index=None if res.curvature is None else res.curvature.total,
                 score_sigma=score, level=res.levels.get(chart_name("frequency", e.mode)),
             ))
-        spec = amplitude_spectrum(B, FS, pad_factor=1)
-        keep = spec.frequencies <= 12.0
+        spec = res.spectrum
+        pad = spec.pad_factor
+        f, amp = spec.frequencies[::pad], spec.amplitude[::pad]  # the unpadded DFT bins of the window
+        keep = f <= 12.0
         baseline = self.monitor.baseline
         self.latest_spectrum = SpectrumDocument.from_arrays(
-            source=self.source_id, window_start_s=start, window_end_s=end, frequencies_hz=spec.frequencies[keep],
-            amplitudes=spec.amplitude[keep], tracked_hz=self._per_unit([float(f) for f in self.monitor.ref]),
+            source=self.source_id, window_start_s=start, window_end_s=end, frequencies_hz=f[keep],
+            amplitudes=amp[keep], tracked_hz=self._per_unit([float(x) for x in self.monitor.ref]),
             baseline_hz=None if baseline is None else self._per_unit([m.f_ref_hz for m in baseline.modes]),
         )
-        return WindowOutput(res, rows, self.latest_spectrum, start, baseline is not None and not had_baseline)
-
-    def charts(self, res: WindowResult) -> list[ChartDocument]:
-        """The charts the window judged, with the levels they were judged against."""
-        out: list[ChartDocument] = []
-        warning, alarm = self.config.chart_levels("frequency")
-        for i, e in enumerate(res.estimates):
-            name = chart_name("frequency", e.mode)
-            level = res.levels.get(name)
-            if level is not None:
-                score = res.frequency_scores[i] if i < len(res.frequency_scores) else None
-                out.append(ChartDocument(name=name, kind="frequency", mode=e.mode, unit=e.unit, level=level, score_sigma=score,
-                                         warning_sigma=warning, alarm_sigma=alarm))
-        level = res.levels.get(CURVATURE_CHART)
-        if level is not None:
-            warning, alarm = self.config.chart_levels("curvature")
-            out.append(ChartDocument(name=CURVATURE_CHART, kind="curvature", level=level, score_sigma=res.curvature_score,
-                                     warning_sigma=warning, alarm_sigma=alarm))
-        return out
+        return WindowOutput(res, rows, self.latest_spectrum, start, baseline is not None and not had_baseline,
+                            alarm_changes(res.alarm_events))
 
 
 # -- the pipeline -----------------------------------------------------------------------------
@@ -464,7 +420,7 @@ class Pipeline:
 
     def __init__(self, *, model: ImmsModel, source_id: str, storage: Storage, analysis: AnalysisConfig,
                  calibration_s: float, chunk_s: float, lateness_s: float, silent_after_s: float,
-                 raise_windows: int, clear_windows: int, archive: Archive | None = None, archive_raw: bool = False,
+                 raise_windows: int | None = None, clear_windows: int | None = None, archive: Archive | None = None, archive_raw: bool = False,
                  archive_estimates: bool = True, estimate_decimation: int = 1, sink: PipelineSink | None = None,
                  sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0) -> None:
         self.model = model
@@ -485,8 +441,11 @@ class Pipeline:
         topics = {s.topic: (s.kind, s.name) for s in self.rig.sensors if s.kind in ("imu", "tof", "strain", "bearing")}
         self.merger = _Merger(lateness_s)
         self.estimator = _Estimator(model, topics, calibration_s, calibration)
+        # one alarm path: the engine's (the service's raise/clear counts, when set, are the engine's hysteresis)
+        overrides = {k: v for k, v in (("hold_windows", raise_windows), ("clear_windows", clear_windows)) if v is not None}
+        analysis = analysis.model_copy(update=overrides) if overrides else analysis
+        self.analysis = analysis
         self.analytics = _Analytics(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id)
-        self.alarms = AlarmLogic(raise_windows=raise_windows, clear_windows=clear_windows, state=blob.get("alarms"))
         self.chunk_ns = int(chunk_s * _NS)
         self.silent_after_ns = int(silent_after_s * _NS)
         self.archive = archive
@@ -567,26 +526,26 @@ class Pipeline:
                 out = FilterOutput.concatenate([out, tail], self.model.state_size)
             elif tail is not None:
                 out = tail
-        temp = data.get(TEMPERATURE_TOPIC)
-        bearing = data.get(BEARING_TOPIC)
-        self._emit(out, temp, bearing)
+        self._emit(out, data.get(TEMPERATURE_TOPIC))
 
-    def _emit(self, out: FilterOutput | None, temp, bearing) -> None:
+    def _emit(self, out: FilterOutput | None, temp) -> None:
         epoch = self.estimator.epoch_ns
         if epoch is None:
             return
-        epoch_s = epoch / _NS
-        temperature = None if temp is None else (epoch_s + (temp[0] - epoch) * 1e-9, temp[1])
-        bearing_abs = None if bearing is None else (epoch_s + (bearing[0] - epoch) * 1e-9, bearing[1])
+        # times after the estimator's epoch (whole UNIX seconds): the engine aligns its windows
+        # in data time from there to the nanosecond
+        temperature = None if temp is None else ((temp[0] - epoch) * 1e-9, temp[1][:, 0])
         if out is None or not len(out.t):
             if temperature is not None:
-                self.analytics.temperature.add(*temperature)
+                self.analytics.add(epoch, np.zeros(0), np.zeros((0, self.model.gamma)), None, temperature)
             return
         self.estimates += len(out.t)
-        if self.analytics.not_before is None and self.estimator.calibration is not None:
-            self.analytics.not_before = epoch_s + float(self.estimator.calibration.rest_end) + self.warmup_s
-        t_abs = epoch_s + out.t
-        b = self.model.state_layout.b_of(out.x)
+        if self.analytics.not_before_ns is None and self.estimator.calibration is not None:
+            self.analytics.set_not_before(epoch + int(round((float(self.estimator.calibration.rest_end) + self.warmup_s) * _NS)))
+        t_abs = epoch / _NS + out.t
+        layout = self.model.state_layout
+        b = layout.b_of(out.x)
+        d = out.x[:, layout.d]  # the support displacement: the measured input of the identification
         self.latest_x = out.x[-1]
         if self.archive_estimates:
             self._archive_estimates(out)
@@ -595,10 +554,10 @@ class Pipeline:
             self._reset_requested = False
             self.analytics.reset()
             active = [a for a in self.storage.alarms(state="active") if a.source == self.source_id]
-            changes = self.alarms.clear_all(active, float(t_abs[0]))
+            changes = clear_changes(active, float(t_abs[0]))
             if changes:
                 self._commit_alarm_only(changes, float(t_abs[0]))
-        for window in self.analytics.add(t_abs, b, temperature, bearing_abs):
+        for window in self.analytics.add(epoch, out.t, b, d, temperature):
             self._commit(window)
 
     def _archive_estimates(self, out: FilterOutput) -> None:
@@ -632,14 +591,14 @@ class Pipeline:
         self.sink_guard.call("estimate", self.sink.estimate, float(t_abs[-1]), out.x[-1].copy(), truth)
 
     def _commit_alarm_only(self, changes, at_s: float) -> None:
-        commit = WindowCommit(self.source_id, self.analytics.next_start - self.analytics.step_s if self.analytics.next_start else at_s,
-                              at_s, [], {"monitor": None, "alarms": self.alarms.state_dict()}, None, changes)
+        nxt = self.analytics.next_start
+        commit = WindowCommit(self.source_id, nxt - self.analytics.step_s if nxt else at_s, at_s, [], {"monitor": None}, None, changes)
         self.storage.commit_window(commit)
 
     def _commit(self, window: WindowOutput) -> None:
         res = window.result
-        charts = self.analytics.charts(res)
-        changes = self.alarms.update(charts, res.end_s)
+        charts = list(res.charts)
+        changes = window.alarm_changes
         baseline = self.analytics.monitor.baseline.to_dict() if window.new_baseline else None
         calibration = None
         if self.estimator.new_calibration and self.estimator.calibration is not None:
@@ -648,7 +607,7 @@ class Pipeline:
         document = window_document(self.source_id, res, window.rows, charts)
         commit = WindowCommit(
             source=self.source_id, window_start_s=window.start_s, data_time_s=res.end_s, rows=window.rows,
-            monitor_state={"monitor": self.analytics.monitor.state_dict(), "alarms": self.alarms.state_dict()},
+            monitor_state={"monitor": self.analytics.monitor.state_dict()},
             calibration=calibration, alarm_changes=changes, baseline=baseline,
         )
         self.storage.commit_window(commit)
@@ -710,14 +669,14 @@ class Pipeline:
             realtime_factor=None if span is None else round(span / elapsed, 2),
             pipeline_latency_s=round(self.latency_s, 4),
             busy_fraction=round(self.busy_s / elapsed, 3),
-            active_alarms=self.alarms.active(),
+            active_alarms=self.analytics.active(),
         )
 
 
 def window_document(source: str, res: WindowResult, rows: list[TrendRow] | tuple = (),
                     charts: list[ChartDocument] | tuple = ()) -> WindowDocument:
-    """The window as the dashboard shows it: the analytics' result with each mode's damping
-    (computed per window by the pipeline), its chart, and the curvature change along η."""
+    """The window as the dashboard shows it: the engine's result with each mode's estimate
+    (frequency, damping and their 1σ, MPC, MAC), its chart, and the curvature change along η."""
     damping = {row.mode: row.damping_ratio for row in rows}
     by_mode = {c.mode: c for c in charts if c.kind == "frequency"}
     modes = []
@@ -725,8 +684,9 @@ def window_document(source: str, res: WindowResult, rows: list[TrendRow] | tuple
         chart = by_mode.get(e.mode)
         modes.append(ModeDocument(
             mode=e.mode, unit=e.unit, frequency_hz=e.frequency_hz, amplitude=e.amplitude, confidence=round(e.confidence, 4),
-            damping_ratio=damping.get(e.mode), score_sigma=res.frequency_scores[i] if i < len(res.frequency_scores) else None,
-            level=None if chart is None else chart.level,
+            damping_ratio=damping.get(e.mode, e.damping_ratio), score_sigma=res.frequency_scores[i] if i < len(res.frequency_scores) else None,
+            level=None if chart is None else chart.level, frequency_std_hz=e.frequency_std_hz, damping_std=e.damping_std,
+            mpc=e.mpc, mac=e.mac, method=e.method,
         ))
     curvature = None
     if res.curvature is not None:

@@ -4,12 +4,13 @@ It shares the FE beam model with the estimator but none of its kinematic shortcu
 """
 
 from ._record import SimulationSummary, simulate
-from ._settings import Damage, PlantSettings, SensorErrors, SimulationSettings, parse_damage
+from ._settings import Damage, OperationalSettings, PlantSettings, SensorErrors, SimulationSettings, parse_damage
 from ._virtual_rig import SAMPLE_RATE_HZ, SampleBlock, VirtualRig
 
 __all__ = [
     "SAMPLE_RATE_HZ",
     "Damage",
+    "OperationalSettings",
     "PlantSettings",
     "SampleBlock",
     "SensorErrors",

@@ -9,7 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from estimator import PointMass, StiffnessSegment
 
-__all__ = ["Damage", "PlantSettings", "SensorErrors", "SimulationSettings", "parse_damage"]
+__all__ = ["Damage", "OperationalSettings", "PlantSettings", "SensorErrors", "SimulationSettings", "parse_damage"]
 
 
 class _Closed(BaseModel):
@@ -70,6 +70,28 @@ class PlantSettings(_Closed):
     ambient_force: float = Field(0.05, ge=0, description="random load per FE node and sample (ambient), N; small enough that the beam stays in its linear range")
 
 
+class OperationalSettings(_Closed):
+    """The operational excitation (``excitation = "operational"``): the support moving randomly
+    and a random distributed load along the beam, as in service (a mast on a vessel, a blade on
+    its hub, a wing on a fuselage)."""
+
+    support_rms: float = Field(0.003, ge=0, le=0.05, description="RMS of the support displacement d(t) after the ramp, m [0.003]")
+    support_band: tuple[float, float] = Field(
+        (0.2, 30.0), description="band of the support acceleration (flat inside, Butterworth order 4 edges), Hz [0.2, 30]")
+    load_rms: float = Field(0.05, ge=0, description="RMS of the distributed load at any point, N/m [0.05]")
+    load_correlation: float = Field(1.0, gt=0, description="correlation length of the load along the beam (exponential kernel), m [1]")
+    load_band: tuple[float, float] = Field((0.1, 30.0), description="band of the load's time history, Hz [0.1, 30]")
+    ramp: float = Field(10.0, ge=0, description="raised-cosine ramp-in after the rest phase, s [10]")
+
+    @model_validator(mode="after")
+    def _bands(self) -> "OperationalSettings":
+        for name in ("support_band", "load_band"):
+            lo, hi = getattr(self, name)
+            if not 0 < lo < hi < 100:
+                raise ValueError(f"{name}=({lo}, {hi}) must satisfy 0 < low < high < 100 Hz (the rig's Nyquist frequency)")
+        return self
+
+
 class Damage(_Closed):
     kind: Literal["mass", "stiffness"]
     mass: float | None = None
@@ -115,7 +137,7 @@ def parse_damage(text: str) -> Damage:
 class SimulationSettings(_Closed):
     duration: float = Field(300.0, gt=0, le=7 * 24 * 3600, description="recording length, s")
     seed: int = Field(1, ge=0)
-    excitation: Literal["paper", "ambient", "decay"] = "paper"
+    excitation: Literal["paper", "ambient", "decay", "operational"] = "paper"
     layout: Literal["benchmark", "dense"] = "benchmark"
     support: Literal["pinned", "clamped"] = Field(
         "pinned", description="pinned: the plain bearing (the beam swings about D); clamped: the fixed bearing (θ ≡ 0)")
@@ -132,6 +154,7 @@ class SimulationSettings(_Closed):
     start_time_ns: int = Field(1_767_225_600_000_000_000, ge=0, description="log_time of the first sample (2026-01-01 UTC)")
     plant: PlantSettings = PlantSettings()
     errors: SensorErrors = SensorErrors()
+    operational: OperationalSettings = OperationalSettings()
 
     @model_validator(mode="after")
     def _friction_needs_a_bearing_that_turns(self) -> "SimulationSettings":

@@ -16,7 +16,7 @@ import scipy.signal
 from estimator import BucklingError, RigDescription, assemble_beam, natural_modes, parse_rig
 
 from ..rig_layouts import build_rig
-from ._excitation import Excitation, make_excitation
+from ._excitation import DistributedLoad, Excitation, OperationalExcitation, make_excitation
 from ._kinematics import point_motion
 from ._plant import Plant, build_plant, clamped_basis, integrate
 from ._settings import SimulationSettings
@@ -139,9 +139,12 @@ class VirtualRig:
             None if not settings.damage else int(round((settings.damage_at or 0.0) * SAMPLE_RATE_HZ))
         )
         nominal_freqs = natural_modes(nominal_model, 6).frequencies_hz
+        op = settings.operational
         self.excitation: Excitation = make_excitation(
             settings.excitation, settings.duration, self._rng_excitation,
             eigenfrequencies_hz=nominal_freqs, rest_s=settings.rest, ambient_force_std=settings.plant.ambient_force,
+            operational=OperationalExcitation(op.support_rms, tuple(op.support_band), op.load_rms, op.load_correlation,
+                                              tuple(op.load_band), op.ramp),
         )
         # Ambient loads act on the lateral DOF of every node beyond D (below it hanging, above it standing).
         n_nodes = len(basis.nodes)
@@ -150,6 +153,13 @@ class VirtualRig:
         rigid[1::2] = 1.0
         T = np.column_stack([rigid, basis.dofs])
         self._load_map = T[2::2].T  # (n, nodes-1): generalized force per nodal load
+        self._distributed_load = None
+        if self.excitation.operational is not None:
+            o = self.excitation.operational
+            self._distributed_load = DistributedLoad(
+                self._rng_ambient, np.asarray(basis.nodes[1:], dtype=float), rms_n_per_m=o.load_rms_n_per_m,
+                correlation_m=o.load_correlation_m, band_hz=o.load_band_hz, sample_rate_hz=SAMPLE_RATE_HZ,
+                start_s=self.excitation.rest_s, ramp_s=o.ramp_s)
         self._sensor_setup()
         self._state = (np.zeros(self.plants[0].size), np.zeros(self.plants[0].size))
         self._next_sample = 0
@@ -209,6 +219,8 @@ class VirtualRig:
                 None if not np.isfinite(self._critical_load_factor) else round(self._critical_load_factor, 6)),
             "plant_rig": self.plant_rig.model_dump_json(),
         }
+        if self.settings.excitation == "operational":
+            meta["operational"] = self.settings.operational.model_dump_json()
         if self.damaged_rig is not None:
             meta["eigenfrequencies_after_damage_hz"] = json.dumps(self.plants[1].linear_frequencies_hz[:8].round(6).tolist())
             meta["damage_time_s"] = json.dumps((self.damage_sample or 0) / SAMPLE_RATE_HZ)
@@ -228,7 +240,9 @@ class VirtualRig:
         t = (k0 + np.arange(n)) * self.dt
         temperature = self.temperature(t)
         plant = self.plants[1] if (self.damage_sample is not None and k0 >= self.damage_sample) else self.plants[0]
-        if self.excitation.ambient_force_std > 0:
+        if self._distributed_load is not None:
+            force = self._distributed_load.nodal_loads(t) @ self._load_map.T
+        elif self.excitation.ambient_force_std > 0:
             loads = self.excitation.ambient_force_std * self._rng_ambient.standard_normal((n, self._load_map.shape[1]))
             loads[t < self.excitation.rest_s] = 0.0
             force = loads @ self._load_map.T

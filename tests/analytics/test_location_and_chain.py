@@ -95,8 +95,9 @@ def test_shape_change_is_flagged_and_located_by_signatures():
     assert json.dumps(res.as_dict(), allow_nan=False)
 
 
-def test_random_decrement_used_when_the_bearing_is_still():
-    """Ambient record with a bearing channel that never moves: no free decay, so random decrement."""
+def test_ambient_damping_by_the_subspace_pole_and_random_decrement():
+    """Ambient record with a bearing channel that never moves: no free decay, so the record's
+    subspace pole (preferred) and random decrement, each with its method and 1σ."""
     rng = np.random.default_rng(5)
     f, zeta = 2.0, 0.01
     wn = 2 * np.pi * f
@@ -107,8 +108,12 @@ def test_random_decrement_used_when_the_bearing_is_still():
     t = np.arange(y.size) / FS
     res = analyze(t, y[:, None], S2[:, :1], ETA, fs=FS, expected_hz=((f,),), bearing=np.zeros(y.size))
     m = res.modes[0]
-    assert m.damping_method == "random_decrement"
-    assert m.damping_ratio == pytest.approx(zeta, rel=0.25)
+    assert m.damping_method == "ssi" and m.method == "ssi"
+    by = {d.method: d for d in m.damping}
+    assert set(by) == {"ssi", "random_decrement"}
+    for d in by.values():
+        assert d.damping_ratio == pytest.approx(zeta, rel=0.25) and 0 < d.damping_std < 0.5 * zeta
+    assert m.damping_ratio == by["ssi"].damping_ratio
 
 
 def test_decay_fit_stops_at_the_noise_floor():
@@ -127,7 +132,7 @@ def test_decay_fit_stops_at_the_noise_floor():
         b[k0 + int(0.5 * FS) :] += 1e-3 * np.exp(-zeta * wn * tt) * np.cos(wn * np.sqrt(1 - zeta**2) * tt)
     res = analyze(t, b[:, None], S2[:, :1], ETA, fs=FS, expected_hz=((f,),), bearing=bearing)
     m = res.modes[0]
-    assert m.damping_method in ("envelope", "combined")
+    assert m.damping_method == "free_decay" and "free_decay" in {d.method for d in m.damping}
     assert m.damping_ratio == pytest.approx(zeta, rel=0.1)
 
 
