@@ -32,25 +32,33 @@ def _what(kind: ChartKind, mode: int | None) -> str:
 
 
 class AlarmLogic:
+    """The hysteresis of the alarms. ``charts`` is the COMMITTED state (what the database holds):
+    ``propose`` computes a window's changes and the state after them without touching it, and
+    ``commit`` adopts that state once the window's transaction is written. So a window that
+    could not be stored changes no alarm, in memory as on disk."""
+
     def __init__(self, *, raise_windows: int, clear_windows: int, state: dict[str, Any] | None = None) -> None:
         if raise_windows < 1 or clear_windows < 1:
             raise ValueError(f"{raise_windows=} and {clear_windows=} must be >= 1")
         self.raise_windows = raise_windows
         self.clear_windows = clear_windows
-        self.charts: dict[str, dict[str, int]] = {k: dict(v) for k, v in (state or {}).items()}
+        self.charts: dict[str, dict[str, int]] = _copy(state or {})
 
     def state_dict(self) -> dict[str, Any]:
-        return {k: dict(v) for k, v in self.charts.items()}
+        return _copy(self.charts)
 
     def active(self) -> dict[str, str]:
         return {k: _LEVEL[v["raised"]] for k, v in self.charts.items() if v["raised"]}
 
-    def update(self, charts: Iterable[ChartDocument], at_s: float) -> list[AlarmChange]:
-        """Feed one window's charts; returns the alarm changes they cause."""
+    def propose(self, charts: Iterable[ChartDocument], at_s: float,
+                state: dict[str, Any] | None = None) -> tuple[list[AlarmChange], dict[str, Any]]:
+        """One window's charts, judged from ``state`` (default: the committed state): the alarm
+        changes and the state after them. Neither this object nor ``state`` is changed."""
+        work = _copy(self.charts if state is None else state)
         changes: list[AlarmChange] = []
         for chart in sorted(charts, key=lambda c: c.name):
             rank = _RANK[chart.level]
-            st = self.charts.setdefault(chart.name, {"raised": 0, "up": 0, "down": 0})
+            st = work.setdefault(chart.name, {"raised": 0, "up": 0, "down": 0})
             if rank > st["raised"]:
                 st["up"] += 1
                 st["down"] = 0
@@ -68,11 +76,26 @@ class AlarmLogic:
             else:
                 st["up"] = 0 if rank <= st["raised"] else st["up"]
                 st["down"] = 0
+        return changes, work
+
+    def commit(self, state: dict[str, Any]) -> None:
+        """Adopt ``state`` (from ``propose``) once its window is stored."""
+        self.charts = _copy(state)
+
+    def update(self, charts: Iterable[ChartDocument], at_s: float) -> list[AlarmChange]:
+        """``propose`` and ``commit`` in one (for callers without a transaction to wait for)."""
+        changes, state = self.propose(charts, at_s)
+        self.commit(state)
         return changes
 
     def clear_all(self, active: Iterable[AlarmDocument], at_s: float) -> list[AlarmChange]:
         """Forget every chart (a new baseline starts) and clear the ``active`` alarms."""
         self.charts.clear()
+        return self.clear_changes(active, at_s)
+
+    @staticmethod
+    def clear_changes(active: Iterable[AlarmDocument], at_s: float) -> list[AlarmChange]:
+        """The changes that clear the ``active`` alarms because a new baseline is being learnt."""
         return [
             AlarmChange("clear", a.chart, a.kind, a.mode, a.level, at_s, None, None,
                         f"{_what(a.kind, a.mode)}: cleared, a new baseline is being learnt")
@@ -90,3 +113,7 @@ class AlarmLogic:
         else:
             message = f"{what} deviates from the baseline{score_text}: {level}"
         return AlarmChange(action, chart.name, chart.kind, chart.mode, level, at_s, score, threshold, message)
+
+
+def _copy(state: dict[str, Any]) -> dict[str, dict[str, int]]:
+    return {k: dict(v) for k, v in state.items()}

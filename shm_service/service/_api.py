@@ -33,6 +33,7 @@ from contract import (
 
 from ._docs import serve_docs_offline
 from ._ingest import IngestError, parse_body
+from ._storage import StorageUnavailable
 
 __all__ = ["ApiService", "create_app"]
 
@@ -43,6 +44,7 @@ class ApiService(Protocol):
     token: str | None
 
     def check_token(self, token: str | None) -> None: ...
+    def health(self) -> HealthDocument: ...
     def status(self) -> StatusDocument: ...
     def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
                limit: int = 100_000) -> list[TrendRow]: ...
@@ -146,6 +148,7 @@ def _error(description: str) -> dict[str, Any]:
 _AUTH_RESPONSES: dict[int | str, dict[str, Any]] = {
     401: _error("missing or wrong token"),
     403: _error("no token is configured: the action is disabled"),
+    503: _error("the database is unavailable for now (locked by another process, disk full): retry later"),
 }
 #: Our own 422s say in a sentence what is wrong with a parameter; FastAPI's list what does not parse.
 _INVALID = {422: _error("a parameter is invalid")}
@@ -175,11 +178,16 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
     )
     serve_docs_offline(app)  # /docs and /redoc from the installed packages, not a CDN
 
+    @app.exception_handler(StorageUnavailable)
+    async def storage_unavailable(request: Request, exc: StorageUnavailable) -> JSONResponse:
+        # The database stayed locked (another process) or failing for the storage's retry period.
+        return JSONResponse({"detail": f"the database is unavailable for now ({exc}); retry later"}, status_code=503,
+                            headers={"Retry-After": "5"})
+
     @app.get("/healthz", summary="liveness: 'degraded' while the pipeline's batches fail", response_model=HealthDocument,
              responses=_AUTH_RESPONSES)
     def healthz() -> HealthDocument:
-        st = service.status().service
-        return HealthDocument(status="ok" if st.pipeline_error is None else "degraded", uptime_s=st.uptime_s)
+        return service.health()
 
     @app.get("/api/status", summary="sources, rates, latency, dropped and rejected samples, degraded sensors",
              response_model=StatusDocument, responses=_AUTH_RESPONSES)

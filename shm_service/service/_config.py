@@ -195,16 +195,29 @@ class AlarmSettings(_Closed):
     clear_windows: int = Field(3, ge=1, le=100, description="consecutive windows below warning before an alarm clears")
     notify_levels: tuple[Literal["warning", "alarm"], ...] = Field(("warning", "alarm"), description="levels that notify")
     notify_cleared: bool = Field(True, description="notify when an alarm clears")
+    repeat_interval_s: float | None = Field(
+        4 * 3600.0, gt=0, description="re-notify an alarm that still fires after this long, wall-clock s (like "
+        "Alertmanager's repeat_interval; None: never)")
+    stale_after_s: float = Field(
+        900.0, gt=0, description="the active alarms of a source that delivered no data for this long are marked stale, "
+        "wall-clock s")
+    notify_stale: bool = Field(True, description="notify when an alarm goes stale (its source went silent)")
 
 
 class NotifySettings(_Closed):
-    """Notifications of alarm events: webhooks and e-mail, through a persistent outbox."""
+    """Notifications of alarm events: webhooks and e-mail, through a persistent outbox. Each target
+    gets an alarm's events in their order; a 4xx answer other than 408/429 is permanent (the
+    notification fails at once, reported), 5xx, 408, 429 and network errors are retried with
+    jittered exponential back-off; targets are served independently."""
 
     webhooks: tuple[str, ...] = Field((), description="URLs that receive a JSON POST per alarm event")
     webhook_timeout_s: float = Field(5.0, gt=0, description="timeout of one webhook attempt, s")
-    retry_initial_s: float = Field(1.0, gt=0, description="first retry delay, s (doubles each attempt)")
-    retry_max_s: float = Field(600.0, gt=0, description="longest retry delay, s")
-    max_attempts: int = Field(20, ge=1, description="attempts before a notification is given up (logged as failed)")
+    retry_initial_s: float = Field(1.0, gt=0, description="first retry delay, s (doubles each attempt, times a random 0.5-1)")
+    retry_max_s: float = Field(300.0, gt=0, description="longest retry delay, s")
+    max_attempts: int | None = Field(None, ge=1, description="attempts before a notification is given up (None: no limit)")
+    give_up_after_s: float = Field(
+        7 * 86400.0, gt=0, description="a notification still failing this long after its event is given up (logged and "
+        "counted as failed), s")
     smtp_host: str | None = Field(None, description="SMTP server for e-mail (None: no e-mail)")
     smtp_port: int = Field(25, ge=1, le=65535, description="SMTP port")
     smtp_starttls: bool = Field(False, description="use STARTTLS")
@@ -215,9 +228,23 @@ class NotifySettings(_Closed):
     @field_validator("webhooks")
     @classmethod
     def _urls(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        # Parsed here, once, as the notifier will use them: a URL the HTTP client cannot use is a
+        # configuration error at start, not a notification failing for ever.
+        import httpx
+
         for url in value:
-            if not url.startswith(("http://", "https://")):
+            try:
+                parsed = httpx.URL(url)
+            except (httpx.InvalidURL, TypeError, ValueError) as exc:
+                raise ValueError(f"webhook {url!r} is not a valid URL: {exc}") from None
+            if parsed.scheme not in ("http", "https"):
                 raise ValueError(f"webhook {url!r} must be an http:// or https:// URL")
+            if not parsed.host:
+                raise ValueError(f"webhook {url!r} has no host")
+            if parsed.port is not None and not 0 < parsed.port < 65536:
+                raise ValueError(f"webhook {url!r}: port {parsed.port} is not within 1-65535")
+        if len(set(value)) != len(value):
+            raise ValueError(f"webhooks {list(value)} name a URL twice")
         return value
 
 
@@ -238,7 +265,15 @@ class ServiceSettings(_Closed):
     retention: RetentionSettings = RetentionSettings()
     alarms: AlarmSettings = AlarmSettings()
     notify: NotifySettings = NotifySettings()
-    storage_sync: Literal["normal", "full"] = Field("normal", description="SQLite synchronous mode: normal survives a process crash, full also a power loss")
+    storage_sync: Literal["normal", "full"] = Field(
+        "normal", description="SQLite synchronous mode of transactions that write only trend rows and state: normal "
+        "survives a process crash, full also a power loss")
+    storage_alarm_sync: Literal["normal", "full"] = Field(
+        "full", description="SQLite synchronous mode of transactions that write alarms, alarm events or the "
+        "notification outbox (full: they survive a power loss)")
+    storage_retry_s: float = Field(
+        10.0, ge=0, le=3600, description="how long a write is retried on a transient database error (locked by another "
+        "process, disk full, I/O error) before the window waits in memory for the next attempt, s")
     queue_batches: int = Field(8, ge=2, le=10_000, description="bounded queue between source and pipeline, batches (a batch is at most ~10 s of data or 2 MB of a file)")
     log_level: Literal["debug", "info", "warning", "error"] = Field("info", description="log level")
 

@@ -55,7 +55,7 @@ from ..recording import FollowBlock
 from ._alarms import AlarmLogic
 from ._archive import Archive
 from ._sinks import SinkGuard
-from ._storage import Storage, WindowCommit
+from ._storage import Storage, StorageUnavailable, WindowCommit, is_transient
 
 __all__ = ["Batch", "Pipeline", "PipelineSink"]
 
@@ -259,6 +259,9 @@ class _Estimator:
             return None
         return self.filter.flush()
 
+    def health_problems(self) -> list[str]:
+        return []
+
     def diagnostics(self) -> EstimatorStatusDocument:
         diag = self.filter.diagnostics() if self.filter is not None else {}
         return EstimatorStatusDocument(
@@ -458,6 +461,17 @@ class _Analytics:
 # -- the pipeline -----------------------------------------------------------------------------
 
 
+@dataclass
+class _PendingCommit:
+    """A window's transaction not yet written (the database was unavailable), with the alarm
+    state it leads to and what goes to the dashboard once it is written."""
+
+    commit: WindowCommit
+    alarm_state: dict
+    document: WindowDocument | None = None
+    spectrum: SpectrumDocument | None = None
+
+
 class Pipeline:
     """Runs the stages for one source. ``process(batch)`` and ``finish()`` are called from one
     thread; ``status()`` from any."""
@@ -466,7 +480,8 @@ class Pipeline:
                  calibration_s: float, chunk_s: float, lateness_s: float, silent_after_s: float,
                  raise_windows: int, clear_windows: int, archive: Archive | None = None, archive_raw: bool = False,
                  archive_estimates: bool = True, estimate_decimation: int = 1, sink: PipelineSink | None = None,
-                 sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0) -> None:
+                 sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0,
+                 commit_retry_s: float = 5.0, max_pending_commits: int = 20_000) -> None:
         self.model = model
         self.rig = model.rig
         self.warmup_s = warmup_s
@@ -487,6 +502,14 @@ class Pipeline:
         self.estimator = _Estimator(model, topics, calibration_s, calibration)
         self.analytics = _Analytics(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id)
         self.alarms = AlarmLogic(raise_windows=raise_windows, clear_windows=clear_windows, state=blob.get("alarms"))
+        # The alarm state after the newest window (committed or waiting): the next window is judged from it.
+        self._alarm_state = self.alarms.state_dict()
+        self._pending_commits: deque[_PendingCommit] = deque()
+        self.commit_retry_s = commit_retry_s
+        self.max_pending_commits = max_pending_commits
+        self.storage_error: str | None = None  # set while windows wait for the database
+        self.storage_errors = 0  # commits that failed (and wait to be retried)
+        self.trend_rows_dropped = 0  # rows of waiting windows dropped beyond max_pending_commits (their alarms kept)
         self.chunk_ns = int(chunk_s * _NS)
         self.silent_after_ns = int(silent_after_s * _NS)
         self.archive = archive
@@ -526,6 +549,8 @@ class Pipeline:
 
     def process(self, batch: Batch) -> None:
         began = time.monotonic()
+        if self._pending_commits:
+            self.flush_commits()
         for block in batch.blocks:
             if not len(block):
                 continue
@@ -594,10 +619,7 @@ class Pipeline:
         if self._reset_requested:
             self._reset_requested = False
             self.analytics.reset()
-            active = [a for a in self.storage.alarms(state="active") if a.source == self.source_id]
-            changes = self.alarms.clear_all(active, float(t_abs[0]))
-            if changes:
-                self._commit_alarm_only(changes, float(t_abs[0]))
+            self._clear_for_new_baseline(float(t_abs[0]))
         for window in self.analytics.add(t_abs, b, temperature, bearing_abs):
             self._commit(window)
 
@@ -631,15 +653,29 @@ class Pipeline:
                 truth = defl[k]
         self.sink_guard.call("estimate", self.sink.estimate, float(t_abs[-1]), out.x[-1].copy(), truth)
 
-    def _commit_alarm_only(self, changes, at_s: float) -> None:
-        commit = WindowCommit(self.source_id, self.analytics.next_start - self.analytics.step_s if self.analytics.next_start else at_s,
-                              at_s, [], {"monitor": None, "alarms": self.alarms.state_dict()}, None, changes)
-        self.storage.commit_window(commit)
+    def _clear_for_new_baseline(self, at_s: float) -> None:
+        """A new baseline: every chart starts over and every active alarm of the source clears
+        (those stored and those raised by windows still waiting for the database)."""
+        active = {a.chart: a for a in self.storage.alarms(state="active") if a.source == self.source_id}
+        for pending in self._pending_commits:
+            for c in pending.commit.alarm_changes:
+                if c.action == "raise":
+                    active[c.chart] = AlarmDocument(id=1, source=self.source_id, chart=c.chart, kind=c.kind, mode=c.mode,
+                                                    level=c.level, state="active", raised_at_s=c.at_s, message=c.message)
+                elif c.action == "clear":
+                    active.pop(c.chart, None)
+        changes = self.alarms.clear_changes(active.values(), at_s)
+        self._alarm_state = {}
+        start = self.analytics.next_start - self.analytics.step_s if self.analytics.next_start else at_s
+        commit = WindowCommit(self.source_id, start, at_s, [], {"monitor": None, "alarms": {}}, None, changes)
+        self._pending_commits.append(_PendingCommit(commit, {}))
+        self.flush_commits()
 
     def _commit(self, window: WindowOutput) -> None:
         res = window.result
         charts = self.analytics.charts(res)
-        changes = self.alarms.update(charts, res.end_s)
+        changes, alarm_state = self.alarms.propose(charts, res.end_s, state=self._alarm_state)
+        self._alarm_state = alarm_state
         baseline = self.analytics.monitor.baseline.to_dict() if window.new_baseline else None
         calibration = None
         if self.estimator.new_calibration and self.estimator.calibration is not None:
@@ -648,29 +684,77 @@ class Pipeline:
         document = window_document(self.source_id, res, window.rows, charts)
         commit = WindowCommit(
             source=self.source_id, window_start_s=window.start_s, data_time_s=res.end_s, rows=window.rows,
-            monitor_state={"monitor": self.analytics.monitor.state_dict(), "alarms": self.alarms.state_dict()},
+            monitor_state={"monitor": self.analytics.monitor.state_dict(), "alarms": alarm_state},
             calibration=calibration, alarm_changes=changes, baseline=baseline,
         )
-        self.storage.commit_window(commit)
-        self.windows_committed += 1
-        self.last_window = document
-        if self.sink is not None:
-            guard = self.sink_guard
-            guard.call("window", self.sink.window, self.last_window)
-            guard.call("spectra", self.sink.spectra, window.spectrum)
-            if changes:
-                changed = {c.chart for c in changes}
-                for alarm in self.storage.alarms(limit=len(changes) + 5):
-                    if alarm.source == self.source_id and alarm.chart in changed:
-                        guard.call("alarm", self.sink.alarm, alarm)
+        self._pending_commits.append(_PendingCommit(commit, alarm_state, document, window.spectrum))
+        if len(self._pending_commits) > self.max_pending_commits:
+            oldest = self._pending_commits[0]
+            self.trend_rows_dropped += len(oldest.commit.rows)
+            oldest.commit.rows = []
+        self.flush_commits()
+
+    def flush_commits(self, retry_s: float | None = None) -> bool:
+        """Write the waiting windows in their order. Alarm state changes take effect (and reach
+        the dashboard) only once their window is written; a transient database error leaves the
+        window waiting for the next attempt (the storage already retried it for ``retry_s``).
+        Returns True when nothing waits any more."""
+        while self._pending_commits:
+            pending = self._pending_commits[0]
+            try:
+                self.storage.commit_window(pending.commit, retry_s=self.commit_retry_s if retry_s is None else retry_s)
+            except Exception as exc:
+                if not is_transient(exc):
+                    # Not a passing fault but a bad transaction: retrying it would stop every later window.
+                    self._pending_commits.popleft()
+                    raise
+                self.storage_errors += 1
+                self.storage_error = (f"storage: {exc}; {len(self._pending_commits)} window(s) wait to be written "
+                                      "(retried with every batch)")
+                if self.storage_errors <= 3 or self.storage_errors % 100 == 0:
+                    log.error("%s", self.storage_error)
+                return False
+            self._pending_commits.popleft()
+            self.alarms.commit(pending.alarm_state)
+            if pending.document is not None:
+                self.windows_committed += 1
+                self.last_window = pending.document
+            self._after_commit(pending)
+        self.storage_error = None
+        return True
+
+    @property
+    def pending_commits(self) -> int:
+        return len(self._pending_commits)
+
+    def _after_commit(self, pending: _PendingCommit) -> None:
+        if self.sink is None:
+            return
+        guard = self.sink_guard
+        if pending.document is not None:
+            guard.call("window", self.sink.window, pending.document)
+        if pending.spectrum is not None:
+            guard.call("spectra", self.sink.spectra, pending.spectrum)
+        changes = pending.commit.alarm_changes
+        if changes:
+            changed = {c.chart for c in changes}
+            for alarm in self.storage.alarms(limit=len(changes) + 5):
+                if alarm.source == self.source_id and alarm.chart in changed:
+                    guard.call("alarm", self.sink.alarm, alarm)
 
     def finish(self) -> None:
         """The source ended: release everything, flush the filter, close the recording."""
         self._advance(self.merger.release(final=True), final=True)
+        if self._pending_commits:
+            self.flush_commits(retry_s=max(self.commit_retry_s, 30.0))
         if self.archive is not None:
             self.archive.close()
 
     # -- status -----------------------------------------------------------------------------
+
+    def health_problems(self) -> list[str]:
+        """Why the pipeline's output cannot be trusted right now (empty: it can)."""
+        return self.estimator.health_problems()
 
     def sensor_states(self) -> dict[str, str]:
         states: dict[str, str] = {}

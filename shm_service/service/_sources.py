@@ -111,6 +111,10 @@ class Source:
             return 0.0
         return (n1 - n0) / max(t1 - t0, 1e-9)
 
+    def health_problems(self) -> list[str]:
+        """Why the source's data cannot be trusted right now (empty: it can)."""
+        return []
+
     def status(self) -> dict[str, Any]:
         now = time.time()
         return {
