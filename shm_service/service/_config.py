@@ -15,6 +15,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from analytics import AnalysisConfig
 
+from ._plausibility import ValueLimits
+
 __all__ = [
     "AlarmSettings",
     "ArchiveSettings",
@@ -114,6 +116,18 @@ class SourceSettings(_Closed):
     follow_idle_s: float | None = Field(None, gt=0, description="stop following after this long without growth, s (None: never)")
     lateness_s: float = Field(1.0, gt=0, le=60, description="how long the merge waits for a late sensor before moving on, s")
     silent_after_s: float = Field(2.0, gt=0, description="a sensor without data this long is reported degraded, s")
+    stuck_after_s: float = Field(
+        1.0, gt=0, description="a sensor whose readings stay exactly the same this long is reported degraded (stuck), s")
+    time_window_s: float = Field(
+        3600.0, gt=0, description="a stamp more than this before the source's newest one, or after its current time, is "
+        "rejected (implausible_time), s; ingest's current time runs on with the wall clock, sim and replay have their own")
+    max_ahead_s: float | None = Field(
+        None, gt=0, description="a sensor whose stamps run ahead of every other sensor of the source by more than this is "
+        "rejected (ahead_of_source: its clock jumped), s (None: lateness_s)")
+    future_tolerance_s: float = Field(
+        60.0, gt=0, description="ingest: no stamp may lie beyond the wall clock plus this, s; a stamp this close to the "
+        "wall clock is always on time")
+    limits: ValueLimits = Field(ValueLimits(), description="readings beyond these are rejected (implausible_value)")
 
     @field_validator("speed", mode="before")
     @classmethod

@@ -55,6 +55,7 @@ from ..recording import FollowBlock
 from ._alarms import AlarmLogic
 from ._archive import Archive
 from ._sinks import SinkGuard
+from ._plausibility import SourceClock, ValueLimits, implausible_values
 from ._storage import Storage, StorageUnavailable, WindowCommit, is_transient
 
 __all__ = ["Batch", "Pipeline", "PipelineSink"]
@@ -481,7 +482,8 @@ class Pipeline:
                  raise_windows: int, clear_windows: int, archive: Archive | None = None, archive_raw: bool = False,
                  archive_estimates: bool = True, estimate_decimation: int = 1, sink: PipelineSink | None = None,
                  sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0,
-                 commit_retry_s: float = 5.0, max_pending_commits: int = 20_000) -> None:
+                 commit_retry_s: float = 5.0, max_pending_commits: int = 20_000, clock: SourceClock | None = None,
+                 limits: ValueLimits | None = None, stuck_after_s: float = 1.0) -> None:
         self.model = model
         self.rig = model.rig
         self.warmup_s = warmup_s
@@ -507,6 +509,12 @@ class Pipeline:
         self._pending_commits: deque[_PendingCommit] = deque()
         self.commit_retry_s = commit_retry_s
         self.max_pending_commits = max_pending_commits
+        # plausibility of what the source delivers (None: judged by the source itself, as ingest is)
+        self.clock = clock
+        self.limits = limits
+        self.rejected: Counter = Counter()  # samples rejected here, by reason
+        self.stuck_after_ns = int(stuck_after_s * _NS)
+        self._stuck: dict[str, tuple[np.ndarray, int, int]] = {}  # topic -> (last row, run start ns, last ns)
         self.storage_error: str | None = None  # set while windows wait for the database
         self.storage_errors = 0  # commits that failed (and wait to be retried)
         self.trend_rows_dropped = 0  # rows of waiting windows dropped beyond max_pending_commits (their alarms kept)
@@ -551,9 +559,10 @@ class Pipeline:
         began = time.monotonic()
         if self._pending_commits:
             self.flush_commits()
-        for block in batch.blocks:
+        for block in self._plausible(batch.blocks):
             if not len(block):
                 continue
+            self._watch_stuck(block)
             self.samples[block.topic] += len(block)
             last = int(block.log_time_ns[-1])
             self.last_time_ns[block.topic] = max(self.last_time_ns.get(block.topic, last), last)
@@ -569,6 +578,65 @@ class Pipeline:
         done = time.monotonic()
         self.latency_s = done - batch.received
         self.busy_s += done - began
+
+    def _plausible(self, blocks: list[FollowBlock]) -> list[FollowBlock]:
+        """The samples of ``blocks`` on the source's clock and within the sensors' limits; the others
+        are counted (``rejected``) and their clock jumps noted (``SourceClock``)."""
+        if self.clock is None and self.limits is None:
+            return blocks
+        blocks = [b for b in blocks if len(b)]
+        clock = self.clock
+        mono = time.monotonic()
+        whole = False
+        if clock is not None and blocks:
+            firsts = {b.topic: int(b.log_time_ns[0]) for b in blocks}
+            whole = clock.source_jump(firsts, mono)
+            # The first batch has no clock yet: the topics that agree with most others are taken
+            # first, so one sensor stamped years off cannot become the source's time.
+            median = float(np.median(list(firsts.values())))
+            blocks = sorted(blocks, key=lambda b: abs(firsts[b.topic] - median))
+        out = []
+        for b in blocks:
+            keep = None
+            if clock is not None:
+                ok, codes = clock.judge(b.topic, b.log_time_ns, mono=mono, whole_source=whole)
+                if not ok.all():
+                    self.rejected.update(clock.count(b.topic, codes, b.log_time_ns, mono=mono))
+                    keep = ok
+            if self.limits is not None and b.kind in ("imu", "tof", "strain", "bearing", "temperature"):
+                bad = implausible_values(b.kind, b.values, self.limits)
+                if bad.any():
+                    self.rejected["implausible_value"] += int(np.count_nonzero(bad & (keep if keep is not None else True)))
+                    keep = ~bad if keep is None else keep & ~bad
+            if keep is not None:
+                b = FollowBlock(b.topic, b.kind, b.name, b.log_time_ns[keep], b.publish_time_ns[keep], b.values[keep])
+            if clock is not None and len(b):
+                clock.take(b.topic, int(b.log_time_ns[-1]), mono)
+            out.append(b)
+        if whole:
+            clock.record(None, "source_jump", sum(len(b) for b in out), clock.offset_s(None, min(firsts.values()), mono))
+        return out
+
+    def _watch_stuck(self, block: FollowBlock) -> None:
+        """Track how long an IMU's or a strain gauge's readings have not changed at all (their
+        noise never lets a working one read the same value twice for long)."""
+        if block.kind not in ("imu", "strain"):
+            return
+        v, t = block.values, block.log_time_ns
+        previous = self._stuck.get(block.topic)
+        same = np.all(v[1:] == v[:-1], axis=1) if len(v) > 1 else np.zeros(0, dtype=bool)
+        changed = np.nonzero(~same)[0]
+        if len(changed):
+            start = int(t[changed[-1] + 1])
+        elif previous is not None and np.array_equal(previous[0], v[0]):
+            start = previous[1]
+        else:
+            start = int(t[0])
+        self._stuck[block.topic] = (v[-1].copy(), start, int(t[-1]))
+
+    def stuck_sensors(self) -> list[str]:
+        """Topics whose readings have stayed exactly the same for ``stuck_after_s`` and more."""
+        return sorted(topic for topic, (_, start, last) in self._stuck.items() if last - start >= self.stuck_after_ns)
 
     def _advance(self, released: dict[str, tuple[np.ndarray, np.ndarray]], final: bool = False) -> None:
         for topic, (t, v) in released.items():
@@ -754,13 +822,17 @@ class Pipeline:
 
     def health_problems(self) -> list[str]:
         """Why the pipeline's output cannot be trusted right now (empty: it can)."""
-        return self.estimator.health_problems()
+        problems = self.estimator.health_problems()
+        if self.clock is not None:
+            problems.extend(self.clock.problems())
+        return problems
 
     def sensor_states(self) -> dict[str, str]:
         states: dict[str, str] = {}
         newest = self.newest_ns
         diag = self.estimator.filter.diagnostics() if self.estimator.filter is not None else {}
         inactive = {d["sensor"] for d in diag.get("degraded_imus", []) if not d.get("active", True)}
+        inactive.update(self.stuck_sensors())
         for sensor in self.rig.sensors:
             topic = sensor.topic
             last = self.last_time_ns.get(topic)

@@ -43,6 +43,7 @@ from ._archive import Archive
 from ._config import ServiceSettings, SettingsError, resolve_token
 from ._notify import Notifier, notify_targets
 from ._pipeline import Pipeline
+from ._plausibility import SourceClock
 from ._retention import RetentionWorker
 from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
@@ -133,6 +134,9 @@ class MonitoringService:
             archive_estimates=settings.archive.estimates, estimate_decimation=settings.archive.estimate_decimation,
             sink=sink, sink_guard=self.dashboard_guard, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
             commit_retry_s=settings.storage_retry_s,
+            # ingest is judged per message by its validator (its response says what was refused)
+            clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits,
+            stuck_after_s=src.stuck_after_s,
         )
         self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
         self.retention = RetentionWorker(settings.retention, storage=self.storage,
@@ -191,10 +195,16 @@ class MonitoringService:
 
                 rig = rig_override or default_rig(src.layout)
                 return IngestSource(src.id or "ingest", self.queue, rig, max_messages=s.server.max_ingest_messages,
-                                    wait_s=s.server.ingest_wait_s, raw=s.archive.enabled and s.archive.raw != "never")
+                                    wait_s=s.server.ingest_wait_s, raw=s.archive.enabled and s.archive.raw != "never",
+                                    clock=self._clock(live=True), limits=src.limits)
         except (RecordingError, FileNotFoundError, ValueError) as exc:
             raise ServiceError(str(exc)) from None
         raise ServiceError(f"unknown source {src.spec!r}")
+
+    def _clock(self, *, live: bool) -> SourceClock:
+        src = self.settings.source
+        return SourceClock(window_s=src.time_window_s, max_ahead_s=src.max_ahead_s or src.lateness_s, live=live,
+                           future_tolerance_s=src.future_tolerance_s)
 
     def _start_dashboard(self) -> Any:
         try:
@@ -343,6 +353,13 @@ class MonitoringService:
         p = self.pipeline.status(queue_depth=self.queue.qsize(), queue_capacity=self.queue.maxsize)
         src = self.source.status()
         src["dropped"] = src["dropped"] + p.late_samples + p.estimator.dropped_samples
+        if self.pipeline.rejected:  # judged by the pipeline (off the clock, implausible values)
+            by_reason = dict(src["rejected_by_reason"])
+            for reason, n in self.pipeline.rejected.items():
+                by_reason[reason] = by_reason.get(reason, 0) + n
+            src["rejected_by_reason"] = by_reason
+            src["rejected"] = sum(by_reason.values())
+        src["problems"] = src["problems"] + self.pipeline.health_problems()
         src["latency_s"] = p.pipeline_latency_s
         states = self.pipeline.sensor_states()
         counts = {"warning": 0, "alarm": 0}

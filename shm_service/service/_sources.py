@@ -21,6 +21,7 @@ from contract import RigDescription, row_layout
 from ..recording import FollowBlock, RecordingError, RecordingFollower, classify_topic, read_recording
 from ._config import ServiceSettings
 from ._ingest import IngestResult, IngestValidator
+from ._plausibility import SourceClock, ValueLimits
 from ._pipeline import Batch
 
 __all__ = ["FileSource", "IngestSource", "SimSource", "Source", "END", "simulation_settings"]
@@ -123,7 +124,7 @@ class Source:
             "data_time_s": None if self.data_time_ns is None else self.data_time_ns / _NS,
             "lag_s": None if self.data_time_ns is None else round(now - self.data_time_ns / _NS, 3),
             "rejected": sum(self.rejected.values()), "rejected_by_reason": dict(self.rejected),
-            "dropped": self.dropped, "problems": self.problems[-20:],
+            "dropped": self.dropped, "problems": self.problems[-20:] + self.health_problems(),
         }
 
 
@@ -393,10 +394,10 @@ class IngestSource(Source):
     kind = "ingest"
 
     def __init__(self, source_id: str, out: queue.Queue, rig: RigDescription, *, max_messages: int, wait_s: float,
-                 raw: bool) -> None:
+                 raw: bool, clock: SourceClock | None = None, limits: ValueLimits | None = None) -> None:
         super().__init__(source_id, out)
         self.rig = rig
-        self.validator = IngestValidator(rig, max_messages=max_messages)
+        self.validator = IngestValidator(rig, max_messages=max_messages, clock=clock, limits=limits)
         self.wait_s = wait_s
         self.raw = raw
         self._lock = threading.Lock()
@@ -420,16 +421,20 @@ class IngestSource(Source):
         within ``wait_s`` (nothing of the request was taken: the client retries)."""
         with self._lock:  # one request at a time keeps each topic's time order
             self.requests += 1
-            saved = dict(self.validator.last)
             result = self.validator.validate(document)
             batch = Batch(result.blocks, result.raw if self.raw else None)
             try:
                 if result.blocks:
                     self.out.put(batch, timeout=self.wait_s)
             except queue.Full:
-                self.validator.last = saved
                 self.refused += 1
                 return None
+            # Only now, with the batch handed on, do the topics' last times move (a refused
+            # request's retry is not a duplicate).
+            self.validator.commit(result)
             self._count(result.blocks)
             self.rejected.update(result.rejected)
             return result
+
+    def health_problems(self) -> list[str]:
+        return self.validator.clock.problems()
