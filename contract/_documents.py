@@ -451,6 +451,7 @@ class SourceStatusDocument(_Document):
     dropped: Count
     problems: list[str]
     latency_s: Num = None
+    clock_jumps: Count = Field(0, description="stamps (or batches) found off the source's clock since the start")
 
 
 class RestCalibrationDocument(_Document):
@@ -565,6 +566,10 @@ class StorageStatusDocument(_Document):
     schema_version: Count
     trend_rows: Count
     archive: ArchiveStatusDocument | None
+    write_retries: Count = Field(0, description="writes retried after a transient error (locked, disk full) since the start")
+    write_failures: Count = Field(0, description="writes given up after the retry period (their windows wait in memory)")
+    windows_waiting: Count = Field(0, description="analysed windows waiting to be written")
+    last_error: str | None = None
 
 
 class SinkStatusDocument(_Document):

@@ -101,6 +101,19 @@ class SimSettings(_Closed):
     temperature_mean_c: float = Field(20.0, description="mean temperature, degC")
     temperature_swing_k: float = Field(40.0, ge=0, description="peak-to-peak temperature swing over the whole run, K")
     block_s: float = Field(1.0, gt=0, le=60, description="simulated seconds per block handed to the pipeline")
+    faults: tuple[str, ...] = Field(
+        (), description="sensor faults to inject, KIND:TOPIC[.FIELD]@START+DURATION[:VALUE] with KIND silence, nan, "
+        "spike (VALUE added), stuck or clock (stamps shifted by VALUE s); START and DURATION in simulated s, "
+        "e.g. spike:/imu/D.accel_y@300+1:100")
+
+    @field_validator("faults")
+    @classmethod
+    def _faults(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        from ._faults import parse_fault
+
+        for spec in value:
+            parse_fault(spec)  # raises with the spec's problem
+        return value
 
 
 class SourceSettings(_Closed):

@@ -22,7 +22,7 @@ import orjson
 from contract import RigDescription
 
 from ..recording import PAYLOAD_FIELDS, FollowBlock, classify_topic
-from ._plausibility import SourceClock, ValueLimits, implausible_values
+from ._plausibility import SourceClock, ValueLimits, implausible_row
 
 __all__ = ["IngestError", "IngestResult", "IngestValidator"]
 
@@ -43,6 +43,7 @@ class IngestResult:
     errors: list[dict[str, Any]] = field(default_factory=list)
     clock: SourceClock | None = None  # the source's clock after this batch (adopted by ``commit``)
     last: dict[str, int] | None = None  # the topics' last times after this batch
+    refused_by_topic: Counter = field(default_factory=Counter)  # rejections of the rig's topics
 
     def as_dict(self) -> dict[str, Any]:
         return {"accepted": self.accepted, "rejected": sum(self.rejected.values()),
@@ -80,6 +81,7 @@ class IngestValidator:
         self.clock = clock or SourceClock(window_s=3600.0, max_ahead_s=1.0, live=True)
         self.limits = limits or ValueLimits()
         self.max_errors = 20
+        self._info: dict[str, Any] = {}
 
     def validate(self, document: Any, *, wall_ns: int | None = None) -> IngestResult:
         if not isinstance(document, dict) or "messages" not in document:
@@ -97,13 +99,14 @@ class IngestValidator:
         clock = self.clock.copy()
         last = dict(self.last)
         whole = clock.source_jump(_first_stamps(messages, self.sensors), mono)
+        judge = clock.judge_stamps(wall_ns=wall, mono=mono, whole_source=whole)
         result = IngestResult([], [], clock=clock, last=last)
         rows: dict[str, tuple[list[int], list[int], list[list[float]]]] = {}
         off_clock: dict[tuple[str, str], list[int]] = {}
         for index, message in enumerate(messages):
             try:
                 topic, log_ns, pub_ns, row, payload = self._message(message)
-                code = clock.judge_one(topic, log_ns, wall_ns=wall, mono=mono, whole_source=whole)
+                code = judge.judge(topic, log_ns)
                 if code:
                     reason = "implausible_time" if code == 1 else "ahead_of_source"
                     off_clock.setdefault((topic, reason), []).append(log_ns)
@@ -115,6 +118,8 @@ class IngestValidator:
                     raise _Reject(reason, f"{topic}: log_time_ns {log_ns} is not after the previous sample's {previous}")
             except _Reject as exc:
                 result.rejected[exc.reason] += 1
+                if isinstance(message, dict) and message.get("topic") in self.sensors:
+                    result.refused_by_topic[message["topic"]] += 1
                 if len(result.errors) < self.max_errors:
                     result.errors.append({"index": index, "reason": exc.reason, "detail": str(exc)})
                 continue
@@ -124,7 +129,7 @@ class IngestValidator:
                     result.errors.append({"index": index, "reason": "malformed", "detail": f"{type(exc).__name__}: {exc}"[:300]})
                 continue
             last[topic] = log_ns
-            clock.take(topic, log_ns, mono)
+            judge.take(topic, log_ns)
             t, p, v = rows.setdefault(topic, ([], [], []))
             t.append(log_ns)
             p.append(pub_ns)
@@ -160,7 +165,11 @@ class IngestValidator:
         topic = message.get("topic")
         if not isinstance(topic, str):
             raise _Reject("malformed", "'topic' must be a string")
-        info = classify_topic(topic)
+        info = self._info.get(topic)
+        if info is None:
+            info = classify_topic(topic)
+            if info is not None and topic in self.sensors:
+                self._info[topic] = info
         if info is None or info.kind not in _SENSOR_KINDS:
             raise _Reject("unknown_topic", f"topic {topic[:80]!r} is not a sensor topic of the recording contract")
         if topic not in self.sensors:
@@ -196,7 +205,7 @@ class IngestValidator:
                 canonical[spec.name] = xs
         if not all(math.isfinite(x) for x in row):
             raise _Reject("nonfinite", f"{topic}: NaN, infinite or out-of-range number at log_time_ns {log_ns}")
-        if implausible_values(info.kind, np.array([row]), self.limits)[0]:
+        if implausible_row(info.kind, row, self.limits):
             raise _Reject("implausible_value", f"{topic}: {row} at log_time_ns {log_ns} is beyond what the sensor can "
                                                f"read (limits: source.limits)")
         # The payload recorded is written from the validated numbers, never the client's bytes.

@@ -30,6 +30,7 @@ from contract import (
     CurvatureDocument,
     EstimatorStatusDocument,
     FlagDocument,
+    LastEstimateDocument,
     LocationDocument,
     ModeDocument,
     PipelineStatusDocument,
@@ -41,14 +42,19 @@ from contract import (
 )
 from estimator import (
     FilterOutput,
+    HealthConfig,
     ImmsFilter,
     ImmsModel,
     Measurements,
     RestCalibration,
     SensorSeries,
+    aiding_window,
+    assess_health,
     build_events,
     calibrate_at_rest,
     damage_signatures,
+    physical_bounds,
+    restart_state,
 )
 
 from ..recording import FollowBlock
@@ -77,6 +83,7 @@ class Batch:
     raw: list[tuple[str, int, bytes, int]] | None = None
     truth: tuple[np.ndarray, np.ndarray] | None = None
     received: float = field(default_factory=time.monotonic)
+    refused: dict[str, int] | None = None  # samples per topic the source refused (its sensor is degraded meanwhile)
 
 
 class PipelineSink(Protocol):
@@ -158,15 +165,27 @@ def calibration_from_dict(d: dict) -> RestCalibration:
 
 
 class _Estimator:
-    """The IMMS filter over released samples. Times are s after ``epoch_ns``."""
+    """The IMMS filter over released samples. Times are s after ``epoch_ns``.
+
+    Restart policy: the filter restarts (a new one, from the current measurements, with the rest
+    calibration kept) when its health check finds it diverged (``estimator.assess_health`` over
+    each chunk: states beyond the rig's physical bounds, growing innovations, aiding refused by
+    the gate) and after a gap of ``gap_reset_s`` at the reference IMU D. The chunk in which it
+    diverged is not passed on (its estimates are not the structure's); ``restarted_at_s`` tells
+    the pipeline to hold the analysis back until the new filter settled. Health is "diverged"
+    until the new filter ran, "recovering" until it ran ``confirm_s`` without a sign, then "ok".
+    """
 
     def __init__(self, model: ImmsModel, topics: dict[str, tuple[str, str]], calibration_s: float,
-                 calibration: RestCalibration | None, gap_reset_s: float = 5.0) -> None:
+                 calibration: RestCalibration | None, gap_reset_s: float = 5.0,
+                 health: HealthConfig | None = None) -> None:
         self.model = model
         self.topics = topics  # topic -> (kind, name)
         self.calibration_s = calibration_s
         self.calibration = calibration
         self.gap_reset_s = gap_reset_s
+        self.health_config = health or HealthConfig()
+        self.bounds = physical_bounds(model.rig.beam.length, self.health_config)
         self.epoch_ns: int | None = None
         self.filter: ImmsFilter | None = None
         self.buffer: list[dict[str, tuple[np.ndarray, np.ndarray]]] = []
@@ -174,8 +193,16 @@ class _Estimator:
         self.last_d_ns: int | None = None
         self.dropped = 0  # samples dropped while the reference IMU D was silent
         self.resets = 0
+        self.resets_by_reason: Counter = Counter()
         self.state = "calibrating"
         self.new_calibration = False
+        self.health = "ok"
+        self.health_reason: str | None = None
+        self.restarted_at_s: float | None = None  # data time (s after the epoch) of the latest restart
+        self._from_measurements = False  # the next filter starts from the measurements (after a divergence)
+        self._counters: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.last_estimate: tuple[float, float, float, float] | None = None  # (UNIX s, d, φ, e)
+        self._tip = model.tip_row()
 
     def _measurements(self, data: dict[str, tuple[np.ndarray, np.ndarray]]) -> Measurements:
         imu, tof, strain, bearing = {}, {}, {}, None
@@ -227,6 +254,18 @@ class _Estimator:
             data = merged
         return self._run(data)
 
+    def _restart(self, reason: str, kind: str, at_s: float) -> None:
+        self.filter = None
+        self._counters = None
+        self.resets += 1
+        self.resets_by_reason[kind] += 1
+        self.restarted_at_s = at_s
+        if kind != "gap":
+            self.health, self.health_reason = "diverged", reason
+            self._from_measurements = True
+            if self.resets_by_reason[kind] <= 3 or self.resets % 100 == 0:
+                log.warning("estimator diverged at %.1f s (%s): restarting from the current measurements", at_s, reason)
+
     def _run(self, data: dict[str, tuple[np.ndarray, np.ndarray]]) -> FilterOutput | None:
         d = data.get(_D_TOPIC)
         newest = max(int(v[0][-1]) for v in data.values())
@@ -234,26 +273,54 @@ class _Estimator:
             if self.last_d_ns is None or newest - self.last_d_ns > self.gap_reset_s * _NS:
                 self.dropped += sum(len(v[0]) for v in data.values())
                 self.state = "stalled: /imu/D is silent"
-                if self.filter is not None:
-                    self.filter = None  # restart at the next D sample
-                    self.resets += 1
+                if self.filter is not None:  # restart at the next D sample
+                    self._restart("/imu/D is silent", "gap", (newest - self.epoch_ns) / _NS)
                 return None
         else:
             first_d = int(d[0][0])
             if self.filter is not None and self.last_d_ns is not None and first_d - self.last_d_ns > self.gap_reset_s * _NS:
-                self.filter = None
-                self.resets += 1
+                self._restart(f"a gap of {(first_d - self.last_d_ns) / _NS:.1f} s at /imu/D", "gap",
+                              (first_d - self.epoch_ns) / _NS)
             self.last_d_ns = int(d[0][-1])
         meas = self._measurements(data)
         if self.filter is None:
             start = min(s.times[0] for s in meas.imu.values()) if meas.imu else min(int(v[0][0]) for v in data.values())
             self.filter = ImmsFilter(self.model, self.calibration, t0=float(start))
+            if self._from_measurements:
+                self.filter.state.x[:] = restart_state(meas, self.model, self.calibration)
+                self._from_measurements = False
         self.state = "running"
         events = build_events(meas, self.model)
         if not len(events):
             return None
         events = events.slice(int(np.searchsorted(events.t, self.filter.t)), len(events))
-        return self.filter.process(events)
+        out = self.filter.process(events)
+        return self._judge(out)
+
+    def _judge(self, out: FilterOutput) -> FilterOutput | None:
+        """The health check of one chunk: restart on a sign of divergence, else pass it on."""
+        c = self.filter.counters
+        now = (c.accepted.copy(), c.rejected.copy(), c.nis_sum.copy())
+        window = None if self._counters is None else aiding_window(self.model.aiding_channels, self._counters, now)
+        self._counters = now
+        if not len(out.t):
+            return out
+        ix = self.model.state_layout.index
+        b = out.x[:, ix.b:ix.b + self.model.gamma]
+        phi = out.x[:, ix.phi] if ix.phi >= 0 else np.zeros(len(out.t))
+        verdict = assess_health(window, out.x[:, ix.d], phi, b @ self._tip, self.bounds, self.health_config)
+        if verdict.diverged:
+            self._restart(verdict.reason or verdict.kind or "diverged", verdict.kind or "diverged", float(out.t[-1]))
+            return None
+        if self.health == "diverged":
+            self.health = "recovering"
+        elif self.health == "recovering" and self.restarted_at_s is not None \
+                and out.t[-1] - self.restarted_at_s >= self.health_config.confirm_s:
+            self.health, self.health_reason = "ok", None
+        last = out.x[-1]
+        self.last_estimate = (self.epoch_ns / _NS + float(out.t[-1]), float(last[ix.d]),
+                              float(last[ix.phi]) if ix.phi >= 0 else 0.0, float(b[-1] @ self._tip))
+        return out
 
     def flush(self) -> FilterOutput | None:
         if self.filter is None:
@@ -261,12 +328,20 @@ class _Estimator:
         return self.filter.flush()
 
     def health_problems(self) -> list[str]:
-        return []
+        if self.health == "ok":
+            return []
+        return [f"estimator {self.health}: {self.health_reason} ({self.resets} filter restarts so far)"]
 
     def diagnostics(self) -> EstimatorStatusDocument:
         diag = self.filter.diagnostics() if self.filter is not None else {}
+        last = None
+        if self.last_estimate is not None:
+            t, d, phi, e = self.last_estimate
+            last = LastEstimateDocument(t_s=t, d_m=d, phi_rad=phi, e_m=e)
         return EstimatorStatusDocument(
             state=self.state, dropped_samples=self.dropped, filter_restarts=self.resets,
+            filter_restarts_by_reason=dict(self.resets_by_reason), health=self.health, health_reason=self.health_reason,
+            last_estimate=last,
             rest_calibration=None if self.calibration is None else self.calibration.as_dict(), **diag)
 
 
@@ -515,6 +590,8 @@ class Pipeline:
         self.rejected: Counter = Counter()  # samples rejected here, by reason
         self.stuck_after_ns = int(stuck_after_s * _NS)
         self._stuck: dict[str, tuple[np.ndarray, int, int]] = {}  # topic -> (last row, run start ns, last ns)
+        self._refused_at: dict[str, int] = {}  # topic -> data time when a sample of it was last refused
+        self._order: dict[str, int] = {}  # topic -> newest stamp handed on
         self.storage_error: str | None = None  # set while windows wait for the database
         self.storage_errors = 0  # commits that failed (and wait to be retried)
         self.trend_rows_dropped = 0  # rows of waiting windows dropped beyond max_pending_commits (their alarms kept)
@@ -546,6 +623,7 @@ class Pipeline:
         self._temperature_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._bearing_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._pending_estimator: dict[str, list] = {}
+        self._warmup_set = False
 
     # -- control ----------------------------------------------------------------------------
 
@@ -568,6 +646,8 @@ class Pipeline:
             self.last_time_ns[block.topic] = max(self.last_time_ns.get(block.topic, last), last)
             self.newest_ns = last if self.newest_ns is None else max(self.newest_ns, last)
             self.merger.add(block)
+        for topic in batch.refused or ():
+            self._refused_at[topic] = self.newest_ns if self.newest_ns is not None else 0
         if batch.truth is not None:
             self._truth.append(batch.truth)
         if self.archive_raw and batch.raw:
@@ -582,7 +662,7 @@ class Pipeline:
     def _plausible(self, blocks: list[FollowBlock]) -> list[FollowBlock]:
         """The samples of ``blocks`` on the source's clock and within the sensors' limits; the others
         are counted (``rejected``) and their clock jumps noted (``SourceClock``)."""
-        if self.clock is None and self.limits is None:
+        if self.clock is None and self.limits is None:  # judged by the source (ingest)
             return blocks
         blocks = [b for b in blocks if len(b)]
         clock = self.clock
@@ -604,12 +684,31 @@ class Pipeline:
                     self.rejected.update(clock.count(b.topic, codes, b.log_time_ns, mono=mono))
                     keep = ok
             if self.limits is not None and b.kind in ("imu", "tof", "strain", "bearing", "temperature"):
-                bad = implausible_values(b.kind, b.values, self.limits)
-                if bad.any():
-                    self.rejected["implausible_value"] += int(np.count_nonzero(bad & (keep if keep is not None else True)))
-                    keep = ~bad if keep is None else keep & ~bad
+                taken = np.ones(len(b), dtype=bool) if keep is None else keep
+                nonfinite = ~np.all(np.isfinite(b.values.reshape(len(b), -1)), axis=1)
+                bad = implausible_values(b.kind, b.values, self.limits) & ~nonfinite
+                if nonfinite.any() or bad.any():
+                    self.rejected["nonfinite"] += int(np.count_nonzero(nonfinite & taken))
+                    self.rejected["implausible_value"] += int(np.count_nonzero(bad & taken))
+                    keep = taken & ~bad & ~nonfinite
             if keep is not None:
                 b = FollowBlock(b.topic, b.kind, b.name, b.log_time_ns[keep], b.publish_time_ns[keep], b.values[keep])
+            # Each topic in time order whatever the source did (a sensor's clock stepping back):
+            # samples stamped at or before the topic's previous one are dropped, counted.
+            t = b.log_time_ns
+            previous = self._order.get(b.topic)
+            if len(t) and (previous is not None and t[0] <= previous or (len(t) > 1 and np.any(t[1:] <= t[:-1]))):
+                running = np.maximum.accumulate(np.concatenate([[previous if previous is not None else t[0] - 1], t[:-1]]))
+                ok = t > running
+                self.rejected["duplicate"] += int(np.count_nonzero(t == running))
+                self.rejected["backwards"] += int(np.count_nonzero(t < running))
+                b = FollowBlock(b.topic, b.kind, b.name, t[ok], b.publish_time_ns[ok], b.values[ok])
+                keep = np.zeros(1, dtype=bool)  # something was refused
+            if keep is not None and not keep.all():
+                # the sensor is degraded while its samples are being refused (data time of the refusal)
+                self._refused_at[b.topic] = self.newest_ns if self.newest_ns is not None else 0
+            if len(b):
+                self._order[b.topic] = int(b.log_time_ns[-1])
             if clock is not None and len(b):
                 clock.take(b.topic, int(b.log_time_ns[-1]), mono)
             out.append(b)
@@ -653,7 +752,12 @@ class Pipeline:
                 data[topic] = (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
         self._pending_estimator = {}
         self.processed_ns = hi
+        restarts = self.estimator.resets
         out = self.estimator.feed(data)
+        if self.estimator.resets != restarts and self.estimator.restarted_at_s is not None and self.estimator.epoch_ns:
+            # Windows that would hold the diverged filter's b (or the new one's first seconds) are not analysed.
+            settle = self.estimator.epoch_ns / _NS + self.estimator.restarted_at_s + self.estimator.health_config.settle_s
+            self.analytics.not_before = max(self.analytics.not_before or -math.inf, settle)
         if final:
             tail = self.estimator.flush()
             if tail is not None and out is not None:
@@ -676,8 +780,10 @@ class Pipeline:
                 self.analytics.temperature.add(*temperature)
             return
         self.estimates += len(out.t)
-        if self.analytics.not_before is None and self.estimator.calibration is not None:
-            self.analytics.not_before = epoch_s + float(self.estimator.calibration.rest_end) + self.warmup_s
+        if not self._warmup_set and self.estimator.calibration is not None:
+            self._warmup_set = True
+            warm = epoch_s + float(self.estimator.calibration.rest_end) + self.warmup_s
+            self.analytics.not_before = max(self.analytics.not_before or -math.inf, warm)
         t_abs = epoch_s + out.t
         b = self.model.state_layout.b_of(out.x)
         self.latest_x = out.x[-1]
@@ -833,6 +939,8 @@ class Pipeline:
         diag = self.estimator.filter.diagnostics() if self.estimator.filter is not None else {}
         inactive = {d["sensor"] for d in diag.get("degraded_imus", []) if not d.get("active", True)}
         inactive.update(self.stuck_sensors())
+        if newest is not None:
+            inactive.update(t for t, at in self._refused_at.items() if newest - at <= self.silent_after_ns)
         for sensor in self.rig.sensors:
             topic = sensor.topic
             last = self.last_time_ns.get(topic)

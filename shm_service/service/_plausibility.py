@@ -8,9 +8,11 @@ runs on with the wall clock while the source is silent. A stamp is rejected when
 - ``implausible_time``: it lies more than ``window_s`` before the source's newest stamp or more
   than ``window_s`` after the source's current time; for a live source also when it lies beyond
   the wall clock plus ``future_tolerance_s``;
-- ``ahead_of_source``: its topic runs ahead of every other topic of the source by more than
-  ``max_ahead_s`` (one sensor's clock jumped: taking it would make every other sensor's samples
-  late, and its own later samples "backwards").
+- ``ahead_of_source``: its topic's stamps jump forward (by more than ``max_ahead_s`` after the
+  topic's previous sample) to beyond every other topic of the source (by more than
+  ``max_ahead_s``): one sensor's clock jumped. Taking it would make every other sensor's
+  samples late, and its own later samples "backwards". A topic merely delivered ahead of the
+  others (a file's chunk, a client's batch) runs on without a jump and is taken.
 
 A stamp of a live source within ``future_tolerance_s`` of the wall clock is never ``ahead`` (the
 wall clock is the better reference: a device whose clock was just corrected is on time). When
@@ -32,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-__all__ = ["ClockJump", "SourceClock", "ValueLimits", "implausible_values"]
+__all__ = ["ClockJump", "SourceClock", "StampJudge", "ValueLimits", "implausible_row", "implausible_values"]
 
 _NS = 1_000_000_000
 
@@ -105,17 +107,36 @@ def implausible_values(kind: str, values: np.ndarray, limits: ValueLimits) -> np
     return ~ok
 
 
+def implausible_row(kind: str, row: list[float], limits: ValueLimits) -> bool:
+    """``implausible_values`` of one sample (a list in the payload layout), without numpy."""
+    if kind == "imu":
+        a, g = limits.accel_m_s2, limits.gyro_rad_s
+        return not (all(-a <= x <= a for x in row[:3]) and all(-g <= x <= g for x in row[3:]))
+    x = row[0]
+    if kind == "tof":
+        return not limits.distance_min_m <= x <= limits.distance_max_m
+    if kind == "strain":
+        return not -limits.strain <= x <= limits.strain
+    if kind == "bearing":
+        return not -limits.bearing_m <= x <= limits.bearing_m
+    if kind == "temperature":
+        return not limits.temperature_min_c <= x <= limits.temperature_max_c
+    raise ValueError(f"{kind=} is not a sensor kind (imu, tof, strain, bearing, temperature)")
+
+
 @dataclass(frozen=True)
 class ClockJump:
     """A stamp (or a batch) off the source's clock: of one topic (``topic``) or of the whole
     source (``topic`` None, taken). ``offset_s`` is the stamp's distance from the reference,
-    ``samples`` how many were concerned, ``at`` the wall-clock time it was seen (UNIX s)."""
+    ``samples`` how many were concerned, ``at`` the wall-clock time it was seen (UNIX s), ``at_ns`` the
+    source's clock then."""
 
     topic: str | None
     reason: str
     offset_s: float
     samples: int
     at: float
+    at_ns: int | None = None  # the source's clock then (data time)
 
     def describe(self) -> str:
         what = "the source's clock jumped" if self.topic is None else f"{self.topic}: stamps"
@@ -203,9 +224,27 @@ class SourceClock:
             off = ((t < newest - self.window_ns) | (t > current + self.window_ns)) & ~live
             code[(code == 0) & off] = 1
             ref = self.reference(topic, mono)
-            if ref is not None:
-                code[(code == 0) & (t > ref + self.ahead_ns) & ~live] = 2
+            own = self.last.get(topic)
+            if ref is not None and own is not None:
+                suspect = (code == 0) & (t > ref + self.ahead_ns) & ~live
+                if suspect.any():
+                    # ahead of the others: a jump only if the topic's own stamps stepped there
+                    code[self._jumped(t, suspect, own)] = 2
         return code == 0, code
+
+    def _jumped(self, t: np.ndarray, suspect: np.ndarray, own: int) -> np.ndarray:
+        """Which suspect stamps lie more than ``max_ahead_s`` after the topic's latest taken one."""
+        steps = np.diff(np.concatenate([[own], t]))
+        if not np.any(steps > self.ahead_ns):  # a continuous run: delivered early, not jumped
+            return np.zeros(len(t), dtype=bool)
+        out = np.zeros(len(t), dtype=bool)
+        latest = own
+        for i in range(len(t)):
+            if suspect[i] and t[i] - latest > self.ahead_ns:
+                out[i] = True
+            else:
+                latest = max(latest, int(t[i]))
+        return out
 
     def judge_one(self, topic: str, stamp: int, *, wall_ns: int, mono: float, whole_source: bool = False) -> int:
         """``judge`` of one stamp (the ingest validator's per-message path): 0 taken, 1
@@ -226,9 +265,15 @@ class SourceClock:
                 ref = now if ref is None else max(ref, now)
         if stamp < newest - self.window_ns or stamp > current + self.window_ns:
             return 1
-        if ref is not None and stamp > ref + self.ahead_ns:
+        own = self.last.get(topic)
+        if ref is not None and own is not None and stamp > ref + self.ahead_ns and stamp - own > self.ahead_ns:
             return 2
         return 0
+
+    def judge_stamps(self, *, wall_ns: int, mono: float, whole_source: bool = False) -> "StampJudge":
+        """A judge of single stamps at one instant (``judge_one`` in O(1) per stamp: the
+        validator's per-message path); its ``take`` moves this clock too."""
+        return StampJudge(self, wall_ns=wall_ns, mono=mono, whole_source=whole_source)
 
     def copy(self) -> "SourceClock":
         """An independent copy (judge a request on it; keep it once the request is taken)."""
@@ -242,7 +287,7 @@ class SourceClock:
         """Count ``samples`` rejected for ``reason`` (or a source-wide jump: reason "source_jump") and note the jump."""
         if reason != "source_jump":
             self.rejected[reason] += samples
-        self.note(ClockJump(topic, reason, offset_s, samples, time.time()))
+        self.note(ClockJump(topic, reason, offset_s, samples, time.time(), self.current()))
 
     def take(self, topic: str, stamp: int, mono: float | None = None) -> None:
         """``stamp`` is the newest taken sample of ``topic``."""
@@ -272,11 +317,69 @@ class SourceClock:
         self.jump_count += 1
         self.last_jump_at = jump.at
 
-    def problems(self, recent_s: float = 60.0, now: float | None = None) -> list[str]:
-        """The clock jumps of the last ``recent_s`` (wall clock): while there are any, the source is degraded."""
-        now = time.time() if now is None else now
-        if self.last_jump_at is None or now - self.last_jump_at > recent_s:
+    def problems(self, recent_s: float = 30.0) -> list[str]:
+        """The clock jumps of the source's last ``recent_s`` (its own clock; the wall clock before it
+        has one): while there are any, the source is degraded."""
+        if self.last_jump_at is None:
             return []
-        recent = [j for j in self.jumps if now - j.at <= recent_s]
+        now_ns = self.current()
+        recent_ns = int(recent_s * _NS)
+
+        def fresh(j: ClockJump) -> bool:
+            if j.at_ns is not None and now_ns is not None:
+                return now_ns - j.at_ns <= recent_ns
+            return time.time() - j.at <= recent_s
+
+        recent = [j for j in self.jumps if fresh(j)]
+        if not recent:
+            return []
         return [j.describe() for j in recent[-3:]] + ([f"({self.jump_count} clock jumps since the start)"]
                                                       if self.jump_count > 3 else [])
+
+
+class StampJudge:
+    """``SourceClock.judge_one`` at one instant, kept up to date as stamps are taken."""
+
+    def __init__(self, clock: SourceClock, *, wall_ns: int, mono: float, whole_source: bool) -> None:
+        self.clock, self.wall_ns, self.mono, self.whole = clock, wall_ns, mono, whole_source
+        live = clock.live
+        self.now = {t: last + (int(max(mono - clock.seen[t], 0.0) * _NS) if live else 0) for t, last in clock.last.items()}
+        self.newest = max(clock.last.values()) if clock.last else None
+        self._rank()
+
+    def _rank(self) -> None:
+        best = sorted(self.now.items(), key=lambda kv: kv[1], reverse=True)[:2]
+        self.first = best[0] if best else None
+        self.second = best[1] if len(best) > 1 else None
+
+    def judge(self, topic: str, stamp: int) -> int:
+        """0 taken, 1 implausible_time, 2 ahead_of_source (as ``SourceClock.judge``)."""
+        c = self.clock
+        if c.live:
+            if stamp > self.wall_ns + c.tolerance_ns:
+                return 1
+            if abs(stamp - self.wall_ns) <= c.tolerance_ns:
+                return 0
+        if self.first is None or self.whole:
+            return 0
+        if stamp < self.newest - c.window_ns or stamp > self.first[1] + c.window_ns:
+            return 1
+        ref = self.second if self.first[0] == topic else self.first
+        own = c.last.get(topic)
+        if ref is not None and own is not None and stamp > ref[1] + c.ahead_ns and stamp - own > c.ahead_ns:
+            return 2
+        return 0
+
+    def take(self, topic: str, stamp: int) -> None:
+        c = self.clock
+        if stamp <= c.last.get(topic, -(2**62)):
+            return
+        c.take(topic, stamp, self.mono)
+        self.now[topic] = stamp
+        self.newest = stamp if self.newest is None else max(self.newest, stamp)
+        if self.first is not None and self.first[0] == topic:
+            self.first = (topic, stamp)
+        elif self.first is None or stamp > self.first[1]:
+            self.second, self.first = self.first, (topic, stamp)
+        elif self.second is None or self.second[0] == topic or stamp > self.second[1]:
+            self.second = (topic, stamp)

@@ -360,6 +360,7 @@ class MonitoringService:
             src["rejected_by_reason"] = by_reason
             src["rejected"] = sum(by_reason.values())
         src["problems"] = src["problems"] + self.pipeline.health_problems()
+        src["clock_jumps"] = src.get("clock_jumps", 0) + (self.pipeline.clock.jump_count if self.pipeline.clock else 0)
         src["latency_s"] = p.pipeline_latency_s
         states = self.pipeline.sensor_states()
         counts = {"warning": 0, "alarm": 0}
@@ -382,7 +383,9 @@ class MonitoringService:
                                                      last_error=self.notifier.last_error),
             storage=StorageStatusDocument(db=str(self.settings.db), schema_version=self.storage.schema_version,
                                           trend_rows=self.storage.count("trends"),
-                                          archive=None if self.pipeline.archive is None else self.pipeline.archive.status()),
+                                          archive=None if self.pipeline.archive is None else self.pipeline.archive.status(),
+                                          write_retries=self.storage.retries, write_failures=self.storage.failures,
+                                          windows_waiting=self.pipeline.pending_commits, last_error=self.storage.last_error),
             sinks={"dashboard": self.dashboard_guard.status(), "notifier": self.notifier.guard.status(),
                    "housekeeping": self.housekeeping_guard.status()},
             thresholds=self.thresholds,

@@ -181,21 +181,29 @@ class SimSource(Source):
         self.raw = raw
         self.truth = truth
         self.metadata = {"truth": self.rigsim.truth_metadata()}
+        from ._faults import parse_fault
 
-    def run(self) -> None:
+        self.faults = tuple(parse_fault(spec) for spec in s.faults)
+        self._fault_state: dict = {}
+
+    def batches(self, block_s: float | None = None) -> Any:
+        """The simulation as the pipeline's batches (with the configured faults), unpaced."""
         from ..virtual_rig._record import encode_payloads
 
         start_ns = self.settings.start_time_ns
-        pacer = _Pacer(self.speed, self._stop)
-        block_s = self.block_s if self.speed is not None else max(self.block_s, 10.0)  # bigger blocks at max speed
-        for block in self.rigsim.blocks(block_s):
-            if self._stop.is_set():
-                self.state = "stopped"
-                return
+        for block in self.rigsim.blocks(block_s or self.block_s):
             blocks, raw = [], [] if self.raw else None
             for topic, (times, values) in block.measurements.items():
                 stamps = start_ns + np.round(times * _NS).astype(np.int64)
                 delays = np.round(block.delays[topic] * _NS).astype(np.int64)
+                if self.faults:
+                    from ._faults import apply_faults
+
+                    kept, stamps, values, dropped = apply_faults(self.faults, topic, times, stamps, values, self._fault_state)
+                    delays = delays[kept]
+                    self.rejected.update(dropped)
+                if not len(stamps):
+                    continue
                 info = classify_topic(topic)
                 sensor = self.rig.sensor_by_topic().get(topic)
                 blocks.append(FollowBlock(topic, info.kind, sensor.name if sensor else topic, stamps, stamps + delays,
@@ -207,9 +215,20 @@ class SimSource(Source):
             truth = None
             if self.truth:
                 truth = (start_ns + np.round(block.times * _NS).astype(np.int64), block.truth["deflection"])
-            pacer.wait(int(start_ns + block.times[-1] * _NS))
-            self._count(blocks)
-            if not self._put(Batch(blocks, raw, truth)):
+            yield Batch(blocks, raw, truth)
+
+    def run(self) -> None:
+        start_ns = self.settings.start_time_ns
+        pacer = _Pacer(self.speed, self._stop)
+        block_s = self.block_s if self.speed is not None else max(self.block_s, 10.0)  # bigger blocks at max speed
+        for batch in self.batches(block_s):
+            if self._stop.is_set():
+                self.state = "stopped"
+                return
+            newest = max((int(b.log_time_ns[-1]) for b in batch.blocks if len(b)), default=start_ns)
+            pacer.wait(newest)
+            self._count(batch.blocks)
+            if not self._put(batch):
                 self.state = "stopped"
                 return
 
@@ -422,9 +441,9 @@ class IngestSource(Source):
         with self._lock:  # one request at a time keeps each topic's time order
             self.requests += 1
             result = self.validator.validate(document)
-            batch = Batch(result.blocks, result.raw if self.raw else None)
+            batch = Batch(result.blocks, result.raw if self.raw else None, refused=dict(result.refused_by_topic))
             try:
-                if result.blocks:
+                if result.blocks or result.refused_by_topic:
                     self.out.put(batch, timeout=self.wait_s)
             except queue.Full:
                 self.refused += 1
@@ -438,3 +457,6 @@ class IngestSource(Source):
 
     def health_problems(self) -> list[str]:
         return self.validator.clock.problems()
+
+    def status(self) -> dict[str, Any]:
+        return {**super().status(), "clock_jumps": self.validator.clock.jump_count}
