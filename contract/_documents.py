@@ -27,6 +27,7 @@ __all__ = [
     "AidingChannelDocument",
     "AlarmCountsDocument",
     "AlarmDocument",
+    "AlarmEvent",
     "AlarmEventDocument",
     "AlarmLevel",
     "AlarmsDocument",
@@ -46,6 +47,7 @@ __all__ = [
     "HealthDocument",
     "IngestErrorDocument",
     "IngestResultDocument",
+    "LastEstimateDocument",
     "Level",
     "LocationDocument",
     "ModeDocument",
@@ -365,6 +367,7 @@ class AlarmDocument(_Document):
     value: Num = Field(None, description="the chart's score when raised or escalated, σ")
     threshold: Num = Field(None, description="the chart's level the score crossed, σ")
     message: str
+    stale: bool = Field(False, description="the alarm's source has gone silent: its state is no longer being judged")
 
     @model_validator(mode="after")
     def _named(self) -> "AlarmDocument":
@@ -387,12 +390,20 @@ class AlarmsDocument(_Document):
     count: Count
 
 
+AlarmEvent = Literal["raised", "escalated", "cleared", "acknowledged", "repeated", "stale"]
+
+
 class AlarmEventDocument(_Document):
     """A notification of an alarm event (webhook body; e-mail attachment). ``id`` is stable
-    across retries: receivers recognise a repeat by it (also the ``Idempotency-Key`` header)."""
+    across retries and unique for ever (a random instance id and the event's UUID): receivers
+    recognise a repeat by it (also the ``Idempotency-Key`` header). ``sequence`` numbers the
+    events of one alarm 1, 2, 3, …: each target receives them in that order (a repeat of an
+    event already received may come again; a receiver keeps the highest one it saw)."""
 
     id: str
-    event: Literal["raised", "escalated", "cleared", "acknowledged"]
+    event: AlarmEvent = Field(description="raised, escalated, cleared, acknowledged; repeated: the alarm still fires "
+                                          "(re-notification); stale: its source went silent")
+    sequence: int = Field(1, ge=1, description="number of this event among the alarm's events (1-based)")
     level: AlarmLevel
     at_s: Finite
     alarm: AlarmDocument
@@ -446,6 +457,7 @@ class SourceStatusDocument(_Document):
     dropped: Count
     problems: list[str]
     latency_s: Num = None
+    clock_jumps: Count = Field(0, description="stamps (or batches) found off the source's clock since the start")
 
 
 class RestCalibrationDocument(_Document):
@@ -470,10 +482,25 @@ class DegradedImuDocument(_Document):
     active: bool
 
 
+class LastEstimateDocument(_Document):
+    """The newest state estimate of the rigid motion and the tip deflection."""
+
+    t_s: Finite = Field(description="UNIX s")
+    d_m: Num = Field(description="ζ position of the support D, m")
+    phi_rad: Num = Field(description="attitude, rad")
+    e_m: Num = Field(description="tip deflection Δ(L) in the body frame, m")
+
+
 class EstimatorStatusDocument(_Document):
     state: str
     dropped_samples: Count
-    filter_restarts: Count
+    filter_restarts: Count = Field(description="restarts of the filter since the start (divergence, a gap at D)")
+    filter_restarts_by_reason: dict[str, Count] = Field(default_factory=dict)
+    health: Literal["ok", "diverged", "recovering"] = Field(
+        "ok", description="diverged: the last check found the filter diverged (it restarts); recovering: restarted "
+                          "and not yet confirmed healthy")
+    health_reason: str | None = Field(None, description="what the last divergence check found")
+    last_estimate: LastEstimateDocument | None = None
     rest_calibration: RestCalibrationDocument | None = None
     aiding: dict[str, AidingChannelDocument] = Field(default_factory=dict)
     rejected: Count = 0
@@ -526,6 +553,10 @@ class NotificationStatusDocument(_Document):
     failed: Count = 0
     sent_this_run: Count
     failed_attempts_this_run: Count
+    outcomes_this_run: dict[str, Count] = Field(
+        default_factory=dict, description="delivery attempts by outcome: sent, retry (temporary failure), permanent "
+                                          "(refused by the target: 4xx), given_up")
+    last_error: str | None = None
 
 
 class ArchiveStatusDocument(_Document):
@@ -541,6 +572,10 @@ class StorageStatusDocument(_Document):
     schema_version: Count
     trend_rows: Count
     archive: ArchiveStatusDocument | None
+    write_retries: Count = Field(0, description="writes retried after a transient error (locked, disk full) since the start")
+    write_failures: Count = Field(0, description="writes given up after the retry period (their windows wait in memory)")
+    windows_waiting: Count = Field(0, description="analysed windows waiting to be written")
+    last_error: str | None = None
 
 
 class SinkStatusDocument(_Document):
@@ -581,6 +616,7 @@ class StatusDocument(_Document):
 class HealthDocument(_Document):
     status: Literal["ok", "degraded"]
     uptime_s: Finite
+    reasons: list[str] = Field(default_factory=list, description="why the service is degraded (empty when ok)")
 
 
 class BaselineRequestDocument(_Document):

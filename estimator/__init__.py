@@ -24,6 +24,16 @@ from ._calibration import (
     modal_frequencies,
 )
 from ._damage_signatures import DamageSignatures, damage_signatures
+from ._health import (
+    AidingWindow,
+    HealthConfig,
+    HealthVerdict,
+    StateBounds,
+    aiding_window,
+    assess_health,
+    physical_bounds,
+    restart_state,
+)
 from ._filter import (
     EstimateResult,
     Events,
@@ -44,6 +54,14 @@ from ._selection import SensorSelection, default_aided, effective_independence, 
 from ._unit_deformations import MAX_UNIT_DEFORMATIONS, UnitDeformations, unit_deformations
 
 __all__ = [
+    "AidingWindow",
+    "HealthConfig",
+    "HealthVerdict",
+    "StateBounds",
+    "aiding_window",
+    "assess_health",
+    "physical_bounds",
+    "restart_state",
     "EstimateResult",
     "Events",
     "FilterConfig",

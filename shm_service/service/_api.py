@@ -33,6 +33,7 @@ from contract import (
 
 from ._docs import serve_docs_offline
 from ._ingest import IngestError, parse_body
+from ._storage import StorageUnavailable
 
 __all__ = ["ApiService", "create_app"]
 
@@ -43,6 +44,7 @@ class ApiService(Protocol):
     token: str | None
 
     def check_token(self, token: str | None) -> None: ...
+    def health(self) -> HealthDocument: ...
     def status(self) -> StatusDocument: ...
     def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
                limit: int = 100_000) -> list[TrendRow]: ...
@@ -146,6 +148,7 @@ def _error(description: str) -> dict[str, Any]:
 _AUTH_RESPONSES: dict[int | str, dict[str, Any]] = {
     401: _error("missing or wrong token"),
     403: _error("no token is configured: the action is disabled"),
+    503: _error("the database is unavailable for now (locked by another process, disk full): retry later"),
 }
 #: Our own 422s say in a sentence what is wrong with a parameter; FastAPI's list what does not parse.
 _INVALID = {422: _error("a parameter is invalid")}
@@ -175,11 +178,16 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
     )
     serve_docs_offline(app)  # /docs and /redoc from the installed packages, not a CDN
 
+    @app.exception_handler(StorageUnavailable)
+    async def storage_unavailable(request: Request, exc: StorageUnavailable) -> JSONResponse:
+        # The database stayed locked (another process) or failing for the storage's retry period.
+        return JSONResponse({"detail": f"the database is unavailable for now ({exc}); retry later"}, status_code=503,
+                            headers={"Retry-After": "5"})
+
     @app.get("/healthz", summary="liveness: 'degraded' while the pipeline's batches fail", response_model=HealthDocument,
              responses=_AUTH_RESPONSES)
     def healthz() -> HealthDocument:
-        st = service.status().service
-        return HealthDocument(status="ok" if st.pipeline_error is None else "degraded", uptime_s=st.uptime_s)
+        return service.health()
 
     @app.get("/api/status", summary="sources, rates, latency, dropped and rejected samples, degraded sensors",
              response_model=StatusDocument, responses=_AUTH_RESPONSES)
@@ -302,20 +310,47 @@ def _metrics(st: StatusDocument) -> str:
     srcs = st.sources
     n = st.notifications
     metric("shm_uptime_seconds", "gauge", "seconds since the service started", [({}, st.service.uptime_s)])
+    sinks = st.sinks
     metric("shm_pipeline_errors_total", "counter", "batches the pipeline failed on (skipped)", [({}, st.service.pipeline_errors)])
+    metric("shm_errors_total", "counter", "errors by component; the monitoring goes on (a failed batch is skipped, a "
+           "failed write waits in memory and is retried, a failing sink is isolated)",
+           [({"component": "pipeline"}, st.service.pipeline_errors), ({"component": "storage"}, st.storage.write_failures),
+            *[({"component": "source"}, int(s.state == "failed")) for s in srcs[:1]],
+            *[({"component": name}, sink.errors) for name, sink in sinks.items()]])
+    metric("shm_batches_skipped_total", "counter", "batches of samples skipped because the pipeline failed on them",
+           [({}, st.service.pipeline_errors)])
     metric("shm_source_messages_total", "counter", "samples accepted from the source",
            [({"source": s.id, "kind": s.kind}, s.messages) for s in srcs])
-    metric("shm_source_rejected_total", "counter", "samples rejected by reason",
+    metric("shm_source_rejected_total", "counter", "samples rejected, by reason (malformed, nonfinite, duplicate, backwards, "
+           "implausible_time, ahead_of_source, implausible_value, ...)",
            [({"source": s.id, "reason": r}, v) for s in srcs for r, v in s.rejected_by_reason.items()])
     metric("shm_source_dropped_total", "counter", "samples dropped (late, or without the reference IMU)",
            [({"source": s.id}, s.dropped) for s in srcs])
+    metric("shm_samples_dropped_total", "counter", "samples accepted but not estimated, by reason",
+           [({"reason": "late"}, p.late_samples), ({"reason": "reference_imu_silent"}, p.estimator.dropped_samples)])
+    metric("shm_source_clock_jumps_total", "counter", "stamps or batches found off the source's clock",
+           [({"source": s.id}, s.clock_jumps) for s in srcs])
     metric("shm_source_rate_hz", "gauge", "incoming samples per second", [({"source": s.id}, s.rate_hz) for s in srcs])
     metric("shm_source_data_time_seconds", "gauge", "newest sample time (UNIX s)", [({"source": s.id}, s.data_time_s) for s in srcs])
     metric("shm_pipeline_latency_seconds", "gauge", "time from a batch's arrival to its processing", [({}, p.pipeline_latency_s)])
     metric("shm_queue_depth", "gauge", "batches waiting in the pipeline queue", [({}, p.queue_depth)])
     metric("shm_estimates_total", "counter", "estimator outputs", [({}, p.estimates)])
     metric("shm_windows_total", "counter", "analysis windows processed", [({}, p.windows)])
-    metric("shm_windows_skipped_total", "counter", "windows skipped for incomplete data", [({}, p.windows_skipped_incomplete)])
+    metric("shm_windows_skipped_total", "counter", "analysis windows not analysed, by reason (incomplete data; warmup: "
+           "the filter converging after the start or a restart)",
+           [({"reason": "incomplete"}, p.windows_skipped_incomplete), ({"reason": "warmup"}, p.windows_skipped_warmup)])
+    est = p.estimator
+    metric("shm_filter_restarts_total", "counter", "restarts of the estimator's filter, by reason (bounds, nis, rejections, "
+           "nonfinite: diverged; gap: the reference IMU fell silent)",
+           [({"reason": r}, v) for r, v in sorted(est.filter_restarts_by_reason.items())] or [({"reason": "none"}, 0)])
+    metric("shm_estimator_healthy", "gauge", "1 while the estimator's health check finds it tracking, 0 while it is diverged "
+           "or recovering", [({}, int(est.health == "ok"))])
+    metric("shm_notifications_total", "counter", "notification delivery attempts this run, by outcome (sent; retry: a "
+           "temporary failure; permanent: refused by the target; given_up)",
+           [({"outcome": k}, n.outcomes_this_run.get(k, 0)) for k in ("sent", "retry", "permanent", "given_up")])
+    metric("shm_storage_write_retries_total", "counter", "database writes retried after a transient error",
+           [({}, st.storage.write_retries)])
+    metric("shm_storage_windows_waiting", "gauge", "analysed windows waiting for the database", [({}, st.storage.windows_waiting)])
     metric("shm_sensor_degraded", "gauge", "1 when a sensor is degraded or silent",
            [({"topic": t}, 0 if v == "ok" else 1) for t, v in st.sensors.items()])
     metric("shm_alarms_active", "gauge", "active alarms by level", [({"level": k}, v) for k, v in st.alarms.active.items()])

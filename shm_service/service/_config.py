@@ -15,6 +15,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from analytics import AnalysisConfig
 
+from ._plausibility import ValueLimits
+
 __all__ = [
     "AlarmSettings",
     "ArchiveSettings",
@@ -100,6 +102,19 @@ class SimSettings(_Closed):
     temperature_mean_c: float = Field(20.0, description="mean temperature, degC")
     temperature_swing_k: float = Field(40.0, ge=0, description="peak-to-peak temperature swing over the whole run, K")
     block_s: float = Field(1.0, gt=0, le=60, description="simulated seconds per block handed to the pipeline")
+    faults: tuple[str, ...] = Field(
+        (), description="sensor faults to inject, KIND:TOPIC[.FIELD]@START+DURATION[:VALUE] with KIND silence, nan, "
+        "spike (VALUE added), stuck or clock (stamps shifted by VALUE s); START and DURATION in simulated s, "
+        "e.g. spike:/imu/D.accel_y@300+1:100")
+
+    @field_validator("faults")
+    @classmethod
+    def _faults(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        from ._faults import parse_fault
+
+        for spec in value:
+            parse_fault(spec)  # raises with the spec's problem
+        return value
 
 
 class SourceSettings(_Closed):
@@ -115,6 +130,18 @@ class SourceSettings(_Closed):
     follow_idle_s: float | None = Field(None, gt=0, description="stop following after this long without growth, s (None: never)")
     lateness_s: float = Field(1.0, gt=0, le=60, description="how long the merge waits for a late sensor before moving on, s")
     silent_after_s: float = Field(2.0, gt=0, description="a sensor without data this long is reported degraded, s")
+    stuck_after_s: float = Field(
+        1.0, gt=0, description="a sensor whose readings stay exactly the same this long is reported degraded (stuck), s")
+    time_window_s: float = Field(
+        3600.0, gt=0, description="a stamp more than this before the source's newest one, or after its current time, is "
+        "rejected (implausible_time), s; ingest's current time runs on with the wall clock, sim and replay have their own")
+    max_ahead_s: float | None = Field(
+        None, gt=0, description="a sensor whose stamps run ahead of every other sensor of the source by more than this is "
+        "rejected (ahead_of_source: its clock jumped), s (None: lateness_s)")
+    future_tolerance_s: float = Field(
+        60.0, gt=0, description="ingest: no stamp may lie beyond the wall clock plus this, s; a stamp this close to the "
+        "wall clock is always on time")
+    limits: ValueLimits = Field(ValueLimits(), description="readings beyond these are rejected (implausible_value)")
 
     @field_validator("speed", mode="before")
     @classmethod
@@ -200,16 +227,29 @@ class AlarmSettings(_Closed):
                                       "clears (default: analytics.clear_windows)")
     notify_levels: tuple[Literal["warning", "alarm"], ...] = Field(("warning", "alarm"), description="levels that notify")
     notify_cleared: bool = Field(True, description="notify when an alarm clears")
+    repeat_interval_s: float | None = Field(
+        4 * 3600.0, gt=0, description="re-notify an alarm that still fires after this long, wall-clock s (like "
+        "Alertmanager's repeat_interval; None: never)")
+    stale_after_s: float = Field(
+        900.0, gt=0, description="the active alarms of a source that delivered no data for this long are marked stale, "
+        "wall-clock s")
+    notify_stale: bool = Field(True, description="notify when an alarm goes stale (its source went silent)")
 
 
 class NotifySettings(_Closed):
-    """Notifications of alarm events: webhooks and e-mail, through a persistent outbox."""
+    """Notifications of alarm events: webhooks and e-mail, through a persistent outbox. Each target
+    gets an alarm's events in their order; a 4xx answer other than 408/429 is permanent (the
+    notification fails at once, reported), 5xx, 408, 429 and network errors are retried with
+    jittered exponential back-off; targets are served independently."""
 
     webhooks: tuple[str, ...] = Field((), description="URLs that receive a JSON POST per alarm event")
     webhook_timeout_s: float = Field(5.0, gt=0, description="timeout of one webhook attempt, s")
-    retry_initial_s: float = Field(1.0, gt=0, description="first retry delay, s (doubles each attempt)")
-    retry_max_s: float = Field(600.0, gt=0, description="longest retry delay, s")
-    max_attempts: int = Field(20, ge=1, description="attempts before a notification is given up (logged as failed)")
+    retry_initial_s: float = Field(1.0, gt=0, description="first retry delay, s (doubles each attempt, times a random 0.5-1)")
+    retry_max_s: float = Field(300.0, gt=0, description="longest retry delay, s")
+    max_attempts: int | None = Field(None, ge=1, description="attempts before a notification is given up (None: no limit)")
+    give_up_after_s: float = Field(
+        7 * 86400.0, gt=0, description="a notification still failing this long after its event is given up (logged and "
+        "counted as failed), s")
     smtp_host: str | None = Field(None, description="SMTP server for e-mail (None: no e-mail)")
     smtp_port: int = Field(25, ge=1, le=65535, description="SMTP port")
     smtp_starttls: bool = Field(False, description="use STARTTLS")
@@ -220,9 +260,23 @@ class NotifySettings(_Closed):
     @field_validator("webhooks")
     @classmethod
     def _urls(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        # Parsed here, once, as the notifier will use them: a URL the HTTP client cannot use is a
+        # configuration error at start, not a notification failing for ever.
+        import httpx
+
         for url in value:
-            if not url.startswith(("http://", "https://")):
+            try:
+                parsed = httpx.URL(url)
+            except (httpx.InvalidURL, TypeError, ValueError) as exc:
+                raise ValueError(f"webhook {url!r} is not a valid URL: {exc}") from None
+            if parsed.scheme not in ("http", "https"):
                 raise ValueError(f"webhook {url!r} must be an http:// or https:// URL")
+            if not parsed.host:
+                raise ValueError(f"webhook {url!r} has no host")
+            if parsed.port is not None and not 0 < parsed.port < 65536:
+                raise ValueError(f"webhook {url!r}: port {parsed.port} is not within 1-65535")
+        if len(set(value)) != len(value):
+            raise ValueError(f"webhooks {list(value)} name a URL twice")
         return value
 
 
@@ -243,7 +297,15 @@ class ServiceSettings(_Closed):
     retention: RetentionSettings = RetentionSettings()
     alarms: AlarmSettings = AlarmSettings()
     notify: NotifySettings = NotifySettings()
-    storage_sync: Literal["normal", "full"] = Field("normal", description="SQLite synchronous mode: normal survives a process crash, full also a power loss")
+    storage_sync: Literal["normal", "full"] = Field(
+        "normal", description="SQLite synchronous mode of transactions that write only trend rows and state: normal "
+        "survives a process crash, full also a power loss")
+    storage_alarm_sync: Literal["normal", "full"] = Field(
+        "full", description="SQLite synchronous mode of transactions that write alarms, alarm events or the "
+        "notification outbox (full: they survive a power loss)")
+    storage_retry_s: float = Field(
+        10.0, ge=0, le=3600, description="how long a write is retried on a transient database error (locked by another "
+        "process, disk full, I/O error) before the window waits in memory for the next attempt, s")
     queue_batches: int = Field(8, ge=2, le=10_000, description="bounded queue between source and pipeline, batches (a batch is at most ~10 s of data or 2 MB of a file)")
     log_level: Literal["debug", "info", "warning", "error"] = Field("info", description="log level")
 

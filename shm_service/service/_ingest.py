@@ -2,14 +2,16 @@
 
 A request body is ``{"messages": [{"topic": ..., "log_time_ns": ..., "publish_time_ns": ...
 (optional), "payload": {...}}]}`` with payloads as in recordings. A body that is not such a
-document is refused as a whole; within it, each message that breaks the contract is rejected
-and counted with its reason, and every valid one is kept.
+document is refused as a whole; within it, each message that breaks the contract, lies off the
+source's clock or reads beyond what a sensor can is rejected and counted with its reason, and
+every valid one is kept. Nothing a message holds makes the request fail (no 500).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import time
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
@@ -20,6 +22,7 @@ import orjson
 from contract import RigDescription
 
 from ..recording import PAYLOAD_FIELDS, FollowBlock, classify_topic
+from ._plausibility import SourceClock, ValueLimits, implausible_row
 
 __all__ = ["IngestError", "IngestResult", "IngestValidator"]
 
@@ -38,6 +41,9 @@ class IngestResult:
     accepted: int = 0
     rejected: Counter = field(default_factory=Counter)
     errors: list[dict[str, Any]] = field(default_factory=list)
+    clock: SourceClock | None = None  # the source's clock after this batch (adopted by ``commit``)
+    last: dict[str, int] | None = None  # the topics' last times after this batch
+    refused_by_topic: Counter = field(default_factory=Counter)  # rejections of the rig's topics
 
     def as_dict(self) -> dict[str, Any]:
         return {"accepted": self.accepted, "rejected": sum(self.rejected.values()),
@@ -57,17 +63,27 @@ def parse_body(body: bytes) -> Any:
 
 
 class IngestValidator:
-    """Checks messages of the rig's topics; keeps the last accepted time per topic so a sample
-    stamped at or before the previous one is rejected (``backwards``/``duplicate``)."""
+    """Checks messages of the rig's topics. Keeps the last accepted time per topic, so a sample
+    stamped at or before the previous one is rejected (``backwards``/``duplicate``), and the
+    source's clock (``SourceClock``): stamps far from it are rejected (``implausible_time``,
+    ``ahead_of_source``), as are values no sensor can read (``implausible_value``).
 
-    def __init__(self, rig: RigDescription, *, max_messages: int) -> None:
+    ``validate`` changes nothing: it returns the result with the state after it, and ``commit``
+    adopts that state once the batch is handed on. A request that is refused (the pipeline is
+    full) or fails therefore never makes its retry look like a duplicate."""
+
+    def __init__(self, rig: RigDescription, *, max_messages: int, clock: SourceClock | None = None,
+                 limits: ValueLimits | None = None) -> None:
         self.rig = rig
         self.sensors = rig.sensor_by_topic()
         self.max_messages = max_messages
         self.last: dict[str, int] = {}
+        self.clock = clock or SourceClock(window_s=3600.0, max_ahead_s=1.0, live=True)
+        self.limits = limits or ValueLimits()
         self.max_errors = 20
+        self._info: dict[str, Any] = {}
 
-    def validate(self, document: Any) -> IngestResult:
+    def validate(self, document: Any, *, wall_ns: int | None = None) -> IngestResult:
         if not isinstance(document, dict) or "messages" not in document:
             raise IngestError('body must be a JSON object {"messages": [...]}')
         extra = set(document) - {"messages"}
@@ -78,22 +94,54 @@ class IngestValidator:
             raise IngestError("'messages' must be a list")
         if len(messages) > self.max_messages:
             raise IngestError(f"{len(messages)} messages in one request; at most {self.max_messages}")
-        result = IngestResult([], [])
+        wall = time.time_ns() if wall_ns is None else wall_ns
+        mono = time.monotonic()
+        clock = self.clock.copy()
+        last = dict(self.last)
+        whole = clock.source_jump(_first_stamps(messages, self.sensors), mono)
+        judge = clock.judge_stamps(wall_ns=wall, mono=mono, whole_source=whole)
+        result = IngestResult([], [], clock=clock, last=last)
         rows: dict[str, tuple[list[int], list[int], list[list[float]]]] = {}
+        off_clock: dict[tuple[str, str], list[int]] = {}
         for index, message in enumerate(messages):
             try:
                 topic, log_ns, pub_ns, row, payload = self._message(message)
+                code = judge.judge(topic, log_ns)
+                if code:
+                    reason = "implausible_time" if code == 1 else "ahead_of_source"
+                    off_clock.setdefault((topic, reason), []).append(log_ns)
+                    raise _Reject(reason, f"{topic}: log_time_ns {log_ns} is {clock.offset_s(topic, log_ns, mono):+.3g} s "
+                                          f"off the source's clock ({_REASONS[reason]})")
+                previous = last.get(topic)
+                if previous is not None and log_ns <= previous:
+                    reason = "duplicate" if log_ns == previous else "backwards"
+                    raise _Reject(reason, f"{topic}: log_time_ns {log_ns} is not after the previous sample's {previous}")
             except _Reject as exc:
                 result.rejected[exc.reason] += 1
+                if isinstance(message, dict) and message.get("topic") in self.sensors:
+                    result.refused_by_topic[message["topic"]] += 1
                 if len(result.errors) < self.max_errors:
                     result.errors.append({"index": index, "reason": exc.reason, "detail": str(exc)})
                 continue
+            except Exception as exc:  # noqa: BLE001 - whatever a message holds, it is its own rejection, never a 500
+                result.rejected["malformed"] += 1
+                if len(result.errors) < self.max_errors:
+                    result.errors.append({"index": index, "reason": "malformed", "detail": f"{type(exc).__name__}: {exc}"[:300]})
+                continue
+            last[topic] = log_ns
+            judge.take(topic, log_ns)
             t, p, v = rows.setdefault(topic, ([], [], []))
             t.append(log_ns)
             p.append(pub_ns)
             v.append(row)
             result.raw.append((topic, log_ns, payload, pub_ns))
             result.accepted += 1
+        for (topic, reason), stamps in off_clock.items():
+            clock.record(topic, reason, len(stamps), clock.offset_s(topic, stamps[0], mono))
+        if whole:
+            firsts = [t[0] for t, _, _ in rows.values()]
+            if firsts:
+                clock.record(None, "source_jump", result.accepted, clock.offset_s(None, min(firsts), mono))
         for topic, (t, p, v) in rows.items():
             sensor = self.sensors[topic]
             info = classify_topic(topic)
@@ -101,20 +149,31 @@ class IngestValidator:
                                              np.array(p, dtype=np.int64), np.array(v, dtype=np.float64)))
         return result
 
+    def commit(self, result: IngestResult) -> None:
+        """The batch of ``result`` was handed on: its times are the topics' and the clock's."""
+        if result.last is not None:
+            self.last = result.last
+        if result.clock is not None:
+            self.clock = result.clock
+
     def _message(self, message: Any) -> tuple[str, int, int, list[float], bytes]:
         if not isinstance(message, dict):
             raise _Reject("malformed", f"a message must be an object, got {type(message).__name__}")
         unknown = set(message) - {"topic", "log_time_ns", "publish_time_ns", "payload"}
         if unknown:
-            raise _Reject("malformed", f"unknown key(s) {sorted(unknown)}")
+            raise _Reject("malformed", f"unknown key(s) {sorted(unknown)[:5]}")
         topic = message.get("topic")
         if not isinstance(topic, str):
             raise _Reject("malformed", "'topic' must be a string")
-        info = classify_topic(topic)
+        info = self._info.get(topic)
+        if info is None:
+            info = classify_topic(topic)
+            if info is not None and topic in self.sensors:
+                self._info[topic] = info
         if info is None or info.kind not in _SENSOR_KINDS:
-            raise _Reject("unknown_topic", f"topic {topic!r} is not a sensor topic of the recording contract")
+            raise _Reject("unknown_topic", f"topic {topic[:80]!r} is not a sensor topic of the recording contract")
         if topic not in self.sensors:
-            raise _Reject("unknown_topic", f"topic {topic!r}: rig.json has no such sensor")
+            raise _Reject("unknown_topic", f"topic {topic[:80]!r}: rig.json has no such sensor")
         log_ns = message.get("log_time_ns")
         if isinstance(log_ns, bool) or not isinstance(log_ns, int) or not 0 <= log_ns <= _MAX_NS:
             raise _Reject("malformed", f"{topic}: 'log_time_ns' must be an integer in [0, 2**63)")
@@ -128,25 +187,46 @@ class IngestValidator:
         fields = PAYLOAD_FIELDS[info.title]
         extra = set(payload) - {f.name for f in fields}
         if extra:
-            raise _Reject("wrong_schema", f"{topic}: payload key(s) {sorted(extra)} are not in {info.title}")
+            raise _Reject("wrong_schema", f"{topic}: payload key(s) {sorted(map(str, extra))[:5]} are not in {info.title}")
+        canonical: dict[str, Any] = {}
         for spec in fields:
             if spec.name not in payload:
                 raise _Reject("wrong_schema", f"{topic}: payload lacks {spec.name!r} ({info.title})")
             value = payload[spec.name]
             if spec.size == 0:
-                row.append(_number(topic, spec.name, value))
+                x = _number(topic, spec.name, value)
+                row.append(x)
+                canonical[spec.name] = x
             else:
                 if not isinstance(value, list) or len(value) != spec.size:
                     raise _Reject("wrong_schema", f"{topic}: {spec.name!r} must be a list of {spec.size} numbers")
-                row.extend(_number(topic, f"{spec.name}[{i}]", x) for i, x in enumerate(value))
+                xs = [_number(topic, f"{spec.name}[{i}]", x) for i, x in enumerate(value)]
+                row.extend(xs)
+                canonical[spec.name] = xs
         if not all(math.isfinite(x) for x in row):
-            raise _Reject("nonfinite", f"{topic}: NaN or infinite value at log_time_ns {log_ns}")
-        last = self.last.get(topic)
-        if last is not None and log_ns <= last:
-            reason = "duplicate" if log_ns == last else "backwards"
-            raise _Reject(reason, f"{topic}: log_time_ns {log_ns} is not after the previous sample's {last}")
-        self.last[topic] = log_ns
-        return topic, log_ns, pub_ns, row, orjson.dumps(payload)
+            raise _Reject("nonfinite", f"{topic}: NaN, infinite or out-of-range number at log_time_ns {log_ns}")
+        if implausible_row(info.kind, row, self.limits):
+            raise _Reject("implausible_value", f"{topic}: {row} at log_time_ns {log_ns} is beyond what the sensor can "
+                                               f"read (limits: source.limits)")
+        # The payload recorded is written from the validated numbers, never the client's bytes.
+        return topic, log_ns, pub_ns, row, orjson.dumps(canonical)
+
+
+_REASONS = {"implausible_time": "outside the plausible window around it (source.time_window_s), or beyond the wall "
+                                "clock plus source.future_tolerance_s",
+            "ahead_of_source": "ahead of every other sensor of the source by more than source.max_ahead_s"}
+
+
+def _first_stamps(messages: list, sensors: dict) -> dict[str, int]:
+    """The first stamp of each topic in a request (for the whole-source jump test)."""
+    firsts: dict[str, int] = {}
+    for m in messages:
+        if isinstance(m, dict):
+            topic, t = m.get("topic"), m.get("log_time_ns")
+            if isinstance(topic, str) and topic in sensors and topic not in firsts and isinstance(t, int) \
+                    and not isinstance(t, bool) and 0 <= t <= _MAX_NS:
+                firsts[topic] = t
+    return firsts
 
 
 def _number(topic: str, name: str, value: Any) -> float:

@@ -28,6 +28,7 @@ from contract import (
     CurvatureDocument,
     EstimatorStatusDocument,
     FlagDocument,
+    LastEstimateDocument,
     LocationDocument,
     ModeDocument,
     PipelineStatusDocument,
@@ -39,21 +40,27 @@ from contract import (
 )
 from estimator import (
     FilterOutput,
+    HealthConfig,
     ImmsFilter,
     ImmsModel,
     Measurements,
     RestCalibration,
     SensorSeries,
+    aiding_window,
+    assess_health,
     build_events,
     calibrate_at_rest,
     damage_signatures,
+    physical_bounds,
+    restart_state,
 )
 
 from ..recording import FollowBlock
 from ._alarms import alarm_changes, clear_changes
 from ._archive import Archive
 from ._sinks import SinkGuard
-from ._storage import AlarmChange, Storage, WindowCommit
+from ._plausibility import SourceClock, ValueLimits, implausible_values
+from ._storage import AlarmChange, Storage, WindowCommit, is_transient
 
 __all__ = ["Batch", "Pipeline", "PipelineSink"]
 
@@ -74,6 +81,7 @@ class Batch:
     raw: list[tuple[str, int, bytes, int]] | None = None
     truth: tuple[np.ndarray, np.ndarray] | None = None
     received: float = field(default_factory=time.monotonic)
+    refused: dict[str, int] | None = None  # samples per topic the source refused (its sensor is degraded meanwhile)
 
 
 class PipelineSink(Protocol):
@@ -155,15 +163,27 @@ def calibration_from_dict(d: dict) -> RestCalibration:
 
 
 class _Estimator:
-    """The IMMS filter over released samples. Times are s after ``epoch_ns``."""
+    """The IMMS filter over released samples. Times are s after ``epoch_ns``.
+
+    Restart policy: the filter restarts (a new one, from the current measurements, with the rest
+    calibration kept) when its health check finds it diverged (``estimator.assess_health`` over
+    each chunk: states beyond the rig's physical bounds, growing innovations, aiding refused by
+    the gate) and after a gap of ``gap_reset_s`` at the reference IMU D. The chunk in which it
+    diverged is not passed on (its estimates are not the structure's); ``restarted_at_s`` tells
+    the pipeline to hold the analysis back until the new filter settled. Health is "diverged"
+    until the new filter ran, "recovering" until it ran ``confirm_s`` without a sign, then "ok".
+    """
 
     def __init__(self, model: ImmsModel, topics: dict[str, tuple[str, str]], calibration_s: float,
-                 calibration: RestCalibration | None, gap_reset_s: float = 5.0) -> None:
+                 calibration: RestCalibration | None, gap_reset_s: float = 5.0,
+                 health: HealthConfig | None = None) -> None:
         self.model = model
         self.topics = topics  # topic -> (kind, name)
         self.calibration_s = calibration_s
         self.calibration = calibration
         self.gap_reset_s = gap_reset_s
+        self.health_config = health or HealthConfig()
+        self.bounds = physical_bounds(model.rig.beam.length, self.health_config)
         self.epoch_ns: int | None = None
         self.filter: ImmsFilter | None = None
         self.buffer: list[dict[str, tuple[np.ndarray, np.ndarray]]] = []
@@ -171,8 +191,16 @@ class _Estimator:
         self.last_d_ns: int | None = None
         self.dropped = 0  # samples dropped while the reference IMU D was silent
         self.resets = 0
+        self.resets_by_reason: Counter = Counter()
         self.state = "calibrating"
         self.new_calibration = False
+        self.health = "ok"
+        self.health_reason: str | None = None
+        self.restarted_at_s: float | None = None  # data time (s after the epoch) of the latest restart
+        self._from_measurements = False  # the next filter starts from the measurements (after a divergence)
+        self._counters: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.last_estimate: tuple[float, float, float, float] | None = None  # (UNIX s, d, φ, e)
+        self._tip = model.tip_row()
 
     def _measurements(self, data: dict[str, tuple[np.ndarray, np.ndarray]]) -> Measurements:
         imu, tof, strain, bearing = {}, {}, {}, None
@@ -224,6 +252,18 @@ class _Estimator:
             data = merged
         return self._run(data)
 
+    def _restart(self, reason: str, kind: str, at_s: float) -> None:
+        self.filter = None
+        self._counters = None
+        self.resets += 1
+        self.resets_by_reason[kind] += 1
+        self.restarted_at_s = at_s
+        if kind != "gap":
+            self.health, self.health_reason = "diverged", reason
+            self._from_measurements = True
+            if self.resets_by_reason[kind] <= 3 or self.resets % 100 == 0:
+                log.warning("estimator diverged at %.1f s (%s): restarting from the current measurements", at_s, reason)
+
     def _run(self, data: dict[str, tuple[np.ndarray, np.ndarray]]) -> FilterOutput | None:
         d = data.get(_D_TOPIC)
         newest = max(int(v[0][-1]) for v in data.values())
@@ -231,36 +271,75 @@ class _Estimator:
             if self.last_d_ns is None or newest - self.last_d_ns > self.gap_reset_s * _NS:
                 self.dropped += sum(len(v[0]) for v in data.values())
                 self.state = "stalled: /imu/D is silent"
-                if self.filter is not None:
-                    self.filter = None  # restart at the next D sample
-                    self.resets += 1
+                if self.filter is not None:  # restart at the next D sample
+                    self._restart("/imu/D is silent", "gap", (newest - self.epoch_ns) / _NS)
                 return None
         else:
             first_d = int(d[0][0])
             if self.filter is not None and self.last_d_ns is not None and first_d - self.last_d_ns > self.gap_reset_s * _NS:
-                self.filter = None
-                self.resets += 1
+                self._restart(f"a gap of {(first_d - self.last_d_ns) / _NS:.1f} s at /imu/D", "gap",
+                              (first_d - self.epoch_ns) / _NS)
             self.last_d_ns = int(d[0][-1])
         meas = self._measurements(data)
         if self.filter is None:
             start = min(s.times[0] for s in meas.imu.values()) if meas.imu else min(int(v[0][0]) for v in data.values())
             self.filter = ImmsFilter(self.model, self.calibration, t0=float(start))
+            if self._from_measurements:
+                self.filter.state.x[:] = restart_state(meas, self.model, self.calibration)
+                self._from_measurements = False
         self.state = "running"
         events = build_events(meas, self.model)
         if not len(events):
             return None
         events = events.slice(int(np.searchsorted(events.t, self.filter.t)), len(events))
-        return self.filter.process(events)
+        out = self.filter.process(events)
+        return self._judge(out)
+
+    def _judge(self, out: FilterOutput) -> FilterOutput | None:
+        """The health check of one chunk: restart on a sign of divergence, else pass it on."""
+        c = self.filter.counters
+        now = (c.accepted.copy(), c.rejected.copy(), c.nis_sum.copy())
+        window = None if self._counters is None else aiding_window(self.model.aiding_channels, self._counters, now)
+        self._counters = now
+        if not len(out.t):
+            return out
+        ix = self.model.state_layout.index
+        b = out.x[:, ix.b:ix.b + self.model.gamma]
+        phi = out.x[:, ix.phi] if ix.phi >= 0 else np.zeros(len(out.t))
+        verdict = assess_health(window, out.x[:, ix.d], phi, b @ self._tip, self.bounds, self.health_config)
+        if verdict.diverged:
+            self._restart(verdict.reason or verdict.kind or "diverged", verdict.kind or "diverged", float(out.t[-1]))
+            return None
+        if self.health == "diverged":
+            self.health = "recovering"
+        elif self.health == "recovering" and self.restarted_at_s is not None \
+                and out.t[-1] - self.restarted_at_s >= self.health_config.confirm_s:
+            self.health, self.health_reason = "ok", None
+        last = out.x[-1]
+        self.last_estimate = (self.epoch_ns / _NS + float(out.t[-1]), float(last[ix.d]),
+                              float(last[ix.phi]) if ix.phi >= 0 else 0.0, float(b[-1] @ self._tip))
+        return out
 
     def flush(self) -> FilterOutput | None:
         if self.filter is None:
             return None
         return self.filter.flush()
 
+    def health_problems(self) -> list[str]:
+        if self.health == "ok":
+            return []
+        return [f"estimator {self.health}: {self.health_reason} ({self.resets} filter restarts so far)"]
+
     def diagnostics(self) -> EstimatorStatusDocument:
         diag = self.filter.diagnostics() if self.filter is not None else {}
+        last = None
+        if self.last_estimate is not None:
+            t, d, phi, e = self.last_estimate
+            last = LastEstimateDocument(t_s=t, d_m=d, phi_rad=phi, e_m=e)
         return EstimatorStatusDocument(
             state=self.state, dropped_samples=self.dropped, filter_restarts=self.resets,
+            filter_restarts_by_reason=dict(self.resets_by_reason), health=self.health, health_reason=self.health_reason,
+            last_estimate=last,
             rest_calibration=None if self.calibration is None else self.calibration.as_dict(), **diag)
 
 
@@ -414,6 +493,17 @@ class _Analytics:
 # -- the pipeline -----------------------------------------------------------------------------
 
 
+@dataclass
+class _PendingCommit:
+    """A window's transaction not yet written (the database was unavailable), with the alarm
+    state it leads to and what goes to the dashboard once it is written."""
+
+    commit: WindowCommit
+    raised: dict[str, str]  # chart -> level of the alarms standing once it is written
+    document: WindowDocument | None = None
+    spectrum: SpectrumDocument | None = None
+
+
 class Pipeline:
     """Runs the stages for one source. ``process(batch)`` and ``finish()`` are called from one
     thread; ``status()`` from any."""
@@ -422,7 +512,9 @@ class Pipeline:
                  calibration_s: float, chunk_s: float, lateness_s: float, silent_after_s: float,
                  raise_windows: int | None = None, clear_windows: int | None = None, archive: Archive | None = None, archive_raw: bool = False,
                  archive_estimates: bool = True, estimate_decimation: int = 1, sink: PipelineSink | None = None,
-                 sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0) -> None:
+                 sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0,
+                 commit_retry_s: float = 5.0, max_pending_commits: int = 20_000, clock: SourceClock | None = None,
+                 limits: ValueLimits | None = None, stuck_after_s: float = 1.0) -> None:
         self.model = model
         self.rig = model.rig
         self.warmup_s = warmup_s
@@ -446,6 +538,23 @@ class Pipeline:
         analysis = analysis.model_copy(update=overrides) if overrides else analysis
         self.analysis = analysis
         self.analytics = _Analytics(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id)
+        # The alarms as the database holds them: the engine's alarm logic runs ahead of it while
+        # windows wait for the database, and what is reported comes from here.
+        self.committed_alarms: dict[str, str] = self.analytics.active()
+        self._pending_commits: deque[_PendingCommit] = deque()
+        self.commit_retry_s = commit_retry_s
+        self.max_pending_commits = max_pending_commits
+        # plausibility of what the source delivers (None: judged by the source itself, as ingest is)
+        self.clock = clock
+        self.limits = limits
+        self.rejected: Counter = Counter()  # samples rejected here, by reason
+        self.stuck_after_ns = int(stuck_after_s * _NS)
+        self._stuck: dict[str, tuple[np.ndarray, int, int]] = {}  # topic -> (last row, run start ns, last ns)
+        self._refused_at: dict[str, int] = {}  # topic -> data time when a sample of it was last refused
+        self._order: dict[str, int] = {}  # topic -> newest stamp handed on
+        self.storage_error: str | None = None  # set while windows wait for the database
+        self.storage_errors = 0  # commits that failed (and wait to be retried)
+        self.trend_rows_dropped = 0  # rows of waiting windows dropped beyond max_pending_commits (their alarms kept)
         self.chunk_ns = int(chunk_s * _NS)
         self.silent_after_ns = int(silent_after_s * _NS)
         self.archive = archive
@@ -474,6 +583,7 @@ class Pipeline:
         self._temperature_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._bearing_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._pending_estimator: dict[str, list] = {}
+        self._warmup_set = False
 
     # -- control ----------------------------------------------------------------------------
 
@@ -485,14 +595,19 @@ class Pipeline:
 
     def process(self, batch: Batch) -> None:
         began = time.monotonic()
-        for block in batch.blocks:
+        if self._pending_commits:
+            self.flush_commits()
+        for block in self._plausible(batch.blocks):
             if not len(block):
                 continue
+            self._watch_stuck(block)
             self.samples[block.topic] += len(block)
             last = int(block.log_time_ns[-1])
             self.last_time_ns[block.topic] = max(self.last_time_ns.get(block.topic, last), last)
             self.newest_ns = last if self.newest_ns is None else max(self.newest_ns, last)
             self.merger.add(block)
+        for topic in batch.refused or ():
+            self._refused_at[topic] = self.newest_ns if self.newest_ns is not None else 0
         if batch.truth is not None:
             self._truth.append(batch.truth)
         if self.archive_raw and batch.raw:
@@ -503,6 +618,84 @@ class Pipeline:
         done = time.monotonic()
         self.latency_s = done - batch.received
         self.busy_s += done - began
+
+    def _plausible(self, blocks: list[FollowBlock]) -> list[FollowBlock]:
+        """The samples of ``blocks`` on the source's clock and within the sensors' limits; the others
+        are counted (``rejected``) and their clock jumps noted (``SourceClock``)."""
+        if self.clock is None and self.limits is None:  # judged by the source (ingest)
+            return blocks
+        blocks = [b for b in blocks if len(b)]
+        clock = self.clock
+        mono = time.monotonic()
+        whole = False
+        if clock is not None and blocks:
+            firsts = {b.topic: int(b.log_time_ns[0]) for b in blocks}
+            whole = clock.source_jump(firsts, mono)
+            # The first batch has no clock yet: the topics that agree with most others are taken
+            # first, so one sensor stamped years off cannot become the source's time.
+            median = float(np.median(list(firsts.values())))
+            blocks = sorted(blocks, key=lambda b: abs(firsts[b.topic] - median))
+        out = []
+        for b in blocks:
+            keep = None
+            if clock is not None:
+                ok, codes = clock.judge(b.topic, b.log_time_ns, mono=mono, whole_source=whole)
+                if not ok.all():
+                    self.rejected.update(clock.count(b.topic, codes, b.log_time_ns, mono=mono))
+                    keep = ok
+            if self.limits is not None and b.kind in ("imu", "tof", "strain", "bearing", "temperature"):
+                taken = np.ones(len(b), dtype=bool) if keep is None else keep
+                nonfinite = ~np.all(np.isfinite(b.values.reshape(len(b), -1)), axis=1)
+                bad = implausible_values(b.kind, b.values, self.limits) & ~nonfinite
+                if nonfinite.any() or bad.any():
+                    self.rejected["nonfinite"] += int(np.count_nonzero(nonfinite & taken))
+                    self.rejected["implausible_value"] += int(np.count_nonzero(bad & taken))
+                    keep = taken & ~bad & ~nonfinite
+            if keep is not None:
+                b = FollowBlock(b.topic, b.kind, b.name, b.log_time_ns[keep], b.publish_time_ns[keep], b.values[keep])
+            # Each topic in time order whatever the source did (a sensor's clock stepping back):
+            # samples stamped at or before the topic's previous one are dropped, counted.
+            t = b.log_time_ns
+            previous = self._order.get(b.topic)
+            if len(t) and (previous is not None and t[0] <= previous or (len(t) > 1 and np.any(t[1:] <= t[:-1]))):
+                running = np.maximum.accumulate(np.concatenate([[previous if previous is not None else t[0] - 1], t[:-1]]))
+                ok = t > running
+                self.rejected["duplicate"] += int(np.count_nonzero(t == running))
+                self.rejected["backwards"] += int(np.count_nonzero(t < running))
+                b = FollowBlock(b.topic, b.kind, b.name, t[ok], b.publish_time_ns[ok], b.values[ok])
+                keep = np.zeros(1, dtype=bool)  # something was refused
+            if keep is not None and not keep.all():
+                # the sensor is degraded while its samples are being refused (data time of the refusal)
+                self._refused_at[b.topic] = self.newest_ns if self.newest_ns is not None else 0
+            if len(b):
+                self._order[b.topic] = int(b.log_time_ns[-1])
+            if clock is not None and len(b):
+                clock.take(b.topic, int(b.log_time_ns[-1]), mono)
+            out.append(b)
+        if whole:
+            clock.record(None, "source_jump", sum(len(b) for b in out), clock.offset_s(None, min(firsts.values()), mono))
+        return out
+
+    def _watch_stuck(self, block: FollowBlock) -> None:
+        """Track how long an IMU's or a strain gauge's readings have not changed at all (their
+        noise never lets a working one read the same value twice for long)."""
+        if block.kind not in ("imu", "strain"):
+            return
+        v, t = block.values, block.log_time_ns
+        previous = self._stuck.get(block.topic)
+        same = np.all(v[1:] == v[:-1], axis=1) if len(v) > 1 else np.zeros(0, dtype=bool)
+        changed = np.nonzero(~same)[0]
+        if len(changed):
+            start = int(t[changed[-1] + 1])
+        elif previous is not None and np.array_equal(previous[0], v[0]):
+            start = previous[1]
+        else:
+            start = int(t[0])
+        self._stuck[block.topic] = (v[-1].copy(), start, int(t[-1]))
+
+    def stuck_sensors(self) -> list[str]:
+        """Topics whose readings have stayed exactly the same for ``stuck_after_s`` and more."""
+        return sorted(topic for topic, (_, start, last) in self._stuck.items() if last - start >= self.stuck_after_ns)
 
     def _advance(self, released: dict[str, tuple[np.ndarray, np.ndarray]], final: bool = False) -> None:
         for topic, (t, v) in released.items():
@@ -519,7 +712,12 @@ class Pipeline:
                 data[topic] = (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
         self._pending_estimator = {}
         self.processed_ns = hi
+        restarts = self.estimator.resets
         out = self.estimator.feed(data)
+        if self.estimator.resets != restarts and self.estimator.restarted_at_s is not None and self.estimator.epoch_ns:
+            # Windows that would hold the diverged filter's b (or the new one's first seconds) are not analysed.
+            settle = self.estimator.epoch_ns + int(round((self.estimator.restarted_at_s + self.estimator.health_config.settle_s) * _NS))
+            self.analytics.set_not_before(max(self.analytics.not_before_ns or settle, settle))
         if final:
             tail = self.estimator.flush()
             if tail is not None and out is not None:
@@ -540,8 +738,10 @@ class Pipeline:
                 self.analytics.add(epoch, np.zeros(0), np.zeros((0, self.model.gamma)), None, temperature)
             return
         self.estimates += len(out.t)
-        if self.analytics.not_before_ns is None and self.estimator.calibration is not None:
-            self.analytics.set_not_before(epoch + int(round((float(self.estimator.calibration.rest_end) + self.warmup_s) * _NS)))
+        if not self._warmup_set and self.estimator.calibration is not None:
+            self._warmup_set = True
+            warm = epoch + int(round((float(self.estimator.calibration.rest_end) + self.warmup_s) * _NS))
+            self.analytics.set_not_before(max(self.analytics.not_before_ns or warm, warm))
         t_abs = epoch / _NS + out.t
         layout = self.model.state_layout
         b = layout.b_of(out.x)
@@ -553,10 +753,7 @@ class Pipeline:
         if self._reset_requested:
             self._reset_requested = False
             self.analytics.reset()
-            active = [a for a in self.storage.alarms(state="active") if a.source == self.source_id]
-            changes = clear_changes(active, float(t_abs[0]))
-            if changes:
-                self._commit_alarm_only(changes, float(t_abs[0]))
+            self._clear_for_new_baseline(float(t_abs[0]))
         for window in self.analytics.add(epoch, out.t, b, d, temperature):
             self._commit(window)
 
@@ -590,10 +787,22 @@ class Pipeline:
                 truth = defl[k]
         self.sink_guard.call("estimate", self.sink.estimate, float(t_abs[-1]), out.x[-1].copy(), truth)
 
-    def _commit_alarm_only(self, changes, at_s: float) -> None:
-        nxt = self.analytics.next_start
-        commit = WindowCommit(self.source_id, nxt - self.analytics.step_s if nxt else at_s, at_s, [], {"monitor": None}, None, changes)
-        self.storage.commit_window(commit)
+    def _clear_for_new_baseline(self, at_s: float) -> None:
+        """A new baseline: every chart starts over and every active alarm of the source clears
+        (those stored and those raised by windows still waiting for the database)."""
+        active = {a.chart: a for a in self.storage.alarms(state="active") if a.source == self.source_id}
+        for pending in self._pending_commits:
+            for c in pending.commit.alarm_changes:
+                if c.action == "raise":
+                    active[c.chart] = AlarmDocument(id=1, source=self.source_id, chart=c.chart, kind=c.kind, mode=c.mode,
+                                                    level=c.level, state="active", raised_at_s=c.at_s, message=c.message)
+                elif c.action == "clear":
+                    active.pop(c.chart, None)
+        changes = clear_changes(active.values(), at_s)
+        start = self.analytics.next_start - self.analytics.step_s if self.analytics.next_start else at_s
+        commit = WindowCommit(self.source_id, start, at_s, [], {"monitor": None}, None, changes)
+        self._pending_commits.append(_PendingCommit(commit, {}))
+        self.flush_commits()
 
     def _commit(self, window: WindowOutput) -> None:
         res = window.result
@@ -610,32 +819,86 @@ class Pipeline:
             monitor_state={"monitor": self.analytics.monitor.state_dict()},
             calibration=calibration, alarm_changes=changes, baseline=baseline,
         )
-        self.storage.commit_window(commit)
-        self.windows_committed += 1
-        self.last_window = document
-        if self.sink is not None:
-            guard = self.sink_guard
-            guard.call("window", self.sink.window, self.last_window)
-            guard.call("spectra", self.sink.spectra, window.spectrum)
-            if changes:
-                changed = {c.chart for c in changes}
-                for alarm in self.storage.alarms(limit=len(changes) + 5):
-                    if alarm.source == self.source_id and alarm.chart in changed:
-                        guard.call("alarm", self.sink.alarm, alarm)
+        self._pending_commits.append(_PendingCommit(commit, self.analytics.active(), document, window.spectrum))
+        if len(self._pending_commits) > self.max_pending_commits:
+            oldest = self._pending_commits[0]
+            self.trend_rows_dropped += len(oldest.commit.rows)
+            oldest.commit.rows = []
+        self.flush_commits()
+
+    def flush_commits(self, retry_s: float | None = None) -> bool:
+        """Write the waiting windows in their order. Alarm state changes take effect (and reach
+        the dashboard) only once their window is written; a transient database error leaves the
+        window waiting for the next attempt (the storage already retried it for ``retry_s``).
+        Returns True when nothing waits any more."""
+        while self._pending_commits:
+            pending = self._pending_commits[0]
+            try:
+                self.storage.commit_window(pending.commit, retry_s=self.commit_retry_s if retry_s is None else retry_s)
+            except Exception as exc:
+                if not is_transient(exc):
+                    # Not a passing fault but a bad transaction: retrying it would stop every later window.
+                    self._pending_commits.popleft()
+                    raise
+                self.storage_errors += 1
+                self.storage_error = (f"storage: {exc}; {len(self._pending_commits)} window(s) wait to be written "
+                                      "(retried with every batch)")
+                if self.storage_errors <= 3 or self.storage_errors % 100 == 0:
+                    log.error("%s", self.storage_error)
+                return False
+            self._pending_commits.popleft()
+            self.committed_alarms = dict(pending.raised)
+            if pending.document is not None:
+                self.windows_committed += 1
+                self.last_window = pending.document
+            self._after_commit(pending)
+        self.storage_error = None
+        return True
+
+    @property
+    def pending_commits(self) -> int:
+        return len(self._pending_commits)
+
+    def _after_commit(self, pending: _PendingCommit) -> None:
+        if self.sink is None:
+            return
+        guard = self.sink_guard
+        if pending.document is not None:
+            guard.call("window", self.sink.window, pending.document)
+        if pending.spectrum is not None:
+            guard.call("spectra", self.sink.spectra, pending.spectrum)
+        changes = pending.commit.alarm_changes
+        if changes:
+            changed = {c.chart for c in changes}
+            for alarm in self.storage.alarms(limit=len(changes) + 5):
+                if alarm.source == self.source_id and alarm.chart in changed:
+                    guard.call("alarm", self.sink.alarm, alarm)
 
     def finish(self) -> None:
         """The source ended: release everything, flush the filter, close the recording."""
         self._advance(self.merger.release(final=True), final=True)
+        if self._pending_commits:
+            self.flush_commits(retry_s=max(self.commit_retry_s, 30.0))
         if self.archive is not None:
             self.archive.close()
 
     # -- status -----------------------------------------------------------------------------
+
+    def health_problems(self) -> list[str]:
+        """Why the pipeline's output cannot be trusted right now (empty: it can)."""
+        problems = self.estimator.health_problems()
+        if self.clock is not None:
+            problems.extend(self.clock.problems())
+        return problems
 
     def sensor_states(self) -> dict[str, str]:
         states: dict[str, str] = {}
         newest = self.newest_ns
         diag = self.estimator.filter.diagnostics() if self.estimator.filter is not None else {}
         inactive = {d["sensor"] for d in diag.get("degraded_imus", []) if not d.get("active", True)}
+        inactive.update(self.stuck_sensors())
+        if newest is not None:
+            inactive.update(t for t, at in self._refused_at.items() if newest - at <= self.silent_after_ns)
         for sensor in self.rig.sensors:
             topic = sensor.topic
             last = self.last_time_ns.get(topic)
@@ -669,7 +932,7 @@ class Pipeline:
             realtime_factor=None if span is None else round(span / elapsed, 2),
             pipeline_latency_s=round(self.latency_s, 4),
             busy_fraction=round(self.busy_s / elapsed, 3),
-            active_alarms=self.analytics.active(),
+            active_alarms=dict(self.committed_alarms),
         )
 
 

@@ -21,6 +21,7 @@ from contract import (
     BaselineRequestDocument,
     BaselineStatusDocument,
     ChartLevelsDocument,
+    HealthDocument,
     IngestResultDocument,
     ModelDocument,
     NotificationStatusDocument,
@@ -42,6 +43,7 @@ from ._archive import Archive
 from ._config import ServiceSettings, SettingsError, resolve_token
 from ._notify import Notifier, notify_targets
 from ._pipeline import Pipeline
+from ._plausibility import SourceClock
 from ._retention import RetentionWorker
 from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
@@ -109,7 +111,9 @@ class MonitoringService:
         except ValueError as exc:
             raise ServiceError(f"estimator model: {exc}") from None
         self.storage = Storage(settings.db, notify_targets=notify_targets(settings.notify),
-                               notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared, sync=settings.storage_sync)
+                               notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
+                               notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
+                               alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
         self.storage.touch_source(self.source.id, self.source.kind, src.spec, time.time())
         archive = None
         if settings.archive.enabled:
@@ -129,11 +133,17 @@ class MonitoringService:
             clear_windows=settings.alarms.clear_windows, archive=archive, archive_raw=raw,
             archive_estimates=settings.archive.estimates, estimate_decimation=settings.archive.estimate_decimation,
             sink=sink, sink_guard=self.dashboard_guard, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
+            commit_retry_s=settings.storage_retry_s,
+            # ingest is judged per message by its validator (its response says what was refused)
+            clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits,
+            stuck_after_s=src.stuck_after_s,
         )
         self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
         self.retention = RetentionWorker(settings.retention, storage=self.storage,
                                          directory=archive.directory if archive is not None else None,
                                          current=lambda: archive.current if archive is not None else None)
+        self.housekeeping_guard = SinkGuard("housekeeping", log)
+        self._touched_samples = 0
         self._lock = threading.Lock()
         self._done = threading.Event()
         self._stopping = threading.Event()
@@ -185,10 +195,16 @@ class MonitoringService:
 
                 rig = rig_override or default_rig(src.layout)
                 return IngestSource(src.id or "ingest", self.queue, rig, max_messages=s.server.max_ingest_messages,
-                                    wait_s=s.server.ingest_wait_s, raw=s.archive.enabled and s.archive.raw != "never")
+                                    wait_s=s.server.ingest_wait_s, raw=s.archive.enabled and s.archive.raw != "never",
+                                    clock=self._clock(live=True), limits=src.limits)
         except (RecordingError, FileNotFoundError, ValueError) as exc:
             raise ServiceError(str(exc)) from None
         raise ServiceError(f"unknown source {src.spec!r}")
+
+    def _clock(self, *, live: bool) -> SourceClock:
+        src = self.settings.source
+        return SourceClock(window_s=src.time_window_s, max_ahead_s=src.max_ahead_s or src.lateness_s, live=live,
+                           future_tolerance_s=src.future_tolerance_s)
 
     def _start_dashboard(self) -> Any:
         try:
@@ -215,12 +231,48 @@ class MonitoringService:
         self.retention.start()
         self._thread = threading.Thread(target=self._pipeline_loop, name="pipeline", daemon=True)
         self._thread.start()
+        threading.Thread(target=self._housekeeping_loop, name="housekeeping", daemon=True).start()
         self.source.start()
+
+    def _housekeeping_loop(self, period_s: float = 2.0) -> None:
+        while not self._stopping.wait(period_s):
+            self.housekeeping()
+
+    def housekeeping(self, now: float | None = None) -> None:
+        """Every few seconds: note that the source delivers (``sources.last_seen_s``), mark stale
+        the alarms of sources silent for ``alarms.stale_after_s``, re-notify alarms that still
+        fire after ``alarms.repeat_interval_s``. A failure is counted and tried again next time."""
+        now = time.time() if now is None else now
+        a = self.settings.alarms
+        try:
+            samples = sum(self.pipeline.samples.values())
+            if samples != self._touched_samples:
+                self.storage.touch_source(self.source.id, self.source.kind, self.settings.source.spec, now)
+                self._touched_samples = samples
+            stale = self.storage.mark_stale(now - a.stale_after_s, now)
+            if stale:
+                log.warning("alarm(s) %s marked stale: their source has delivered no data for %.0f s", stale, a.stale_after_s)
+            if a.repeat_interval_s is not None and self.storage.renotify_due(a.repeat_interval_s, now):
+                pass
+            self.notifier.wake()
+        except Exception as exc:
+            self.housekeeping_guard.record("housekeeping", exc)
 
     def _pipeline_loop(self) -> None:
         try:
             while True:
-                item = self.queue.get()
+                try:
+                    item = self.queue.get(timeout=1.0)
+                except queue.Empty:
+                    # No data: windows that wait for the database are tried again meanwhile.
+                    if self.pipeline.pending_commits:
+                        try:
+                            self.pipeline.flush_commits()
+                        except Exception as exc:
+                            self._batch_failed(exc, what="pipeline error writing a window")
+                        self.pipeline_error = self.pipeline.storage_error
+                        self.notifier.wake()
+                    continue
                 if item is END:
                     break
                 try:
@@ -228,9 +280,11 @@ class MonitoringService:
                 except Exception as exc:
                     self._batch_failed(exc)
                 else:
-                    self.pipeline_error = None
+                    # None once a batch succeeds and nothing waits for the database
+                    self.pipeline_error = self.pipeline.storage_error
                 self.notifier.wake()
             self.pipeline.finish()
+            self.pipeline_error = self.pipeline.storage_error
         except Exception as exc:
             self._batch_failed(exc, what="pipeline failed at the end of the source")
         finally:
@@ -280,10 +334,33 @@ class MonitoringService:
         if not token or not hmac.compare_digest(token.encode(), self.token.encode()):
             raise PermissionError("missing or wrong token")
 
+    def health(self) -> HealthDocument:
+        """``/healthz``: cheap (no query of the database), "degraded" with the reasons why."""
+        reasons: list[str] = []
+        if self.pipeline_error is not None:
+            reasons.append(f"pipeline: {self.pipeline_error}")
+        if self.pipeline.storage_error is not None and self.pipeline.storage_error != self.pipeline_error:
+            reasons.append(self.pipeline.storage_error)
+        reasons.extend(self.pipeline.health_problems())
+        src = self.source
+        if src.state == "failed":
+            reasons.append(f"source {src.id} failed: {src.error}")
+        reasons.extend(src.health_problems())
+        return HealthDocument(status="degraded" if reasons else "ok", uptime_s=round(time.time() - self.started_at, 1),
+                              reasons=reasons)
+
     def status(self) -> StatusDocument:
         p = self.pipeline.status(queue_depth=self.queue.qsize(), queue_capacity=self.queue.maxsize)
         src = self.source.status()
         src["dropped"] = src["dropped"] + p.late_samples + p.estimator.dropped_samples
+        if self.pipeline.rejected:  # judged by the pipeline (off the clock, implausible values)
+            by_reason = dict(src["rejected_by_reason"])
+            for reason, n in self.pipeline.rejected.items():
+                by_reason[reason] = by_reason.get(reason, 0) + n
+            src["rejected_by_reason"] = by_reason
+            src["rejected"] = sum(by_reason.values())
+        src["problems"] = src["problems"] + self.pipeline.health_problems()
+        src["clock_jumps"] = src.get("clock_jumps", 0) + (self.pipeline.clock.jump_count if self.pipeline.clock else 0)
         src["latency_s"] = p.pipeline_latency_s
         states = self.pipeline.sensor_states()
         counts = {"warning": 0, "alarm": 0}
@@ -301,11 +378,16 @@ class MonitoringService:
             baseline=BaselineStatusDocument(state=p.baseline, modes=self._baseline_modes()),
             alarms=AlarmCountsDocument(active=counts),
             notifications=NotificationStatusDocument(**self.storage.outbox_counts(), sent_this_run=self.notifier.sent,
-                                                     failed_attempts_this_run=self.notifier.failed_attempts),
+                                                     failed_attempts_this_run=self.notifier.failed_attempts,
+                                                     outcomes_this_run=dict(self.notifier.outcomes),
+                                                     last_error=self.notifier.last_error),
             storage=StorageStatusDocument(db=str(self.settings.db), schema_version=self.storage.schema_version,
                                           trend_rows=self.storage.count("trends"),
-                                          archive=None if self.pipeline.archive is None else self.pipeline.archive.status()),
-            sinks={"dashboard": self.dashboard_guard.status(), "notifier": self.notifier.guard.status()},
+                                          archive=None if self.pipeline.archive is None else self.pipeline.archive.status(),
+                                          write_retries=self.storage.retries, write_failures=self.storage.failures,
+                                          windows_waiting=self.pipeline.pending_commits, last_error=self.storage.last_error),
+            sinks={"dashboard": self.dashboard_guard.status(), "notifier": self.notifier.guard.status(),
+                   "housekeeping": self.housekeeping_guard.status()},
             thresholds=self.thresholds,
             model=self.model_document,
         )
@@ -326,7 +408,7 @@ class MonitoringService:
 
     def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         self.check_token(token)
-        alarm = self.storage.acknowledge(alarm_id, by)
+        alarm = self.storage.acknowledge(alarm_id, by, retry_s=min(self.settings.storage_retry_s, 3.0))
         if alarm is None:
             raise KeyError(f"alarm {alarm_id} does not exist")
         return alarm
@@ -335,7 +417,8 @@ class MonitoringService:
         self.paused = bool(paused)
 
     def request_baseline(self) -> BaselineRequestDocument:
-        baseline_id = self.storage.request_baseline(self.source.id)
+        # An operator's request waits a few seconds for the database at most (then 503: retry).
+        baseline_id = self.storage.request_baseline(self.source.id, retry_s=min(self.settings.storage_retry_s, 3.0))
         self.pipeline.request_baseline()
         return BaselineRequestDocument(baseline_id=baseline_id, state="learning", source=self.source.id,
                                        learn_s=self.settings.analytics.baseline_s)

@@ -21,6 +21,7 @@ from contract import RigDescription, row_layout
 from ..recording import FollowBlock, RecordingError, RecordingFollower, classify_topic, read_recording
 from ._config import ServiceSettings
 from ._ingest import IngestResult, IngestValidator
+from ._plausibility import SourceClock, ValueLimits
 from ._pipeline import Batch
 
 __all__ = ["FileSource", "IngestSource", "SimSource", "Source", "END", "simulation_settings"]
@@ -111,6 +112,10 @@ class Source:
             return 0.0
         return (n1 - n0) / max(t1 - t0, 1e-9)
 
+    def health_problems(self) -> list[str]:
+        """Why the source's data cannot be trusted right now (empty: it can)."""
+        return []
+
     def status(self) -> dict[str, Any]:
         now = time.time()
         return {
@@ -119,7 +124,7 @@ class Source:
             "data_time_s": None if self.data_time_ns is None else self.data_time_ns / _NS,
             "lag_s": None if self.data_time_ns is None else round(now - self.data_time_ns / _NS, 3),
             "rejected": sum(self.rejected.values()), "rejected_by_reason": dict(self.rejected),
-            "dropped": self.dropped, "problems": self.problems[-20:],
+            "dropped": self.dropped, "problems": self.problems[-20:] + self.health_problems(),
         }
 
 
@@ -176,21 +181,29 @@ class SimSource(Source):
         self.raw = raw
         self.truth = truth
         self.metadata = {"truth": self.rigsim.truth_metadata()}
+        from ._faults import parse_fault
 
-    def run(self) -> None:
+        self.faults = tuple(parse_fault(spec) for spec in s.faults)
+        self._fault_state: dict = {}
+
+    def batches(self, block_s: float | None = None) -> Any:
+        """The simulation as the pipeline's batches (with the configured faults), unpaced."""
         from ..virtual_rig._record import encode_payloads
 
         start_ns = self.settings.start_time_ns
-        pacer = _Pacer(self.speed, self._stop)
-        block_s = self.block_s if self.speed is not None else max(self.block_s, 10.0)  # bigger blocks at max speed
-        for block in self.rigsim.blocks(block_s):
-            if self._stop.is_set():
-                self.state = "stopped"
-                return
+        for block in self.rigsim.blocks(block_s or self.block_s):
             blocks, raw = [], [] if self.raw else None
             for topic, (times, values) in block.measurements.items():
                 stamps = start_ns + np.round(times * _NS).astype(np.int64)
                 delays = np.round(block.delays[topic] * _NS).astype(np.int64)
+                if self.faults:
+                    from ._faults import apply_faults
+
+                    kept, stamps, values, dropped = apply_faults(self.faults, topic, times, stamps, values, self._fault_state)
+                    delays = delays[kept]
+                    self.rejected.update(dropped)
+                if not len(stamps):
+                    continue
                 info = classify_topic(topic)
                 sensor = self.rig.sensor_by_topic().get(topic)
                 blocks.append(FollowBlock(topic, info.kind, sensor.name if sensor else topic, stamps, stamps + delays,
@@ -202,9 +215,20 @@ class SimSource(Source):
             truth = None
             if self.truth:
                 truth = (start_ns + np.round(block.times * _NS).astype(np.int64), block.truth["deflection"])
-            pacer.wait(int(start_ns + block.times[-1] * _NS))
-            self._count(blocks)
-            if not self._put(Batch(blocks, raw, truth)):
+            yield Batch(blocks, raw, truth)
+
+    def run(self) -> None:
+        start_ns = self.settings.start_time_ns
+        pacer = _Pacer(self.speed, self._stop)
+        block_s = self.block_s if self.speed is not None else max(self.block_s, 10.0)  # bigger blocks at max speed
+        for batch in self.batches(block_s):
+            if self._stop.is_set():
+                self.state = "stopped"
+                return
+            newest = max((int(b.log_time_ns[-1]) for b in batch.blocks if len(b)), default=start_ns)
+            pacer.wait(newest)
+            self._count(batch.blocks)
+            if not self._put(batch):
                 self.state = "stopped"
                 return
 
@@ -389,10 +413,10 @@ class IngestSource(Source):
     kind = "ingest"
 
     def __init__(self, source_id: str, out: queue.Queue, rig: RigDescription, *, max_messages: int, wait_s: float,
-                 raw: bool) -> None:
+                 raw: bool, clock: SourceClock | None = None, limits: ValueLimits | None = None) -> None:
         super().__init__(source_id, out)
         self.rig = rig
-        self.validator = IngestValidator(rig, max_messages=max_messages)
+        self.validator = IngestValidator(rig, max_messages=max_messages, clock=clock, limits=limits)
         self.wait_s = wait_s
         self.raw = raw
         self._lock = threading.Lock()
@@ -416,16 +440,23 @@ class IngestSource(Source):
         within ``wait_s`` (nothing of the request was taken: the client retries)."""
         with self._lock:  # one request at a time keeps each topic's time order
             self.requests += 1
-            saved = dict(self.validator.last)
             result = self.validator.validate(document)
-            batch = Batch(result.blocks, result.raw if self.raw else None)
+            batch = Batch(result.blocks, result.raw if self.raw else None, refused=dict(result.refused_by_topic))
             try:
-                if result.blocks:
+                if result.blocks or result.refused_by_topic:
                     self.out.put(batch, timeout=self.wait_s)
             except queue.Full:
-                self.validator.last = saved
                 self.refused += 1
                 return None
+            # Only now, with the batch handed on, do the topics' last times move (a refused
+            # request's retry is not a duplicate).
+            self.validator.commit(result)
             self._count(result.blocks)
             self.rejected.update(result.rejected)
             return result
+
+    def health_problems(self) -> list[str]:
+        return self.validator.clock.problems()
+
+    def status(self) -> dict[str, Any]:
+        return {**super().status(), "clock_jumps": self.validator.clock.jump_count}

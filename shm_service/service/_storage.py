@@ -5,15 +5,30 @@ upgraded by the migrations below, in order, each in one transaction.
 Everything that one analysis window produces (its trend rows, the monitor state after it, alarm
 changes, alarm events and the outbox rows of their notifications) is written in ONE transaction
 (``commit_window``), so a crash at any instant leaves either all of it or none of it.
+
+Durability: a transaction that writes alarms or the outbox is committed with
+``synchronous = FULL`` (it survives a power loss, not only a crash of the process); trend rows
+alone may use NORMAL (``sync``). Every alarm event has a UUID, so a notification's id
+(``shm-{instance}-{uuid}``) never repeats for a different event, even after a power loss rolled
+back the last AUTOINCREMENT ids.
+
+Faults: transient errors (the database locked by another process, disk full, an I/O error) are
+retried inside ``Storage`` with jittered exponential back-off for up to ``retry_s``; then
+``StorageUnavailable`` is raised and nothing of the transaction is kept. Reads use a
+connection of their own (WAL readers never wait for a writer), so a held write lock delays no
+status query.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import math
+import random
 import sqlite3
 import threading
 import time
+import uuid
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -22,7 +37,9 @@ from typing import Any
 
 from contract import AlarmDocument, AlarmEventDocument, TrendRow
 
-__all__ = ["AlarmChange", "SCHEMA_VERSION", "Storage", "WindowCommit"]
+__all__ = ["AlarmChange", "SCHEMA_VERSION", "Storage", "StorageUnavailable", "WindowCommit", "is_transient"]
+
+log = logging.getLogger("shm.serve.storage")
 
 _MIGRATIONS: tuple[str, ...] = (
     # 1: the first schema
@@ -128,6 +145,35 @@ _MIGRATIONS: tuple[str, ...] = (
     """
     ALTER TABLE alarms RENAME COLUMN acknowledged_at TO acknowledged_at_s;
     """,
+    # 3: events with a per-alarm sequence number and a UUID (notification ids that cannot repeat),
+    # re-notifications ('repeated') and stale alarms; the outbox knows its alarm (in-order
+    # delivery per alarm and target) and its last error. alarm_events is rebuilt (its CHECK
+    # grows), the documented way: new table, copy, drop, rename (foreign keys off meanwhile).
+    """
+    ALTER TABLE alarms ADD COLUMN stale INTEGER NOT NULL DEFAULT 0;
+    CREATE TABLE alarm_events_new (
+        id INTEGER PRIMARY KEY AUTOINCREMENT,
+        alarm_id INTEGER NOT NULL REFERENCES alarms(id),
+        seq INTEGER NOT NULL,
+        uuid TEXT NOT NULL UNIQUE,
+        event TEXT NOT NULL CHECK (event IN ('raised', 'escalated', 'cleared', 'acknowledged', 'repeated', 'stale')),
+        level TEXT NOT NULL,
+        at_s REAL NOT NULL,
+        created_at REAL NOT NULL,
+        UNIQUE (alarm_id, seq)
+    );
+    INSERT INTO alarm_events_new (id, alarm_id, seq, uuid, event, level, at_s, created_at)
+        SELECT e.id, e.alarm_id, (SELECT COUNT(*) FROM alarm_events AS p WHERE p.alarm_id = e.alarm_id AND p.id <= e.id),
+               lower(hex(randomblob(16))), e.event, e.level, e.at_s, e.created_at FROM alarm_events AS e;
+    DROP TABLE alarm_events;
+    ALTER TABLE alarm_events_new RENAME TO alarm_events;
+    CREATE INDEX alarm_events_alarm ON alarm_events (alarm_id, seq);
+    ALTER TABLE outbox ADD COLUMN alarm_id INTEGER;
+    ALTER TABLE outbox ADD COLUMN last_error TEXT;
+    ALTER TABLE outbox ADD COLUMN permanent INTEGER NOT NULL DEFAULT 0;
+    UPDATE outbox SET alarm_id = (SELECT alarm_id FROM alarm_events WHERE alarm_events.id = outbox.event_id);
+    CREATE INDEX outbox_order ON outbox (channel, target, alarm_id, status, id);
+    """,
 )
 
 SCHEMA_VERSION = len(_MIGRATIONS)
@@ -135,6 +181,34 @@ SCHEMA_VERSION = len(_MIGRATIONS)
 #: The trend table's columns are the trend row document's fields, the alarm table's the alarm document's.
 TREND_COLUMNS = tuple(TrendRow.model_fields)
 ALARM_COLUMNS = tuple(AlarmDocument.model_fields)
+
+
+class StorageUnavailable(RuntimeError):
+    """The database stayed locked or failing (disk full, I/O error) for the whole retry period."""
+
+
+#: SQLite result codes that may pass: another connection holds a lock, the disk is full, an I/O
+#: error (a disk being remounted, a network file system), the file cannot be opened for now.
+_TRANSIENT = ("SQLITE_BUSY", "SQLITE_LOCKED", "SQLITE_FULL", "SQLITE_IOERR", "SQLITE_CANTOPEN", "SQLITE_PROTOCOL")
+
+
+def is_transient(exc: BaseException) -> bool:
+    """Whether an error of SQLite may pass when the transaction is tried again."""
+    if isinstance(exc, StorageUnavailable):
+        return True
+    if not isinstance(exc, sqlite3.OperationalError):
+        return False
+    name = getattr(exc, "sqlite_errorname", "") or ""
+    if name.startswith(_TRANSIENT):
+        return True
+    text = str(exc).lower()
+    return "locked" in text or "disk is full" in text or "disk i/o" in text
+
+
+def _conditions(pairs: Sequence[tuple[str, Any]]) -> tuple[list[str], list[Any]]:
+    """The SQL conditions (and their arguments) of the pairs whose value is not None."""
+    kept = [(sql, value) for sql, value in pairs if value is not None]
+    return [sql for sql, _ in kept], [value for _, value in kept]
 
 
 def _finite(x: Any) -> float | None:
@@ -177,26 +251,114 @@ class WindowCommit:
 
 
 class Storage:
-    """The service's database. Thread-safe: one connection guarded by a lock (writes are short
-    transactions; WAL lets the dashboard and API read while the pipeline writes)."""
+    """The service's database. Thread-safe. Writes go through one connection under a lock, in
+    short transactions retried on transient errors (``retry_s``, jittered exponential back-off
+    from ``retry_initial_s``); reads through a second connection under a lock of its own (WAL: a
+    reader sees the last committed state and never waits for a writer).
+
+    ``sync`` is the synchronous mode of transactions that only write trend rows and state;
+    ``alarm_sync`` that of transactions writing alarms, alarm events or the outbox."""
 
     def __init__(self, path: str | Path, *, notify_targets: Sequence[tuple[str, str]] = (),
-                 notify_levels: Sequence[str] = ("warning", "alarm"), notify_cleared: bool = True, sync: str = "normal") -> None:
+                 notify_levels: Sequence[str] = ("warning", "alarm"), notify_cleared: bool = True, notify_stale: bool = True,
+                 sync: str = "normal", alarm_sync: str = "full", retry_s: float = 10.0, retry_initial_s: float = 0.05,
+                 busy_timeout_s: float = 0.5) -> None:
+        for name, value in (("sync", sync), ("alarm_sync", alarm_sync)):
+            if value not in ("normal", "full"):
+                raise ValueError(f"{name}={value!r} must be 'normal' or 'full'")
+        if not (retry_s >= 0 and retry_initial_s > 0 and busy_timeout_s >= 0):
+            raise ValueError(f"{retry_s=}, {retry_initial_s=} and {busy_timeout_s=} must be >= 0 (retry_initial_s > 0)")
         self.path = Path(path)
-        if str(path) != ":memory:":
+        memory = str(path) == ":memory:"
+        if not memory:
             self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.sync = sync.upper()
+        self.alarm_sync = alarm_sync.upper()
+        self.retry_s = float(retry_s)
+        self.retry_initial_s = float(retry_initial_s)
+        self.retries = 0  # transient errors retried since the start
+        self.failures = 0  # transactions given up after retry_s
+        self.last_error: str | None = None
         self._lock = threading.RLock()
-        self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None, timeout=30.0)
+        self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None, timeout=busy_timeout_s)
         self._db.row_factory = sqlite3.Row
         self._db.execute("PRAGMA journal_mode=WAL")
-        # WAL + NORMAL: a committed transaction survives a crash of the process (SIGKILL);
-        # only a power loss may roll back the last ones. Set storage_sync="full" for that too.
-        self._db.execute(f"PRAGMA synchronous={'FULL' if sync == 'full' else 'NORMAL'}")
+        self._db.execute(f"PRAGMA synchronous={self.sync}")
         self._db.execute("PRAGMA foreign_keys=ON")
+        self._synchronous = self.sync
         self.notify_targets = tuple(notify_targets)
         self.notify_levels = tuple(notify_levels)
         self.notify_cleared = notify_cleared
-        self.migrate()
+        self.notify_stale = notify_stale
+        self._call_with_retry(self.migrate)
+        if memory:
+            self._rdb, self._rlock = self._db, self._lock
+        else:
+            self._rdb = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None, timeout=busy_timeout_s)
+            self._rdb.row_factory = sqlite3.Row
+            self._rdb.execute("PRAGMA query_only=ON")
+            self._rlock = threading.RLock()
+        self._instance = self._read(lambda db: str(db.execute("SELECT value FROM meta WHERE key='instance'").fetchone()[0]))
+
+    # -- retries --------------------------------------------------------------------------------
+
+    def _call_with_retry(self, fn: Any, retry_s: float | None = None) -> Any:
+        """``fn()`` again after a transient error, with jittered exponential back-off (the
+        lock is not held while waiting), until ``retry_s`` has passed."""
+        budget = self.retry_s if retry_s is None else retry_s
+        deadline = time.monotonic() + budget
+        delay = self.retry_initial_s
+        attempt = 0
+        while True:
+            try:
+                return fn()
+            except (sqlite3.OperationalError, sqlite3.DatabaseError) as exc:
+                if not is_transient(exc):
+                    raise
+                attempt += 1
+                self.last_error = f"{type(exc).__name__}: {exc}"
+                now = time.monotonic()
+                if now >= deadline:
+                    self.failures += 1
+                    raise StorageUnavailable(f"{self.path}: {exc} (still after {attempt} attempts in {budget:g} s)") from exc
+                self.retries += 1
+                if attempt == 1 or attempt % 20 == 0:
+                    log.warning("%s: %s; retrying (attempt %d)", self.path, exc, attempt)
+                # full jitter: many writers retrying do not retry in step
+                time.sleep(min(random.uniform(0.5, 1.0) * delay, max(deadline - now, 0.0)))
+                delay = min(delay * 2, 2.0)
+
+    def _read(self, fn: Any) -> Any:
+        def attempt() -> Any:
+            with self._rlock:
+                return fn(self._rdb)
+        return self._call_with_retry(attempt)
+
+    def _write(self, fn: Any, *, durable: bool = False, retry_s: float | None = None) -> Any:
+        """Run ``fn(db)`` in one IMMEDIATE transaction (``durable``: synchronous = alarm_sync),
+        retried as a whole on transient errors. A failed COMMIT is rolled back, so the
+        connection is never left inside a transaction."""
+
+        def attempt() -> Any:
+            with self._lock:
+                wanted = self.alarm_sync if durable else self.sync
+                if wanted != self._synchronous:
+                    self._db.execute(f"PRAGMA synchronous={wanted}")  # between transactions only
+                    self._synchronous = wanted
+                self._db.execute("BEGIN IMMEDIATE")
+                try:
+                    result = fn(self._db)
+                    self._db.execute("COMMIT")
+                except BaseException:
+                    if self._db.in_transaction:
+                        try:
+                            self._db.execute("ROLLBACK")
+                        except sqlite3.Error:  # the rollback itself failed: SQLite rolled back already
+                            pass
+                    raise
+                return result
+
+        return self._call_with_retry(attempt, retry_s)
 
     # -- schema ---------------------------------------------------------------------------------
 
@@ -211,53 +373,77 @@ class Storage:
             version = self.schema_version
             if version > SCHEMA_VERSION:
                 raise RuntimeError(f"{self.path}: schema version {version} is newer than this program's {SCHEMA_VERSION}")
-            for number in range(version + 1, SCHEMA_VERSION + 1):
-                script = _MIGRATIONS[number - 1]
-                self._db.execute("BEGIN IMMEDIATE")
-                try:
-                    for statement in (s.strip() for s in script.split(";")):
-                        if statement:
-                            self._db.execute(statement)
-                    self._db.execute(f"PRAGMA user_version = {number}")
-                    self._db.execute("COMMIT")
-                except BaseException:
-                    self._db.execute("ROLLBACK")
-                    raise
+            if version == SCHEMA_VERSION:
+                return
+            # A migration may rebuild a table others refer to: foreign keys are checked once at the end.
+            self._db.execute("PRAGMA foreign_keys=OFF")
+            try:
+                for number in range(version + 1, SCHEMA_VERSION + 1):
+                    script = _MIGRATIONS[number - 1]
+                    self._db.execute("BEGIN IMMEDIATE")
+                    try:
+                        for statement in (s.strip() for s in script.split(";")):
+                            if statement:
+                                self._db.execute(statement)
+                        problems = self._db.execute("PRAGMA foreign_key_check").fetchall()
+                        if problems:
+                            raise RuntimeError(f"{self.path}: migration {number} breaks foreign keys: {[tuple(p) for p in problems][:5]}")
+                        self._db.execute(f"PRAGMA user_version = {number}")
+                        self._db.execute("COMMIT")
+                    except BaseException:
+                        if self._db.in_transaction:
+                            self._db.execute("ROLLBACK")
+                        raise
+            finally:
+                self._db.execute("PRAGMA foreign_keys=ON")
 
     @contextmanager
-    def transaction(self) -> Iterator[sqlite3.Connection]:
+    def transaction(self, *, durable: bool = False) -> Iterator[sqlite3.Connection]:
+        """One write transaction (not retried: for callers that do their own)."""
         with self._lock:
+            wanted = self.alarm_sync if durable else self.sync
+            if wanted != self._synchronous:
+                self._db.execute(f"PRAGMA synchronous={wanted}")
+                self._synchronous = wanted
             self._db.execute("BEGIN IMMEDIATE")
             try:
                 yield self._db
+                self._db.execute("COMMIT")
             except BaseException:
-                self._db.execute("ROLLBACK")
+                if self._db.in_transaction:
+                    self._db.execute("ROLLBACK")
                 raise
-            self._db.execute("COMMIT")
 
     def close(self) -> None:
         with self._lock:
             self._db.close()
+        if self._rdb is not self._db:
+            with self._rlock:
+                self._rdb.close()
+
+    def integrity_check(self) -> str:
+        """``PRAGMA integrity_check``: "ok" or the problems found."""
+        return "; ".join(str(r[0]) for r in self._read(lambda db: db.execute("PRAGMA integrity_check").fetchall()))
 
     @property
     def instance(self) -> str:
         """A random id of this database (keys of notifications: unique across databases)."""
-        with self._lock:
-            return str(self._db.execute("SELECT value FROM meta WHERE key='instance'").fetchone()[0])
+        return self._instance
 
     # -- sources and state ----------------------------------------------------------------------
 
-    def touch_source(self, source: str, kind: str, detail: str, data_time_s: float) -> None:
-        with self.transaction() as db:
+    def touch_source(self, source: str, kind: str, detail: str, seen_at: float) -> None:
+        """Record that ``source`` delivered data at ``seen_at`` (UNIX s, wall clock)."""
+        def run(db: sqlite3.Connection) -> None:
             db.execute(
                 "INSERT INTO sources (id, kind, detail, first_seen_s, last_seen_s) VALUES (?, ?, ?, ?, ?) "
                 "ON CONFLICT(id) DO UPDATE SET kind=excluded.kind, detail=excluded.detail, last_seen_s=excluded.last_seen_s",
-                (source, kind, detail, data_time_s, data_time_s),
+                (source, kind, detail, seen_at, seen_at),
             )
+        self._write(run)
 
     def load_state(self, source: str) -> dict[str, Any] | None:
-        with self._lock:
-            row = self._db.execute("SELECT * FROM monitor_state WHERE source = ?", (source,)).fetchone()
+        row = self._read(lambda db: db.execute("SELECT * FROM monitor_state WHERE source = ?", (source,)).fetchone())
         if row is None:
             return None
         return {
@@ -268,18 +454,19 @@ class Storage:
         }
 
     def save_calibration(self, source: str, calibration: dict) -> None:
-        with self.transaction() as db:
+        def run(db: sqlite3.Connection) -> None:
             db.execute(
                 "INSERT INTO monitor_state (source, calibration, updated_at) VALUES (?, ?, ?) "
                 "ON CONFLICT(source) DO UPDATE SET calibration=excluded.calibration, updated_at=excluded.updated_at",
                 (source, json.dumps(calibration), time.time()),
             )
+        self._write(run)
 
     # -- baselines ------------------------------------------------------------------------------
 
-    def request_baseline(self, source: str) -> int:
+    def request_baseline(self, source: str, *, retry_s: float | None = None) -> int:
         """Supersede the active baseline; a new one is learnt (state 'learning'). Returns its id."""
-        with self.transaction() as db:
+        def run(db: sqlite3.Connection) -> int:
             db.execute("UPDATE baselines SET state='superseded' WHERE source=? AND state IN ('active', 'learning')", (source,))
             cur = db.execute(
                 "INSERT INTO baselines (source, state, requested_at) VALUES (?, 'learning', ?)", (source, time.time())
@@ -287,15 +474,15 @@ class Storage:
             # The monitor starts over: its stored state no longer applies.
             db.execute("UPDATE monitor_state SET monitor=NULL WHERE source=?", (source,))
             return int(cur.lastrowid)
+        return self._write(run, retry_s=retry_s)
 
     def baselines(self, source: str | None = None) -> list[dict[str, Any]]:
-        with self._lock:
+        def run(db: sqlite3.Connection) -> list:
             if source is None:
-                rows = self._db.execute("SELECT * FROM baselines ORDER BY id DESC").fetchall()
-            else:
-                rows = self._db.execute("SELECT * FROM baselines WHERE source=? ORDER BY id DESC", (source,)).fetchall()
+                return db.execute("SELECT * FROM baselines ORDER BY id DESC").fetchall()
+            return db.execute("SELECT * FROM baselines WHERE source=? ORDER BY id DESC", (source,)).fetchall()
         out = []
-        for r in rows:
+        for r in self._read(run):
             d = dict(r)
             d["data"] = None if d["data"] is None else json.loads(d["data"])
             out.append(d)
@@ -303,16 +490,19 @@ class Storage:
 
     # -- windows --------------------------------------------------------------------------------
 
-    def commit_window(self, commit: WindowCommit) -> list[int]:
-        """Write a window's rows, state, alarm changes and their outbox rows in one transaction.
-        Rows of a window already stored are ignored (replaying the same period). Returns the ids
-        of the alarm events written."""
-        now = time.time()
-        events: list[int] = []
-        with self.transaction() as db:
-            for r in commit.rows:
-                if r.source != commit.source:
-                    raise ValueError(f"trend row of source {r.source!r} in a commit of source {commit.source!r}")
+    def commit_window(self, commit: WindowCommit, *, retry_s: float | None = None) -> list[int]:
+        """Write a window's rows, state, alarm changes and their outbox rows in one transaction
+        (durable when it changes an alarm), retried on transient errors. Rows of a window already
+        stored are ignored (replaying the same period). Returns the ids of the alarm events
+        written. Raises ``StorageUnavailable`` when it could not be written within ``retry_s``:
+        then nothing of it was."""
+        for r in commit.rows:
+            if r.source != commit.source:
+                raise ValueError(f"trend row of source {r.source!r} in a commit of source {commit.source!r}")
+
+        def run(db: sqlite3.Connection) -> list[int]:
+            now = time.time()
+            events: list[int] = []
             db.executemany(
                 f"INSERT OR IGNORE INTO trends ({', '.join(TREND_COLUMNS)}, created_at) VALUES ({', '.join('?' * (len(TREND_COLUMNS) + 1))})",
                 [(*(getattr(r, c) for c in TREND_COLUMNS), now) for r in commit.rows],
@@ -326,13 +516,17 @@ class Storage:
                  None if commit.monitor_state is None else json.dumps(commit.monitor_state),
                  None if commit.calibration is None else json.dumps(commit.calibration), now),
             )
+            # The source is judged again: its alarms are no longer stale.
+            db.execute("UPDATE alarms SET stale=0 WHERE source=? AND stale=1", (commit.source,))
             if commit.baseline is not None:
                 self._store_baseline(db, commit.source, commit.baseline, now)
             for change in commit.alarm_changes:
                 event = self._apply_alarm(db, commit.source, change, now)
                 if event is not None:
                     events.append(event)
-        return events
+            return events
+
+        return self._write(run, durable=bool(commit.alarm_changes), retry_s=retry_s)
 
     def _store_baseline(self, db: sqlite3.Connection, source: str, baseline: dict, now: float) -> None:
         row = db.execute("SELECT id FROM baselines WHERE source=? AND state='learning' ORDER BY id DESC LIMIT 1", (source,)).fetchone()
@@ -377,49 +571,85 @@ class Storage:
             raise ValueError(f"unknown alarm action {change.action!r}")
         return self._event(db, alarm_id, event, change.level, change.at_s, now)
 
-    def _event(self, db: sqlite3.Connection, alarm_id: int, event: str, level: str, at_s: float, now: float) -> int:
+    def _event(self, db: sqlite3.Connection, alarm_id: int, event: str, level: str, at_s: float, now: float,
+               *, notify: bool | None = None) -> int:
+        """Insert an alarm event (its per-alarm sequence number and UUID) and, when it notifies,
+        its outbox rows, one per target."""
+        seq = int(db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM alarm_events WHERE alarm_id=?", (alarm_id,)).fetchone()[0])
+        event_uuid = uuid.uuid4().hex
         cur = db.execute(
-            "INSERT INTO alarm_events (alarm_id, event, level, at_s, created_at) VALUES (?, ?, ?, ?, ?)",
-            (alarm_id, event, level, at_s, now),
+            "INSERT INTO alarm_events (alarm_id, seq, uuid, event, level, at_s, created_at) VALUES (?, ?, ?, ?, ?, ?, ?)",
+            (alarm_id, seq, event_uuid, event, level, at_s, now),
         )
         event_id = int(cur.lastrowid)
-        notify = (event in ("raised", "escalated") and level in self.notify_levels) or (event == "cleared" and self.notify_cleared)
+        if notify is None:
+            notify = ((event in ("raised", "escalated", "repeated") and level in self.notify_levels)
+                      or (event == "cleared" and self.notify_cleared) or (event == "stale" and self.notify_stale))
         if notify and self.notify_targets:
             alarm = AlarmDocument.model_validate(dict(db.execute(
                 f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE id=?", (alarm_id,)).fetchone()))
-            payload = AlarmEventDocument(id=f"shm-{self.instance}-{event_id}", event=event, level=level, at_s=at_s,
-                                         alarm=alarm).model_dump_json()
+            payload = AlarmEventDocument(id=f"shm-{self._instance}-{event_uuid}", event=event, sequence=seq, level=level,
+                                         at_s=at_s, alarm=alarm).model_dump_json()
             db.executemany(
-                "INSERT OR IGNORE INTO outbox (event_id, channel, target, payload, status, next_attempt_at, created_at) "
-                "VALUES (?, ?, ?, ?, 'pending', ?, ?)",
-                [(event_id, channel, target, payload, now, now) for channel, target in self.notify_targets],
+                "INSERT OR IGNORE INTO outbox (event_id, alarm_id, channel, target, payload, status, next_attempt_at, created_at) "
+                "VALUES (?, ?, ?, ?, ?, 'pending', ?, ?)",
+                [(event_id, alarm_id, channel, target, payload, now, now) for channel, target in self.notify_targets],
             )
         return event_id
+
+    # -- re-notification and stale alarms --------------------------------------------------------
+
+    def renotify_due(self, interval_s: float, now: float | None = None) -> list[int]:
+        """A 'repeated' event (notified) for every active, non-stale alarm whose last notified
+        event (raised, escalated, repeated) is ``interval_s`` old. Returns the new event ids."""
+        if not (math.isfinite(interval_s) and interval_s > 0):
+            raise ValueError(f"{interval_s=} must be a positive number of seconds")
+        now = time.time() if now is None else now
+
+        def due(db: sqlite3.Connection) -> list:
+            return db.execute(
+                "SELECT a.id, a.level FROM alarms AS a WHERE a.state='active' AND a.stale=0 AND "
+                "(SELECT MAX(e.created_at) FROM alarm_events AS e WHERE e.alarm_id=a.id AND "
+                "e.event IN ('raised', 'escalated', 'repeated')) <= ?", (now - interval_s,)).fetchall()
+
+        if not self._read(due):
+            return []
+
+        def run(db: sqlite3.Connection) -> list[int]:
+            return [self._event(db, int(r["id"]), "repeated", r["level"], now, now) for r in due(db)]
+
+        return self._write(run, durable=True)
+
+    def mark_stale(self, silent_since: float, now: float | None = None) -> list[int]:
+        """Mark stale the active alarms of every source not seen since ``silent_since`` (UNIX s,
+        wall clock; ``sources.last_seen_s``), with a 'stale' event each. Returns the alarm ids."""
+        now = time.time() if now is None else now
+        query = ("SELECT a.id, a.level FROM alarms AS a JOIN sources AS s ON s.id = a.source "
+                 "WHERE a.state='active' AND a.stale=0 AND s.last_seen_s < ?")
+        if not self._read(lambda db: db.execute(query, (silent_since,)).fetchall()):
+            return []
+
+        def run(db: sqlite3.Connection) -> list[int]:
+            rows = db.execute(query, (silent_since,)).fetchall()
+            for r in rows:
+                db.execute("UPDATE alarms SET stale=1 WHERE id=?", (r["id"],))
+                self._event(db, int(r["id"]), "stale", r["level"], now, now)
+            return [int(r["id"]) for r in rows]
+
+        return self._write(run, durable=True)
 
     # -- queries --------------------------------------------------------------------------------
 
     def trends(self, *, from_s: float | None = None, to_s: float | None = None, mode: int | None = None,
                source: str | None = None, limit: int = 100_000) -> list[TrendRow]:
-        where, args = [], []
-        if from_s is not None:
-            where.append("window_start_s >= ?")
-            args.append(from_s)
-        if to_s is not None:
-            where.append("window_start_s < ?")
-            args.append(to_s)
-        if mode is not None:
-            where.append("mode = ?")
-            args.append(mode)
-        if source is not None:
-            where.append("source = ?")
-            args.append(source)
+        where, args = _conditions([("window_start_s >= ?", from_s), ("window_start_s < ?", to_s), ("mode = ?", mode),
+                                   ("source = ?", source)])
         sql = f"SELECT {', '.join(TREND_COLUMNS)} FROM trends"
         if where:
             sql += " WHERE " + " AND ".join(where)
         sql += " ORDER BY window_start_s, source, mode LIMIT ?"
         args.append(int(limit))
-        with self._lock:
-            rows = self._db.execute(sql, args).fetchall()
+        rows = self._read(lambda db: db.execute(sql, args).fetchall())
         return [TrendRow.model_validate(dict(r)) for r in rows]
 
     def delete_trends_older_than(self, age_s: float) -> int:
@@ -427,87 +657,124 @@ class Storage:
         their source (data time: a replay of old data keeps its rows). Returns how many went."""
         if not (math.isfinite(age_s) and age_s > 0):
             raise ValueError(f"{age_s=} must be a positive number of seconds")
-        with self.transaction() as db:
+
+        def run(db: sqlite3.Connection) -> int:
             cur = db.execute(
                 "DELETE FROM trends WHERE window_start_s < "
                 "(SELECT MAX(t.window_start_s) FROM trends AS t WHERE t.source = trends.source) - ?", (float(age_s),))
             return int(cur.rowcount)
 
+        return self._write(run)
+
     def count(self, table: str) -> int:
         if table not in ("trends", "alarms", "alarm_events", "outbox", "notification_log", "baselines"):
-            raise ValueError(table)
-        with self._lock:
-            return int(self._db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0])
+            raise ValueError(f"{table=} is not a table of the service's database")
+        return int(self._read(lambda db: db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0]))
 
     def alarms(self, *, state: str | None = None, limit: int = 1000) -> list[AlarmDocument]:
         """Alarms, newest first (only those in ``state``: "active" or "cleared")."""
-        with self._lock:
+        if state not in (None, "active", "cleared"):
+            raise ValueError(f"{state=} must be 'active', 'cleared' or None")
+
+        def run(db: sqlite3.Connection) -> list:
             if state is None:
-                rows = self._db.execute(f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms ORDER BY id DESC LIMIT ?", (limit,))
-            else:
-                rows = self._db.execute(
-                    f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE state=? ORDER BY id DESC LIMIT ?", (state, limit)
-                )
-            rows = rows.fetchall()
-        return [AlarmDocument.model_validate(dict(r)) for r in rows]
+                return db.execute(f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms ORDER BY id DESC LIMIT ?", (limit,)).fetchall()
+            return db.execute(f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE state=? ORDER BY id DESC LIMIT ?",
+                              (state, limit)).fetchall()
+
+        return [AlarmDocument.model_validate(dict(r)) for r in self._read(run)]
 
     def alarm(self, alarm_id: int) -> AlarmDocument | None:
-        with self._lock:
-            row = self._db.execute(f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE id=?", (alarm_id,)).fetchone()
+        row = self._read(lambda db: db.execute(f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE id=?", (alarm_id,)).fetchone())
         return None if row is None else AlarmDocument.model_validate(dict(row))
 
-    def acknowledge(self, alarm_id: int, by: str) -> AlarmDocument | None:
+    def acknowledge(self, alarm_id: int, by: str, *, retry_s: float | None = None) -> AlarmDocument | None:
         """Acknowledge an alarm (idempotent: a second acknowledgement keeps the first)."""
-        now = time.time()
-        with self.transaction() as db:
+
+        def run(db: sqlite3.Connection) -> bool:
+            now = time.time()
             row = db.execute("SELECT * FROM alarms WHERE id=?", (alarm_id,)).fetchone()
             if row is None:
-                return None
+                return False
             if row["acknowledged_at_s"] is None:
                 db.execute("UPDATE alarms SET acknowledged_at_s=?, acknowledged_by=? WHERE id=?", (now, by, alarm_id))
-                db.execute(
-                    "INSERT INTO alarm_events (alarm_id, event, level, at_s, created_at) VALUES (?, 'acknowledged', ?, ?, ?)",
-                    (alarm_id, row["level"], now, now),
-                )
+                self._event(db, alarm_id, "acknowledged", row["level"], now, now, notify=False)
+            return True
+
+        if not self._write(run, durable=True, retry_s=retry_s):
+            return None
         return self.alarm(alarm_id)
 
     def alarm_events(self) -> list[dict[str, Any]]:
-        with self._lock:
-            return [dict(r) for r in self._db.execute("SELECT * FROM alarm_events ORDER BY id").fetchall()]
+        return [dict(r) for r in self._read(lambda db: db.execute("SELECT * FROM alarm_events ORDER BY id").fetchall())]
 
     # -- outbox ---------------------------------------------------------------------------------
 
-    def due_notifications(self, now: float, limit: int = 20) -> list[dict[str, Any]]:
-        with self._lock:
-            rows = self._db.execute(
-                "SELECT * FROM outbox WHERE status='pending' AND next_attempt_at <= ? ORDER BY id LIMIT ?", (now, limit)
-            ).fetchall()
-        return [dict(r) for r in rows]
+    def due_notifications(self, now: float, limit: int = 20, *, channel: str | None = None,
+                          target: str | None = None) -> list[dict[str, Any]]:
+        """Pending rows due at ``now``, oldest first; of one target when given. A row waits while
+        an earlier row of the same alarm and target is still pending: each target gets an alarm's
+        events in their order, whatever their retries."""
+        where, args = _conditions([("o.next_attempt_at <= ?", now), ("o.channel = ?", channel), ("o.target = ?", target)])
+        where.insert(0, "o.status='pending'")
+        sql = (f"SELECT o.* FROM outbox AS o WHERE {' AND '.join(where)} AND NOT EXISTS (SELECT 1 FROM outbox AS p "
+               "WHERE p.status='pending' AND p.channel=o.channel AND p.target=o.target AND p.alarm_id IS o.alarm_id "
+               "AND p.id < o.id) ORDER BY o.id LIMIT ?")
+        args.append(limit)
+        return [dict(r) for r in self._read(lambda db: db.execute(sql, args).fetchall())]
 
-    def record_attempt(self, outbox_id: int, ok: bool, detail: str, *, next_attempt_at: float | None, give_up: bool) -> None:
-        """Log one delivery attempt and, in the same transaction, mark the row sent, failed or due again."""
-        now = time.time()
-        with self.transaction() as db:
+    def next_due(self, *, channel: str, target: str) -> float | None:
+        """When the earliest pending row of a target is due (UNIX s), None when there is none."""
+        row = self._read(lambda db: db.execute(
+            "SELECT MIN(next_attempt_at) FROM outbox WHERE status='pending' AND channel=? AND target=?",
+            (channel, target)).fetchone())
+        return None if row[0] is None else float(row[0])
+
+    def pending_targets(self) -> list[tuple[str, str]]:
+        """(channel, target) of every pending row."""
+        rows = self._read(lambda db: db.execute(
+            "SELECT DISTINCT channel, target FROM outbox WHERE status='pending' ORDER BY channel, target").fetchall())
+        return [(r["channel"], r["target"]) for r in rows]
+
+    def record_attempt(self, outbox_id: int, ok: bool, detail: str, *, next_attempt_at: float | None, give_up: bool,
+                       permanent: bool = False) -> None:
+        """Log one delivery attempt and, in the same transaction, mark the row sent, failed
+        (``give_up``; ``permanent``: the target refused it for good) or due again."""
+
+        def run(db: sqlite3.Connection) -> None:
+            now = time.time()
             row = db.execute("SELECT attempts FROM outbox WHERE id=?", (outbox_id,)).fetchone()
+            if row is None:
+                raise KeyError(f"outbox row {outbox_id} does not exist")
             attempt = int(row["attempts"]) + 1
             db.execute("INSERT INTO notification_log (outbox_id, attempt, at, ok, detail) VALUES (?, ?, ?, ?, ?)",
                        (outbox_id, attempt, now, int(ok), detail[:500]))
             if ok:
-                db.execute("UPDATE outbox SET status='sent', attempts=?, sent_at=? WHERE id=?", (attempt, now, outbox_id))
+                db.execute("UPDATE outbox SET status='sent', attempts=?, sent_at=?, last_error=NULL WHERE id=?",
+                           (attempt, now, outbox_id))
             elif give_up:
-                db.execute("UPDATE outbox SET status='failed', attempts=? WHERE id=?", (attempt, outbox_id))
+                db.execute("UPDATE outbox SET status='failed', attempts=?, last_error=?, permanent=? WHERE id=?",
+                           (attempt, detail[:500], int(permanent), outbox_id))
             else:
-                db.execute("UPDATE outbox SET attempts=?, next_attempt_at=? WHERE id=?", (attempt, next_attempt_at, outbox_id))
+                db.execute("UPDATE outbox SET attempts=?, next_attempt_at=?, last_error=? WHERE id=?",
+                           (attempt, next_attempt_at, detail[:500], outbox_id))
+
+        self._write(run, durable=True)
+
+    def fail_pending(self, channel: str, target: str, detail: str) -> int:
+        """Mark failed (for good) every pending row of a target no longer configured."""
+        def run(db: sqlite3.Connection) -> int:
+            cur = db.execute("UPDATE outbox SET status='failed', last_error=?, permanent=1 WHERE status='pending' "
+                             "AND channel=? AND target=?", (detail[:500], channel, target))
+            return int(cur.rowcount)
+        return self._write(run, durable=True)
 
     def outbox(self) -> list[dict[str, Any]]:
-        with self._lock:
-            return [dict(r) for r in self._db.execute("SELECT * FROM outbox ORDER BY id").fetchall()]
+        return [dict(r) for r in self._read(lambda db: db.execute("SELECT * FROM outbox ORDER BY id").fetchall())]
 
     def notification_log(self) -> list[dict[str, Any]]:
-        with self._lock:
-            return [dict(r) for r in self._db.execute("SELECT * FROM notification_log ORDER BY id").fetchall()]
+        return [dict(r) for r in self._read(lambda db: db.execute("SELECT * FROM notification_log ORDER BY id").fetchall())]
 
     def outbox_counts(self) -> dict[str, int]:
-        with self._lock:
-            rows = self._db.execute("SELECT status, COUNT(*) AS n FROM outbox GROUP BY status").fetchall()
+        rows = self._read(lambda db: db.execute("SELECT status, COUNT(*) AS n FROM outbox GROUP BY status").fetchall())
         return {r["status"]: int(r["n"]) for r in rows}

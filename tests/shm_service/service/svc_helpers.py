@@ -35,33 +35,53 @@ def fast_overrides(tmp: Path, **extra) -> dict:
 
 
 class Receiver:
-    """A tiny webhook receiver: records every POST; ``fail_first`` answers 500 that many times."""
+    """A tiny webhook receiver: records every POST it answers 2xx (body, Idempotency-Key, arrival
+    time). ``fail_first`` answers 500 that many times; ``script`` is a list of statuses (or
+    callables body -> status) used one per request before the default 200; ``delay_s(body)`` is
+    how long an answer waits (a slow receiver)."""
 
-    def __init__(self, fail_first: int = 0) -> None:
+    def __init__(self, fail_first: int = 0, script=None, delay_s=None) -> None:
+        import time
+
         self.posts: list[dict] = []
         self.keys: list[str] = []
+        self.times: list[float] = []
+        self.refused: list[tuple[int, dict]] = []  # (status, body) of the requests not answered 2xx
         self.fail_first = fail_first
+        self.script = list(script or [])
+        self.delay_s = delay_s
         self.lock = threading.Lock()
         receiver = self
 
         class Handler(BaseHTTPRequestHandler):
             def do_POST(self) -> None:  # noqa: N802
                 body = self.rfile.read(int(self.headers.get("Content-Length", 0)))
+                doc = json.loads(body)
+                if receiver.delay_s is not None:
+                    time.sleep(receiver.delay_s(doc))
                 with receiver.lock:
+                    status = 200
                     if receiver.fail_first > 0:
                         receiver.fail_first -= 1
-                        self.send_response(500)
-                        self.end_headers()
-                        return
-                    receiver.posts.append(json.loads(body))
-                    receiver.keys.append(self.headers.get("Idempotency-Key", ""))
-                self.send_response(200)
+                        status = 500
+                    elif receiver.script:
+                        step = receiver.script.pop(0)
+                        status = step(doc) if callable(step) else step
+                    if 200 <= status < 300:
+                        receiver.posts.append(doc)
+                        receiver.keys.append(self.headers.get("Idempotency-Key", ""))
+                        receiver.times.append(time.monotonic())
+                    else:
+                        receiver.refused.append((status, doc))
+                self.send_response(status)
+                self.send_header("Content-Length", "0")
                 self.end_headers()
 
             def log_message(self, *args) -> None:
                 pass
 
         self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.server.daemon_threads = True
         self.url = f"http://127.0.0.1:{self.server.server_address[1]}/hook"
         self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
         self.thread.start()
@@ -69,5 +89,3 @@ class Receiver:
     def close(self) -> None:
         self.server.shutdown()
         self.server.server_close()
-
-

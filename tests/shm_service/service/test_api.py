@@ -198,3 +198,36 @@ def test_openapi_property_based(which, request):
     if which == "replayed":  # the documents were checked with data in them, not only empty
         for label in ("GET /api/trends", "GET /api/alarms", "GET /api/spectra/latest", "GET /api/status"):
             assert (label, 200) in statuses, label
+
+
+def test_a_future_stamped_sample_is_rejected_and_later_data_are_processed(running):
+    """Issue 11, item 1: one sample at +10 years used to stop the pipeline for good."""
+    service, url = running
+    auth = {"Authorization": f"Bearer {TOKEN}"}
+    t0 = time.time_ns() - 60 * 1_000_000_000
+    with httpx.Client(base_url=url, headers=auth) as c:
+        assert c.post("/api/ingest", json=_imu_batch(t0, 200)).json()["accepted"] == 200
+        future = _imu_batch(t0 + 10 * 365 * 86400 * 1_000_000_000, 1)
+        r = c.post("/api/ingest", json=future)
+        assert r.status_code == 200 and r.json()["rejected_by_reason"] == {"implausible_time": 1}
+        health = c.get("/healthz").json()
+        assert health["status"] == "degraded" and any("clock jump" in reason for reason in health["reasons"])
+        for k in range(1, 6):  # the next 5 s of data
+            assert c.post("/api/ingest", json=_imu_batch(t0 + k * 1_000_000_000, 200)).json()["accepted"] == 200
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            st = c.get("/api/status").json()
+            if st["pipeline"]["samples"] >= 1200:
+                break
+            time.sleep(0.05)
+        assert st["pipeline"]["samples"] == 1200 and st["pipeline"]["late_samples"] == 0
+        assert st["sources"][0]["rejected_by_reason"] == {"implausible_time": 1}
+        # NaN and an integer beyond 64 bits in one body: per-message rejections, never a 500,
+        # and the valid message's retry is not answered 'duplicate' for a sample never taken
+        t = t0 + 6 * 1_000_000_000
+        body = ('{"messages": [{"topic": "/tof/s1", "log_time_ns": %d, "payload": {"distance": NaN}}, '
+                '{"topic": "/tof/s1", "log_time_ns": %d, "payload": {"distance": 100000000000000000000000000000}}, '
+                '{"topic": "/tof/s1", "log_time_ns": %d, "payload": {"distance": 0.5}}]}' % (t, t + 30_000_000, t + 60_000_000))
+        r = c.post("/api/ingest", content=body.encode(), headers={"Content-Type": "application/json"})
+        assert r.status_code == 200, r.text
+        assert r.json()["accepted"] == 1 and r.json()["rejected_by_reason"] == {"nonfinite": 1, "implausible_value": 1}

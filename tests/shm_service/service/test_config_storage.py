@@ -84,13 +84,22 @@ def test_version_1_database_keeps_its_acknowledgements(tmp_path):
     con.executescript(_MIGRATIONS[0])
     con.execute("INSERT INTO alarms (source, chart, kind, mode, level, state, raised_at_s, acknowledged_at, acknowledged_by, "
                 "message) VALUES ('src', 'mode2', 'frequency', 2, 'alarm', 'active', 10.0, 12.5, 'op', 'm')")
+    for at in (10.0, 12.5):
+        con.execute("INSERT INTO alarm_events (alarm_id, event, level, at_s, created_at) VALUES (1, ?, 'alarm', ?, ?)",
+                    ("raised" if at == 10.0 else "acknowledged", at, at))
+    con.execute("INSERT INTO outbox (event_id, channel, target, payload, status, next_attempt_at, created_at) "
+                "VALUES (1, 'webhook', 'http://127.0.0.1:1/x', '{}', 'sent', 10.0, 10.0)")
     con.execute("PRAGMA user_version = 1")
     con.commit()
     con.close()
     st = Storage(db)
-    assert st.schema_version == SCHEMA_VERSION == 2
+    assert st.schema_version == SCHEMA_VERSION == 3
     (alarm,) = st.alarms()
-    assert alarm.acknowledged_at_s == 12.5 and alarm.acknowledged_by == "op" and alarm.acknowledged
+    assert alarm.acknowledged_at_s == 12.5 and alarm.acknowledged_by == "op" and alarm.acknowledged and not alarm.stale
+    # schema 3: the events got their per-alarm sequence numbers and distinct UUIDs, the outbox its alarm
+    events = st.alarm_events()
+    assert [e["seq"] for e in events] == [1, 2] and len({e["uuid"] for e in events}) == 2
+    assert st.outbox()[0]["alarm_id"] == 1 and st.integrity_check() == "ok"
 
 
 def test_a_failing_window_commit_leaves_nothing(tmp_path):

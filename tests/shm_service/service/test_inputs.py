@@ -112,3 +112,94 @@ def test_sim_source_takes_support_orientation_and_length_from_the_sim_table(tmp_
     mast = tomllib.loads('[sim]\nsupport = "clamped"\norientation = "standing"\ndamage = []\n')
     with pytest.raises(BucklingError, match="buckles"):
         SimSource("sim", queue.Queue(), ServiceSettings.model_validate(mast), raw=False, truth=True)
+
+
+# -- plausibility of times and values (issue 11, items 1 and 5) ----------------------------------
+
+S = 1_000_000_000
+
+
+def test_source_clock_rejects_stamps_off_the_clock_and_keeps_the_valid_ones():
+    from shm_service.service._plausibility import SourceClock
+
+    clock = SourceClock(window_s=3600.0, max_ahead_s=1.0, live=False)
+    for topic in ("/imu/D", "/tof/s1", "/strain/g1"):
+        clock.take(topic, 1000 * S, mono=0.0)
+    stamps = np.array([1000 * S + S // 2, 1003 * S, 1000 * S + 4000 * S, 1000 * S - 4000 * S, 1000 * S + 10 * 365 * 86400 * S])
+    ok, codes = clock.judge("/imu/D", stamps, mono=0.0)
+    # 0.5 s ahead: fine; 3 s ahead of every other sensor: its clock jumped; ±4000 s and +10 years: off the window
+    assert codes.tolist() == [0, 2, 1, 1, 1] and ok.tolist() == [True, False, False, False, False]
+    assert clock.count("/imu/D", codes, stamps, mono=0.0) == {"ahead_of_source": 1, "implausible_time": 3}
+    assert clock.newest() == 1000 * S  # nothing rejected moved the clock
+    assert any("clock jump" in p for p in clock.problems())
+    # the whole source moving together (a recording resumed after two hours) is the source's time
+    firsts = {t: 1000 * S + 7200 * S for t in ("/imu/D", "/tof/s1", "/strain/g1")}
+    assert clock.source_jump(firsts, mono=0.0)
+    assert not clock.source_jump({"/imu/D": 1000 * S + 7200 * S}, mono=0.0)  # one sensor is not the source
+    with pytest.raises(ValueError, match="window_s"):
+        SourceClock(window_s=0.0, max_ahead_s=1.0, live=False)
+
+
+def test_a_live_sources_clock_runs_on_with_the_wall_clock():
+    from shm_service.service._plausibility import SourceClock
+
+    wall = 2_000_000 * S
+    clock = SourceClock(window_s=3600.0, max_ahead_s=1.0, live=True, future_tolerance_s=60.0)
+    assert clock.judge_one("/imu/D", wall + 61 * S, wall_ns=wall, mono=0.0) == 1  # beyond the wall clock
+    clock.take("/imu/D", wall - 3 * 3600 * S, mono=0.0)  # a device whose clock was three hours behind
+    clock.take("/tof/s1", wall - 3 * 3600 * S, mono=0.0)
+    # two hours later (wall clock) it resumes where its clock stands now: not ahead, not off the window
+    assert clock.judge_one("/imu/D", wall - 3600 * S, wall_ns=wall + 7200 * S, mono=7200.0) == 0
+    # its clock corrected to the wall clock: on time whatever its past
+    assert clock.judge_one("/imu/D", wall + 7200 * S, wall_ns=wall + 7200 * S, mono=7200.0) == 0
+    # one sensor five minutes ahead of the others at once: its clock jumped
+    assert clock.judge_one("/imu/D", wall - 3 * 3600 * S + 300 * S, wall_ns=wall, mono=0.0) == 2
+
+
+def test_implausible_values_by_sensor_kind():
+    from shm_service.service._plausibility import ValueLimits, implausible_values
+
+    limits = ValueLimits()
+    imu = np.array([[-9.81, 0.1, 0.0, 0.0, 0.0, 0.01], [2500.0, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, -250.0], [np.nan, 0, 0, 0, 0, 0]])
+    assert implausible_values("imu", imu, limits).tolist() == [False, True, True, True]
+    assert implausible_values("tof", np.array([0.5, -0.1, 150.0]), limits).tolist() == [False, True, True]
+    assert implausible_values("strain", np.array([[1e-4], [-0.06]]), limits).tolist() == [False, True]
+    assert implausible_values("temperature", np.array([20.0, 250.0]), limits).tolist() == [False, True]
+    with pytest.raises(ValueError, match="kind"):
+        implausible_values("truth", np.zeros((1, 1)), limits)
+    with pytest.raises(ValueError, match="shape"):
+        implausible_values("imu", np.zeros((2, 3)), limits)
+    with pytest.raises(ValueError, match="distance_min_m"):
+        ValueLimits(distance_min_m=5.0, distance_max_m=1.0)
+
+
+def test_ingest_never_fails_on_what_a_message_holds_and_moves_time_only_when_taken():
+    wall = 1_767_225_600 * S
+    v = IngestValidator(default_rig("benchmark"), max_messages=100)
+    huge = 10**29
+    msgs = [
+        {"topic": "/tof/s1", "log_time_ns": wall, "payload": {"distance": 0.5}},
+        {"topic": "/tof/s1", "log_time_ns": wall + S // 30, "payload": {"distance": huge}},  # 1e29 m
+        {"topic": "/tof/s1", "log_time_ns": wall + 2 * S // 30, "payload": {"distance": 10**400}},  # beyond a float
+        {"topic": "/imu/D", "log_time_ns": wall, "payload": {"accel": [3000.0, 0, 0], "gyro": [0, 0, 0]}},
+        {"topic": "/strain/g1", "log_time_ns": wall, "payload": {"strain": 0.2}},
+        {"topic": "/imu/D", "log_time_ns": huge, "payload": _imu(1)},
+        {"topic": "/imu/D", "log_time_ns": wall + S, "publish_time_ns": huge, "payload": _imu(1)},
+        {"topic": "/imu/D", "log_time_ns": wall + S, "payload": {"accel": [[[1]]], "gyro": [0, 0, 0]}},
+        {"topic": "/imu/D", "log_time_ns": wall + S, "payload": {"accel": [1, 2, 3], "gyro": [0, 0, 0], huge: 1}},
+        {huge: 1},
+    ]
+    r = v.validate({"messages": msgs}, wall_ns=wall)
+    assert r.accepted == 1 and r.raw[0][2] == b'{"distance":0.5}'
+    assert dict(r.rejected) == {"implausible_value": 3, "nonfinite": 1, "malformed": 3, "wrong_schema": 2}
+    assert v.last == {}  # nothing moves before the batch is handed on...
+    assert v.validate({"messages": msgs[:1]}, wall_ns=wall).accepted == 1  # ...so a retry is no duplicate
+    v.commit(r)
+    assert v.validate({"messages": msgs[:1]}, wall_ns=wall).rejected == {"duplicate": 1}
+    # one sample stamped ten years ahead, then the valid data go on being taken
+    ahead = {"topic": "/tof/s1", "log_time_ns": wall + 10 * 365 * 86400 * S, "payload": {"distance": 0.5}}
+    later = [{"topic": "/tof/s1", "log_time_ns": wall + k * S // 30, "payload": {"distance": 0.5}} for k in range(1, 31)]
+    r = v.validate({"messages": [ahead, *later]}, wall_ns=wall + S)
+    assert r.accepted == 30 and dict(r.rejected) == {"implausible_time": 1}
+    v.commit(r)
+    assert any("clock jump" in p for p in v.clock.problems())
