@@ -19,7 +19,7 @@ from typing import Protocol
 import numpy as np
 import orjson
 
-from analytics import AnalysisConfig, ModalMonitor, WindowResult, amplitude_spectrum, random_decrement
+from analytics import AnalysisConfig, Baseline, ModalMonitor, WindowResult, amplitude_spectrum, random_decrement
 from contract import (
     BEARING_TOPIC,
     CURVATURE_CHART,
@@ -314,7 +314,7 @@ class _Analytics:
     gives the same windows (and the unique key of the trend rows holds)."""
 
     def __init__(self, model: ImmsModel, config: AnalysisConfig, monitor_state: dict | None, last_window_start: float | None,
-                 source_id: str, min_coverage: float = 0.8) -> None:
+                 source_id: str, min_coverage: float = 0.8, baseline: dict | None = None) -> None:
         self.model = model
         self.config = config
         self.source_id = source_id
@@ -324,7 +324,7 @@ class _Analytics:
         self.n = int(round(self.window_s * FS))
         self.min_coverage = min_coverage
         self.signatures = None
-        self.monitor = self._monitor(monitor_state)
+        self.monitor = self._monitor(monitor_state, baseline)
         self.b = _Chunks()
         self.temperature = _Chunks()
         self.bearing = _Chunks()
@@ -336,7 +336,7 @@ class _Analytics:
         self.latest_spectrum: SpectrumDocument | None = None
         self.learning_baseline = self.monitor.baseline is None
 
-    def _monitor(self, state: dict | None) -> ModalMonitor:
+    def _monitor(self, state: dict | None, baseline: dict | None = None) -> ModalMonitor:
         m = self.model
         if self.signatures is None:
             # FE-predicted damage signatures of the rig: where along the beam a flag points.
@@ -348,8 +348,20 @@ class _Analytics:
                 return monitor
             except (ValueError, TypeError) as exc:
                 log.warning("stored monitor state unusable (%s); starting a new monitor", exc)
-        return ModalMonitor(m.units.frequencies_hz, m.units.curvature(m.stations), m.stations, fs=FS, config=self.config,
-                            beam_length=m.rig.beam.length, signatures=self.signatures)
+        stored = None
+        if baseline is not None:
+            try:
+                stored = Baseline.from_dict(baseline)
+            except ValueError as exc:
+                log.warning("stored baseline unusable (%s); learning a new one", exc)
+        try:
+            return ModalMonitor(m.units.frequencies_hz, m.units.curvature(m.stations), m.stations, fs=FS, config=self.config,
+                                baseline=stored, beam_length=m.rig.beam.length, signatures=self.signatures)
+        except ValueError as exc:  # a baseline of another model (modes)
+            if stored is None:
+                raise
+            log.warning("stored baseline does not fit the model (%s); learning a new one", exc)
+            return self._monitor(None)
 
     def reset(self) -> None:
         self.monitor = self._monitor(None)
@@ -485,7 +497,10 @@ class Pipeline:
         topics = {s.topic: (s.kind, s.name) for s in self.rig.sensors if s.kind in ("imu", "tof", "strain", "bearing")}
         self.merger = _Merger(lateness_s)
         self.estimator = _Estimator(model, topics, calibration_s, calibration)
-        self.analytics = _Analytics(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id)
+        # Without a monitor to resume, the source's active baseline (shm baseline learn) arms a new one.
+        baseline = None if blob.get("monitor") else storage.active_baseline(source_id)
+        self.analytics = _Analytics(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id,
+                                    baseline=baseline)
         self.alarms = AlarmLogic(raise_windows=raise_windows, clear_windows=clear_windows, state=blob.get("alarms"))
         self.chunk_ns = int(chunk_s * _NS)
         self.silent_after_ns = int(silent_after_s * _NS)
