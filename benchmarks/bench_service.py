@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -19,9 +20,33 @@ import time
 from pathlib import Path
 
 
-def bench_replay(recording: Path, *, dashboard: bool) -> dict:
+def _run_measured(cmd: list[str], **kwargs) -> tuple[subprocess.CompletedProcess, float, int]:
+    """Run ``cmd``; returns the completed process, its CPU seconds and its peak RSS (bytes,
+    sampled every 0.2 s)."""
+    import psutil
+
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        popen = subprocess.Popen(cmd, stdout=out, stderr=err, text=True, **kwargs)
+        handle = psutil.Process(popen.pid)
+        peak, cpu = 0, 0.0
+        while popen.poll() is None:
+            try:
+                peak = max(peak, handle.memory_info().rss)
+                times = handle.cpu_times()
+                cpu = times.user + times.system
+            except psutil.Error:
+                pass
+            time.sleep(0.2)
+        out.seek(0)
+        err.seek(0)
+        return subprocess.CompletedProcess(cmd, popen.returncode, out.read(), err.read()), cpu, peak
+
+
+def bench_replay(recording: Path, *, dashboard: bool, tree: Path | None = None, archive: bool = True) -> dict:
     """``shm serve --source replay:FILE --speed max`` as a subprocess, timed, with its dashboard on
-    (a free port, no browser) or off; the log is counted for warnings and errors."""
+    (a free port, no browser) or off; the log is counted for warnings and errors. ``tree``: run
+    another checkout's code (``--compare``: before/after side by side); ``archive=False``: with
+    ``--no-archive``. CPU seconds and peak RSS of the process are reported too."""
     if not recording.exists():
         print(f"simulating {recording} (one hour, ambient) ...", flush=True)
         subprocess.run([sys.executable, "-m", "shm_service.cli", "simulate", "--duration", "3600", "--excitation", "ambient",
@@ -30,14 +55,18 @@ def bench_replay(recording: Path, *, dashboard: bool) -> dict:
         cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--source", f"replay:{recording}", "--speed", "max",
                "--port", "0", "--db", f"{tmp}/shm.sqlite", "--recordings", f"{tmp}/rec", "--json"]
         cmd += ["--dashboard-port", "0"] if dashboard else ["--no-dashboard"]
+        cmd += [] if archive else ["--no-archive"]
+        env = dict(os.environ, PYTHONPATH=str(tree)) if tree is not None else None
+        load = " ".join(f"{x:.2f}" for x in os.getloadavg())
         started = time.perf_counter()
-        proc = subprocess.run(cmd, capture_output=True, text=True)
+        proc, cpu_s, peak_rss = _run_measured(cmd, cwd=tree, env=env)
         wall = time.perf_counter() - started
     if proc.returncode != 0:
         print(proc.stderr[-3000:], flush=True)
     levels = [line.split()[2] for line in proc.stderr.splitlines() if len(line.split()) > 2]
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
-    result = {"dashboard": dashboard, "wall_s": round(wall, 1), "exit": proc.returncode, "messages": summary["messages"],
+    result = {"tree": str(tree or "."), "dashboard": dashboard, "archive": archive, "wall_s": round(wall, 1),
+              "cpu_s": round(cpu_s, 1), "peak_rss_mib": round(peak_rss / 2**20, 1), "load_before": load, "exit": proc.returncode, "messages": summary["messages"],
               "estimates": summary["estimates"], "windows": summary["windows"], "windows_committed": summary["windows_committed"],
               "trend_rows": summary["trend_rows"], "realtime_factor": round(summary["processed_data_s"] / wall, 1),
               "pipeline_errors": summary["pipeline_errors"], "sink_errors": summary["sink_errors"],
@@ -91,6 +120,25 @@ def bench_memory(hours: float, sample_s: float = 30.0) -> dict:
     return result
 
 
+def bench_sim_memory(seconds: float, tree: Path | None = None) -> dict:
+    """Peak RSS of ``shm serve --source sim --speed max`` with the raw archive on (the queued
+    batches carry every sample's payload) for ``seconds`` of simulated data; ``tree`` as for
+    ``bench_replay``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        config = Path(tmp) / "sim.toml"
+        config.write_text(f"[sim]\nduration_s = {seconds}\n")
+        cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(config), "--source", "sim", "--speed", "max",
+               "--port", "0", "--db", f"{tmp}/shm.sqlite", "--recordings", f"{tmp}/rec", "--no-dashboard", "--json"]
+        env = dict(os.environ, PYTHONPATH=str(tree)) if tree is not None else None
+        started = time.perf_counter()
+        proc, cpu_s, peak = _run_measured(cmd, cwd=tree, env=env)
+        wall = time.perf_counter() - started
+    result = {"tree": str(tree or "."), "simulated_s": seconds, "wall_s": round(wall, 1), "cpu_s": round(cpu_s, 1),
+              "peak_rss_mib": round(peak / 2**20, 1), "exit": proc.returncode}
+    print(f"[sim-memory] {result}", flush=True)
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--replay", default="/tmp/hour.mcap", help="one-hour recording (simulated if missing)")
@@ -99,10 +147,28 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--skip-sim", action="store_true")
     p.add_argument("--skip-dashboard", action="store_true", help="replay with the dashboard off only")
     p.add_argument("--quick", action="store_true", help="a 2-hour memory run instead of --hours")
+    p.add_argument("--compare", default=None, metavar="TREE",
+                   help="another checkout (e.g. the merge base): its replay with --no-archive and no dashboard, and "
+                        "this tree's, alternately (--rounds), before the usual runs")
+    p.add_argument("--rounds", type=int, default=2)
     # `python -m benchmarks` passes the same arguments to every benchmark: ignore the others' flags.
     args, _ = p.parse_known_args(argv)
     if args.quick:
         args.hours = min(args.hours, 2.0)
+    if args.compare:
+        runs: dict[str, list[dict]] = {"before": [], "after": []}
+        for _ in range(args.rounds):
+            runs["before"].append(bench_replay(Path(args.replay), dashboard=False, tree=Path(args.compare).resolve(), archive=False))
+            runs["after"].append(bench_replay(Path(args.replay), dashboard=False, archive=False))
+        best = {k: min(r["wall_s"] for r in v) for k, v in runs.items()}
+        cpu = {k: min(r["cpu_s"] for r in v) for k, v in runs.items()}
+        print(f"[replay] one hour, --no-archive, no dashboard: before {best['before']} s wall / {cpu['before']} s CPU, "
+              f"after {best['after']} s wall / {cpu['after']} s CPU (best of {args.rounds}); "
+              f"{best['before'] / best['after']:.2f}x faster", flush=True)
+        before = bench_sim_memory(1200.0, Path(args.compare).resolve())
+        after = bench_sim_memory(1200.0)
+        print(f"[sim-memory] 20 simulated minutes at max speed, raw archive on: peak RSS before {before['peak_rss_mib']} MiB, "
+              f"after {after['peak_rss_mib']} MiB", flush=True)
     if not args.skip_replay:
         bench_replay(Path(args.replay), dashboard=False)
         if not args.skip_dashboard:

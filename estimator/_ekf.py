@@ -21,9 +21,12 @@ __all__ = ["predict_covariance", "predict_covariance_into", "update_scalar", "up
 
 @numba.njit(cache=True)
 def predict_covariance_into(P: np.ndarray, F: np.ndarray, Q: np.ndarray, work: np.ndarray) -> None:
-    """P ← F P Fᵀ + Q in place (n, n); ``work`` is an (n, n) scratch buffer."""
+    """P ← F P Fᵀ + Q in place (n, n); ``work`` is an (n, n) scratch buffer.
+
+    F of a kinematic model is sparse (the identity plus a few couplings): both products skip its
+    zeros, testing each entry of F once per product (n² tests, not n³)."""
     n = P.shape[0]
-    for i in range(n):
+    for i in range(n):  # work = F P
         for j in range(n):
             work[i, j] = 0.0
         for k in range(n):
@@ -31,15 +34,17 @@ def predict_covariance_into(P: np.ndarray, F: np.ndarray, Q: np.ndarray, work: n
             if f != 0.0:
                 for j in range(n):
                     work[i, j] += f * P[k, j]
-    for i in range(n):
-        for j in range(i, n):
-            acc = Q[i, j]
-            for k in range(n):
-                f = F[j, k]
-                if f != 0.0:
-                    acc += work[i, k] * f
-            P[i, j] = acc
-            P[j, i] = acc
+    for j in range(n):  # P = work Fᵀ + Q, column j on and above the diagonal
+        for i in range(j + 1):
+            P[i, j] = Q[i, j]
+        for k in range(n):
+            f = F[j, k]
+            if f != 0.0:
+                for i in range(j + 1):
+                    P[i, j] += work[i, k] * f
+    for j in range(n):  # mirrored: exactly symmetric
+        for i in range(j):
+            P[j, i] = P[i, j]
 
 
 @numba.njit(cache=True)
@@ -60,13 +65,14 @@ def update_scalar_into(x: np.ndarray, P: np.ndarray, innovation: float, H: np.nd
     Mahalanobis distance); with d2 > ``gate`` (or NaN) nothing changes.
     """
     n = x.shape[0]
+    # u = P H, column by column over the few states H touches (n tests of H, not n²)
     for i in range(n):
-        acc = 0.0
-        for j in range(n):
-            h = H[j]
-            if h != 0.0:
-                acc += P[i, j] * h
-        u[i] = acc
+        u[i] = 0.0
+    for j in range(n):
+        h = H[j]
+        if h != 0.0:
+            for i in range(n):
+                u[i] += P[i, j] * h
     S = R
     for j in range(n):
         S += H[j] * u[j]

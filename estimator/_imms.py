@@ -535,7 +535,7 @@ def _aid(x, P, innovation, H, R, gate, ubuf, channel, accepted, rejected, nis_su
         rejected[channel] += 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)  # the source thread decodes meanwhile
 def run_events(ev, m, st, out, counters):
     """Process the events ``ev`` (``EventArrays``) in time order with model ``m``
     (``ModelArrays``) from filter state ``st`` (``FilterState``, updated in place); the states

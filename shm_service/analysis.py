@@ -13,7 +13,7 @@ from analytics import AnalysisConfig, AnalysisResult, Baseline, analyze, learn_b
 
 from .estimation import DeformationRecord, deformation_record
 
-__all__ = ["DEFAULT_WARMUP_S", "RecordAnalysis", "analyze_deformations", "analyze_recording", "baseline_from_deformations",
+__all__ = ["DEFAULT_WARMUP_S", "RecordAnalysis", "trend_rows", "analyze_deformations", "analyze_recording", "baseline_from_deformations",
            "baseline_from_recording"]
 
 #: windows starting less than this after the rest phase are not analysed (the filter converging);
@@ -94,3 +94,21 @@ def baseline_from_recording(path, *, config: AnalysisConfig | None = None, rig=N
     rec = read_recording(path, rig=rig)
     data = deformation_record(rec, model_args=model_args)
     return baseline_from_deformations(rec.rig, data, config=config, warmup_s=warmup_s, not_before_s=not_before_s)
+
+
+def trend_rows(source: str, result, start_s: float, end_s: float) -> list:
+    """The storage rows (``contract.TrendRow``, one per mode estimate) of one analysed window
+    (``analytics.WindowResult``) of ``source`` from ``start_s`` to ``end_s`` (UNIX s): what
+    ``shm serve`` stores live and ``shm reprocess`` stores from archives."""
+    from contract import TrendRow, chart_name
+
+    rows = []
+    for i, e in enumerate(result.estimates):
+        score = result.frequency_scores[i] if i < len(result.frequency_scores) else None
+        rows.append(TrendRow(
+            source=source, window_start_s=start_s, window_end_s=end_s, mode=e.mode, unit=e.unit, kind=result.kind,
+            frequency_hz=e.frequency_hz, damping_ratio=e.damping_ratio, amplitude=e.amplitude, confidence=e.confidence,
+            temperature_c=result.temperature_c, curvature_index=None if result.curvature is None else result.curvature.total,
+            score_sigma=score, level=result.levels.get(chart_name("frequency", e.mode)),
+        ))
+    return rows

@@ -1,4 +1,5 @@
-"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, oma, study, serve, demo, import.
+"""The ``shm`` command line: modes, simulate, inspect, estimate, analyze, reprocess, baseline, oma, study, serve,
+demo, import.
 
 Building the parser imports nothing heavy (numpy, scipy, pydantic, the estimator are imported by
 the command that needs them), so ``shm --help`` and argument errors answer at once.
@@ -390,6 +391,94 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- shm reprocess, shm baseline learn ---------------------------------------------------
+def _analysis_options(args: argparse.Namespace):
+    from .reprocess import AnalysisOptions
+
+    return AnalysisOptions(rig=args.rig, peripheral=args.peripheral, modes=args.modes, imus=args.imus, tofs=args.tofs,
+                           gauges=args.gauges, config=args.config)
+
+
+def _cmd_reprocess(args: argparse.Namespace) -> int:
+    import time
+
+    from .reprocess import reprocess
+
+    started = time.perf_counter()
+    outcomes = reprocess(args.recordings, args.db, workers=args.workers, scheduler=args.scheduler, force=args.force,
+                         options=_analysis_options(args), source=args.structure, progress=not args.json)
+    wall = time.perf_counter() - started
+    if args.json:
+        _print_json({"files": [o.as_dict() for o in outcomes], "wall_s": round(wall, 3)})
+    else:
+        for o in outcomes:
+            detail = f"{o.windows} windows" if o.status == "done" else (o.error or "")
+            print(f"{o.status:8} {o.path}  {detail}")
+        counts = {s: sum(o.status == s for o in outcomes) for s in ("done", "skipped", "failed")}
+        print(f"{counts['done']} done, {counts['skipped']} skipped, {counts['failed']} failed in {wall:.1f} s -> {args.db}")
+    return 1 if any(o.status == "failed" for o in outcomes) else 0
+
+
+def _time_arg(text: str) -> float:
+    """UNIX seconds or an ISO 8601 time (UTC unless it says otherwise)."""
+    from datetime import datetime, timezone
+
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    try:
+        moment = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither UNIX seconds nor an ISO 8601 time") from None
+    return (moment if moment.tzinfo else moment.replace(tzinfo=timezone.utc)).timestamp()
+
+
+def _cmd_baseline_learn(args: argparse.Namespace) -> int:
+    import math
+
+    from .reprocess import learn_baseline
+
+    period = (args.start if args.start is not None else -math.inf, args.end if args.end is not None else math.inf)
+    if period[0] >= period[1]:
+        raise CliError(f"--from {args.start} must be before --to {args.end}")
+    try:
+        summary = learn_baseline(args.recordings, args.db, args.structure, (max(period[0], -1e18), min(period[1], 1e18)),
+                                 workers=args.workers, scheduler=args.scheduler, options=_analysis_options(args),
+                                 progress=not args.json)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if args.json:
+        _print_json(summary)
+    else:
+        print(f"baseline {summary['baseline_id']} of {summary['structure']} from {summary['trusted_windows']} trusted "
+              f"windows in {summary['files_used']} file(s), stored in {args.db} (active)")
+        for m in summary["modes"]:
+            print(f"  mode {m['mode']} (unit {m['unit']}): {m['frequency_hz']:.4f} Hz ± {100 * m['sigma_rel']:.3f} % "
+                  f"({m['windows']} windows)")
+        for failure in summary["failed"]:
+            print(f"  failed: {failure['path']}: {failure['error']}")
+    return 0
+
+
+def _add_analysis_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", default=None, help="a `shm serve` configuration (TOML): the same analytics, alarm hysteresis and warm-up")
+    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
+    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
+    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
+    p.add_argument("--imus", default=None, help="as for estimate")
+    p.add_argument("--tofs", default=None, help="as for estimate")
+    p.add_argument("--gauges", default=None, help="as for estimate")
+
+
+def _add_cluster_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--workers", type=number(int, low=1, high=512), default=None, metavar="N",
+                   help="worker processes of the local cluster (default: the cores)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="an existing dask.distributed scheduler (tcp://host:8786) instead of a local cluster; its "
+                        "workers need this package and the files at the same paths")
+
+
 # -- shm oma -----------------------------------------------------------------------------
 def _cmd_oma(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
@@ -568,18 +657,39 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("analyze", help="modal analytics of the deformation variables (runs the estimator on raw recordings)")
     p.add_argument("recording", help="an estimates recording (shm estimate --out, shm serve's archive) or a raw recording")
     p.add_argument("--baseline", help="a healthy recording to learn the baseline from (all of it; with or without a temperature swing)")
-    p.add_argument("--config", default=None, help="a `shm serve` configuration (TOML): the same analytics, alarm hysteresis and warm-up")
     p.add_argument("--not-before", type=number(low=0, unit="s"), default=None, metavar="S",
                    help="analyse windows starting at or after S seconds into the recording (default: the rest phase's end plus "
                         "the warm-up, when the recording tells the rest phase)")
-    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
-    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
-    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
-    p.add_argument("--imus", default=None, help="as for estimate")
-    p.add_argument("--tofs", default=None, help="as for estimate")
-    p.add_argument("--gauges", default=None, help="as for estimate")
+    _add_analysis_arguments(p)  # the same as reprocess and baseline learn take
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_analyze)
+
+    p = sub.add_parser("reprocess", help="estimator and analysis over many recordings (dask.distributed) into a service database")
+    p.add_argument("recordings", nargs="+", metavar="FILE", help="recordings (.mcap) of the contract")
+    p.add_argument("--db", required=True, type=output_path, help="the service's SQLite database (created if missing)")
+    _add_cluster_arguments(p)
+    p.add_argument("--force", action="store_true", help="reprocess files already done with this configuration")
+    p.add_argument("--structure", default=None, metavar="ID",
+                   help="source id of the rows (default: an archive file's source, else the file's stem)")
+    _add_analysis_arguments(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_reprocess)
+
+    p = sub.add_parser("baseline", help="baselines of the live service")
+    baseline_sub = p.add_subparsers(dest="baseline_command", required=True)
+    p = baseline_sub.add_parser("learn", help="learn a baseline from a healthy period spread over recordings and store "
+                                              "it as the structure's active baseline (the service loads it at start)")
+    p.add_argument("recordings", nargs="+", metavar="FILE", help="recordings (.mcap) of the healthy period")
+    p.add_argument("--structure", required=True, metavar="ID", help="the source id the service monitors it as")
+    p.add_argument("--db", required=True, type=output_path, help="the service's SQLite database")
+    p.add_argument("--from", dest="start", type=_time_arg, default=None, metavar="TIME",
+                   help="start of the healthy period: UNIX s or ISO 8601 (default: the files' start)")
+    p.add_argument("--to", dest="end", type=_time_arg, default=None, metavar="TIME",
+                   help="end of the healthy period (default: the files' end)")
+    _add_cluster_arguments(p)
+    _add_analysis_arguments(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_baseline_learn)
 
     p = sub.add_parser("oma", help="operational modal analysis (SSI-cov) of measured channels: .npy/.npz, CSV/TSV/text, .mat, HDF5, .mcap")
     p.add_argument("data", help="measured channels (see shm_service/tables.py for the formats)")

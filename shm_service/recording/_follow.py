@@ -11,11 +11,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from collections.abc import Iterable
 from typing import Final
 
 import numpy as np
 
-from contract import RigDescription
+from contract import Kind, RigDescription
 
 from ._reader import (
     _RECORD_HEAD,
@@ -23,6 +24,7 @@ from ._reader import (
     RecordingError,
     TopicReport,
     _Reader,
+    _kinds,
     _Stop,
 )
 from ._writer import MAGIC
@@ -49,7 +51,8 @@ class FollowBlock:
 
 
 class RecordingFollower:
-    """Reads ``path`` incrementally. ``topics`` limits decoding (others are counted, not decoded).
+    """Reads ``path`` incrementally. ``topics`` (or ``kinds``, as for ``read_recording``) limits
+    decoding (others are counted, not decoded).
 
     ``poll()`` returns the new blocks; ``finished`` is set once the data section ended (the
     writer closed the file); ``damaged`` once the file cannot be read further (a problem is in
@@ -65,10 +68,11 @@ class RecordingFollower:
         *,
         rig: RigDescription | str | Path | None = None,
         topics: frozenset[str] | set[str] | None = None,
+        kinds: Iterable[Kind] | None = None,
         piece_bytes: int = _PIECE,
     ) -> None:
         self.path = Path(path)
-        self._reader = _Reader(self.path, rig, None if topics is None else frozenset(topics))
+        self._reader = _Reader(self.path, rig, None if topics is None else frozenset(topics), _kinds(kinds))
         self._position = 0
         self._started = False
         self._piece = int(piece_bytes)

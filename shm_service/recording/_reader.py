@@ -1,10 +1,12 @@
 """Reading recordings: the one reader of the recording contract for everything downstream.
 
-The file is parsed record by record with ``struct`` (chunks decompressed here, whole), not with
-``mcap.reader``: the library needs the footer, which a file cut off mid-write lacks, and iterates
-at about 150 k messages/s. Payloads are decoded a chunk and a channel at a time with orjson and
-laid out with numpy; a block with anything unusual (NaN, a missing key, ...) is decoded again
-message by message to count and skip exactly the bad ones.
+The file is parsed here (chunks decompressed whole), not with ``mcap.reader``: the library needs
+the footer, which a file cut off mid-write lacks, and iterates at about 150 k messages/s. A
+compiled scan (``_fastdecode``) lists the message records of each chunk; payloads are decoded a
+chunk and a channel at a time by the compiled template decoder (the contract's fixed payload
+layouts, exact float parsing), and only what it does not decide (NaN, a missing key, other
+layouts, ...) goes the reference way: orjson objects for the block, else message by message
+to count and skip exactly the bad ones.
 """
 
 from __future__ import annotations
@@ -14,10 +16,10 @@ import math
 import struct
 import zlib
 from collections import Counter
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, get_args
 
 import lz4.frame
 import numpy as np
@@ -37,6 +39,7 @@ from contract import (
     parse_rig,
 )
 
+from ._fastdecode import decode_template, scan_buffer, template_codes
 from ._writer import MAGIC, RIG_ATTACHMENT
 
 __all__ = ["Channel", "ReadReport", "Recording", "RecordingError", "TopicReport", "read_recording"]
@@ -171,19 +174,35 @@ def read_recording(
     *,
     rig: RigDescription | str | Path | None = None,
     topics: Iterable[str] | None = None,
+    kinds: Iterable[Kind] | None = None,
 ) -> Recording:
     """Read the recording at ``path``, keeping what is valid and reporting what is not.
 
     ``rig`` replaces the file's ``rig.json`` attachment (a description, or a ``.json``/``.toml``
-    file). ``topics`` limits decoding to those topics. A file cut off mid-write yields every
+    file). ``topics`` limits decoding to those topics, ``kinds`` to the topics of those kinds
+    ("imu", "tof", "strain", "bearing", "temperature", "truth", "estimate"). A file cut off mid-write yields every
     complete message before the damage (``report.truncated``). Raises ``RecordingError`` for a
     missing or invalid rig description and for a contract topic with the wrong encoding or schema.
     """
-    return _Reader(Path(path), rig, None if topics is None else frozenset(topics)).read()
+    return _Reader(Path(path), rig, None if topics is None else frozenset(topics), _kinds(kinds)).read()
+
+
+def _kinds(kinds: Iterable[str] | None) -> frozenset[str] | None:
+    if kinds is None:
+        return None
+    chosen = frozenset(kinds)
+    unknown = chosen - set(get_args(Kind))
+    if unknown:
+        raise ValueError(f"kinds={sorted(chosen)}: unknown kind(s) {sorted(unknown)}")
+    return chosen
 
 
 class _ChannelReader:
-    """Collects one topic's messages and decodes them a block (a chunk's worth) at a time."""
+    """Collects one topic's messages and decodes them a block (a chunk's worth) at a time.
+
+    Pending messages are kept as spans of the buffer they came in (a decompressed chunk), not
+    as one bytes object each; ``flush`` decodes a block with the compiled template decoder and
+    hands only what it could not decode to the reference path (orjson, then the stdlib)."""
 
     def __init__(self, topic: str, info: TopicInfo, name: str, position: float | None, stations: int, decode: bool) -> None:
         self.topic = topic
@@ -195,73 +214,91 @@ class _ChannelReader:
         self.sizes: list[int | None] = [
             stations if f.size == "stations" else None if f.size == "free" else f.size for f in self.fields
         ]
-        self.times: list[int] = []
-        self.publish: list[int] = []
-        self.payloads: list[bytes] = []
-        self.appenders = (self.times.append, self.publish.append, self.payloads.append)
+        # pending pieces: (buffer, log times, publish times, payload starts, payload stops)
+        self.pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.pending = 0
+        self.times: np.ndarray = _NO_TIMES  # log times of the block being decoded (for reports)
+        self.payloads: list[bytes] = []  # the payloads the reference path decodes
         self.blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.report = TopicReport(topic, info.title)
         self.first_malformed: tuple[int, str] | None = None
         self.first_nonfinite: int | None = None
         self.raw_min: int | None = None
         self.raw_max: int | None = None
-        self._template: _Template | None = None
+        self._template: np.ndarray | None = None
+        self._width = 0
+
+    def add(self, buf: np.ndarray, times: np.ndarray, publish: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> None:
+        """Queue messages: their times and the spans of their payloads in ``buf`` (uint8)."""
+        self.pieces.append((buf, times, publish, starts, stops))
+        self.pending += len(times)
 
     def flush(self) -> None:
         """Decode the pending messages into a block of valid rows."""
-        count = len(self.times)
+        count = self.pending
         if count == 0:
             return
+        pieces, self.pieces, self.pending = self.pieces, [], 0
         self.report.messages += count
+        times = np.concatenate([p[1] for p in pieces]) if len(pieces) > 1 else pieces[0][1]
         if not self.decode:
-            low, high = min(self.times), max(self.times)
+            low, high = int(times.min()), int(times.max())
             self.raw_min = low if self.raw_min is None else min(self.raw_min, low)
             self.raw_max = high if self.raw_max is None else max(self.raw_max, high)
+            return
+        publish = np.concatenate([p[2] for p in pieces]) if len(pieces) > 1 else pieces[0][2]
+        template = self._template_codes()
+        if template is None:
+            values, keep = self._decode_reference(pieces, times, None)
         else:
-            times = np.array(self.times, dtype=np.uint64).astype(np.int64)
-            publish = np.array(self.publish, dtype=np.uint64).astype(np.int64)
-            values = self._decode_fast()
-            if values is None:
-                values, keep = self._decode_slow()
-                times, publish = times[keep], publish[keep]
-            self.blocks.append((times, publish, values))
-        self.times.clear()
-        self.publish.clear()
-        self.payloads.clear()
+            parts = [decode_template(buf, starts, stops, template, self._width) for buf, _, _, starts, stops in pieces]
+            values = np.concatenate([p[0] for p in parts]) if len(parts) > 1 else parts[0][0]
+            decoded = np.concatenate([p[1] for p in parts]) if len(parts) > 1 else parts[0][1]
+            if decoded.all():
+                keep = None
+            else:  # what the template does not cover goes the reference way, in place
+                missing = ~decoded
+                rows, kept = self._decode_reference(pieces, times, missing)
+                keep = decoded.copy()
+                keep[missing] = kept
+                values[np.flatnonzero(missing)[kept]] = rows
+                values = values[keep]
+        if keep is not None:
+            times, publish = times[keep], publish[keep]
+        self.blocks.append((times, publish, values))
 
-    def _decode_compact(self, joined: bytes) -> np.ndarray | None:
-        """All pending payloads as rows if each is the compact JSON of the schema's template
-        (keys in the contract's order, no spaces, as our writer and orjson write them), else
-        ``None``. The template's structure is checked with the number characters deleted; the
-        numbers are then parsed by orjson as one flat array, which refuses anything that is not
-        a JSON number."""
-        if None in self.sizes:
-            return None
-        count = len(self.payloads)
-        if self._template is None:
-            self._template = _Template(self.fields, [s for s in self.sizes if s is not None])
-        template = self._template
-        if joined.translate(None, _NUMBER_CHARACTERS) + b"\n" != template.skeleton * count:
-            return None
-        text = joined.replace(template.boundary, b",")
-        for piece in template.separators:
-            text = text.replace(piece, b",")
+    def _template_codes(self) -> np.ndarray | None:
+        """The payload skeleton of this schema once every vector size is known."""
+        if self._template is None and None not in self.sizes:
+            example = orjson.dumps({f.name: 0 if size == 0 else [0] * size for f, size in zip(self.fields, self.sizes)})
+            self._width = example.count(b"0")
+            self._template = template_codes(example.replace(b"0", b"#"))
+        return self._template
+
+    def _decode_reference(self, pieces, times: np.ndarray, select: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Rows and kept mask of the pending messages (those of ``select``) by orjson objects,
+        else message by message."""
+        payloads: list[bytes] = []
+        for buf, _, _, starts, stops in pieces:
+            data = buf.tobytes() if len(starts) > 64 else None
+            for a, b in zip(starts.tolist(), stops.tolist()):
+                payloads.append(data[a:b] if data is not None else buf[a:b].tobytes())
+        if select is not None:
+            payloads = [payloads[i] for i in np.flatnonzero(select).tolist()]
+            times = times[select]
+        self.payloads, self.times = payloads, times
         try:
-            numbers = orjson.loads(b"[" + text[len(template.head) : len(text) - len(template.tail)] + b"]")
-            values = np.array(numbers, dtype=np.float64)
-        except (orjson.JSONDecodeError, TypeError, ValueError):
-            return None
-        if values.shape != (count * template.width,):
-            return None
-        return values.reshape(count, template.width)
+            values = self._decode_fast()
+            if values is not None:
+                return values, np.ones(len(payloads), dtype=bool)
+            return self._decode_slow()
+        finally:
+            self.payloads, self.times = [], _NO_TIMES
 
     def _decode_fast(self) -> np.ndarray | None:
         """All pending payloads as rows, or ``None`` if any of them needs a closer look."""
         payloads = self.payloads
         joined = b"\n".join(payloads)
-        values = self._decode_compact(joined)
-        if values is not None:
-            return values
         if b"true" in joined or b"false" in joined:  # numpy would turn booleans into numbers
             return None
         count = len(payloads)
@@ -299,12 +336,12 @@ class _ChannelReader:
             except _Malformed as exc:
                 self.report.malformed += 1
                 if self.first_malformed is None:
-                    self.first_malformed = (self.times[index], str(exc))
+                    self.first_malformed = (int(self.times[index]), str(exc))
                 continue
             if not all(map(math.isfinite, row)):
                 self.report.nonfinite += 1
                 if self.first_nonfinite is None:
-                    self.first_nonfinite = self.times[index]
+                    self.first_nonfinite = int(self.times[index])
                 continue
             rows.append(row)
             keep[index] = True
@@ -369,21 +406,7 @@ class _ChannelReader:
         return Channel(self.topic, self.info.kind, self.name, self.position, self.field_names(), times, publish, values)
 
 
-_NUMBER_CHARACTERS: Final = b"0123456789.eE+-"
-
-
-class _Template:
-    """The compact JSON layout of a payload with known vector sizes, split at its numbers."""
-
-    def __init__(self, fields: Iterable[FieldSpec], sizes: list[int]) -> None:
-        example = orjson.dumps({f.name: 0 if size == 0 else [0] * size for f, size in zip(fields, sizes)})
-        pieces = example.split(b"0")
-        self.width = len(pieces) - 1
-        self.head, self.tail = pieces[0], pieces[-1]
-        self.skeleton = example.translate(None, _NUMBER_CHARACTERS) + b"\n"
-        self.boundary = self.tail + b"\n" + self.head
-        middle = {p for p in pieces[1:-1] if p != b","}
-        self.separators = sorted(middle, key=len, reverse=True)
+_NO_TIMES: Final = np.empty(0, dtype=np.int64)
 
 
 class _Malformed(ValueError):
@@ -439,9 +462,11 @@ class _Stop(Exception):
 
 
 class _Reader:
-    def __init__(self, path: Path, rig: RigDescription | str | Path | None, topics: frozenset[str] | None) -> None:
+    def __init__(self, path: Path, rig: RigDescription | str | Path | None, topics: frozenset[str] | None,
+                 kinds: frozenset[str] | None = None) -> None:
         self.path = path
         self.topics = topics
+        self.kinds = kinds
         self.rig: RigDescription | None = None
         if isinstance(rig, RigDescription):
             self.rig = rig
@@ -453,10 +478,10 @@ class _Reader:
         self.rig_json: bytes | None = None
         self.schemas: dict[int, tuple[str, str]] = {}
         self.channel_topics: dict[int, str] = {}
-        self.routes: dict[int, tuple[Callable[[int], None], Callable[[int], None], Callable[[bytes], None]]] = {}
+        self.routes: dict[int, _ChannelReader] = {}
         self.readers: dict[str, _ChannelReader] = {}
         self.skipped: dict[int, tuple[str, str]] = {}
-        self.unrouted: list[int] = []
+        self.unrouted: Counter[int] = Counter()
         self.attachments: list[str] = []
         self.metadata: dict[str, dict[str, str]] = {}
         self.report = ReadReport()
@@ -513,33 +538,39 @@ class _Reader:
     def _scan(self, buf: bytes, pos: int, end: int) -> int:
         """Parse the records in ``buf[pos:end]``; returns where an incomplete record starts (or
         ``end``). Raises ``_Stop`` at the end of the data section."""
-        message_head = _MESSAGE_HEAD.unpack_from
-        record_head = _RECORD_HEAD.unpack_from
-        routes = self.routes
-        unrouted = self.unrouted.append
-        head_size = _MESSAGE_HEAD.size
-        while pos < end:
-            if end - pos >= head_size:
-                opcode, length, channel_id, _, log_time, publish_time = message_head(buf, pos)
-            elif end - pos >= 9:
-                opcode, length = record_head(buf, pos)
-            else:
-                return pos
-            following = pos + 9 + length
-            if following > end:
-                return pos
-            if opcode == _OP_MESSAGE and length >= _MESSAGE_BODY_HEAD:
-                route = routes.get(channel_id)
-                if route is None:
-                    unrouted(channel_id)
-                else:
-                    route[0](log_time)
-                    route[1](publish_time)
-                    route[2](buf[pos + head_size : following])
-            else:
+        data = np.frombuffer(buf, dtype=np.uint8)
+        while True:
+            n, pos, state, cids, logs, pubs, starts, stops = scan_buffer(data, pos, end)
+            if n:
+                self._route(data, cids, logs, pubs, starts, stops)
+            if state == 1:  # a record the reader handles here
+                opcode, length = _RECORD_HEAD.unpack_from(buf, pos)
+                following = pos + 9 + length
                 self._record(opcode, buf, pos + 9, following)
-            pos = following
-        return pos
+                pos = following
+            elif state != 3:  # at the end, or at an incomplete record
+                return pos
+
+    def _route(self, data: np.ndarray, cids: np.ndarray, logs: np.ndarray, pubs: np.ndarray, starts: np.ndarray,
+               stops: np.ndarray) -> None:
+        """Hand the scanned messages to their channels' readers (file order kept per channel)."""
+        routes = self.routes
+        if cids[0] == cids[-1] and (cids == cids[0]).all():
+            groups = [(int(cids[0]), None)]
+        else:
+            order = np.argsort(cids, kind="stable")
+            ordered = cids[order]
+            bounds = [0, *(np.flatnonzero(ordered[1:] != ordered[:-1]) + 1).tolist(), len(order)]
+            groups = [(int(ordered[a]), order[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+        for channel_id, index in groups:
+            reader = routes.get(channel_id)
+            count = len(cids) if index is None else len(index)
+            if reader is None:
+                self.unrouted[channel_id] += count
+            elif index is None:
+                reader.add(data, logs, pubs, starts, stops)
+            else:
+                reader.add(data, logs[index], pubs[index], starts[index], stops[index])
 
     def _record(self, opcode: int, buf: bytes, body: int, end: int) -> None:
         if opcode == _OP_CHUNK:
@@ -614,7 +645,7 @@ class _Reader:
         return self._pending_count() - before
 
     def _pending_count(self) -> int:
-        return sum(len(r.times) for r in self.readers.values())
+        return sum(r.pending for r in self.readers.values())
 
     def _flush(self) -> None:
         for reader in self.readers.values():
@@ -657,10 +688,10 @@ class _Reader:
                     self.skipped[channel_id] = (topic, f"rig.json has no {what}")
                     return
                 name, position = sensor.name, sensor.position
-            decode = self.topics is None or topic in self.topics
+            decode = (self.topics is None or topic in self.topics) and (self.kinds is None or info.kind in self.kinds)
             reader = _ChannelReader(topic, info, name, position, len(rig.truth_stations), decode)
             self.readers[topic] = reader
-        self.routes[channel_id] = reader.appenders
+        self.routes[channel_id] = reader
 
     def _require_rig(self) -> RigDescription:
         if self.rig is None:

@@ -19,7 +19,7 @@ from typing import Protocol
 import numpy as np
 import orjson
 
-from analytics import AnalysisConfig, EngineWindow, ModalMonitor, MonitoringEngine, WindowResult
+from analytics import AnalysisConfig, Baseline, EngineWindow, ModalMonitor, MonitoringEngine, WindowResult
 from contract import (
     IMU_PLANAR_COLUMNS,
     TEMPERATURE_TOPIC,
@@ -35,7 +35,6 @@ from contract import (
     SpectrumDocument,
     TrendRow,
     WindowDocument,
-    chart_name,
     estimate_payloads,
 )
 from estimator import (
@@ -55,6 +54,7 @@ from estimator import (
     restart_state,
 )
 
+from ..analysis import trend_rows
 from ..recording import FollowBlock
 from ._alarms import alarm_changes, clear_changes
 from ._archive import Archive
@@ -363,7 +363,7 @@ class _Analytics:
     time, so replaying a period gives the same windows (and the unique key of the trend rows holds)."""
 
     def __init__(self, model: ImmsModel, config: AnalysisConfig, monitor_state: dict | None, last_window_start: float | None,
-                 source_id: str, min_coverage: float = 0.8) -> None:
+                 source_id: str, min_coverage: float = 0.8, baseline: dict | None = None) -> None:
         self.model = model
         self.config = config
         self.source_id = source_id
@@ -372,7 +372,7 @@ class _Analytics:
         self.step_s = config.window_s * (1 - config.overlap)
         self.min_coverage = min_coverage
         self.signatures = None
-        self.monitor = self._monitor(monitor_state)
+        self.monitor = self._monitor(monitor_state, baseline)
         self.engine: MonitoringEngine | None = None
         self._next_start_ns = None if last_window_start is None else int(round(last_window_start * _NS)) + int(round(self.step_s * _NS))
         self.not_before_ns: int | None = None  # windows starting earlier are not analysed (filter converging)
@@ -380,7 +380,7 @@ class _Analytics:
         self.learning_baseline = self.monitor.baseline is None
         self._temperature: list[tuple[np.ndarray, np.ndarray]] = []  # samples before the engine starts
 
-    def _monitor(self, state: dict | None) -> ModalMonitor:
+    def _monitor(self, state: dict | None, baseline: dict | None = None) -> ModalMonitor:
         m = self.model
         if self.signatures is None:
             # FE-predicted damage signatures of the rig: where along the beam a flag points.
@@ -394,8 +394,20 @@ class _Analytics:
                 return monitor
             except (ValueError, TypeError) as exc:
                 log.warning("stored monitor state unusable (%s); starting a new monitor", exc)
-        return ModalMonitor(m.units.frequencies_hz, m.units.curvature(m.stations), m.stations, fs=FS, config=self.config,
-                            beam_length=m.rig.beam.length, signatures=self.signatures)
+        stored = None
+        if baseline is not None:
+            try:
+                stored = Baseline.from_dict(baseline)
+            except ValueError as exc:
+                log.warning("stored baseline unusable (%s); learning a new one", exc)
+        try:
+            return ModalMonitor(m.units.frequencies_hz, m.units.curvature(m.stations), m.stations, fs=FS, config=self.config,
+                                baseline=stored, beam_length=m.rig.beam.length, signatures=self.signatures)
+        except ValueError as exc:  # a baseline of another model (modes)
+            if stored is None:
+                raise
+            log.warning("stored baseline does not fit the model (%s); learning a new one", exc)
+            return self._monitor(None)
 
     # -- the engine's counters ------------------------------------------------------------------
     @property
@@ -467,15 +479,7 @@ class _Analytics:
         res = w.result
         start, end = w.start_ns / _NS, res.end_s
         self.learning_baseline = self.monitor.baseline is None
-        rows = []
-        for i, e in enumerate(res.estimates):
-            score = res.frequency_scores[i] if i < len(res.frequency_scores) else None
-            rows.append(TrendRow(
-                source=self.source_id, window_start_s=start, window_end_s=end, mode=e.mode, unit=e.unit, kind=res.kind,
-                frequency_hz=e.frequency_hz, damping_ratio=e.damping_ratio, amplitude=e.amplitude, confidence=e.confidence,
-                temperature_c=res.temperature_c, curvature_index=None if res.curvature is None else res.curvature.total,
-                score_sigma=score, level=res.levels.get(chart_name("frequency", e.mode)),
-            ))
+        rows = trend_rows(self.source_id, res, start, end)
         spec = res.spectrum
         pad = spec.pad_factor
         f, amp = spec.frequencies[::pad], spec.amplitude[::pad]  # the unpadded DFT bins of the window
@@ -537,7 +541,10 @@ class Pipeline:
         overrides = {k: v for k, v in (("hold_windows", raise_windows), ("clear_windows", clear_windows)) if v is not None}
         analysis = analysis.model_copy(update=overrides) if overrides else analysis
         self.analysis = analysis
-        self.analytics = _Analytics(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id)
+        # Without a monitor to resume, the source's active baseline (shm baseline learn) arms a new one.
+        baseline = None if blob.get("monitor") else storage.active_baseline(source_id)
+        self.analytics = _Analytics(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id,
+                                    baseline=baseline)
         # The alarms as the database holds them: the engine's alarm logic runs ahead of it while
         # windows wait for the database, and what is reported comes from here.
         self.committed_alarms: dict[str, str] = self.analytics.active()

@@ -259,8 +259,12 @@ class FileSource(Source):
                 raise FileNotFoundError(f"replay: {self.path} does not exist")
             self._open()
 
+    def _kinds(self) -> tuple[str, ...]:
+        """What the pipeline uses: the sensors, and the truth only when it is shown."""
+        return ("imu", "tof", "strain", "bearing", "temperature", *(("truth",) if self.truth else ()))
+
     def _open(self) -> None:
-        self.follower = RecordingFollower(self.path, rig=self._rig_override)
+        self.follower = RecordingFollower(self.path, rig=self._rig_override, kinds=self._kinds())
         self._early = self.follower.poll(max_bytes=1 << 16)  # rig.json comes with the first records
         self.rig = self.follower.rig
         if self.rig is None and not self.follow:
@@ -344,7 +348,7 @@ class FileSource(Source):
 
     def _replay_in_bulk(self, pacer: "_Pacer") -> None:
         """Replay a whole recording read at once, in 10 s slices of data time across all channels."""
-        rec = read_recording(self.path, rig=self._rig_override)
+        rec = read_recording(self.path, rig=self._rig_override, kinds=self._kinds())
         self.problems = list(rec.report.problems)
         for report in rec.report.topics.values():
             for reason in ("malformed", "nonfinite", "duplicate", "backwards"):

@@ -174,6 +174,21 @@ _MIGRATIONS: tuple[str, ...] = (
     UPDATE outbox SET alarm_id = (SELECT alarm_id FROM alarm_events WHERE alarm_events.id = outbox.event_id);
     CREATE INDEX outbox_order ON outbox (channel, target, alarm_id, status, id);
     """,
+    # 4: recordings reprocessed into the trends (shm reprocess): a file is done once its row is
+    # committed with its trend rows; key = content hash + configuration (incl. the source)
+    """
+    CREATE TABLE reprocessed (
+        key TEXT PRIMARY KEY,
+        path TEXT NOT NULL,
+        source TEXT NOT NULL,
+        content_sha256 TEXT NOT NULL,
+        configuration TEXT NOT NULL,
+        windows INTEGER NOT NULL,
+        start_s REAL,
+        end_s REAL,
+        done_at REAL NOT NULL
+    );
+    """,
 )
 
 SCHEMA_VERSION = len(_MIGRATIONS)
@@ -487,6 +502,72 @@ class Storage:
             d["data"] = None if d["data"] is None else json.loads(d["data"])
             out.append(d)
         return out
+
+    def store_baseline(self, source: str, baseline: dict) -> int:
+        """Store ``baseline`` (``analytics.Baseline.to_dict()``) as the active baseline of
+        ``source`` (the previous one superseded); the stored monitor state of the source is
+        dropped so that the service starts its monitor from this baseline. Returns its id."""
+        now = time.time()
+
+        def run(db: sqlite3.Connection) -> int:
+            db.execute("UPDATE baselines SET state='superseded' WHERE source=? AND state IN ('active', 'learning')", (source,))
+            cur = db.execute(
+                "INSERT INTO baselines (source, state, requested_at, learnt_at, start_s, end_s, data) "
+                "VALUES (?, 'active', ?, ?, ?, ?, ?)",
+                (source, now, now, baseline.get("start_s"), baseline.get("end_s"), json.dumps(baseline)),
+            )
+            db.execute("UPDATE monitor_state SET monitor=NULL WHERE source=?", (source,))
+            return int(cur.lastrowid)
+
+        return self._write(run, durable=True)
+
+    def active_baseline(self, source: str) -> dict | None:
+        """The data of the active baseline of ``source``, or None."""
+        def run(db: sqlite3.Connection):
+            return db.execute(
+                "SELECT data FROM baselines WHERE source=? AND state='active' AND data IS NOT NULL ORDER BY id DESC LIMIT 1",
+                (source,)).fetchone()
+
+        row = self._read(run)
+        return None if row is None else json.loads(row["data"])
+
+    # -- reprocessed recordings ---------------------------------------------------------------
+
+    def reprocessed(self, keys: Sequence[str]) -> set[str]:
+        """Which of ``keys`` are done (committed by ``commit_reprocessed``)."""
+        def run(db: sqlite3.Connection) -> set[str]:
+            return {r["key"] for r in db.execute(
+                f"SELECT key FROM reprocessed WHERE key IN ({', '.join('?' * len(keys))})", tuple(keys)).fetchall()}
+
+        return self._read(run)
+
+    def commit_reprocessed(self, *, key: str, path: str, source: str, content_sha256: str, configuration: str,
+                           windows: int, start_s: float | None, end_s: float | None, rows: list[TrendRow]) -> None:
+        """A reprocessed recording's trend rows (replacing those of the same windows) and its
+        ledger row, in one transaction: after a kill a file is either done or not started."""
+        now = time.time()
+        for r in rows:
+            if r.source != source:
+                raise ValueError(f"trend row of source {r.source!r} for source {source!r}")
+
+        def run(db: sqlite3.Connection) -> None:
+            db.executemany(
+                f"INSERT OR REPLACE INTO trends ({', '.join(TREND_COLUMNS)}, created_at) VALUES ({', '.join('?' * (len(TREND_COLUMNS) + 1))})",
+                [(*(getattr(r, c) for c in TREND_COLUMNS), now) for r in rows],
+            )
+            db.execute(
+                "INSERT INTO sources (id, kind, detail, first_seen_s, last_seen_s) VALUES (?, 'reprocess', ?, ?, ?) "
+                "ON CONFLICT(id) DO UPDATE SET first_seen_s=MIN(first_seen_s, excluded.first_seen_s), "
+                "last_seen_s=MAX(last_seen_s, excluded.last_seen_s)",
+                (source, path, start_s if start_s is not None else now, end_s if end_s is not None else now),
+            )
+            db.execute(
+                "INSERT OR REPLACE INTO reprocessed (key, path, source, content_sha256, configuration, windows, start_s, end_s, done_at) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (key, path, source, content_sha256, configuration, windows, start_s, end_s, now),
+            )
+
+        self._write(run)
 
     # -- windows --------------------------------------------------------------------------------
 

@@ -10,6 +10,7 @@ import numpy as np
 import orjson
 
 from ..recording import RecordingWriter
+from ..recording._writer import encode_payloads_json
 from ._settings import SimulationSettings
 from ._virtual_rig import SampleBlock, VirtualRig
 
@@ -40,29 +41,29 @@ class SimulationSummary:
 
 
 def encode_payloads(topic: str, values: np.ndarray) -> list[bytes]:
-    """JSON payloads of the contract for the rows of ``values`` of ``topic``."""
+    """JSON payloads of the contract for the rows of ``values`` of ``topic`` (exact-size bytes)."""
     rows = values.tolist()
-    dumps = orjson.dumps
     if topic.startswith("/imu/"):
-        return [dumps({"accel": r[:3], "gyro": r[3:]}) for r in rows]
-    if topic.startswith("/tof/") or topic == "/bearing/displacement":
-        return [dumps({"distance": r[0]}) for r in rows]
-    if topic.startswith("/strain/"):
-        return [dumps({"strain": r[0]}) for r in rows]
-    if topic == "/env/temperature":
-        return [dumps({"celsius": r[0]}) for r in rows]
-    raise ValueError(f"no payload encoding for topic {topic!r}")
+        objects = [{"accel": r[:3], "gyro": r[3:]} for r in rows]
+    elif topic.startswith("/tof/") or topic == "/bearing/displacement":
+        objects = [{"distance": r[0]} for r in rows]
+    elif topic.startswith("/strain/"):
+        objects = [{"strain": r[0]} for r in rows]
+    elif topic == "/env/temperature":
+        objects = [{"celsius": r[0]} for r in rows]
+    else:
+        raise ValueError(f"no payload encoding for topic {topic!r}")
+    return encode_payloads_json(objects)
 
 
 def _truth_payloads(truth: dict[str, np.ndarray]) -> list[bytes]:
-    dumps = orjson.dumps
-    return [
-        dumps({"d": d, "h": h, "phi": p, "e": e, "deflection": w, "curvature": k})
+    return encode_payloads_json([
+        {"d": d, "h": h, "phi": p, "e": e, "deflection": w, "curvature": k}
         for d, h, p, e, w, k in zip(
             truth["d"].tolist(), truth["h"].tolist(), truth["phi"].tolist(), truth["e"].tolist(),
             truth["deflection"].tolist(), truth["curvature"].tolist(),
         )
-    ]
+    ])
 
 
 def write_block(writer: RecordingWriter, block: SampleBlock, start_time_ns: int) -> dict[str, int]:

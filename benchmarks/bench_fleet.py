@@ -1,0 +1,183 @@
+"""Issue 14's figures for archives and structures (benchmarks, not tests):
+
+- ``shm reprocess`` of eight one-hour recordings on 1 and 2 workers of a LocalCluster (the
+  scaling ratio), each run into a fresh database;
+- the scheduler's overhead per task, from a few hundred small tasks;
+- on paper, what N machines would give (the measured per-file time and overhead);
+- memory per structure: RSS of one process as it adds simulated structures (each a
+  ``MonitoringService`` of its own, ``--no-archive``, no dashboard) at real time.
+
+Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_fleet [--replay FILE] [--files 8] [--skip-reprocess]
+     [--skip-memory] [--structures 4]
+(``main()`` is the entry for ``python -m benchmarks``; the eight files are the one-hour recording
+under eight names, hard links: the work per file is that of eight different hours.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def _load() -> str:
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def bench_reprocess(recording: Path, files: int, workers: tuple[int, ...] = (1, 2)) -> dict:
+    """``shm reprocess`` of ``files`` copies on each worker count, as a subprocess (wall and
+    CPU of the whole run, the cluster's start included)."""
+    if not recording.exists():
+        print(f"simulating {recording} (one hour, ambient) ...", flush=True)
+        subprocess.run([sys.executable, "-m", "shm_service.cli", "simulate", "--duration", "3600", "--excitation", "ambient",
+                        "--out", str(recording)], check=True)
+    results = {}
+    with tempfile.TemporaryDirectory(dir=recording.parent) as tmp:
+        paths = []
+        for i in range(files):
+            path = Path(tmp) / f"hour-{i + 1:02d}.mcap"
+            os.link(recording, path)
+            paths.append(str(path))
+        for n in workers:
+            db = Path(tmp) / f"reprocess-{n}.sqlite"
+            cmd = [sys.executable, "-m", "shm_service.cli", "reprocess", *paths, "--db", str(db), "--workers", str(n), "--json"]
+            load = _load()
+            started = time.perf_counter()
+            proc = subprocess.run(cmd, capture_output=True, text=True)
+            wall = time.perf_counter() - started
+            if proc.returncode != 0:
+                print(proc.stderr[-2000:], flush=True)
+            doc = json.loads(proc.stdout)
+            statuses = [f["status"] for f in doc["files"]]
+            results[n] = {"workers": n, "files": files, "wall_s": round(wall, 1), "done": statuses.count("done"),
+                          "windows": sum(f["windows"] or 0 for f in doc["files"]), "load_before": load, "load_after": _load(),
+                          "data_hours_per_wall_hour": round(files * 3600 / wall, 1)}
+            print(f"[reprocess] {results[n]}", flush=True)
+    if len(workers) > 1:
+        a, b = results[workers[0]]["wall_s"], results[workers[-1]]["wall_s"]
+        print(f"[reprocess] scaling {workers[0]} -> {workers[-1]} workers: {a / b:.2f}x faster "
+              f"(ideal {workers[-1] / workers[0]:.0f}x; this machine has {os.cpu_count()} cores, load {_load()})", flush=True)
+    return results
+
+
+def _noop(x: int) -> int:
+    return x + 1
+
+
+def bench_scheduler(tasks: int = 400, workers: int = 2) -> dict:
+    """Overhead per task: ``tasks`` tasks that do nothing, on a fresh LocalCluster, wall per task."""
+    import logging
+
+    from distributed import Client, LocalCluster, wait
+
+    with LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", silence_logs=logging.CRITICAL) as cluster, \
+            Client(cluster) as client:
+        client.submit(_noop, -1).result()  # workers up
+        best = None
+        for _ in range(3):
+            started = time.perf_counter()
+            futures = client.map(_noop, range(tasks), pure=False)
+            wait(futures)
+            elapsed = time.perf_counter() - started
+            best = elapsed if best is None else min(best, elapsed)
+            del futures
+    result = {"tasks": tasks, "workers": workers, "wall_s": round(best, 3), "overhead_ms_per_task": round(1e3 * best / tasks, 3),
+              "load": _load()}
+    print(f"[scheduler] {result}", flush=True)
+    return result
+
+
+def bench_commit(rows_per_file: int = 560, files: int = 20) -> float:
+    """Seconds the client spends committing one reprocessed hour (its trend rows and ledger row)."""
+    from contract import TrendRow
+    from shm_service.service._storage import Storage
+
+    with tempfile.TemporaryDirectory() as tmp:
+        storage = Storage(Path(tmp) / "c.sqlite")
+        started = time.perf_counter()
+        for f in range(files):
+            rows = [TrendRow(source=f"s{f}", window_start_s=30.0 * (i // 5), window_end_s=30.0 * (i // 5) + 60, mode=i % 5 + 1,
+                             unit=1, kind="ambient", frequency_hz=1.0) for i in range(rows_per_file)]
+            storage.commit_reprocessed(key=f"k{f}", path=f"/f{f}", source=f"s{f}", content_sha256="0" * 64, configuration="{}",
+                                       windows=rows_per_file // 5, start_s=0.0, end_s=3600.0, rows=rows)
+        per_file = (time.perf_counter() - started) / files
+        storage.close()
+    print(f"[commit] {1e3 * per_file:.1f} ms per reprocessed hour ({rows_per_file} trend rows)", flush=True)
+    return per_file
+
+
+def on_paper(per_file_s: float, overhead_s: float, commit_s: float, files: int = 1000, cores: int = 2) -> None:
+    """What N machines of ``cores`` cores would give for ``files`` one-hour recordings: the
+    files run in parallel on N·cores workers; the scheduler's per-task overhead and the
+    client's commits (one SQLite writer) are serial."""
+    print(f"[paper] {files} one-hour files, {per_file_s:.1f} s per file on one core, "
+          f"{1e3 * overhead_s:.1f} ms scheduler overhead and {1e3 * commit_s:.0f} ms commit per file (serial):")
+    for n in (1, 2, 4, 8, 16, 64):
+        parallel = files * per_file_s / (n * cores)
+        serial = files * (overhead_s + commit_s)
+        wall = max(parallel, serial)  # the client commits while the workers compute
+        print(f"[paper]   {n:3d} machine(s): {wall / 3600:7.2f} h ({files * 3600 / wall:8.0f} data-hours per hour); "
+              f"serial part {serial:.0f} s")
+    print("[paper]   (reading the files is the other shared resource: 600 MB per one-hour file from the shared disk)")
+
+
+def bench_memory_per_structure(structures: int = 4, settle_s: float = 90.0) -> dict:
+    """RSS of this process with 1..``structures`` simulated structures at real time, each a
+    MonitoringService (its own database, no archive, no dashboard), sampled after ``settle_s``."""
+    import psutil
+
+    from shm_service.service._config import load_settings
+    from shm_service.service._service import MonitoringService
+
+    proc = psutil.Process()
+    services = []
+    samples = []
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            for k in range(structures):
+                settings = load_settings(None, {
+                    "db": f"{tmp}/s{k}.sqlite", "source": {"spec": "sim", "speed": 1.0, "id": f"mast-{k:02d}"},
+                    "sim": {"duration_s": 3600.0, "seed": k + 1}, "dashboard": {"enabled": False},
+                    "archive": {"enabled": False},
+                })
+                service = MonitoringService(settings, environ={})
+                service.start()
+                services.append(service)
+                time.sleep(settle_s)
+                rss = proc.memory_info().rss / 2**20
+                samples.append(round(rss, 1))
+                print(f"[memory] {k + 1} structure(s): RSS {rss:7.1f} MiB", flush=True)
+        finally:
+            for service in services:
+                service.stop(drain_s=0)
+    increments = [round(b - a, 1) for a, b in zip(samples, samples[1:])]
+    result = {"rss_mib": samples, "per_additional_structure_mib": increments, "load": _load()}
+    print(f"[memory] {json.dumps(result)}", flush=True)
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--replay", default="/tmp/hour.mcap", help="one-hour recording (simulated if missing)")
+    p.add_argument("--files", type=int, default=8)
+    p.add_argument("--structures", type=int, default=4)
+    p.add_argument("--skip-reprocess", action="store_true")
+    p.add_argument("--skip-memory", action="store_true")
+    args, _ = p.parse_known_args(argv)
+    if not args.skip_memory:  # first: before this process imports the cluster's libraries
+        bench_memory_per_structure(args.structures)
+    scheduler = bench_scheduler()
+    if not args.skip_reprocess:
+        results = bench_reprocess(Path(args.replay), args.files)
+        one = results[1]
+        on_paper(one["wall_s"] / args.files, scheduler["overhead_ms_per_task"] / 1e3, bench_commit())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
