@@ -17,7 +17,9 @@ recording. Speed: the analytics of 30 minutes of b(t) (the estimator excluded) â
 
 Recordings and b(t) are cached under var/bench/ (or $SHM_BENCH_CACHE).
 
-Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_operational [--indep DIR] [--seeds 11,12] [--no-peer]
+Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_operational [--indep DIR] [--seeds 11,12] [--no-peer] [--no-virtual]
+(``--indep DIR`` may hold the recordings or their ``shm estimate --out`` estimates under the same names;
+``--no-virtual``: the independent recordings only.)
 """
 
 from __future__ import annotations
@@ -207,18 +209,21 @@ def main(argv: list[str] | None = None) -> None:
     verdict: dict[str, bool] = {}
     base = dict(excitation="operational", duration=DURATION)
 
+    virtual = "--no-virtual" not in args  # --no-virtual: the independent recordings only
     # constant temperature: frequencies, damping, modes listed
-    for sd in seeds:
+    for sd in seeds if virtual else []:
         path = recording_path(SimulationSettings(seed=sd, **base))
         rig, data, est = _cached_deformations(path)
         res, wall, cpu = _analyse(rig, data)
         report += modal_rows(f"virtual rig operational, constant T, seed {sd}", rig, data, res, wall, cpu, est, _peer(path, data, peer_on), verdict)
     # a 20 K swing: a baseline from one healthy recording, a second healthy one and a damaged one against it
-    report.append("\n[20 K swing: baseline learnt from a healthy 30-minute recording (seed 21)]")
-    rig, healthy, _ = _cached_deformations(recording_path(SimulationSettings(seed=21, temperature_swing=20.0, **base)))
-    bl = _baseline(rig, healthy)
+    if virtual:
+        report.append("\n[20 K swing: baseline learnt from a healthy 30-minute recording (seed 21)]")
+        rig, healthy, _ = _cached_deformations(recording_path(SimulationSettings(seed=21, temperature_swing=20.0, **base)))
+        bl = _baseline(rig, healthy)
     for name, kw, at in [("healthy, seed 22, against seed 21's baseline", dict(seed=22), None),
-                         ("0.126 kg at the tip from 600 s, seed 23, against seed 21's", dict(seed=23, damage=("mass:0.126@4.0",), damage_at=DAMAGE_AT), DAMAGE_AT)]:
+                         ("0.126 kg at the tip from 600 s, seed 23, against seed 21's", dict(seed=23, damage=("mass:0.126@4.0",), damage_at=DAMAGE_AT),
+                          DAMAGE_AT)] if virtual else []:
         rig, data, _ = _cached_deformations(recording_path(SimulationSettings(temperature_swing=20.0, **base, **kw)))
         res, _, _ = _analyse(rig, data, bl)
         report += damage_rows(name, res, at, verdict)
