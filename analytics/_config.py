@@ -48,9 +48,10 @@ class AnalysisConfig(BaseModel):
     ewma_lambda: float = Field(0.2, gt=0, le=1, description="EWMA smoothing of the control charts [0.2]")
     warning_sigma: float = Field(3.0, gt=0, description="warning level of the charts, σ of the EWMA [3]")
     alarm_sigma: float = Field(5.0, gt=0, description="alarm level, σ of the EWMA [5]")
-    curvature_alarm_sigma: float = Field(6.0, gt=0, description="alarm level of the curvature chart, σ of its χ²/p statistic [6]: above the "
-                                         "frequency charts' 5 because the statistic's upper tail is longer than a normal one (healthy simulated "
-                                         "30 min runs, ideal and realistic: at most 3.6)")
+    curvature_alarm_sigma: float = Field(6.0, gt=0, description="alarm level of the curvature chart, σ of its statistic Q (mean (Δ/σ)², its healthy std from the "
+                                         "baseline's error covariance over the stations) [6]: above the frequency charts' 5 because Q's upper tail "
+                                         "is longer than a normal one (healthy simulated 30 min runs, ideal and realistic: at most 3.6 with the "
+                                         "χ²/p std; an independent simulation's healthy record against another's baseline: at most 4.4)")
     clear_sigma: float = Field(2.0, ge=0, description="an alarm clears below this level, σ of the EWMA [2]")
     hold_windows: int = Field(3, ge=1, description="consecutive windows at or beyond a chart's warning (alarm) line to raise a warning (an alarm) [3]")
     clear_windows: int = Field(3, ge=1, description="consecutive windows below clear_sigma to clear a raised alarm [3]")

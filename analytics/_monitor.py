@@ -380,6 +380,9 @@ class ModalMonitor:
         self._cross = None  # (modes, Γ) complex EWMA of cross spectra
         self._cross_sum = None
         self._cross_windows = 0  # ambient windows in the EWMA (its scatter settles after the memory)
+        # (modes,) Σ w_k²·p_k over the EWMA's weights w_k and the windows' powers p_k of the mode on
+        # its carrying unit: the average's scatter (see _shape_change_std)
+        self._cross_w2p = None
         self._ci_hist: list = []
         self._charts: list[EwmaChart] = []
         self._ci_chart: EwmaChart | None = None
@@ -590,7 +593,12 @@ class ModalMonitor:
             C = cross_spectra(B, self.fs, self.ref, window=c.window)  # (modes, Γ)
             G = np.array([C[i] * np.conj(C[i, self.units[i]]) for i in range(self.n_modes)])
             a = 1.0 / c.curvature_memory_windows
-            self._cross = G if self._cross is None else (1 - a) * self._cross + a * G
+            power = np.array([G[i, self.units[i]].real for i in range(self.n_modes)])
+            if self._cross is None:
+                self._cross, self._cross_w2p = G, power
+            else:
+                self._cross = (1 - a) * self._cross + a * G
+                self._cross_w2p = None if self._cross_w2p is None else (1 - a) ** 2 * self._cross_w2p + a * a * power
             self._cross_sum = G if self._cross_sum is None else self._cross_sum + G
             self._cross_windows += 1
         location = None
@@ -669,7 +677,17 @@ class ModalMonitor:
         return float(slope[i])
 
     def _shape_change_std(self) -> np.ndarray | None:
-        """1σ per mode of (averaged shape − baseline shape) per station for a healthy structure."""
+        """1σ per mode of (averaged shape − baseline shape) per station for a healthy structure.
+
+        A window's shape comes from its cross spectra at the mode, whose noise (the other modes'
+        off-resonant response, the estimator's noise) does not grow with the mode's own random
+        amplitude in the window: the shape's variance is σ²·p̄/p for a window of power p (the mode
+        on its carrying unit; p̄ the mean power), as the healthy records show (log-slope −1 of
+        the squared shape error against log p). The averages are power-weighted sums of the
+        windows' cross spectra, so the average's variance is σ²·Σ w²p / Σ w p for weights w
+        (Σ w = 1): the EWMA's actual weights, the first window's (1 − a)^(n−1) share included,
+        and a strong window counting more than a weak one. σ (one window at mean power) is the
+        baseline's jackknife, its own sum's variance σ²/n."""
         bl = self.baseline
         if bl.curvature_windows < 1:  # a baseline stored before this statistic existed
             return None
@@ -677,10 +695,15 @@ class ModalMonitor:
         own = bl.curvature_shape_std if len(bl.curvature_shape_std) == self.n_modes else (0.0,) * self.n_modes
         a = 1.0 / self.config.curvature_memory_windows
         r = min(max(bl.curvature_index_rho, 0.0), 0.95)
-        ewma = a / (2 - a) * (1 + r * (1 - a)) / (1 - r * (1 - a))
+        corr = (1 + r * (1 - a)) / (1 - r * (1 - a))  # successive windows' correlation, in an EWMA
+        share = np.full(self.n_modes, a / (2 - a))  # the settled EWMA's, for a state stored before the weights were tracked
+        if self._cross_w2p is not None and self._cross is not None:
+            power = np.array([self._cross[i, self.units[i]].real for i in range(self.n_modes)])
+            ok = power > 0
+            share[ok] = np.clip(self._cross_w2p[ok] / power[ok], 0.0, 1.0)
         n_eff = max(1.0, bl.curvature_windows * (1 - r) / (1 + r))
         std = np.maximum(np.asarray(own, dtype=float), self.config.curvature_min_std)
-        return std * math.sqrt(ewma + 1.0 / n_eff)
+        return std * np.sqrt(share * corr + 1.0 / n_eff)
 
     def _locate(self, delta: np.ndarray | None, dsd: np.ndarray | None) -> DamageLocation | None:
         """Model-assisted location of the present change (EWMA of the charts) against the signatures."""
@@ -784,6 +807,7 @@ class ModalMonitor:
         hist = list(self._ci_hist)
         n = len(hist)
         shape_std, rho = (), 0.0
+        q_std = None
         if n >= 3:
             total = np.sum(hist, axis=0)
             jack = []
@@ -799,12 +823,27 @@ class ModalMonitor:
                 J = np.array(jack)  # (n, modes, η)
                 var_mean = (n - 1) / n * np.sum((J - J.mean(axis=0)) ** 2, axis=0)  # variance of the n-window shape
                 shape_std = tuple(float(x) for x in np.sqrt(n * np.mean(var_mean, axis=1)))
+                # Q pools each mode's stations under one σ, but their errors are neither equally large
+                # nor independent (a normalised shape spans Γ − 1 directions over len(η) stations):
+                # its std is √(2·Σ tr(C²))/(modes·len(η)), C a mode's error covariance over η
+                # normalised to a unit mean variance (the jackknife's); χ²_p/p only if C is diagonal
+                D = J - J.mean(axis=0)
+                trace2 = 0.0
+                for i in range(self.n_modes):
+                    C = D[:, i, :].T @ D[:, i, :]
+                    scale = float(np.trace(C)) / C.shape[0]
+                    if scale > 0:
+                        trace2 += float(np.sum((C / scale) ** 2))
+                if trace2 > 0:
+                    q_std = math.sqrt(2.0 * trace2) / (self.n_modes * self.eta.size)
                 x = (J - J.mean(axis=0)).reshape(n, -1)  # influence of each window (sign flipped)
                 den = float(np.sum(x[:-1] ** 2))
                 rho = float(np.clip(np.sum(x[:-1] * x[1:]) / den, 0.0, 0.95)) if den > 0 else 0.0
         # Q = mean (Δ/σ)² is ~χ²_p/p; p: the shape of a mode spans Γ − 1 directions once normalised
         p = max(1, self.n_modes * min(self.gamma - 1, self.eta.size))
-        return Baseline(tuple(modes), base_shapes, 1.0, math.sqrt(2.0 / p), rho, float(self._first_trusted), float(t_end), shape_std, n,
+        if q_std is None:
+            q_std = math.sqrt(2.0 / p)
+        return Baseline(tuple(modes), base_shapes, 1.0, q_std, rho, float(self._first_trusted), float(t_end), shape_std, n,
                         self._trusted, float(c.window_s))
 
     # -- persistence -----------------------------------------------------------------------
@@ -818,6 +857,7 @@ class ModalMonitor:
             "records": [{**vars(r), "shapes": [None if s is None else list(s) for s in r.shapes]} for r in self._records],
             "first_trusted": self._first_trusted, "trusted": self._trusted,
             "cross": cx(self._cross), "cross_sum": cx(self._cross_sum), "cross_windows": self._cross_windows,
+            "cross_w2p": None if self._cross_w2p is None else self._cross_w2p.tolist(),
             "ci_hist": [cx(G) for G in self._ci_hist],
             "power": None if self._power is None else self._power.tolist(),
             "charts": [ch.state_dict() for ch in self._charts],
@@ -842,6 +882,7 @@ class ModalMonitor:
             m._cross, m._cross_sum = ux(d["cross"]), ux(d["cross_sum"])
             # States stored before the counter existed had a settled average.
             m._cross_windows = int(d.get("cross_windows", m.config.curvature_memory_windows))
+            m._cross_w2p = None if d.get("cross_w2p") is None else np.asarray(d["cross_w2p"], dtype=float)
             m._ci_hist = [ux(g) for g in d["ci_hist"]]
             m._power = None if d.get("power") is None else np.asarray(d["power"], dtype=float)
             m._charts = [EwmaChart.from_state_dict(c) for c in d["charts"]]

@@ -17,7 +17,9 @@ recording. Speed: the analytics of 30 minutes of b(t) (the estimator excluded) �
 
 Recordings and b(t) are cached under var/bench/ (or $SHM_BENCH_CACHE).
 
-Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_operational [--indep DIR] [--seeds 11,12] [--no-peer]
+Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_operational [--indep DIR] [--seeds 11,12] [--no-peer] [--no-virtual]
+(``--indep DIR`` may hold the recordings or their ``shm estimate --out`` estimates under the same names;
+``--no-virtual``: the independent recordings only.)
 """
 
 from __future__ import annotations
@@ -118,17 +120,26 @@ def modal_rows(name: str, rig, data, res, wall: float, cpu: float, est_s: float,
     gamma = data.b.shape[1]
     rows = [f"\n[{name}]  analytics {wall:.1f} s wall, {cpu:.1f} s CPU for {data.times[-1] - data.times[0]:.0f} s of b(t) "
             f"(estimator {est_s:.0f} s when it ran)" + (f"; pyOMA-2 SSI-cov {peer[2]:.1f} s" if peer else ""),
-            " mode  exact Hz    ours Hz   err %   peer Hz   err %  |  ζ exact  ζ ours  err %  method      ζ peer  err %"]
+            " mode  exact Hz    ours Hz   err %  ±1σ %   peer Hz   err %  |  ζ exact  ζ ours  err %  ±1σ %  method      ζ peer  err %"]
     ok_f, ok_z = True, True
+    cover_f = cover_z = stated_f = stated_z = 0
     for m in res.modes:
         k = m.mode - 1
         f, z = m.frequency_hz, m.damping_ratio
         pf = pz = None
         if peer and k < peer[0].size and np.isfinite(peer[0][k]):
             pf, pz = float(peer[0][k]), float(peer[1][k])
-        rows.append(f"  {m.mode:3d}  {exact[k]:8.5f}  {f or float('nan'):9.5f} {_pct(f, exact[k])}  {pf or float('nan'):8.5f} {_pct(pf, exact[k])}"
-                    f"  |  {zeta[k]:.4f}  {z or float('nan'):.4f} {_pct(z, zeta[k])[:-2]:>6}  {m.damping_method or '-':10s}"
-                    f"  {pz or float('nan'):.4f} {_pct(pz, zeta[k])[:-2]:>6}")
+        sf, sz = m.frequency_std_hz, m.damping_std
+        if f is not None and sf:
+            stated_f += 1
+            cover_f += abs(f - exact[k]) <= sf
+        if z is not None and sz:
+            stated_z += 1
+            cover_z += abs(z - zeta[k]) <= sz
+        rows.append(f"  {m.mode:3d}  {exact[k]:8.5f}  {f or float('nan'):9.5f} {_pct(f, exact[k])} {100 * (sf or float('nan')) / exact[k]:6.3f}"
+                    f"  {pf or float('nan'):8.5f} {_pct(pf, exact[k])}"
+                    f"  |  {zeta[k]:.4f}  {z or float('nan'):.4f} {_pct(z, zeta[k])[:-2]:>6} {100 * (sz or float('nan')) / zeta[k]:5.0f}"
+                    f"  {m.damping_method or '-':10s}  {pz or float('nan'):.4f} {_pct(pz, zeta[k])[:-2]:>6}")
         if f is None:
             ok_f = False
         else:
@@ -138,8 +149,11 @@ def modal_rows(name: str, rig, data, res, wall: float, cpu: float, est_s: float,
             zbar = 0.3 if m.mode >= 3 else 0.5
             ok_z &= z is not None and abs(z / zeta[k] - 1) <= zbar
     listed = len(res.modes)
+    kinds = {k: sum(w.kind == k for w in res.windows) for k in ("ambient", "free_decay", "forced", "quiet")}
     rows.append(f"  modes listed {listed} (Γ + 3 = {gamma + 3}); flags {len(res.flags)}; windows {len(res.windows)} "
-                f"({sum(w.trusted for w in res.windows)} trusted, {sum(w.kind == 'forced' for w in res.windows)} forced)")
+                f"({sum(w.trusted for w in res.windows)} trusted: {kinds['ambient']} ambient, {kinds['free_decay']} free decay; "
+                f"{kinds['forced']} forced, {kinds['quiet']} quiet); within the stated 1σ: frequencies {cover_f}/{stated_f}, "
+                f"damping {cover_z}/{stated_z}")
     verdict[f"{name}: frequencies"] = ok_f
     verdict[f"{name}: damping"] = ok_z
     verdict[f"{name}: ≤ Γ+3 modes, no flag"] = listed <= gamma + 3 and not res.flags
@@ -162,8 +176,13 @@ def damage_rows(name: str, res, damage_at: float | None, verdict: dict) -> list[
     verdict[f"{name}: flagged within 600 s"] = ok
     kinds = sorted({f["kind"] + (str(f["mode"]) if f["mode"] else "") for f in first.flags})
     where = first.flags[0]
+    charts: dict[str, float] = {}  # each chart's first window in alarm (its end, s)
+    for w in res.windows:
+        for f in w.flags:
+            charts.setdefault(f["kind"] + (str(f["mode"]) if f["mode"] else ""), w.end_s)
     return [f"  {name:58s} first flag at {first.end_s:6.0f} s, {delay:4.0f} s after the damage ({','.join(kinds)}; "
-            f"{where.get('third')} third, {where.get('damage_kind')}){'' if ok else '  <-- FAILS'}"]
+            f"{where.get('third')} third, {where.get('damage_kind')}){'' if ok else '  <-- FAILS'}",
+            "      charts in alarm, first window end: " + ", ".join(f"{k} {v:.0f} s" for k, v in sorted(charts.items(), key=lambda kv: kv[1]))]
 
 
 def _peer(path: Path, data, on: bool):
@@ -190,18 +209,21 @@ def main(argv: list[str] | None = None) -> None:
     verdict: dict[str, bool] = {}
     base = dict(excitation="operational", duration=DURATION)
 
+    virtual = "--no-virtual" not in args  # --no-virtual: the independent recordings only
     # constant temperature: frequencies, damping, modes listed
-    for sd in seeds:
+    for sd in seeds if virtual else []:
         path = recording_path(SimulationSettings(seed=sd, **base))
         rig, data, est = _cached_deformations(path)
         res, wall, cpu = _analyse(rig, data)
         report += modal_rows(f"virtual rig operational, constant T, seed {sd}", rig, data, res, wall, cpu, est, _peer(path, data, peer_on), verdict)
     # a 20 K swing: a baseline from one healthy recording, a second healthy one and a damaged one against it
-    report.append("\n[20 K swing: baseline learnt from a healthy 30-minute recording (seed 21)]")
-    rig, healthy, _ = _cached_deformations(recording_path(SimulationSettings(seed=21, temperature_swing=20.0, **base)))
-    bl = _baseline(rig, healthy)
+    if virtual:
+        report.append("\n[20 K swing: baseline learnt from a healthy 30-minute recording (seed 21)]")
+        rig, healthy, _ = _cached_deformations(recording_path(SimulationSettings(seed=21, temperature_swing=20.0, **base)))
+        bl = _baseline(rig, healthy)
     for name, kw, at in [("healthy, seed 22, against seed 21's baseline", dict(seed=22), None),
-                         ("0.126 kg at the tip from 600 s, seed 23, against seed 21's", dict(seed=23, damage=("mass:0.126@4.0",), damage_at=DAMAGE_AT), DAMAGE_AT)]:
+                         ("0.126 kg at the tip from 600 s, seed 23, against seed 21's", dict(seed=23, damage=("mass:0.126@4.0",), damage_at=DAMAGE_AT),
+                          DAMAGE_AT)] if virtual else []:
         rig, data, _ = _cached_deformations(recording_path(SimulationSettings(temperature_swing=20.0, **base, **kw)))
         res, _, _ = _analyse(rig, data, bl)
         report += damage_rows(name, res, at, verdict)
@@ -231,6 +253,10 @@ def main(argv: list[str] | None = None) -> None:
                 rig, data, _ = _cached_deformations(const)
                 res, _, _ = _analyse(rig, data, bl)
                 report += damage_rows("independent h_const against h_swing's baseline", res, None, verdict)
+                # healthy across temperature: the 20 K swing against a baseline of constant temperature
+                bl_const = _baseline(rig, data)
+                res, _, _ = _analyse(rig, healthy, bl_const)
+                report += damage_rows("independent h_swing against h_const's baseline", res, None, verdict)
     _log("\n".join(report))
     _log("\nbars: " + "; ".join(f"{k}: {'ok' if v else 'FAIL'}" for k, v in verdict.items()))
 

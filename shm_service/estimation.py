@@ -217,7 +217,8 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None) -> Def
         units = unit_deformations(assemble_beam(rec.rig), len(columns))
         estimated_here = False
         try:  # written by `shm estimate --out`: the rest phase the estimator calibrated on
-            rest_end = float(json.loads(rec.metadata["estimator"]["calibration"])["rest_end"])
+            calibration = json.loads(rec.metadata["estimator"]["calibration"])  # estimator.Calibration.as_dict()
+            rest_end = float(calibration["rest_end_s"] if "rest_end_s" in calibration else calibration["rest_end"])
         except (KeyError, TypeError, ValueError):
             rest_end = None
     else:

@@ -48,11 +48,12 @@ def test_locate_damage_with_curvature_changes():
     assert loc.eta_m == 0.5 and loc.third == "upper" and loc.best_match == pytest.approx(1.0)
 
 
-def synthetic(duration=1500.0, mix_at=None, mix=0.0, seed=0):
-    """Three units, one narrow-band mode each; from mix_at mode 1 also moves unit 2 (shape change)."""
+def synthetic(duration=1500.0, mix_at=None, mix=0.0, seed=0, noise=1e-6):
+    """Three units, one narrow-band mode each, white noise of RMS ``noise`` on each; from mix_at
+    mode 1 also moves unit 2 (shape change)."""
     rng = np.random.default_rng(seed)
     t = np.arange(int(duration * FS)) / FS
-    b = 1e-6 * rng.standard_normal((t.size, 3))
+    b = noise * rng.standard_normal((t.size, 3))
     for i, f in enumerate((1.0, 2.5, 4.0)):
         # a lightly damped mode under white noise (resonator), so every window is 'ambient'
         bb, aa = signal.iirpeak(f, Q=40.0, fs=FS)
@@ -75,7 +76,23 @@ def test_healthy_curvature_chart_is_calibrated(healthy):
     assert len(scores) > 20 and max(abs(s) for s in scores) < AnalysisConfig().curvature_alarm_sigma / 2
     bl = healthy.baseline
     assert len(bl.curvature_shape_std) == 3 and bl.curvature_windows >= 10
-    assert bl.curvature_index_mean == 1.0 and bl.curvature_index_std == pytest.approx(np.sqrt(2 / 6))
+    # Q pools 8 stations per mode whose errors span Γ − 1 = 2 directions: its std lies between that of
+    # χ²_6/6 (two equal, independent directions per mode) and χ²_3/3 (one direction per mode)
+    assert bl.curvature_index_mean == 1.0 and np.sqrt(2 / 6) - 1e-9 <= bl.curvature_index_std <= np.sqrt(2 / 3) + 1e-9
+
+
+def test_baseline_from_another_record_charts_calmly_from_its_first_window():
+    """A baseline learnt from one healthy record, charted on another: the first charted window's
+    average still carries its first window with weight (1 − a)^(n−1), not a, and its scatter must
+    say so (else the chart starts in alarm on a healthy structure)."""
+    # noisy shapes (white noise well above the modes' floor), so the floor of the scatter does not hide it
+    base = analyze(*synthetic(seed=1, noise=3e-3)[:2], S2, ETA, fs=FS, expected_hz=((1.0,), (2.5,), (4.0,))).baseline
+    t, b, exp = synthetic(duration=900.0, seed=3, noise=3e-3)
+    res = analyze(t, b, S2, ETA, fs=FS, expected_hz=exp, baseline=base)
+    scores = [w.curvature_score for w in res.windows if w.curvature_score is not None]
+    assert res.flags == () and len(scores) > 10
+    # a healthy chart starts near 0 (the EWMA-from-the-first-window scatter made these ≈ 2σ)
+    assert np.mean(scores[:5]) < 1.0, scores
 
 
 def test_shape_change_is_flagged_and_located_by_signatures():
