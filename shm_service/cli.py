@@ -377,8 +377,8 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
             z = m.get("damping_ratio")
             sf = m.get("frequency_std_hz")
             sz = m.get("damping_std")
-            print(f"{m['unit']:4d} {m.get('mode') or '-':>4} {f if f is None else round(f, 4)!s:>9} "
-                  f"{sf if sf is None else round(sf, 4)!s:>8} {'-' if z is None else round(100 * z, 3)!s:>9} "
+            print(f"{m['unit']:4d} {m.get('mode') or '-':>4} {'-' if f is None else round(f, 4)!s:>9} "
+                  f"{'-' if sf is None else round(sf, 4)!s:>8} {'-' if z is None else round(100 * z, 3)!s:>9} "
                   f"{'-' if sz is None else round(100 * sz, 3)!s:>7}  {m.get('damping_method') or '-'}")
         bl = output.get("baseline")
         if bl:

@@ -96,7 +96,7 @@ def demo_timeline(settings: Any) -> Timeline:
     from .service._sources import simulation_settings
 
     sim = simulation_settings(settings)
-    a, est = settings.analytics, settings.estimator
+    a, est = settings.engine_config(), settings.estimator  # the analytics with the service's alarm hysteresis
     step = a.window_s * (1.0 - a.overlap)
     rest = sim.rest
     # windows start on multiples of the step (data time from the start, which is on the grid)
@@ -109,8 +109,7 @@ def demo_timeline(settings: Any) -> Timeline:
     if damage is not None:
         # the first analysed window that holds damaged data (it ends after the damage appears)
         first_damaged_end = max((math.floor((damage - a.window_s) / step) + 1) * step, first_start) + a.window_s
-        # a chart reaches a level after hold_windows windows beyond it; the service raises an alarm-level at
-        # once (a warning only after raise_windows windows at it)
+        # an alarm (or a warning) is raised after hold_windows consecutive windows at or beyond its line
         earliest = first_damaged_end + (a.hold_windows - 1) * step
     return Timeline(rest, (first_start, first_start + a.window_s), step, baseline, damage, first_damaged_end, earliest,
                     sim.duration)
@@ -141,7 +140,7 @@ def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, 
     """The banner: where to look, what happens when, how to stop it, where the data live."""
     speed = None if settings.source.speed == "max" else float(settings.source.speed)
     pace = "max speed" if speed is None else f"{speed:g}x real time"
-    t, a = timeline, settings.analytics
+    t, a = timeline, settings.engine_config()
     lines = [f"shm demo: the virtual rig at {pace}, {t.duration_s:g} s of simulated data ({_clock(t.duration_s, speed)}).", ""]
     free = "on a free port, printed below when it starts"
     if settings.dashboard.enabled:
@@ -167,8 +166,8 @@ def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, 
         at(t.damage_s, f"the damage appears: {', '.join(settings.sim.damage)}",
            *([f"the simulated plant's eigenfrequencies change by {shifts}"] if changes else []))
         at(t.earliest_alarm_s, "the earliest an alarm can be raised: the first window holding the damage ends at "
-           f"{t.first_damaged_window_end_s:g} s", f"and a chart needs {a.hold_windows} windows beyond a level (a warning "
-           f"alarm {settings.alarms.raise_windows} more at it); how much later depends on the change",
+           f"{t.first_damaged_window_end_s:g} s", f"and a chart needs {a.hold_windows} consecutive windows at or beyond a line; "
+           "how much later depends on the change",
            f"against the baseline's scatter (EWMA charts, λ = {a.ewma_lambda:g}, warning {a.warning_sigma:g} σ, "
            f"alarm {a.alarm_sigma:g} σ)")
         if t.earliest_alarm_s > t.duration_s:
