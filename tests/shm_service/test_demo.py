@@ -49,6 +49,8 @@ def test_timeline_is_computed_from_the_configuration():
     assert (t.rest_s, t.first_window_s, t.step_s, t.baseline_s) == (60.0, (180.0, 240.0), 30.0, 660.0)
     # the window 870-930 s is the first to hold damaged data; the charts hold 3 windows: 930 + 2·30
     assert (t.damage_s, t.first_damaged_window_end_s, t.earliest_alarm_s, t.duration_s) == (900.0, 930.0, 990.0, 1800.0)
+    # the first window wholly after the damage is 900-960 s: three of them raise a large shift at 1020 s
+    assert t.expected_alarm_s == 1020.0
     t = demo_timeline(load_settings(None, {"sim": {"damage_at_s": None}}))
     assert t.damage_s is None and t.earliest_alarm_s is None
     t = demo_timeline(load_settings(None, {"sim": {"damage_at_s": 333.0}, "estimator": {"warmup_s": 5.0},
@@ -56,6 +58,7 @@ def test_timeline_is_computed_from_the_configuration():
                                                         "hold_windows": 2}}))
     # first window starts at ceil(65/10)·10 = 70; baseline at 70 + 40 = 110; damage window 320-340
     assert (t.first_window_s, t.baseline_s, t.first_damaged_window_end_s, t.earliest_alarm_s) == ((70.0, 90.0), 110.0, 340.0, 350.0)
+    assert t.expected_alarm_s == 340.0 + 20.0 + 10.0  # the window 340-360 s is the first wholly damaged one
 
 
 def test_each_run_gets_a_fresh_directory_and_the_last_one_is_kept_once(tmp_path):
