@@ -160,6 +160,9 @@ def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, 
         lines.append(f"  {data_s:7g} s{wall}  {text}")
         lines.extend(f"  {'':{9 + len(wall)}}  {m}" for m in more)
 
+    if speed is not None:
+        lines.append("  (wall-clock times hold while the machine keeps the pace: /api/status sources[0].lag_s is how many "
+                     "simulated seconds the data are behind it)")
     at(0, f"the beam rests for {t.rest_s:g} s: the estimator learns the sensors' biases and noise")
     at(t.rest_s, f"ambient excitation; the filter converges ({settings.estimator.warmup_s:g} s are not analysed)")
     at(t.first_window_s[1], f"the first analysis window ({t.first_window_s[0]:g}-{t.first_window_s[1]:g} s); "
