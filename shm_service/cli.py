@@ -368,9 +368,10 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     if args.json:
         _print_json(output)
     else:
+        skipped = ", ".join(f"{v} {k}" for k, v in output["skipped_windows"].items() if v)
         print(f"{rec.path}: {data.times[-1] - data.times[0]:.0f} s of b1..b{data.b.shape[1]}"
               f"{' (estimated here)' if data.estimated_here else ''}, {len(output['windows'])} windows"
-              f" ({', '.join(f'{v} {k}' for k, v in output['skipped_windows'].items() if v)} skipped)")
+              f"{f' ({skipped} skipped)' if skipped else ''}")
         print(f"{'unit':>4} {'mode':>4} {'f [Hz]':>9} {'± [Hz]':>8} {'zeta [%]':>9} {'± [%]':>7}  damping by")
         for m in output["modes"]:
             f = m.get("frequency_hz")

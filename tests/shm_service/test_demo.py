@@ -4,6 +4,7 @@ stops it with exit status 0 (``make demo`` then prints no error)."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -122,6 +123,13 @@ def test_a_short_demo_runs_to_its_end_and_says_what_happened(tmp_path):
     assert (f"{len(alarms)} alarm" if alarms else "no alarms raised") in out  # the summary is the database's
     assert (demo / "demo.toml").exists() and list((demo / "recordings").glob("*.mcap"))
     assert not (demo / "demo.pid").exists() and not (tmp_path / "var").exists()
+    # shm analyze reads the demo's recording (its estimates are archived at 50 Hz, a quarter of the
+    # estimator's rate) and analyses its windows, as the service did
+    (recording,) = (demo / "recordings").glob("*.mcap")
+    analysed = subprocess.run(_shm("analyze", str(recording), "--config", str(config), "--json"), capture_output=True,
+                              text=True, timeout=600, cwd=tmp_path)
+    assert analysed.returncode == 0, analysed.stderr
+    assert len(json.loads(analysed.stdout)["windows"]) > 0
     # a second run starts afresh: the first run's data move aside (a minute of healthy data will do)
     second = subprocess.run(_shm("demo", "--dir", str(demo), "--duration", "60", "--no-damage", "--speed", "max",
                                  "--no-dashboard", "--port", "0"), capture_output=True, text=True, timeout=600, cwd=tmp_path)
