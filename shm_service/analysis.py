@@ -53,7 +53,8 @@ def _rate_hz(times_s: np.ndarray) -> float:
     steps = steps[steps > 0]
     if not steps.size:
         raise ValueError("b has fewer than two distinct times: no sample rate")
-    return float(1.0 / np.median(steps))
+    # to a µHz: the estimator's 200 Hz is 200.0 exactly, as in shm serve (the engine's grid is fs's)
+    return round(float(1.0 / np.median(steps)), 6)
 
 
 def _kwargs(rig, data: DeformationRecord, config: AnalysisConfig | None, warmup_s: float | None, not_before_s: float | None,
