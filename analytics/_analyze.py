@@ -428,11 +428,16 @@ def learn_baseline(
     skipped = engine.skipped_incomplete + engine.skipped_warmup
     what = (f"{len(windows)} windows of {cfg.window_s:g} s analysed ({', '.join(f'{v} {k}' for k, v in kinds.items())}; "
             f"{skipped} skipped)")
+    # the least a record must hold: baseline_min_windows trusted windows on the window grid
+    minimum_s = cfg.window_s + (cfg.baseline_min_windows - 1) * cfg.window_s * (1.0 - cfg.overlap)
+    need = (f"a baseline needs at least {cfg.baseline_min_windows} trusted windows with each mode "
+            f"(analytics.baseline_min_windows): {minimum_s:g} s of ambient data after the rest phase and the filter's warm-up")
     bl = mon.fit_baseline()
     if bl is None:
-        raise BaselineError(f"no baseline can be learnt: {what}, and none of them is a trusted window of operational (ambient) data")
+        raise BaselineError(f"no baseline can be learnt: {what}, and none of them is a trusted window of operational (ambient) "
+                            f"data; {need}")
     problems = bl.problems(cfg)
     if len(problems) == len(bl.modes):
         lines = "; ".join(f"mode {m}: {why}" for m, why in sorted(problems.items()))
-        raise BaselineError(f"no mode can be charted from this record ({what}): {lines}")
+        raise BaselineError(f"no mode can be charted from this record ({what}): {lines}; {need}")
     return bl

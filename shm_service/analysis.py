@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from analytics import AnalysisConfig, AnalysisResult, Baseline, analyze, learn_baseline
 
 from .estimation import DeformationRecord, deformation_record
@@ -44,9 +46,21 @@ def _not_before(data: DeformationRecord, warmup_s: float | None, not_before_s: f
     return data.rest_end_s + warmup_s
 
 
+def _rate_hz(times_s: np.ndarray) -> float:
+    """The sample rate of b: the estimator's 200 Hz, or what a recording kept of it (``shm serve``
+    archives every ``archive.estimate_decimation``-th estimate: 50 Hz by default)."""
+    steps = np.diff(np.asarray(times_s, dtype=float))
+    steps = steps[steps > 0]
+    if not steps.size:
+        raise ValueError("b has fewer than two distinct times: no sample rate")
+    # to a µHz: the estimator's 200 Hz is 200.0 exactly, as in shm serve (the engine's grid is fs's)
+    return round(float(1.0 / np.median(steps)), 6)
+
+
 def _kwargs(rig, data: DeformationRecord, config: AnalysisConfig | None, warmup_s: float | None, not_before_s: float | None,
             signatures) -> dict:
     return dict(
+        fs=_rate_hz(data.times),
         temperature=data.temperature, bearing=data.support if data.support is not None else data.bearing,
         expected_hz=data.units.frequencies_hz, config=config, beam_length=rig.beam.length,
         signatures=_signatures(rig, data) if signatures is None else signatures, time_origin_ns=data.origin_ns,

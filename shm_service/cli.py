@@ -368,17 +368,18 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     if args.json:
         _print_json(output)
     else:
+        skipped = ", ".join(f"{v} {k}" for k, v in output["skipped_windows"].items() if v)
         print(f"{rec.path}: {data.times[-1] - data.times[0]:.0f} s of b1..b{data.b.shape[1]}"
               f"{' (estimated here)' if data.estimated_here else ''}, {len(output['windows'])} windows"
-              f" ({', '.join(f'{v} {k}' for k, v in output['skipped_windows'].items() if v)} skipped)")
+              f"{f' ({skipped} skipped)' if skipped else ''}")
         print(f"{'unit':>4} {'mode':>4} {'f [Hz]':>9} {'± [Hz]':>8} {'zeta [%]':>9} {'± [%]':>7}  damping by")
         for m in output["modes"]:
             f = m.get("frequency_hz")
             z = m.get("damping_ratio")
             sf = m.get("frequency_std_hz")
             sz = m.get("damping_std")
-            print(f"{m['unit']:4d} {m.get('mode') or '-':>4} {f if f is None else round(f, 4)!s:>9} "
-                  f"{sf if sf is None else round(sf, 4)!s:>8} {'-' if z is None else round(100 * z, 3)!s:>9} "
+            print(f"{m['unit']:4d} {m.get('mode') or '-':>4} {'-' if f is None else round(f, 4)!s:>9} "
+                  f"{'-' if sf is None else round(sf, 4)!s:>8} {'-' if z is None else round(100 * z, 3)!s:>9} "
                   f"{'-' if sz is None else round(100 * sz, 3)!s:>7}  {m.get('damping_method') or '-'}")
         bl = output.get("baseline")
         if bl:

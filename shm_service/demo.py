@@ -87,6 +87,8 @@ class Timeline:
     damage_s: float | None
     first_damaged_window_end_s: float | None
     earliest_alarm_s: float | None
+    #: when a change large against the baseline's scatter is raised: hold_windows windows wholly after the damage
+    expected_alarm_s: float | None
     duration_s: float
 
 
@@ -96,7 +98,7 @@ def demo_timeline(settings: Any) -> Timeline:
     from .service._sources import simulation_settings
 
     sim = simulation_settings(settings)
-    a, est = settings.analytics, settings.estimator
+    a, est = settings.engine_config(), settings.estimator  # the analytics with the service's alarm hysteresis
     step = a.window_s * (1.0 - a.overlap)
     rest = sim.rest
     # windows start on multiples of the step (data time from the start, which is on the grid)
@@ -105,15 +107,16 @@ def demo_timeline(settings: Any) -> Timeline:
     k = max(0, math.ceil((first_start + a.baseline_s - a.window_s - first_start) / step))
     baseline = first_start + k * step + a.window_s
     damage = sim.damage_at if sim.damage else None
-    first_damaged_end = earliest = None
+    first_damaged_end = earliest = expected = None
     if damage is not None:
         # the first analysed window that holds damaged data (it ends after the damage appears)
         first_damaged_end = max((math.floor((damage - a.window_s) / step) + 1) * step, first_start) + a.window_s
-        # a chart reaches a level after hold_windows windows beyond it; the service raises an alarm-level at
-        # once (a warning only after raise_windows windows at it)
+        # an alarm (or a warning) is raised after hold_windows consecutive windows at or beyond its line
         earliest = first_damaged_end + (a.hold_windows - 1) * step
+        # the first window that holds only damaged data; a window half healthy shifts by half as much
+        expected = max(math.ceil(damage / step) * step, first_start) + a.window_s + (a.hold_windows - 1) * step
     return Timeline(rest, (first_start, first_start + a.window_s), step, baseline, damage, first_damaged_end, earliest,
-                    sim.duration)
+                    expected, sim.duration)
 
 
 def _clock(data_s: float, speed: float | None) -> str:
@@ -141,7 +144,7 @@ def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, 
     """The banner: where to look, what happens when, how to stop it, where the data live."""
     speed = None if settings.source.speed == "max" else float(settings.source.speed)
     pace = "max speed" if speed is None else f"{speed:g}x real time"
-    t, a = timeline, settings.analytics
+    t, a = timeline, settings.engine_config()
     lines = [f"shm demo: the virtual rig at {pace}, {t.duration_s:g} s of simulated data ({_clock(t.duration_s, speed)}).", ""]
     free = "on a free port, printed below when it starts"
     if settings.dashboard.enabled:
@@ -157,6 +160,9 @@ def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, 
         lines.append(f"  {data_s:7g} s{wall}  {text}")
         lines.extend(f"  {'':{9 + len(wall)}}  {m}" for m in more)
 
+    if speed is not None:
+        lines.append("  (wall-clock times hold while the machine keeps the pace: /api/status sources[0].lag_s is how many "
+                     "simulated seconds the data are behind it)")
     at(0, f"the beam rests for {t.rest_s:g} s: the estimator learns the sensors' biases and noise")
     at(t.rest_s, f"ambient excitation; the filter converges ({settings.estimator.warmup_s:g} s are not analysed)")
     at(t.first_window_s[1], f"the first analysis window ({t.first_window_s[0]:g}-{t.first_window_s[1]:g} s); "
@@ -167,11 +173,13 @@ def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, 
         at(t.damage_s, f"the damage appears: {', '.join(settings.sim.damage)}",
            *([f"the simulated plant's eigenfrequencies change by {shifts}"] if changes else []))
         at(t.earliest_alarm_s, "the earliest an alarm can be raised: the first window holding the damage ends at "
-           f"{t.first_damaged_window_end_s:g} s", f"and a chart needs {a.hold_windows} windows beyond a level (a warning "
-           f"alarm {settings.alarms.raise_windows} more at it); how much later depends on the change",
-           f"against the baseline's scatter (EWMA charts, λ = {a.ewma_lambda:g}, warning {a.warning_sigma:g} σ, "
-           f"alarm {a.alarm_sigma:g} σ)")
-        if t.earliest_alarm_s > t.duration_s:
+           f"{t.first_damaged_window_end_s:g} s", f"and a chart needs {a.hold_windows} consecutive windows at or beyond a line")
+        at(t.expected_alarm_s, f"a shift large against the baseline's scatter is raised: {a.hold_windows} windows wholly after the "
+           f"damage (the first ends at {t.expected_alarm_s - (a.hold_windows - 1) * t.step_s:g} s);",
+           "a warning first, an alarm when the chart goes on to its alarm line; smaller shifts take longer",
+           f"(EWMA charts, λ = {a.ewma_lambda:g}, warning {a.warning_sigma:g} σ, alarm {a.alarm_sigma:g} σ, "
+           f"curvature alarm {a.curvature_alarm_sigma:g} σ)")
+        if t.expected_alarm_s > t.duration_s:
             lines.append("  NOTE: the scenario ends before an alarm can be raised; give a longer --duration")
     else:
         lines.append("  (no damage: no alarm is expected)")
@@ -285,13 +293,21 @@ def happened(settings: Any) -> str:
     try:
         storage = Storage(settings.db)
         try:
-            alarms = sorted(storage.alarms(), key=lambda a: a.raised_at_s)
+            alarms = {a.id: a for a in storage.alarms()}
+            events = storage.alarm_events()
             windows = storage.count("trends")
         finally:
             storage.close()
     except Exception as exc:  # the summary must not turn a good run into a failure
         return f"shm demo: cannot read {settings.db}: {exc}"
-    lines = [f"shm demo: {windows} trend rows stored; {len(alarms) or 'no'} alarm{'s' if len(alarms) != 1 else ''} raised"]
-    for a in alarms:
-        lines.append(f"  {a.raised_at_s - start_s:7.0f} s  {a.level:<7} {a.chart}: {a.message}")
+    lines = [f"shm demo: {windows} trend rows stored; {len(alarms) or 'no'} alarm{'s' if len(alarms) != 1 else ''} raised"
+             + (" (simulated time, what each did):" if alarms else "")]
+    # every event (raised as a warning, escalated to an alarm, cleared) in the order they came
+    for e in sorted(events, key=lambda e: (e["at_s"], e["id"])):
+        a = alarms.get(e["alarm_id"])
+        if a is None:
+            continue
+        lines.append(f"  {e['at_s'] - start_s:7.0f} s  #{a.id} {a.chart:<10} {e['event']:<9} {e['level']}")
+    for a in sorted(alarms.values(), key=lambda a: a.id):
+        lines.append(f"  #{a.id} now {a.state}: {a.message}")
     return "\n".join(lines)

@@ -82,7 +82,11 @@ class Snapshot:
     status: StatusDocument | None
     status_error: str | None
     status_version: int
-    estimate_rate_hz: float
+    estimate_rate_hz: float  # states pushed to the dashboard per wall second (what it can draw)
+    # the estimator's own output: estimates per second of data (its sample rate) and data seconds per
+    # wall second, from the service's status over the last polls (None until two polls saw progress)
+    filter_rate_hz: float | None = None
+    realtime_factor: float | None = None
 
 
 class _Store:
@@ -104,6 +108,7 @@ class _Store:
         self.status_version = 0
         self.notify: deque[AlarmDocument] = deque(maxlen=50)
         self.push_times: deque[float] = deque(maxlen=50)
+        self.progress: deque[tuple[float, int, float]] = deque(maxlen=6)  # (monotonic s, estimates, processed data s)
 
     def snapshot(self) -> Snapshot:
         with self.lock:
@@ -111,13 +116,18 @@ class _Store:
                 rate = (len(self.push_times) - 1) / (self.push_times[-1] - self.push_times[0])
             else:
                 rate = 0.0
+            filter_rate = realtime = None
+            if len(self.progress) >= 2:
+                (w0, n0, d0), (w1, n1, d1) = self.progress[0], self.progress[-1]
+                if n1 > n0 and d1 > d0:
+                    filter_rate, realtime = (n1 - n0) / (d1 - d0), (d1 - d0) / max(w1 - w0, 1e-9)
             return Snapshot(
                 self.estimate, self.estimate_version, self.mean,
                 self.spectra, self.spectra_version,
                 self.windows_tuple, self.windows_version,
                 self.alarms_tuple, self.alarms_version,
                 self.status, self.status_error, self.status_version,
-                rate,
+                rate, filter_rate, realtime,
             )
 
     def upsert_alarm(self, rec: AlarmDocument) -> bool:
@@ -405,6 +415,9 @@ class Dashboard:
                 status, error = None, f"{type(exc).__name__}: {exc}"
             with store.lock:
                 store.status = status if isinstance(status, StatusDocument) else store.status
+                pipeline = getattr(status, "pipeline", None)
+                if pipeline is not None and pipeline.processed_data_s is not None:
+                    store.progress.append((now, int(pipeline.estimates), float(pipeline.processed_data_s)))
                 store.status_error = error
                 store.status_version += 1
         if now - last.get("alarms", -math.inf) >= ALARM_POLL_S:

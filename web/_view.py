@@ -788,8 +788,17 @@ class ClientView:
         error = f"<br><span style='color:#dc2626'>service: {html.escape(snap.status_error)}</span>" if snap.status_error else ""
         return (
             f"<div style='font-size:12.5px;line-height:1.45'><b>{html.escape(dash.label)}</b> {live} {badge}<br>"
-            f"{motion}<br>estimates {snap.estimate_rate_hz:.0f} Hz · {sensors}{error}</div>"
+            f"{motion}<br>{_rates(snap)} · {sensors}{error}</div>"
         )
+
+
+def _rates(snap: "Snapshot") -> str:
+    """The estimator's rate (estimates per second of data), its pace against real time and how
+    often the picture gets a new state (the pipeline hands on one state per batch, not every one)."""
+    drawn = f"drawn {snap.estimate_rate_hz:.0f} Hz"
+    if snap.filter_rate_hz is None:
+        return f"estimates: waiting for the filter's progress · {drawn}"
+    return f"estimates {snap.filter_rate_hz:.0f} Hz · {snap.realtime_factor:.1f}× real time · {drawn}"
 
 
 def _colour(index: int) -> str:
@@ -893,7 +902,7 @@ def _status_html(snap: "Snapshot", dash: "Dashboard") -> str:
         parts.append(f"<p><b>Storage</b> {html.escape(st.db)} · schema {st.schema_version} · {st.trend_rows} trend rows</p>")
     parts.append(
         f"<p style='color:#666'>Dashboard: {dash.client_count} browser(s), {1 / max(dash.last_frame_s, 1e-3):.0f} frames/s possible "
-        f"(last frame {1e3 * dash.last_frame_s:.1f} ms), estimates arriving at {snap.estimate_rate_hz:.0f} Hz.</p>"
+        f"(last frame {1e3 * dash.last_frame_s:.1f} ms), states arriving at {snap.estimate_rate_hz:.0f} Hz.</p>"
     )
     return "<div style='font-size:12px'>" + "".join(parts) + "</div>"
 

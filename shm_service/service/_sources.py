@@ -24,12 +24,33 @@ from ._ingest import IngestResult, IngestValidator
 from ._plausibility import SourceClock, ValueLimits
 from ._pipeline import Batch
 
-__all__ = ["FileSource", "IngestSource", "SimSource", "Source", "END", "simulation_settings"]
+__all__ = ["FileSource", "IngestSource", "SimSource", "Source", "END", "data_lag_s", "simulation_settings"]
 
 log = logging.getLogger("shm.serve.source")
 
 END = object()  # put into the queue when a source has ended
 _NS = 1_000_000_000
+
+
+def data_lag_s(data_time_ns: int | None, now_s: float, *, speed: float | None = 1.0,
+               origin: tuple[float, int] | None = None) -> float | None:
+    """How far a source's data are behind where its clock says they should be, s.
+
+    A live source (``origin`` None: follow, ingest) runs on the wall clock: ``now_s`` (UNIX s)
+    minus the newest data time. A paced source (sim, replay) has its own clock that started at
+    ``origin`` = (wall s, data ns) of its first data and runs at ``speed`` × real time: the lag
+    is ``speed`` × wall time since then minus data time since then (0 on schedule, > 0 when
+    the pipeline holds it back); ``now_s`` is then on the clock of ``origin[0]``. A source at max
+    speed (``speed`` None) has no schedule: None, as before any data.
+    """
+    if data_time_ns is None:
+        return None
+    if origin is None:
+        return round(now_s - data_time_ns / _NS, 3)
+    if speed is None:
+        return None
+    wall0, data0 = origin
+    return round(speed * (now_s - wall0) - (data_time_ns - data0) / _NS, 3)
 
 
 class Source:
@@ -47,6 +68,10 @@ class Source:
         self.dropped = 0
         self.problems: list[str] = []
         self.data_time_ns: int | None = None
+        # paced sources (sim, replay): their pace (None: max) and (monotonic s, data ns) of the first data
+        self.paced = False
+        self.speed: float | None = None
+        self._clock_origin: tuple[float, int] | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._rate: list[tuple[float, int]] = []
@@ -99,6 +124,8 @@ class Source:
                 last = int(b.log_time_ns[-1])
                 self.data_time_ns = last if self.data_time_ns is None else max(self.data_time_ns, last)
         now = time.monotonic()
+        if self._clock_origin is None and self.data_time_ns is not None:
+            self._clock_origin = (now, self.data_time_ns)
         self._rate.append((now, self.messages))
         while len(self._rate) > 2 and now - self._rate[0][0] > 10.0:
             self._rate.pop(0)
@@ -117,12 +144,15 @@ class Source:
         return []
 
     def status(self) -> dict[str, Any]:
-        now = time.time()
+        if self.paced:
+            lag = data_lag_s(self.data_time_ns, time.monotonic(), speed=self.speed, origin=self._clock_origin)
+        else:
+            lag = data_lag_s(self.data_time_ns, time.time())
         return {
             "id": self.id, "kind": self.kind, "state": self.state, "error": self.error, "messages": self.messages,
             "rate_hz": round(self.rate_hz, 1),
             "data_time_s": None if self.data_time_ns is None else self.data_time_ns / _NS,
-            "lag_s": None if self.data_time_ns is None else round(now - self.data_time_ns / _NS, 3),
+            "lag_s": lag,
             "rejected": sum(self.rejected.values()), "rejected_by_reason": dict(self.rejected),
             "dropped": self.dropped, "problems": self.problems[-20:] + self.health_problems(),
         }
@@ -177,6 +207,7 @@ class SimSource(Source):
         self.rig = self.rigsim.nominal_rig
         self.block_s = s.block_s
         speed = settings.source.speed
+        self.paced = True
         self.speed = None if speed == "max" else float(speed)
         self.raw = raw
         self.truth = truth
@@ -244,6 +275,7 @@ class FileSource(Source):
         self.path = Path(settings.source.path or "")
         self.follow = follow
         speed = settings.source.speed
+        self.paced = not follow
         self.speed = None if (follow or speed == "max") else float(speed)
         self.poll_s = settings.source.follow_poll_s
         self.idle_s = settings.source.follow_idle_s

@@ -155,6 +155,13 @@ def test_when_no_baseline_can_be_learnt_the_error_names_the_modes_and_what_they_
     with pytest.raises(BaselineError, match=r"mode 1: .*windows with a subspace estimate.*minutes of trusted data.*8 needed; "
                                             r"24 cycles per 60 s window, 30 needed to chart it; mode 2: .*8 needed"):
         learn_baseline(t, b, S2, ETA, fs=FS, bearing=d, expected_hz=slow)
+    # … and the least a record must hold: 8 windows of 60 s every 30 s = 60 + 7 · 30 s
+    with pytest.raises(BaselineError, match=r"a baseline needs at least 8 trusted windows .*: 270 s of ambient data"):
+        learn_baseline(t, b, S2, ETA, fs=FS, bearing=d, expected_hz=slow)
+    with pytest.raises(BaselineError, match=r"no baseline can be learnt: 0 windows .*; a baseline needs at least 3 trusted "
+                                            r"windows .*: 40 s of ambient data"):
+        learn_baseline(t, b, S2, ETA, fs=FS, bearing=d, expected_hz=EXPECTED,
+                       config=AnalysisConfig(window_s=20.0, baseline_min_windows=3), not_before_s=149.0)
 
 
 @pytest.mark.parametrize("call, match", [

@@ -4,6 +4,7 @@ stops it with exit status 0 (``make demo`` then prints no error)."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -49,6 +50,8 @@ def test_timeline_is_computed_from_the_configuration():
     assert (t.rest_s, t.first_window_s, t.step_s, t.baseline_s) == (60.0, (180.0, 240.0), 30.0, 660.0)
     # the window 870-930 s is the first to hold damaged data; the charts hold 3 windows: 930 + 2·30
     assert (t.damage_s, t.first_damaged_window_end_s, t.earliest_alarm_s, t.duration_s) == (900.0, 930.0, 990.0, 1800.0)
+    # the first window wholly after the damage is 900-960 s: three of them raise a large shift at 1020 s
+    assert t.expected_alarm_s == 1020.0
     t = demo_timeline(load_settings(None, {"sim": {"damage_at_s": None}}))
     assert t.damage_s is None and t.earliest_alarm_s is None
     t = demo_timeline(load_settings(None, {"sim": {"damage_at_s": 333.0}, "estimator": {"warmup_s": 5.0},
@@ -56,6 +59,7 @@ def test_timeline_is_computed_from_the_configuration():
                                                         "hold_windows": 2}}))
     # first window starts at ceil(65/10)·10 = 70; baseline at 70 + 40 = 110; damage window 320-340
     assert (t.first_window_s, t.baseline_s, t.first_damaged_window_end_s, t.earliest_alarm_s) == ((70.0, 90.0), 110.0, 340.0, 350.0)
+    assert t.expected_alarm_s == 340.0 + 20.0 + 10.0  # the window 340-360 s is the first wholly damaged one
 
 
 def test_each_run_gets_a_fresh_directory_and_the_last_one_is_kept_once(tmp_path):
@@ -119,6 +123,13 @@ def test_a_short_demo_runs_to_its_end_and_says_what_happened(tmp_path):
     assert (f"{len(alarms)} alarm" if alarms else "no alarms raised") in out  # the summary is the database's
     assert (demo / "demo.toml").exists() and list((demo / "recordings").glob("*.mcap"))
     assert not (demo / "demo.pid").exists() and not (tmp_path / "var").exists()
+    # shm analyze reads the demo's recording (its estimates are archived at 50 Hz, a quarter of the
+    # estimator's rate) and analyses its windows, as the service did
+    (recording,) = (demo / "recordings").glob("*.mcap")
+    analysed = subprocess.run(_shm("analyze", str(recording), "--config", str(config), "--json"), capture_output=True,
+                              text=True, timeout=600, cwd=tmp_path)
+    assert analysed.returncode == 0, analysed.stderr
+    assert len(json.loads(analysed.stdout)["windows"]) > 0
     # a second run starts afresh: the first run's data move aside (a minute of healthy data will do)
     second = subprocess.run(_shm("demo", "--dir", str(demo), "--duration", "60", "--no-damage", "--speed", "max",
                                  "--no-dashboard", "--port", "0"), capture_output=True, text=True, timeout=600, cwd=tmp_path)
