@@ -95,7 +95,8 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         print(f"shm serve: error: {exc}", file=sys.stderr)
         return 2
     s = settings.server
-    app = create_app(service, loopback=s.loopback, max_body_bytes=s.max_body_bytes, max_ingest_bytes=s.max_ingest_bytes)
+    app = create_app(service, loopback=s.loopback, max_body_bytes=s.max_body_bytes, max_ingest_bytes=s.max_ingest_bytes,
+                     host=s.host, allowed_hosts=s.allowed_hosts, auth_failures_per_minute=s.auth_failures_per_minute)
     try:
         api = ApiServer(app, s.host, s.port).start()
     except (OSError, TimeoutError) as exc:
