@@ -148,6 +148,7 @@ class RecordingFollower:
                 stat = os.fstat(f.fileno())
                 if self._identity is not None and self._was_replaced(f, stat):
                     self._restart()
+                    f.seek(0)
                 if self.finished or self.damaged:
                     return []
                 if not self._started:

@@ -40,6 +40,7 @@ from contract import (
 
 from ._docs import serve_docs_offline
 from ._ingest import IngestError, parse_body
+from ._starting import ServiceStarting
 from ._storage import StorageUnavailable
 
 __all__ = ["ApiService", "AuthLimiter", "HostCheck", "create_app"]
@@ -371,6 +372,10 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
     )
     serve_docs_offline(app)  # /docs and /redoc from the installed packages, not a CDN
 
+    @app.exception_handler(ServiceStarting)
+    async def service_starting(request: Request, exc: ServiceStarting) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "5"})
+
     @app.exception_handler(StorageUnavailable)
     async def storage_unavailable(request: Request, exc: StorageUnavailable) -> JSONResponse:
         # The database stayed locked (another process) or failing for the storage's retry period.
@@ -481,7 +486,7 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
 
     app.add_middleware(_Gate, default=max_body_bytes, ingest=max_ingest_bytes,
                        hosts=HostCheck(host, allowed_hosts) if check_host else None,
-                       check_token=None if loopback else service.check_token, limiter=limiter)
+                       check_token=None if loopback else (lambda token: service.check_token(token)), limiter=limiter)
     app.state.auth_limiter = limiter
     return app
 

@@ -156,6 +156,9 @@ class SourceSettings(_Closed):
     layout: Literal["benchmark", "dense"] = Field("benchmark", description="rig layout for ingest when no rig file is given")
     follow_poll_s: float = Field(0.2, gt=0, description="how often a followed file is checked for new data, s")
     follow_idle_s: float | None = Field(None, gt=0, description="stop following after this long without growth, s (None: never)")
+    follow_rotations: bool = Field(
+        True, description="follow: after the writer closed the file, keep watching its name for a new file (a logger's "
+        "rotation; a replaced file is read from its start); false: the source ends with the file")
     lateness_s: float = Field(1.0, gt=0, le=60, description="how long the merge waits for a late sensor before moving on, s")
     silent_after_s: float = Field(2.0, gt=0, description="a sensor without data this long is reported degraded, s")
     stuck_after_s: float = Field(

@@ -59,6 +59,10 @@ class ServiceError(RuntimeError):
     """The service cannot start (the message says why)."""
 
 
+class RigPending(ServiceError):
+    """``follow:``: the file (or its rig.json) is not there yet; the service can be made once it is."""
+
+
 class _DashboardSink:
     """Adapts the pipeline's pushes to ``web.Dashboard`` (the pipeline's ``SinkGuard`` counts
     and isolates what it raises). Nothing is pushed while every browser has paused."""
@@ -91,8 +95,10 @@ class MonitoringService:
     """One running ``shm serve``. ``environ`` is the environment the token is read from
     (default ``os.environ``; tests pass a dict)."""
 
-    def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None) -> None:
+    def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None,
+                 rig_wait_s: float = 0.0) -> None:
         self.settings = settings
+        self._rig_wait_s = rig_wait_s
         self.token = resolve_token(settings, environ)
         if not settings.server.loopback and self.token is None:
             raise ServiceError(f"server.host {settings.server.host} is not loopback: a token is required "
@@ -184,9 +190,11 @@ class MonitoringService:
                 source = FileSource(src.id or path.stem, self.queue, s, follow=kind == "follow", rig=rig_override, truth=truth)
                 if source.rig is None:
                     if kind == "follow":
-                        log.info("waiting for %s and its rig.json", path)
-                        if source.wait_for_rig(timeout=3600.0 * 24) is None:
-                            raise ServiceError(f"follow: no readable rig.json in {path}")
+                        # The model needs the rig: without source.rig, wait for the file's rig.json
+                        # (``shm serve`` serves the API meanwhile and retries; see RigPending).
+                        if source.wait_for_rig(timeout=self._rig_wait_s) is None:
+                            raise RigPending(f"follow: waiting for {path} and its rig.json "
+                                             "(or give the rig with source.rig)")
                     else:
                         raise ServiceError(f"{path}: no rig.json")
                 return source
