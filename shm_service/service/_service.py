@@ -103,6 +103,10 @@ class MonitoringService:
         if not settings.server.loopback and self.token is None:
             raise ServiceError(f"server.host {settings.server.host} is not loopback: a token is required "
                                "(server.token_file or SHM_TOKEN)")
+        if settings.dashboard.enabled and not _loopback(settings.dashboard.host) and self.token is None:
+            raise ServiceError(f"dashboard.host {settings.dashboard.host} is not loopback: a token is required "
+                               "(server.token_file or SHM_TOKEN), which the dashboard then asks for; or bind it to "
+                               "127.0.0.1, or --no-dashboard")
         self.started_at = time.time()
         self.paused = False
         self.queue: queue.Queue = queue.Queue(maxsize=settings.queue_batches)
@@ -225,7 +229,8 @@ class MonitoringService:
         d = self.settings.dashboard
         try:
             dashboard = Dashboard(host=d.host, port=d.port, rig=self.rig, units=self.model.units,
-                                  layout=self.model.state_layout, stations=self.model.stations, service=self)
+                                  layout=self.model.state_layout, stations=self.model.stations, service=self,
+                                  token=self.token)
         except Exception as exc:
             log.warning("dashboard failed to start (%s); running without it", exc)
             return None
@@ -455,3 +460,14 @@ def _check_sensor_counts(rig: RigDescription, est: Any) -> None:
 def _check(settings: ServiceSettings) -> None:
     if settings.source.kind == "replay" and not Path(settings.source.path or "").is_file():
         raise SettingsError(f"replay: {settings.source.path} does not exist")
+
+
+def _loopback(host: str) -> bool:
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False

@@ -163,3 +163,12 @@ def test_off_loopback_every_route_needs_the_token_and_guesses_are_limited(tmp_pa
     finally:
         api.stop()
         service.stop(drain_s=0)
+
+
+def test_serve_refuses_a_dashboard_off_loopback_without_a_token(tmp_path):
+    from shm_service.service._service import ServiceError
+
+    o = fast_overrides(tmp_path, **{"source.spec": "ingest"})
+    o["dashboard"] = {"enabled": True, "host": "0.0.0.0", "port": 0}
+    with pytest.raises(ServiceError, match="dashboard.host 0.0.0.0 is not loopback: a token is required"):
+        MonitoringService(load_settings(None, o), environ={})
