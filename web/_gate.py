@@ -17,6 +17,7 @@ import base64
 import binascii
 import hashlib
 import hmac
+import logging
 import threading
 from http.cookies import SimpleCookie
 from typing import Any
@@ -32,6 +33,17 @@ from websockets.http11 import Request, Response
 __all__ = ["COOKIE", "TokenGate"]
 
 COOKIE = "shm_dashboard"
+
+
+class _QuietHandshakes(logging.Filter):
+    """A browser closing a spare connection before sending a request is no error worth a traceback."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.getMessage() not in ("opening handshake failed", "connection rejected (401 Unauthorized)")
+
+
+_LOG = logging.getLogger("shm.dashboard.gate")
+_LOG.addFilter(_QuietHandshakes())
 _HOP = {"connection", "keep-alive", "transfer-encoding", "upgrade", "content-length", "content-encoding"}
 
 
@@ -144,7 +156,7 @@ class TokenGate:
             try:
                 server = await serve(
                     self._handler, host, port, process_request=self._process_request, max_size=50 * 1024 * 1024,
-                    compression=None,
+                    compression=None, logger=_LOG,
                     select_subprotocol=lambda _, offered: next((p for p in offered if p.startswith("viser-v")), None))
             except OSError as exc:
                 self._error = exc

@@ -72,3 +72,38 @@ def test_the_dashboard_refuses_to_listen_off_loopback_without_a_token():
         Dashboard(host="0.0.0.0", port=0, rig=None, units=None, layout=None, stations=None, service=None)
     with pytest.raises(ValueError, match="at least 8"):
         TokenGate(host="127.0.0.1", port=0, upstream_port=1, token="short")
+
+
+@pytest.mark.skipif(not __import__("pathlib").Path("/usr/bin/chromium").exists(), reason="needs Debian's chromium")
+def test_a_browser_opens_the_gated_dashboard_with_the_token(tmp_path):
+    """Headless chromium: without the token the gate answers 401; with ``?token=`` once the
+    page loads, its websocket passes the gate with the cookie and viser's GUI appears."""
+    from playwright.sync_api import sync_playwright
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    server.gui.add_markdown("gate probe: live")
+    gate = TokenGate(host="127.0.0.1", port=0, upstream_port=server.get_port(), token=TOKEN)
+    args = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+            "--disable-sync"]
+    try:
+        with sync_playwright() as p:
+            context = p.chromium.launch_persistent_context(str(tmp_path / "profile"), executable_path="/usr/bin/chromium",
+                                                           headless=True, args=args)
+            try:
+                page = context.pages[0] if context.pages else context.new_page()
+                from playwright.sync_api import Error as PlaywrightError
+
+                try:  # headless chromium cannot ask for the password: it gives up on the challenge
+                    assert page.goto(f"http://127.0.0.1:{gate.port}/").status == 401
+                except PlaywrightError as exc:
+                    assert "ERR_INVALID_AUTH_CREDENTIALS" in str(exc)
+                page.goto(f"http://127.0.0.1:{gate.port}/?token={TOKEN}")
+                page.wait_for_selector("canvas", timeout=30_000)
+                page.get_by_text("gate probe: live").first.wait_for(timeout=30_000)
+                assert "token" not in page.url
+                assert len(server.get_clients()) == 1
+            finally:
+                context.close()
+    finally:
+        gate.stop()
+        server.stop()
