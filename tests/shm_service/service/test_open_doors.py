@@ -172,3 +172,16 @@ def test_serve_refuses_a_dashboard_off_loopback_without_a_token(tmp_path):
     o["dashboard"] = {"enabled": True, "host": "0.0.0.0", "port": 0}
     with pytest.raises(ServiceError, match="dashboard.host 0.0.0.0 is not loopback: a token is required"):
         MonitoringService(load_settings(None, o), environ={})
+
+
+def test_generated_and_mutated_requests_get_no_server_error(tmp_path):
+    """A short seeded part of benchmarks/http_campaign (10 000 requests there): NaN, huge
+    integers, deep nesting, chunked bodies, odd Host and Authorization headers, with and
+    without the token, on a loopback API and on one that needs the token everywhere."""
+    from benchmarks.http_campaign import campaign
+
+    result = campaign(150, seed=5, workdir=tmp_path)
+    assert result["server_errors"] == 0 and result["dropped"] == 0, result["examples"]
+    statuses = result["statuses"]
+    assert sum(statuses.values()) + result["not_sent"] == 150
+    assert {200, 400, 401, 413, 421} <= set(statuses) and result["integrity"] == "ok"
