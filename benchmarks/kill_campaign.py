@@ -188,18 +188,18 @@ def campaign(kills: int = 20, *, seed: int = 7, max_delay_s: float = 15.0, workd
     }
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.kill_campaign", description=__doc__.splitlines()[0])
     ap.add_argument("--kills", type=int, default=20)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--max-delay", type=float, default=15.0, help="latest kill instant after the API is up, s")
-    args = ap.parse_args(argv)
+    args, _ = ap.parse_known_args(argv)
     result = campaign(args.kills, seed=args.seed, max_delay_s=args.max_delay)
     print(json.dumps(result, indent=1))
     bad = (any(result["committed_rows_lost"].values()) or result["events_undelivered"] or result["alarms_out_of_order"]
            or result["integrity_ok"] != result["integrity_checks"])
-    sys.exit(1 if bad else 0)
+    return 1 if bad else 0
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    sys.exit(main(sys.argv[1:]))
