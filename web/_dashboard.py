@@ -14,6 +14,7 @@ parts (rail, reflector, grid) are shared.
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import math
 import threading
@@ -45,6 +46,7 @@ from ._data import (
     window_record,
     windows_from_trend_rows,
 )
+from ._gate import TokenGate
 from ._geometry import BeamState, parse_state
 from ._view import ClientView
 
@@ -164,6 +166,9 @@ class Dashboard:
     stations : η (m) of the curvature-change index (and of ``truth_deflection``).
     service : a ``DashboardService`` (status, trends, alarms, acknowledge, set_paused); duck typed.
     render_hz : frames per second drawn into each browser (10–60).
+    token : the operator token. Required off loopback: viser then listens on a free loopback
+        port and ``web._gate.TokenGate`` on ``host:port`` lets only requests with the token pass
+        (a browser asks for it: the token as the password; ValueError without one).
     """
 
     def __init__(
@@ -178,7 +183,12 @@ class Dashboard:
         service: Any,
         render_hz: float = 20.0,
         label: str = "IMMS structural health monitor",
+        token: str | None = None,
     ) -> None:
+        off_loopback = not _is_loopback(host)
+        if off_loopback and not token:
+            raise ValueError(f"dashboard host {host!r} is not loopback: a token is required (server.token_file or "
+                             "SHM_TOKEN); viser itself has no authentication")
         gamma = int(getattr(units, "count", 0))
         if gamma < 1:
             raise ValueError("units must provide at least one unit deformation (units.count >= 1)")
@@ -230,8 +240,19 @@ class Dashboard:
         self._service_paused: bool | None = None
         self._stop = threading.Event()
 
-        self.server = viser.ViserServer(host=host, port=port, label=label, verbose=False)
-        self.port = int(self.server.get_port())
+        self.gate = None
+        if off_loopback:
+            # viser on a free loopback port; the token gate (web._gate) on the public address
+            self.server = viser.ViserServer(host="127.0.0.1", port=0, label=label, verbose=False)
+            try:
+                self.gate = TokenGate(host=host, port=port, upstream_port=int(self.server.get_port()), token=token)
+            except BaseException:
+                self.server.stop()
+                raise
+            self.port = self.gate.port
+        else:
+            self.server = viser.ViserServer(host=host, port=port, label=label, verbose=False)
+            self.port = int(self.server.get_port())
         shown_host = "localhost" if host in ("0.0.0.0", "::", "") else host
         self.url = f"http://{shown_host}:{self.port}/"
         try:
@@ -242,6 +263,8 @@ class Dashboard:
             self._thread.start()
         except BaseException:
             self.server.stop()
+            if self.gate is not None:
+                self.gate.stop()
             raise
 
     # ------------------------------------------------------------------ pushes (service side)
@@ -309,6 +332,8 @@ class Dashboard:
         self._stop.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout=5.0)
+        if self.gate is not None:
+            self.gate.stop()
         self.server.stop()
 
     def __enter__(self) -> "Dashboard":
@@ -495,3 +520,12 @@ def _finite(name: str, value: Any) -> float:
     if not _is_num(value):
         raise ValueError(f"{name}={value!r} must be a finite number")
     return float(value)
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False

@@ -3,15 +3,22 @@ parameters and call the service (storage, analytics). Errors are HTTPExceptions 
 
 Authentication: ``Authorization: Bearer <token>`` (or ``X-SHM-Token``). Ingest, acknowledge
 and baseline changes always need the token (403 when none is configured, 401 when missing or
-wrong); on a non-loopback address every request needs it. Request bodies are size-limited
-(413).
+wrong); on a non-loopback address every request needs it, the API documents (``/docs``, ``/redoc``,
+``/openapi.json``) included; a browser may send it as the password of HTTP Basic. Wrong tokens
+are rate-limited per client address (429). The ``Host`` header is checked against loopback,
+the bound address and ``server.allowed_hosts`` (421), against DNS rebinding. Request bodies are
+size-limited (413), chunked ones too.
 """
 
 from __future__ import annotations
 
 import csv
 import io
+import ipaddress
 import math
+import threading
+import time
+from collections.abc import Iterable
 from datetime import datetime
 from typing import Any, Literal, Protocol
 
@@ -33,9 +40,10 @@ from contract import (
 
 from ._docs import serve_docs_offline
 from ._ingest import IngestError, parse_body
+from ._starting import ServiceStarting
 from ._storage import StorageUnavailable
 
-__all__ = ["ApiService", "create_app"]
+__all__ = ["ApiService", "AuthLimiter", "HostCheck", "create_app"]
 
 
 class ApiService(Protocol):
@@ -58,69 +66,238 @@ class ApiService(Protocol):
 _TREND_FIELDS = tuple(TrendRow.model_fields)
 
 
-class _BodyLimit:
-    """ASGI middleware: refuses bodies over the limit (413) by Content-Length and while streaming."""
+class AuthLimiter:
+    """Failed token attempts per client address: after ``max_failures`` wrong tokens within
+    ``window_s`` the address is refused (429, ``Retry-After``) until the oldest failure leaves
+    the window, whatever it sends meanwhile (a right guess would not be told apart). A missing
+    token is not a guess and is not counted. At most ``max_clients`` addresses are remembered
+    (the oldest entries go first), so a flood of addresses cannot grow the table without bound."""
 
-    def __init__(self, app: Any, default: int, ingest: int) -> None:
+    def __init__(self, max_failures: int = 10, window_s: float = 60.0, *, max_clients: int = 10_000) -> None:
+        if max_failures < 1 or not window_s > 0:
+            raise ValueError(f"{max_failures=} must be >= 1 and {window_s=} > 0")
+        self.max_failures = int(max_failures)
+        self.window_s = float(window_s)
+        self.max_clients = int(max_clients)
+        self._failures: dict[str, list[float]] = {}
+        self._lock = threading.Lock()
+        self.refused = 0  # requests answered 429
+
+    def _recent(self, client: str, now: float) -> list[float]:
+        times = self._failures.get(client)
+        if not times:
+            return []
+        times[:] = [t for t in times if now - t < self.window_s]
+        if not times:
+            del self._failures[client]
+        return times
+
+    def retry_after(self, client: str, now: float | None = None) -> int | None:
+        """Seconds until ``client`` may try again, or None when it may now."""
+        now = time.monotonic() if now is None else now
+        with self._lock:
+            times = self._recent(client, now)
+            if len(times) < self.max_failures:
+                return None
+            self.refused += 1
+            return max(1, math.ceil(times[-self.max_failures] + self.window_s - now))
+
+    def failed(self, client: str, now: float | None = None) -> None:
+        now = time.monotonic() if now is None else now
+        with self._lock:
+            self._recent(client, now)
+            self._failures.setdefault(client, []).append(now)
+            while len(self._failures) > self.max_clients:
+                del self._failures[next(iter(self._failures))]
+
+
+_LOOPBACK_NAMES = frozenset({"localhost", "localhost.localdomain", "ip6-localhost", "ip6-loopback"})
+
+
+class HostCheck:
+    """Which ``Host`` headers the server answers (against DNS rebinding: a page of another site
+    whose name was re-pointed at this machine sends its own name as ``Host``). Accepted: the
+    loopback names and addresses, the bound address, the names and addresses of ``allowed``
+    (``*.example.org`` matches the subdomains; ``*`` alone switches the check off) and, when
+    bound to every interface (0.0.0.0, ::), any IP literal (a rebinding attack needs a name)."""
+
+    def __init__(self, bound: str, allowed: Iterable[str] = ()) -> None:
+        self.bound = ipaddress.ip_address(bound)
+        self.wildcard = self.bound.is_unspecified
+        self.allowed = frozenset(a.lower().rstrip(".") for a in allowed)
+        self.everything = "*" in self.allowed
+        self.suffixes = tuple(a[1:] for a in self.allowed if a.startswith("*."))
+        self.refused = 0
+
+    @staticmethod
+    def name_of(header: str) -> str | None:
+        """The host of a ``Host`` header (port and IPv6 brackets removed), None if malformed."""
+        value = header.strip().lower()
+        if not value or any(c in value for c in " /\\@?#"):
+            return None
+        if value.startswith("["):
+            inside, bracket, rest = value[1:].partition("]")
+            if not bracket or (rest and not (rest.startswith(":") and rest[1:].isdigit())):
+                return None
+            return inside
+        name, colon, port = value.rpartition(":") if ":" in value else (value, "", "")
+        if colon and not port.isdigit():
+            return None
+        return name.rstrip(".") or None
+
+    def accepts(self, name: str) -> bool:
+        if self.everything or name in _LOOPBACK_NAMES or name in self.allowed:
+            return True
+        try:
+            address = ipaddress.ip_address(name)
+        except ValueError:
+            return any(name.endswith(s) for s in self.suffixes)
+        return address.is_loopback or address == self.bound or self.wildcard
+
+
+class _Gate:
+    """ASGI middleware in front of every route (API, documents, their assets):
+
+    1. the ``Host`` header is checked (400 missing or malformed, 421 not one of this server's);
+    2. off loopback, the token is required (401; ``Basic`` with the token as password is
+       accepted too, so a browser can open ``/docs``); wrong guesses are rate-limited (429);
+    3. the body is read here, whole, before the route runs, and refused over the limit (413),
+       by ``Content-Length`` and while it streams (chunked): a route that never reads its body
+       would otherwise answer before the limit was ever checked.
+    """
+
+    def __init__(self, app: Any, *, default: int, ingest: int, hosts: HostCheck | None,
+                 check_token: Any | None, limiter: AuthLimiter) -> None:
         self.app = app
         self.default = default
         self.ingest = ingest
+        self.hosts = hosts
+        self.check_token = check_token  # None: loopback, the routes decide
+        self.limiter = limiter
 
     async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
-        limit = self.ingest if scope.get("path") == "/api/ingest" else self.default
+        headers: dict[bytes, bytes] = {}
         for name, value in scope.get("headers", []):
-            if name == b"content-length":
-                try:
-                    length = int(value)
-                except ValueError:
-                    await _reject(send, 400, "Content-Length is not a number")
-                    return
-                if length > limit:
-                    await _reject(send, 413, f"request body of {length} bytes exceeds the limit of {limit} bytes")
-                    return
+            if name in headers and name in (b"host", b"content-length"):
+                await _reject(send, 400, f"more than one {name.decode()} header")
+                return
+            headers[name] = value
+        if self.hosts is not None:
+            raw = headers.get(b"host")
+            if raw is None:
+                await _reject(send, 400, "the request has no Host header")
+                return
+            host = HostCheck.name_of(raw.decode("latin-1"))
+            if host is None:
+                await _reject(send, 400, "the Host header is malformed")
+                return
+            if not self.hosts.accepts(host):
+                self.hosts.refused += 1
+                await _reject(send, 421, f"this server does not answer for host {host[:100]!r} (server.allowed_hosts "
+                                         "lists the names it answers to besides loopback and its own address)")
+                return
+        if self.check_token is not None:
+            client = _client_of(scope)
+            wait = self.limiter.retry_after(client)
+            if wait is not None:
+                await _reject(send, 429, f"too many wrong tokens from {client}; retry in {wait} s",
+                              [(b"retry-after", str(wait).encode())])
+                return
+            token = _token_from(headers.get(b"authorization", b"").decode("latin-1"),
+                                headers.get(b"x-shm-token", b"").decode("latin-1"))
+            try:
+                self.check_token(token)
+            except PermissionError as exc:
+                if token:
+                    self.limiter.failed(client)
+                await _reject(send, 401, str(exc), [(b"www-authenticate", b'Bearer realm="shm serve"'),
+                                                    (b"www-authenticate", b'Basic realm="shm serve", charset="UTF-8"')])
+                return
+        limit = self.ingest if scope.get("path") == "/api/ingest" else self.default
+        length_header = headers.get(b"content-length")
+        if length_header is not None:
+            try:
+                length = int(length_header)
+                if length < 0:
+                    raise ValueError
+            except ValueError:
+                await _reject(send, 400, "Content-Length is not a number")
+                return
+            if length > limit:
+                await _reject(send, 413, f"request body of {length} bytes exceeds the limit of {limit} bytes",
+                              close=True)
+                return
+        elif b"transfer-encoding" not in headers:
+            await self.app(scope, receive, send)  # no body
+            return
+        chunks: list[bytes] = []
         seen = 0
-        sent_error = False
-
-        async def limited() -> dict:
-            nonlocal seen, sent_error
+        while True:
             message = await receive()
-            if message["type"] == "http.request":
-                seen += len(message.get("body", b""))
-                if seen > limit:
-                    raise _TooLarge()
-            return message
+            if message["type"] == "http.disconnect":
+                return
+            body = message.get("body", b"")
+            seen += len(body)
+            if seen > limit:
+                await _reject(send, 413, f"request body exceeds the limit of {limit} bytes", close=True)
+                return
+            chunks.append(body)
+            if not message.get("more_body", False):
+                break
+        whole = b"".join(chunks)
+        delivered = False
 
-        try:
-            await self.app(scope, limited, send)
-        except _TooLarge:
-            if not sent_error:
-                sent_error = True
-                await _reject(send, 413, f"request body exceeds the limit of {limit} bytes")
+        async def replay() -> dict:
+            nonlocal delivered
+            if not delivered:
+                delivered = True
+                return {"type": "http.request", "body": whole, "more_body": False}
+            return await receive()
+
+        await self.app(scope, replay, send)
 
 
-class _TooLarge(Exception):
-    pass
+def _client_of(scope: dict) -> str:
+    client = scope.get("client")
+    return str(client[0]) if client else "unknown"
 
 
-async def _reject(send: Any, status: int, detail: str) -> None:
+async def _reject(send: Any, status: int, detail: str, headers: list[tuple[bytes, bytes]] | None = None, *,
+                  close: bool = False) -> None:
     import json
 
     body = json.dumps({"detail": detail}).encode()
+    extra = list(headers or []) + ([(b"connection", b"close")] if close else [])
     await send({"type": "http.response.start", "status": status,
-                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()), *extra]})
     await send({"type": "http.response.body", "body": body})
 
 
+def _token_from(authorization: str, x_token: str) -> str | None:
+    """The token of ``Authorization: Bearer T``, ``Authorization: Basic`` (any user, password T:
+    what a browser asks for) or ``X-SHM-Token: T``."""
+    if authorization:
+        scheme, _, value = authorization.strip().partition(" ")
+        value = value.strip()
+        if scheme.lower() == "bearer" and value:
+            return value
+        if scheme.lower() == "basic" and value:
+            import base64
+            import binascii
+
+            try:
+                decoded = base64.b64decode(value, validate=True).decode("utf-8")
+            except (binascii.Error, UnicodeDecodeError):
+                return None
+            return decoded.partition(":")[2] or None
+    return x_token.strip() or None
+
+
 def _token_of(request: Request) -> str | None:
-    auth = request.headers.get("authorization")
-    if auth:
-        scheme, _, value = auth.partition(" ")
-        if scheme.lower() == "bearer" and value.strip():
-            return value.strip()
-    return request.headers.get("x-shm-token") or None
+    return _token_from(request.headers.get("authorization", ""), request.headers.get("x-shm-token", ""))
 
 
 def _parse_time(name: str, value: str | None) -> float | None:
@@ -146,8 +323,12 @@ def _error(description: str) -> dict[str, Any]:
 
 
 _AUTH_RESPONSES: dict[int | str, dict[str, Any]] = {
+    400: _error("no or a malformed Host header"),
     401: _error("missing or wrong token"),
     403: _error("no token is configured: the action is disabled"),
+    413: _error("request body over the limit"),
+    421: _error("the Host header names a host this server does not answer for (server.allowed_hosts)"),
+    429: _error("too many wrong tokens from this address: retry after Retry-After seconds"),
     503: _error("the database is unavailable for now (locked by another process, disk full): retry later"),
 }
 #: Our own 422s say in a sentence what is wrong with a parameter; FastAPI's list what does not parse.
@@ -155,15 +336,28 @@ _INVALID = {422: _error("a parameter is invalid")}
 
 
 def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: int = 64 * 1024,
-               max_ingest_bytes: int = 8 * 1024 * 1024) -> FastAPI:
-    """The API of ``service``. ``loopback=False`` requires the token for every request."""
+               max_ingest_bytes: int = 8 * 1024 * 1024, host: str = "127.0.0.1", allowed_hosts: Iterable[str] = (),
+               check_host: bool = True, auth_failures_per_minute: int = 10) -> FastAPI:
+    """The API of ``service``, bound at ``host``. ``loopback=False`` requires the token for every
+    request, the API documents included. ``Host`` headers other than loopback, ``host`` and
+    ``allowed_hosts`` are refused (421); more than ``auth_failures_per_minute`` wrong tokens from
+    one address are answered 429 for the rest of the minute."""
+    limiter = AuthLimiter(auth_failures_per_minute, 60.0)
 
     def authorize(request: Request) -> None:
+        client = request.client.host if request.client else "unknown"
+        wait = limiter.retry_after(client)
+        if wait is not None:
+            raise HTTPException(429, f"too many wrong tokens from {client}; retry in {wait} s",
+                                headers={"Retry-After": str(wait)})
+        token = _token_of(request)
         try:
-            service.check_token(_token_of(request))
+            service.check_token(token)
         except PermissionError as exc:
             if service.token is None:
                 raise HTTPException(403, str(exc)) from None
+            if token:
+                limiter.failed(client)
             raise HTTPException(401, str(exc), headers={"WWW-Authenticate": "Bearer"}) from None
 
     def everyone(request: Request) -> None:
@@ -177,6 +371,10 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
         dependencies=[Depends(everyone)],
     )
     serve_docs_offline(app)  # /docs and /redoc from the installed packages, not a CDN
+
+    @app.exception_handler(ServiceStarting)
+    async def service_starting(request: Request, exc: ServiceStarting) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "5"})
 
     @app.exception_handler(StorageUnavailable)
     async def storage_unavailable(request: Request, exc: StorageUnavailable) -> JSONResponse:
@@ -286,7 +484,10 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
     def metrics() -> PlainTextResponse:
         return PlainTextResponse(_metrics(service.status()), media_type="text/plain; version=0.0.4; charset=utf-8")
 
-    app.add_middleware(_BodyLimit, default=max_body_bytes, ingest=max_ingest_bytes)
+    app.add_middleware(_Gate, default=max_body_bytes, ingest=max_ingest_bytes,
+                       hosts=HostCheck(host, allowed_hosts) if check_host else None,
+                       check_token=None if loopback else (lambda token: service.check_token(token)), limiter=limiter)
+    app.state.auth_limiter = limiter
     return app
 
 

@@ -76,7 +76,8 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
     from ._api import create_app
     from ._config import SettingsError, load_settings, render_toml
     from ._server import ApiServer
-    from ._service import MonitoringService, ServiceError
+    from ._service import MonitoringService, RigPending, ServiceError
+    from ._starting import ServiceSlot, StartingService
 
     try:
         settings = load_settings(args.config, overrides_from_args(args))
@@ -89,24 +90,6 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s",
                         stream=sys.stderr)
     log = logging.getLogger("shm.serve")
-    try:
-        service = MonitoringService(settings, environ=environ)
-    except (ServiceError, SettingsError, OSError) as exc:
-        print(f"shm serve: error: {exc}", file=sys.stderr)
-        return 2
-    s = settings.server
-    app = create_app(service, loopback=s.loopback, max_body_bytes=s.max_body_bytes, max_ingest_bytes=s.max_ingest_bytes)
-    try:
-        api = ApiServer(app, s.host, s.port).start()
-    except (OSError, TimeoutError) as exc:
-        print(f"shm serve: error: HTTP API on {s.host}:{s.port}: {exc}", file=sys.stderr)
-        service.stop()
-        return 2
-    print(f"shm serve: API at {api.url} (docs {api.url}/docs); source {settings.source.spec} as '{service.source.id}'; "
-          f"data in {settings.data_dir} (db {settings.db}, recordings "
-          f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
-    if service.dashboard is not None:
-        print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
     stop = threading.Event()
 
     def on_signal(signum: int, frame: Any) -> None:
@@ -115,6 +98,49 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, on_signal)
         signal.signal(signal.SIGTERM, on_signal)
+    s = settings.server
+    api = None
+    try:
+        service = MonitoringService(settings, environ=environ)
+        slot = ServiceSlot(service)
+    except RigPending as pending:
+        # follow: the file is not there yet. The API comes up now (healthz: degraded, the other
+        # routes 503 "starting"); the service is built once the file's rig.json is readable.
+        slot = ServiceSlot(StartingService(settings, str(pending), environ=environ))
+        service = None
+    except (ServiceError, SettingsError, OSError) as exc:
+        print(f"shm serve: error: {exc}", file=sys.stderr)
+        return 2
+    app = create_app(slot, loopback=s.loopback, max_body_bytes=s.max_body_bytes, max_ingest_bytes=s.max_ingest_bytes,
+                     host=s.host, allowed_hosts=s.allowed_hosts, auth_failures_per_minute=s.auth_failures_per_minute)
+    try:
+        api = ApiServer(app, s.host, s.port).start()
+    except (OSError, TimeoutError) as exc:
+        print(f"shm serve: error: HTTP API on {s.host}:{s.port}: {exc}", file=sys.stderr)
+        if service is not None:
+            service.stop()
+        return 2
+    if service is None:
+        print(f"shm serve: API at {api.url}; {slot.waiting_for}", flush=True)
+        log.info("%s", slot.waiting_for)
+        while service is None:
+            if stop.wait(settings.source.follow_poll_s):
+                api.stop()
+                return 0
+            try:
+                service = MonitoringService(settings, environ=environ)
+            except RigPending:
+                continue
+            except (ServiceError, SettingsError, OSError) as exc:
+                print(f"shm serve: error: {exc}", file=sys.stderr)
+                api.stop()
+                return 2
+        slot.current = service
+    print(f"shm serve: API at {api.url} (docs {api.url}/docs); source {settings.source.spec} as '{service.source.id}'; "
+          f"data in {settings.data_dir} (db {settings.db}, recordings "
+          f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
+    if service.dashboard is not None:
+        print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
     started = time.monotonic()
     service.start()
     code = 0

@@ -55,6 +55,26 @@ class ServerSettings(_Closed):
     max_ingest_bytes: int = Field(8 * 1024 * 1024, ge=1024, description="largest ingest request body, bytes")
     max_ingest_messages: int = Field(100_000, ge=1, description="most messages in one ingest request")
     ingest_wait_s: float = Field(5.0, gt=0, description="how long an ingest request waits for room in the pipeline before 503")
+    allowed_hosts: tuple[str, ...] = Field(
+        (), description="host names (or addresses) the API answers to in the Host header besides loopback and its own "
+        "address, e.g. ['shm.example.org', '*.plant.local']; others get 421 (against DNS rebinding); ['*']: any")
+    auth_failures_per_minute: int = Field(
+        10, ge=1, le=10_000, description="wrong tokens accepted from one client address per minute; more are answered 429")
+
+    @field_validator("allowed_hosts")
+    @classmethod
+    def _allowed_hosts(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        out = []
+        for name in value:
+            host = name.strip().lower().rstrip(".")
+            if host.startswith("[") and host.endswith("]"):
+                host = host[1:-1]
+            label = host[2:] if host.startswith("*.") else host
+            if host != "*" and (not label or any(c in label for c in " /\\@?#:*") and not _is_ip(label)):
+                raise ValueError(f"allowed_hosts entry {name!r} must be a host name or address without scheme or port "
+                                 "(e.g. 'shm.example.org', '*.plant.local', '10.0.0.5')")
+            out.append(host)
+        return tuple(out)
 
     @field_validator("host")
     @classmethod
@@ -70,6 +90,14 @@ class ServerSettings(_Closed):
     @property
     def loopback(self) -> bool:
         return ipaddress.ip_address(self.host).is_loopback
+
+
+def _is_ip(value: str) -> bool:
+    try:
+        ipaddress.ip_address(value)
+    except ValueError:
+        return False
+    return True
 
 
 class DashboardSettings(_Closed):
@@ -128,6 +156,9 @@ class SourceSettings(_Closed):
     layout: Literal["benchmark", "dense"] = Field("benchmark", description="rig layout for ingest when no rig file is given")
     follow_poll_s: float = Field(0.2, gt=0, description="how often a followed file is checked for new data, s")
     follow_idle_s: float | None = Field(None, gt=0, description="stop following after this long without growth, s (None: never)")
+    follow_rotations: bool = Field(
+        True, description="follow: after the writer closed the file, keep watching its name for a new file (a logger's "
+        "rotation; a replaced file is read from its start); false: the source ends with the file")
     lateness_s: float = Field(1.0, gt=0, le=60, description="how long the merge waits for a late sensor before moving on, s")
     silent_after_s: float = Field(2.0, gt=0, description="a sensor without data this long is reported degraded, s")
     stuck_after_s: float = Field(

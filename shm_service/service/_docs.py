@@ -2,8 +2,9 @@
 
 FastAPI's own pages load Swagger UI and ReDoc from a CDN, so on a rig's offline network ``/docs``
 stays blank. ``fastapi-offline`` ships the same JavaScript and CSS in its wheel; these pages point
-at those files, served by the API itself under ``STATIC_URL``. Like FastAPI's, the pages and the
-assets carry no data and need no token (the OpenAPI document they render is public too).
+at those files, served by the API itself under ``STATIC_URL``. On loopback the pages, the
+assets and the OpenAPI document need no token; off loopback every path needs it (the API's
+middleware checks it before any route), a browser sending it as the HTTP Basic password.
 
 ReDoc's sidebar always shows a Redocly logo fetched from the vendor's CDN; the pages' Content
 Security Policy allows images, scripts, styles and connections only from the API itself (plus

@@ -59,6 +59,10 @@ class ServiceError(RuntimeError):
     """The service cannot start (the message says why)."""
 
 
+class RigPending(ServiceError):
+    """``follow:``: the file (or its rig.json) is not there yet; the service can be made once it is."""
+
+
 class _DashboardSink:
     """Adapts the pipeline's pushes to ``web.Dashboard`` (the pipeline's ``SinkGuard`` counts
     and isolates what it raises). Nothing is pushed while every browser has paused."""
@@ -91,12 +95,18 @@ class MonitoringService:
     """One running ``shm serve``. ``environ`` is the environment the token is read from
     (default ``os.environ``; tests pass a dict)."""
 
-    def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None) -> None:
+    def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None,
+                 rig_wait_s: float = 0.0) -> None:
         self.settings = settings
+        self._rig_wait_s = rig_wait_s
         self.token = resolve_token(settings, environ)
         if not settings.server.loopback and self.token is None:
             raise ServiceError(f"server.host {settings.server.host} is not loopback: a token is required "
                                "(server.token_file or SHM_TOKEN)")
+        if settings.dashboard.enabled and not _loopback(settings.dashboard.host) and self.token is None:
+            raise ServiceError(f"dashboard.host {settings.dashboard.host} is not loopback: a token is required "
+                               "(server.token_file or SHM_TOKEN), which the dashboard then asks for; or bind it to "
+                               "127.0.0.1, or --no-dashboard")
         self.started_at = time.time()
         self.paused = False
         self.queue: queue.Queue = queue.Queue(maxsize=settings.queue_batches)
@@ -184,9 +194,11 @@ class MonitoringService:
                 source = FileSource(src.id or path.stem, self.queue, s, follow=kind == "follow", rig=rig_override, truth=truth)
                 if source.rig is None:
                     if kind == "follow":
-                        log.info("waiting for %s and its rig.json", path)
-                        if source.wait_for_rig(timeout=3600.0 * 24) is None:
-                            raise ServiceError(f"follow: no readable rig.json in {path}")
+                        # The model needs the rig: without source.rig, wait for the file's rig.json
+                        # (``shm serve`` serves the API meanwhile and retries; see RigPending).
+                        if source.wait_for_rig(timeout=self._rig_wait_s) is None:
+                            raise RigPending(f"follow: waiting for {path} and its rig.json "
+                                             "(or give the rig with source.rig)")
                     else:
                         raise ServiceError(f"{path}: no rig.json")
                 return source
@@ -217,7 +229,8 @@ class MonitoringService:
         d = self.settings.dashboard
         try:
             dashboard = Dashboard(host=d.host, port=d.port, rig=self.rig, units=self.model.units,
-                                  layout=self.model.state_layout, stations=self.model.stations, service=self)
+                                  layout=self.model.state_layout, stations=self.model.stations, service=self,
+                                  token=self.token)
         except Exception as exc:
             log.warning("dashboard failed to start (%s); running without it", exc)
             return None
@@ -447,3 +460,14 @@ def _check_sensor_counts(rig: RigDescription, est: Any) -> None:
 def _check(settings: ServiceSettings) -> None:
     if settings.source.kind == "replay" and not Path(settings.source.path or "").is_file():
         raise SettingsError(f"replay: {settings.source.path} does not exist")
+
+
+def _loopback(host: str) -> bool:
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False

@@ -283,38 +283,46 @@ class FileSource(Source):
         topics = {s.topic for s in rig.sensors} if rig is not None else None
         self._rig_override = rig
         self._topics = topics
+        self.rotations = settings.source.follow_rotations
         self.follower: RecordingFollower | None = None
         self._counted_rejects: dict[str, int] = {}
         self._early: list[FollowBlock] = []
-        if not follow:
-            if not self.path.is_file():
-                raise FileNotFoundError(f"replay: {self.path} does not exist")
-            self._open()
+        if not follow and not self.path.is_file():
+            raise FileNotFoundError(f"replay: {self.path} does not exist")
+        # follow: a missing file is waited for (the follower notes it once, with a count)
+        self._open()
 
     def _kinds(self) -> tuple[str, ...]:
         """What the pipeline uses: the sensors, and the truth only when it is shown."""
         return ("imu", "tof", "strain", "bearing", "temperature", *(("truth",) if self.truth else ()))
 
     def _open(self) -> None:
-        self.follower = RecordingFollower(self.path, rig=self._rig_override, kinds=self._kinds())
+        self.follower = RecordingFollower(self.path, rig=self._rig_override, kinds=self._kinds(),
+                                          reopen_finished=self.follow and self.rotations)
         self._early = self.follower.poll(max_bytes=1 << 16)  # rig.json comes with the first records
         self.rig = self.follower.rig
         if self.rig is None and not self.follow:
             raise RecordingError(f"{self.path}: rig.json is missing: no 'rig.json' attachment at the start of the file")
 
     def wait_for_rig(self, timeout: float) -> RigDescription | None:
-        """Follow: wait until the file exists and its rig.json is readable."""
+        """Follow: look (until ``timeout``, s; 0: once) for the file and its rig.json."""
         deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.path.is_file():
-                try:
-                    self._open()
-                except RecordingError:
-                    raise
-                if self.rig is not None:
-                    return self.rig
-            time.sleep(self.poll_s)
-        return None
+        while True:
+            if self.follower is None:
+                self._open()
+            elif self.rig is None:
+                self._early.extend(self.follower.poll(max_bytes=1 << 16))
+                self.rig = self.follower.rig
+            if self.rig is not None:
+                return self.rig
+            if time.monotonic() >= deadline or self._stop.wait(self.poll_s):
+                return None
+
+    def health_problems(self) -> list[str]:
+        f = self.follower
+        if self.follow and f is not None and f.missing:
+            return [f"follow: {self.path} does not exist (not yet written, or deleted); waiting for it"]
+        return []
 
     def _update_rejects(self) -> None:
         f = self.follower
@@ -405,30 +413,29 @@ class FileSource(Source):
             if self._stop.is_set():
                 self.state = "stopped"
             return
-        if self.follower is None:
-            self.state = "waiting for the file"
-            while not self._stop.is_set() and self.wait_for_rig(1.0) is None:
-                pass
-            if self._stop.is_set():
-                return
-            self.state = "running"
         f = self.follower
+        assert f is not None
         pacer = _Pacer(self.speed, self._stop)
         if not self._emit(self._early, pacer):
             return
         idle_since = time.monotonic()
+        replaced = f.replaced
         while not self._stop.is_set():
             before = f.bytes_read
             blocks = f.poll(max_bytes=2 << 20)
+            self.state = "waiting for the file" if f.missing else "running"
+            self.problems = list(f.report.problems)  # a missing file's entry counts on without data
             if blocks and not self._emit(blocks, pacer):
                 return
-            if f.finished:
+            if f.replaced != replaced:  # a new file under the name: reading it is progress
+                replaced, before = f.replaced, -1
+            if f.finished and not (self.follow and self.rotations):
                 break
             if f.damaged:
                 self.state = "failed"
                 self.error = f.report.problems[-1] if f.report.problems else "file damaged"
                 break
-            if f.bytes_read == before:  # at the end of what exists now
+            if f.bytes_read == before or f.finished:  # at the end of what exists now
                 if not self.follow:
                     self._emit(f.finish(), pacer)
                     break

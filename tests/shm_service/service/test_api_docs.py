@@ -73,15 +73,26 @@ def test_assets_are_the_packaged_files_with_their_types(api_url):
         assert not any(p.startswith(("/docs", "/redoc", STATIC_URL)) for p in paths)
 
 
-def test_docs_are_public_on_a_non_loopback_api_like_the_openapi_document(tmp_path):
+def test_docs_need_the_token_on_a_non_loopback_api_like_every_route(tmp_path):
+    """Issue 11, item 9: off loopback, /docs, /redoc, /openapi.json and their assets answered
+    without the token. A browser opens them with the token as the HTTP Basic password."""
+    import base64
+
+    token = "test-token-123"
     settings = load_settings(None, fast_overrides(tmp_path, **{"source.spec": "ingest"}))
-    service = MonitoringService(settings, environ={"SHM_TOKEN": "test-token-123"})
+    service = MonitoringService(settings, environ={"SHM_TOKEN": token})
     api = ApiServer(create_app(service, loopback=False), "127.0.0.1", 0).start()
+    pages = ("/docs", "/redoc", "/openapi.json", "/docs/oauth2-redirect", f"{STATIC_URL}/swagger-ui.css")
+    basic = "Basic " + base64.b64encode(f"operator:{token}".encode()).decode()
     try:
         with httpx.Client(base_url=api.url) as client:
             assert client.get("/api/status").status_code == 401
-            assert client.get("/docs").status_code == 200 and client.get("/redoc").status_code == 200
-            assert client.get(f"{STATIC_URL}/swagger-ui.css").status_code == 200
+            for page in pages:
+                r = client.get(page)
+                assert r.status_code == 401, page
+                assert any(v.startswith("Basic") for v in r.headers.get_list("www-authenticate")), page
+                assert client.get(page, headers={"Authorization": f"Bearer {token}"}).status_code == 200, page
+                assert client.get(page, headers={"Authorization": basic}).status_code == 200, page
     finally:
         api.stop()
         service.stop(drain_s=0)
