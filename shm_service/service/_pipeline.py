@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field
@@ -18,6 +19,7 @@ from typing import Protocol
 
 import numpy as np
 import orjson
+from threadpoolctl import threadpool_limits
 
 from analytics import AnalysisConfig, Baseline, EngineWindow, ModalMonitor, MonitoringEngine, WindowResult
 from contract import (
@@ -92,6 +94,23 @@ class PipelineSink(Protocol):
     def spectra(self, spectrum: SpectrumDocument) -> None: ...
     def window(self, window: WindowDocument) -> None: ...
     def alarm(self, alarm: AlarmDocument) -> None: ...
+
+
+_blas_limit = None
+
+
+def _one_blas_thread() -> None:
+    """Run BLAS/LAPACK single-threaded in this process (once; an explicit OPENBLAS_NUM_THREADS or
+    OMP_NUM_THREADS is left alone).
+
+    The analysis multiplies and decomposes small matrices (a 120 × 120 block Toeplitz per window)
+    while the source thread decodes on the other core: OpenBLAS's worker threads then spin for
+    the cores and one SSI-cov window took 4-10× the CPU of a single thread (measured on the
+    2-core machine under load). Results are the same bits: each output element is computed by
+    the same kernel either way."""
+    global _blas_limit
+    if _blas_limit is None and not {"OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"} & set(os.environ):
+        _blas_limit = threadpool_limits(1, user_api="blas")
 
 
 # -- merge ------------------------------------------------------------------------------------
@@ -519,6 +538,7 @@ class Pipeline:
                  sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0,
                  commit_retry_s: float = 5.0, max_pending_commits: int = 20_000, clock: SourceClock | None = None,
                  limits: ValueLimits | None = None, stuck_after_s: float = 1.0) -> None:
+        _one_blas_thread()
         self.model = model
         self.rig = model.rig
         self.warmup_s = warmup_s
