@@ -139,6 +139,34 @@ def bench_sim_memory(seconds: float, tree: Path | None = None) -> dict:
     return result
 
 
+def compare(recording: Path, tree: Path, rounds: int) -> dict:
+    """Before/after in one run: the one-hour replay of ``tree``'s code and this tree's, with
+    ``--no-archive`` and with the default archive, alternately for ``rounds`` rounds (best wall
+    and CPU of each), then the sim source's peak RSS with the raw archive (20 simulated minutes)."""
+    runs: dict[tuple[str, bool], list[dict]] = {(k, a): [] for k in ("before", "after") for a in (False, True)}
+    for _ in range(rounds):
+        for archive in (False, True):
+            runs["before", archive].append(bench_replay(recording, dashboard=False, tree=tree, archive=archive))
+            runs["after", archive].append(bench_replay(recording, dashboard=False, archive=archive))
+    best = {k: {"wall_s": min(r["wall_s"] for r in v), "cpu_s": min(r["cpu_s"] for r in v),
+                "peak_rss_mib": max(r["peak_rss_mib"] for r in v), "windows": sorted({r["windows_committed"] for r in v}),
+                "trend_rows": sorted({r["trend_rows"] for r in v})} for k, v in runs.items()}
+    for archive in (False, True):
+        b, a = best["before", archive], best["after", archive]
+        print(f"[compare] one hour replayed, {'default archive' if archive else '--no-archive'}, no dashboard "
+              f"(best of {rounds}): before {b['wall_s']} s wall / {b['cpu_s']} s CPU / {b['peak_rss_mib']} MiB peak RSS, "
+              f"after {a['wall_s']} s / {a['cpu_s']} s / {a['peak_rss_mib']} MiB; {b['wall_s'] / a['wall_s']:.2f}x faster; "
+              f"windows committed {b['windows']} / {a['windows']}, trend rows {b['trend_rows']} / {a['trend_rows']}", flush=True)
+    sim_before = bench_sim_memory(1200.0, tree)
+    sim_after = bench_sim_memory(1200.0)
+    print(f"[compare] sim source, 20 simulated minutes at max speed, raw archive on: peak RSS before "
+          f"{sim_before['peak_rss_mib']} MiB, after {sim_after['peak_rss_mib']} MiB", flush=True)
+    result = {"replay": {f"{k}/{'archive' if a else 'no-archive'}": v for (k, a), v in best.items()},
+              "sim_memory": {"before": sim_before, "after": sim_after}}
+    print(f"[compare] {json.dumps(result)}", flush=True)
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--replay", default="/tmp/hour.mcap", help="one-hour recording (simulated if missing)")
@@ -148,27 +176,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--skip-dashboard", action="store_true", help="replay with the dashboard off only")
     p.add_argument("--quick", action="store_true", help="a 2-hour memory run instead of --hours")
     p.add_argument("--compare", default=None, metavar="TREE",
-                   help="another checkout (e.g. the merge base): its replay with --no-archive and no dashboard, and "
-                        "this tree's, alternately (--rounds), before the usual runs")
+                   help="another checkout (e.g. the tree before a change): its replay with and without --no-archive "
+                        "(no dashboard) and this tree's, alternately (--rounds), and the sim source's memory, before the usual runs")
     p.add_argument("--rounds", type=int, default=2)
     # `python -m benchmarks` passes the same arguments to every benchmark: ignore the others' flags.
     args, _ = p.parse_known_args(argv)
     if args.quick:
         args.hours = min(args.hours, 2.0)
     if args.compare:
-        runs: dict[str, list[dict]] = {"before": [], "after": []}
-        for _ in range(args.rounds):
-            runs["before"].append(bench_replay(Path(args.replay), dashboard=False, tree=Path(args.compare).resolve(), archive=False))
-            runs["after"].append(bench_replay(Path(args.replay), dashboard=False, archive=False))
-        best = {k: min(r["wall_s"] for r in v) for k, v in runs.items()}
-        cpu = {k: min(r["cpu_s"] for r in v) for k, v in runs.items()}
-        print(f"[replay] one hour, --no-archive, no dashboard: before {best['before']} s wall / {cpu['before']} s CPU, "
-              f"after {best['after']} s wall / {cpu['after']} s CPU (best of {args.rounds}); "
-              f"{best['before'] / best['after']:.2f}x faster", flush=True)
-        before = bench_sim_memory(1200.0, Path(args.compare).resolve())
-        after = bench_sim_memory(1200.0)
-        print(f"[sim-memory] 20 simulated minutes at max speed, raw archive on: peak RSS before {before['peak_rss_mib']} MiB, "
-              f"after {after['peak_rss_mib']} MiB", flush=True)
+        compare(Path(args.replay), Path(args.compare).resolve(), args.rounds)
     if not args.skip_replay:
         bench_replay(Path(args.replay), dashboard=False)
         if not args.skip_dashboard:
