@@ -20,26 +20,36 @@ import time
 from pathlib import Path
 
 
+_THREAD_CPU: dict[int, list[float]] = {}  # pid -> CPU seconds of its busiest threads (set by _run_measured)
+
+
 def _run_measured(cmd: list[str], **kwargs) -> tuple[subprocess.CompletedProcess, float, int]:
     """Run ``cmd``; returns the completed process, its CPU seconds and its peak RSS (bytes,
-    sampled every 0.2 s)."""
+    sampled every 0.2 s). The CPU seconds of its three busiest threads are left in
+    ``_THREAD_CPU[pid]`` (the busiest thread bounds the wall time on an idle machine)."""
     import psutil
 
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         popen = subprocess.Popen(cmd, stdout=out, stderr=err, text=True, **kwargs)
         handle = psutil.Process(popen.pid)
         peak, cpu = 0, 0.0
+        threads: dict[int, float] = {}
         while popen.poll() is None:
             try:
                 peak = max(peak, handle.memory_info().rss)
                 times = handle.cpu_times()
                 cpu = times.user + times.system
+                for th in handle.threads():
+                    threads[th.id] = th.user_time + th.system_time
             except psutil.Error:
                 pass
             time.sleep(0.2)
         out.seek(0)
         err.seek(0)
-        return subprocess.CompletedProcess(cmd, popen.returncode, out.read(), err.read()), cpu, peak
+        _THREAD_CPU[popen.pid] = sorted(threads.values(), reverse=True)[:3]
+        proc = subprocess.CompletedProcess(cmd, popen.returncode, out.read(), err.read())
+        proc.pid = popen.pid  # type: ignore[attr-defined]
+        return proc, cpu, peak
 
 
 def bench_replay(recording: Path, *, dashboard: bool, tree: Path | None = None, archive: bool = True) -> dict:
@@ -61,12 +71,14 @@ def bench_replay(recording: Path, *, dashboard: bool, tree: Path | None = None, 
         started = time.perf_counter()
         proc, cpu_s, peak_rss = _run_measured(cmd, cwd=tree, env=env)
         wall = time.perf_counter() - started
+        load += " → " + " ".join(f"{x:.2f}" for x in os.getloadavg())
     if proc.returncode != 0:
         print(proc.stderr[-3000:], flush=True)
     levels = [line.split()[2] for line in proc.stderr.splitlines() if len(line.split()) > 2]
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
     result = {"tree": str(tree or "."), "dashboard": dashboard, "archive": archive, "wall_s": round(wall, 1),
-              "cpu_s": round(cpu_s, 1), "peak_rss_mib": round(peak_rss / 2**20, 1), "load_before": load, "exit": proc.returncode, "messages": summary["messages"],
+              "cpu_s": round(cpu_s, 1), "busiest_threads_cpu_s": [round(c, 1) for c in _THREAD_CPU.get(proc.pid, [])],
+              "peak_rss_mib": round(peak_rss / 2**20, 1), "load": load, "exit": proc.returncode, "messages": summary["messages"],
               "estimates": summary["estimates"], "windows": summary["windows"], "windows_committed": summary["windows_committed"],
               "trend_rows": summary["trend_rows"], "realtime_factor": round(summary["processed_data_s"] / wall, 1),
               "pipeline_errors": summary["pipeline_errors"], "sink_errors": summary["sink_errors"],
@@ -149,13 +161,15 @@ def compare(recording: Path, tree: Path, rounds: int) -> dict:
             runs["before", archive].append(bench_replay(recording, dashboard=False, tree=tree, archive=archive))
             runs["after", archive].append(bench_replay(recording, dashboard=False, archive=archive))
     best = {k: {"wall_s": min(r["wall_s"] for r in v), "cpu_s": min(r["cpu_s"] for r in v),
-                "peak_rss_mib": max(r["peak_rss_mib"] for r in v), "windows": sorted({r["windows_committed"] for r in v}),
+                "peak_rss_mib": max(r["peak_rss_mib"] for r in v),
+                "busiest_thread_cpu_s": min((r["busiest_threads_cpu_s"] or [float("nan")])[0] for r in v), "windows": sorted({r["windows_committed"] for r in v}),
                 "trend_rows": sorted({r["trend_rows"] for r in v})} for k, v in runs.items()}
     for archive in (False, True):
         b, a = best["before", archive], best["after", archive]
         print(f"[compare] one hour replayed, {'default archive' if archive else '--no-archive'}, no dashboard "
-              f"(best of {rounds}): before {b['wall_s']} s wall / {b['cpu_s']} s CPU / {b['peak_rss_mib']} MiB peak RSS, "
-              f"after {a['wall_s']} s / {a['cpu_s']} s / {a['peak_rss_mib']} MiB; {b['wall_s'] / a['wall_s']:.2f}x faster; "
+              f"(best of {rounds}): before {b['wall_s']} s wall / {b['cpu_s']} s CPU (busiest thread {b['busiest_thread_cpu_s']} s) / "
+              f"{b['peak_rss_mib']} MiB peak RSS, after {a['wall_s']} s / {a['cpu_s']} s ({a['busiest_thread_cpu_s']} s) / "
+              f"{a['peak_rss_mib']} MiB; {b['wall_s'] / a['wall_s']:.2f}x faster; "
               f"windows committed {b['windows']} / {a['windows']}, trend rows {b['trend_rows']} / {a['trend_rows']}", flush=True)
     sim_before = bench_sim_memory(1200.0, tree)
     sim_after = bench_sim_memory(1200.0)
