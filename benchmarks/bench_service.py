@@ -3,7 +3,10 @@ the dashboard off and on (issue 10: under 3 minutes on 2 cores with it on, every
 committed, nothing in the log), and flat memory over a long simulated run at maximum speed.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_service [--replay FILE] [--hours H] [--skip-replay] [--skip-sim]
-     [--skip-dashboard]
+     [--skip-dashboard] [--compare TREE [--rounds N]]
+``--compare TREE`` (another checkout, e.g. ``git worktree add ../old COMMIT``) runs its code and this
+tree's side by side: the one-hour replay with ``--no-archive`` and with the default archive, and
+the sim source's peak RSS with the raw archive.
 (``main()`` is the entry for ``python -m benchmarks``.)
 """
 
@@ -151,10 +154,10 @@ def bench_sim_memory(seconds: float, tree: Path | None = None) -> dict:
     return result
 
 
-def compare(recording: Path, tree: Path, rounds: int) -> dict:
+def compare(recording: Path, tree: Path, rounds: int, sim_s: float = 1200.0) -> dict:
     """Before/after in one run: the one-hour replay of ``tree``'s code and this tree's, with
     ``--no-archive`` and with the default archive, alternately for ``rounds`` rounds (best wall
-    and CPU of each), then the sim source's peak RSS with the raw archive (20 simulated minutes)."""
+    and CPU of each), then the sim source's peak RSS with the raw archive (``sim_s`` of simulated data)."""
     runs: dict[tuple[str, bool], list[dict]] = {(k, a): [] for k in ("before", "after") for a in (False, True)}
     for _ in range(rounds):
         for archive in (False, True):
@@ -171,9 +174,9 @@ def compare(recording: Path, tree: Path, rounds: int) -> dict:
               f"{b['peak_rss_mib']} MiB peak RSS, after {a['wall_s']} s / {a['cpu_s']} s ({a['busiest_thread_cpu_s']} s) / "
               f"{a['peak_rss_mib']} MiB; {b['wall_s'] / a['wall_s']:.2f}x faster; "
               f"windows committed {b['windows']} / {a['windows']}, trend rows {b['trend_rows']} / {a['trend_rows']}", flush=True)
-    sim_before = bench_sim_memory(1200.0, tree)
-    sim_after = bench_sim_memory(1200.0)
-    print(f"[compare] sim source, 20 simulated minutes at max speed, raw archive on: peak RSS before "
+    sim_before = bench_sim_memory(sim_s, tree)
+    sim_after = bench_sim_memory(sim_s)
+    print(f"[compare] sim source, {sim_s:g} simulated s at max speed, raw archive on: peak RSS before "
           f"{sim_before['peak_rss_mib']} MiB, after {sim_after['peak_rss_mib']} MiB", flush=True)
     result = {"replay": {f"{k}/{'archive' if a else 'no-archive'}": v for (k, a), v in best.items()},
               "sim_memory": {"before": sim_before, "after": sim_after}}
@@ -193,12 +196,13 @@ def main(argv: list[str] | None = None) -> int:
                    help="another checkout (e.g. the tree before a change): its replay with and without --no-archive "
                         "(no dashboard) and this tree's, alternately (--rounds), and the sim source's memory, before the usual runs")
     p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--sim-seconds", type=float, default=1200.0, help="simulated seconds of --compare's sim memory run")
     # `python -m benchmarks` passes the same arguments to every benchmark: ignore the others' flags.
     args, _ = p.parse_known_args(argv)
     if args.quick:
         args.hours = min(args.hours, 2.0)
     if args.compare:
-        compare(Path(args.replay), Path(args.compare).resolve(), args.rounds)
+        compare(Path(args.replay), Path(args.compare).resolve(), args.rounds, args.sim_seconds)
     if not args.skip_replay:
         bench_replay(Path(args.replay), dashboard=False)
         if not args.skip_dashboard:
