@@ -220,7 +220,6 @@ class IngestValidator:
         # The payload recorded is written from the validated numbers, never the client's bytes.
         return topic, log_ns, pub_ns, row, canonical
 
-
     def _validate_columns(self, messages: list, wall_ns: int, mono: float) -> IngestResult | None:
         """The whole request at once, column by column, when every message is clean: the rig's
         sensor topics, integer stamps in range and on the source's clock (no source-wide jump),
