@@ -3,7 +3,10 @@ the dashboard off and on (issue 10: under 3 minutes on 2 cores with it on, every
 committed, nothing in the log), and flat memory over a long simulated run at maximum speed.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_service [--replay FILE] [--hours H] [--skip-replay] [--skip-sim]
-     [--skip-dashboard]
+     [--skip-dashboard] [--compare TREE [--rounds N]]
+``--compare TREE`` (another checkout, e.g. ``git worktree add ../old COMMIT``) runs its code and this
+tree's side by side: the one-hour replay with ``--no-archive`` and with the default archive, and
+the sim source's peak RSS with the raw archive.
 (``main()`` is the entry for ``python -m benchmarks``.)
 """
 
@@ -20,26 +23,36 @@ import time
 from pathlib import Path
 
 
+_THREAD_CPU: dict[int, list[float]] = {}  # pid -> CPU seconds of its busiest threads (set by _run_measured)
+
+
 def _run_measured(cmd: list[str], **kwargs) -> tuple[subprocess.CompletedProcess, float, int]:
     """Run ``cmd``; returns the completed process, its CPU seconds and its peak RSS (bytes,
-    sampled every 0.2 s)."""
+    sampled every 0.2 s). The CPU seconds of its three busiest threads are left in
+    ``_THREAD_CPU[pid]`` (the busiest thread bounds the wall time on an idle machine)."""
     import psutil
 
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         popen = subprocess.Popen(cmd, stdout=out, stderr=err, text=True, **kwargs)
         handle = psutil.Process(popen.pid)
         peak, cpu = 0, 0.0
+        threads: dict[int, float] = {}
         while popen.poll() is None:
             try:
                 peak = max(peak, handle.memory_info().rss)
                 times = handle.cpu_times()
                 cpu = times.user + times.system
+                for th in handle.threads():
+                    threads[th.id] = th.user_time + th.system_time
             except psutil.Error:
                 pass
             time.sleep(0.2)
         out.seek(0)
         err.seek(0)
-        return subprocess.CompletedProcess(cmd, popen.returncode, out.read(), err.read()), cpu, peak
+        _THREAD_CPU[popen.pid] = sorted(threads.values(), reverse=True)[:3]
+        proc = subprocess.CompletedProcess(cmd, popen.returncode, out.read(), err.read())
+        proc.pid = popen.pid  # type: ignore[attr-defined]
+        return proc, cpu, peak
 
 
 def bench_replay(recording: Path, *, dashboard: bool, tree: Path | None = None, archive: bool = True) -> dict:
@@ -61,12 +74,14 @@ def bench_replay(recording: Path, *, dashboard: bool, tree: Path | None = None, 
         started = time.perf_counter()
         proc, cpu_s, peak_rss = _run_measured(cmd, cwd=tree, env=env)
         wall = time.perf_counter() - started
+        load += " → " + " ".join(f"{x:.2f}" for x in os.getloadavg())
     if proc.returncode != 0:
         print(proc.stderr[-3000:], flush=True)
     levels = [line.split()[2] for line in proc.stderr.splitlines() if len(line.split()) > 2]
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
     result = {"tree": str(tree or "."), "dashboard": dashboard, "archive": archive, "wall_s": round(wall, 1),
-              "cpu_s": round(cpu_s, 1), "peak_rss_mib": round(peak_rss / 2**20, 1), "load_before": load, "exit": proc.returncode, "messages": summary["messages"],
+              "cpu_s": round(cpu_s, 1), "busiest_threads_cpu_s": [round(c, 1) for c in _THREAD_CPU.get(proc.pid, [])],
+              "peak_rss_mib": round(peak_rss / 2**20, 1), "load": load, "exit": proc.returncode, "messages": summary["messages"],
               "estimates": summary["estimates"], "windows": summary["windows"], "windows_committed": summary["windows_committed"],
               "trend_rows": summary["trend_rows"], "realtime_factor": round(summary["processed_data_s"] / wall, 1),
               "pipeline_errors": summary["pipeline_errors"], "sink_errors": summary["sink_errors"],
@@ -139,6 +154,36 @@ def bench_sim_memory(seconds: float, tree: Path | None = None) -> dict:
     return result
 
 
+def compare(recording: Path, tree: Path, rounds: int, sim_s: float = 1200.0) -> dict:
+    """Before/after in one run: the one-hour replay of ``tree``'s code and this tree's, with
+    ``--no-archive`` and with the default archive, alternately for ``rounds`` rounds (best wall
+    and CPU of each), then the sim source's peak RSS with the raw archive (``sim_s`` of simulated data)."""
+    runs: dict[tuple[str, bool], list[dict]] = {(k, a): [] for k in ("before", "after") for a in (False, True)}
+    for _ in range(rounds):
+        for archive in (False, True):
+            runs["before", archive].append(bench_replay(recording, dashboard=False, tree=tree, archive=archive))
+            runs["after", archive].append(bench_replay(recording, dashboard=False, archive=archive))
+    best = {k: {"wall_s": min(r["wall_s"] for r in v), "cpu_s": min(r["cpu_s"] for r in v),
+                "peak_rss_mib": max(r["peak_rss_mib"] for r in v),
+                "busiest_thread_cpu_s": min((r["busiest_threads_cpu_s"] or [float("nan")])[0] for r in v), "windows": sorted({r["windows_committed"] for r in v}),
+                "trend_rows": sorted({r["trend_rows"] for r in v})} for k, v in runs.items()}
+    for archive in (False, True):
+        b, a = best["before", archive], best["after", archive]
+        print(f"[compare] one hour replayed, {'default archive' if archive else '--no-archive'}, no dashboard "
+              f"(best of {rounds}): before {b['wall_s']} s wall / {b['cpu_s']} s CPU (busiest thread {b['busiest_thread_cpu_s']} s) / "
+              f"{b['peak_rss_mib']} MiB peak RSS, after {a['wall_s']} s / {a['cpu_s']} s ({a['busiest_thread_cpu_s']} s) / "
+              f"{a['peak_rss_mib']} MiB; {b['wall_s'] / a['wall_s']:.2f}x faster; "
+              f"windows committed {b['windows']} / {a['windows']}, trend rows {b['trend_rows']} / {a['trend_rows']}", flush=True)
+    sim_before = bench_sim_memory(sim_s, tree)
+    sim_after = bench_sim_memory(sim_s)
+    print(f"[compare] sim source, {sim_s:g} simulated s at max speed, raw archive on: peak RSS before "
+          f"{sim_before['peak_rss_mib']} MiB, after {sim_after['peak_rss_mib']} MiB", flush=True)
+    result = {"replay": {f"{k}/{'archive' if a else 'no-archive'}": v for (k, a), v in best.items()},
+              "sim_memory": {"before": sim_before, "after": sim_after}}
+    print(f"[compare] {json.dumps(result)}", flush=True)
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--replay", default="/tmp/hour.mcap", help="one-hour recording (simulated if missing)")
@@ -148,27 +193,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--skip-dashboard", action="store_true", help="replay with the dashboard off only")
     p.add_argument("--quick", action="store_true", help="a 2-hour memory run instead of --hours")
     p.add_argument("--compare", default=None, metavar="TREE",
-                   help="another checkout (e.g. the merge base): its replay with --no-archive and no dashboard, and "
-                        "this tree's, alternately (--rounds), before the usual runs")
+                   help="another checkout (e.g. the tree before a change): its replay with and without --no-archive "
+                        "(no dashboard) and this tree's, alternately (--rounds), and the sim source's memory, before the usual runs")
     p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--sim-seconds", type=float, default=1200.0, help="simulated seconds of --compare's sim memory run")
     # `python -m benchmarks` passes the same arguments to every benchmark: ignore the others' flags.
     args, _ = p.parse_known_args(argv)
     if args.quick:
         args.hours = min(args.hours, 2.0)
     if args.compare:
-        runs: dict[str, list[dict]] = {"before": [], "after": []}
-        for _ in range(args.rounds):
-            runs["before"].append(bench_replay(Path(args.replay), dashboard=False, tree=Path(args.compare).resolve(), archive=False))
-            runs["after"].append(bench_replay(Path(args.replay), dashboard=False, archive=False))
-        best = {k: min(r["wall_s"] for r in v) for k, v in runs.items()}
-        cpu = {k: min(r["cpu_s"] for r in v) for k, v in runs.items()}
-        print(f"[replay] one hour, --no-archive, no dashboard: before {best['before']} s wall / {cpu['before']} s CPU, "
-              f"after {best['after']} s wall / {cpu['after']} s CPU (best of {args.rounds}); "
-              f"{best['before'] / best['after']:.2f}x faster", flush=True)
-        before = bench_sim_memory(1200.0, Path(args.compare).resolve())
-        after = bench_sim_memory(1200.0)
-        print(f"[sim-memory] 20 simulated minutes at max speed, raw archive on: peak RSS before {before['peak_rss_mib']} MiB, "
-              f"after {after['peak_rss_mib']} MiB", flush=True)
+        compare(Path(args.replay), Path(args.compare).resolve(), args.rounds, args.sim_seconds)
     if not args.skip_replay:
         bench_replay(Path(args.replay), dashboard=False)
         if not args.skip_dashboard:

@@ -12,7 +12,7 @@ from contract import ESTIMATE_TOPIC, PAYLOAD_FIELDS, SCHEMAS, TRUTH_TOPIC, class
 from ._follow import FollowBlock, RecordingFollower
 from ._inspect import format_inspection, inspect_recording
 from ._reader import Channel, ReadReport, Recording, RecordingError, TopicReport, read_recording
-from ._writer import RecordingWriter
+from ._writer import RecordingWriter, encode_payloads_json
 
 __all__ = [
     "ESTIMATE_TOPIC",
@@ -28,6 +28,7 @@ __all__ = [
     "RecordingWriter",
     "TopicReport",
     "classify_topic",
+    "encode_payloads_json",
     "format_inspection",
     "inspect_recording",
     "read_recording",

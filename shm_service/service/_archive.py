@@ -16,6 +16,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from contract import RigDescription
 
 from ..recording import ESTIMATE_TOPIC, RecordingWriter
@@ -111,8 +113,19 @@ class Archive:
             self.errors += 1
             log.error("recording failed: %s", exc)
 
-    def write_estimates(self, stamps_ns: list[int], payloads: list[bytes]) -> None:
-        self.write_many([(ESTIMATE_TOPIC, t, p, t) for t, p in zip(stamps_ns, payloads)])
+    def write_estimates(self, stamps_ns: Any, payloads: list[bytes]) -> None:
+        """Write estimate payloads (encoded JSON) stamped ``stamps_ns`` (integer ns, log and
+        publish time), all at once."""
+        if not len(payloads):
+            return
+        try:
+            writer = self._writer_for(int(stamps_ns[0]))
+            writer.write_batch(ESTIMATE_TOPIC, np.asarray(stamps_ns, dtype=np.int64), payloads)
+            self._bytes += sum(map(len, payloads)) + 40 * len(payloads)
+            self.messages += len(payloads)
+        except (OSError, ValueError) as exc:
+            self.errors += 1
+            log.error("recording failed: %s", exc)
 
     def maybe_flush(self, force: bool = False) -> None:
         if self._writer is None:

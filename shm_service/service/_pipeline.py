@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
-import orjson
+from threadpoolctl import threadpool_limits
 
 from analytics import AnalysisConfig, Baseline, EngineWindow, ModalMonitor, MonitoringEngine, WindowResult
 from contract import (
@@ -55,7 +56,7 @@ from estimator import (
 )
 
 from ..analysis import trend_rows
-from ..recording import FollowBlock
+from ..recording import FollowBlock, encode_payloads_json
 from ._alarms import alarm_changes, clear_changes
 from ._archive import Archive
 from ._sinks import SinkGuard
@@ -92,6 +93,23 @@ class PipelineSink(Protocol):
     def spectra(self, spectrum: SpectrumDocument) -> None: ...
     def window(self, window: WindowDocument) -> None: ...
     def alarm(self, alarm: AlarmDocument) -> None: ...
+
+
+_blas_limit = None
+
+
+def _one_blas_thread() -> None:
+    """Run BLAS/LAPACK single-threaded in this process (once; an explicit OPENBLAS_NUM_THREADS or
+    OMP_NUM_THREADS is left alone).
+
+    The analysis multiplies and decomposes small matrices (a 120 × 120 block Toeplitz per window)
+    while the source thread decodes on the other core: OpenBLAS's worker threads then spin for
+    the cores and one SSI-cov window took 4-10× the CPU of a single thread (measured on the
+    2-core machine under load). Results are the same bits: each output element is computed by
+    the same kernel either way."""
+    global _blas_limit
+    if _blas_limit is None and not {"OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"} & set(os.environ):
+        _blas_limit = threadpool_limits(1, user_api="blas")
 
 
 # -- merge ------------------------------------------------------------------------------------
@@ -346,11 +364,28 @@ class _Estimator:
 # -- analytics --------------------------------------------------------------------------------
 
 
+class _LazySpectrum:
+    """A window's ``SpectrumDocument``, built the first time it is asked for (the API, the
+    dashboard): validating its few thousand amplitudes costs about 30 ms a window, and a replay
+    without a dashboard asks for none. Safe to call from any thread (the arguments are kept)."""
+
+    __slots__ = ("_kwargs", "_document")
+
+    def __init__(self, **kwargs) -> None:
+        self._kwargs = kwargs
+        self._document: SpectrumDocument | None = None
+
+    def get(self) -> SpectrumDocument:
+        if self._document is None:
+            self._document = SpectrumDocument.from_arrays(**self._kwargs)
+        return self._document
+
+
 @dataclass
 class WindowOutput:
     result: WindowResult
     rows: list[TrendRow]
-    spectrum: SpectrumDocument
+    spectrum: _LazySpectrum
     start_s: float
     new_baseline: bool
     alarm_changes: list[AlarmChange]
@@ -376,7 +411,7 @@ class _Analytics:
         self.engine: MonitoringEngine | None = None
         self._next_start_ns = None if last_window_start is None else int(round(last_window_start * _NS)) + int(round(self.step_s * _NS))
         self.not_before_ns: int | None = None  # windows starting earlier are not analysed (filter converging)
-        self.latest_spectrum: SpectrumDocument | None = None
+        self._latest_spectrum: _LazySpectrum | None = None
         self.learning_baseline = self.monitor.baseline is None
         self._temperature: list[tuple[np.ndarray, np.ndarray]] = []  # samples before the engine starts
 
@@ -408,6 +443,11 @@ class _Analytics:
                 raise
             log.warning("stored baseline does not fit the model (%s); learning a new one", exc)
             return self._monitor(None)
+
+    @property
+    def latest_spectrum(self) -> SpectrumDocument | None:
+        latest = self._latest_spectrum
+        return None if latest is None else latest.get()
 
     # -- the engine's counters ------------------------------------------------------------------
     @property
@@ -485,12 +525,12 @@ class _Analytics:
         f, amp = spec.frequencies[::pad], spec.amplitude[::pad]  # the unpadded DFT bins of the window
         keep = f <= 12.0
         baseline = self.monitor.baseline
-        self.latest_spectrum = SpectrumDocument.from_arrays(
+        self._latest_spectrum = spectrum = _LazySpectrum(
             source=self.source_id, window_start_s=start, window_end_s=end, frequencies_hz=f[keep],
             amplitudes=amp[keep], tracked_hz=self._per_unit([float(x) for x in self.monitor.ref]),
             baseline_hz=None if baseline is None else self._per_unit([m.f_ref_hz for m in baseline.modes]),
         )
-        return WindowOutput(res, rows, self.latest_spectrum, start, baseline is not None and not had_baseline,
+        return WindowOutput(res, rows, spectrum, start, baseline is not None and not had_baseline,
                             alarm_changes(res.alarm_events))
 
 
@@ -505,7 +545,7 @@ class _PendingCommit:
     commit: WindowCommit
     raised: dict[str, str]  # chart -> level of the alarms standing once it is written
     document: WindowDocument | None = None
-    spectrum: SpectrumDocument | None = None
+    spectrum: _LazySpectrum | None = None
 
 
 class Pipeline:
@@ -519,6 +559,7 @@ class Pipeline:
                  sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0,
                  commit_retry_s: float = 5.0, max_pending_commits: int = 20_000, clock: SourceClock | None = None,
                  limits: ValueLimits | None = None, stuck_after_s: float = 1.0) -> None:
+        _one_blas_thread()
         self.model = model
         self.rig = model.rig
         self.warmup_s = warmup_s
@@ -590,6 +631,7 @@ class Pipeline:
         self._temperature_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._bearing_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._pending_estimator: dict[str, list] = {}
+        self._estimate_maps: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._warmup_set = False
 
     # -- control ----------------------------------------------------------------------------
@@ -769,14 +811,15 @@ class Pipeline:
         t, x, P = out.t[::k], out.x[::k], out.P_diag[::k]
         if not len(t):
             return
-        m = self.model
-        layout = m.state_layout
+        layout = self.model.state_layout
+        if self._estimate_maps is None:  # b → tip deflection, deflection and curvature at the stations
+            m = self.model
+            self._estimate_maps = (m.tip_row(), m.units.shape(m.stations).T, m.units.curvature(m.stations).T)
+        tip, shape, curvature = self._estimate_maps
         b = layout.b_of(x)
-        rows = estimate_payloads(layout, x, P, b @ m.tip_row(), b @ m.units.shape(m.stations).T,
-                                 b @ m.units.curvature(m.stations).T)
-        stamps = (self.estimator.epoch_ns + np.round(t * 1e9).astype(np.int64)).tolist()
-        dumps = orjson.dumps
-        self.archive.write_estimates(stamps, [dumps(row) for row in rows])
+        rows = estimate_payloads(layout, x, P, b @ tip, b @ shape, b @ curvature)
+        stamps = self.estimator.epoch_ns + np.round(t * 1e9).astype(np.int64)
+        self.archive.write_estimates(stamps, encode_payloads_json(rows))
 
     def _push_estimates(self, t_abs: np.ndarray, out: FilterOutput) -> None:
         if self.sink is None:
@@ -873,7 +916,7 @@ class Pipeline:
         if pending.document is not None:
             guard.call("window", self.sink.window, pending.document)
         if pending.spectrum is not None:
-            guard.call("spectra", self.sink.spectra, pending.spectrum)
+            guard.call("spectra", self.sink.spectra, pending.spectrum.get())
         changes = pending.commit.alarm_changes
         if changes:
             changed = {c.chart for c in changes}

@@ -117,6 +117,39 @@ def test_round_trip_exact_values_and_merged_order(tmp_path: Path) -> None:
     assert "/truth/state" in format_inspection(summary_dict)
 
 
+def test_write_batch_writes_the_bytes_of_one_write_per_message(tmp_path: Path) -> None:
+    # Chunks of 2 kB: the batches are cut across several chunks, one message at a time would be cut the same way.
+    import orjson
+
+    stamps = T0 + np.arange(300, dtype=np.int64) * FAST
+    payloads = [orjson.dumps(imu(i)) for i in range(300)]
+    strain = [orjson.dumps({"strain": i * 1e-7}) for i in range(300)]
+    one, many = tmp_path / "one.mcap", tmp_path / "many.mcap"
+    with RecordingWriter(one, RIG, chunk_size=2048) as writer:
+        writer.write("/strain/g1", T0, strain[0])
+        for t, p in zip(stamps.tolist(), payloads):
+            writer.write("/imu/D", t, p, t + 7)
+        for t, p in zip(stamps.tolist()[1:], strain[1:]):
+            writer.write("/strain/g1", t, p)
+    with RecordingWriter(many, RIG, chunk_size=2048) as writer:
+        writer.write("/strain/g1", T0, strain[0])
+        writer.write_batch("/imu/D", stamps[:17], payloads[:17], stamps[:17] + 7)
+        writer.write_batch("/imu/D", stamps[17:], payloads[17:], stamps[17:] + 7)
+        writer.write_batch("/strain/g1", stamps[:0], [])
+        writer.write_batch("/strain/g1", stamps[1:], strain[1:])
+    assert many.read_bytes() == one.read_bytes()
+    assert len(read_recording(many).channels["/imu/D"]) == 300
+    with RecordingWriter(tmp_path / "bad.mcap", RIG) as writer:
+        with pytest.raises(ValueError, match="log_times_ns must be 2 integers"):
+            writer.write_batch("/imu/D", stamps[:3], payloads[:2])
+        with pytest.raises(ValueError, match="publish_time_ns=.* is before log_time_ns"):
+            writer.write_batch("/imu/D", stamps[:2], payloads[:2], stamps[:2] - 1)
+        with pytest.raises(ValueError, match="negative"):
+            writer.write_batch("/imu/D", -stamps[:2], payloads[:2])
+        with pytest.raises(ValueError, match="not a topic of the recording contract"):
+            writer.write_batch("/nope", stamps[:2], payloads[:2])
+
+
 def test_topics_filter_and_other_json_formatting(tmp_path: Path) -> None:
     path = tmp_path / "spaced.mcap"
     with RecordingWriter(path, json.dumps(RIG)) as writer:
