@@ -68,8 +68,10 @@ class FilterConfig(BaseModel):
     q_b: float = Field(1e-8, ge=0, description="model error of ḃ (truncated modes), 1/s")
     q_v: float | None = Field(
         None, ge=0,
-        description="model error of b̈ (accelerometers), 1/s³; None: 1e-4 with strain gauges, 1e-3 without "
-        "(nothing then corrects b̈ at 200 Hz, and with 1e-4 the NEES of φ shows the filter overconfident by ~2)",
+        description="model error of b̈ (accelerometers) beyond their noise (which the input noise already "
+        "carries), 1/s³; None: 1e-6 with strain gauges, 1e-3 without (nothing then corrects b̈ at 200 Hz, and "
+        "with 1e-4 the NEES of φ shows the filter overconfident by ~2). With gauges 1e-4 was 20 times the "
+        "accelerometers' own b̈ noise and let b follow the gauges, which misread the combimode",
     )
     q_beta: float = Field(1e-11, ge=0, description="random walk of the gyro bias at D, rad²/s³")
     q_beta_peripheral: float = Field(
@@ -81,8 +83,13 @@ class FilterConfig(BaseModel):
         1e-4, ge=0, description="model error of the residual modes' dynamics: random walk of their rates, 1/s³")
     residual_damping: float = Field(
         0.01, ge=0, lt=1, description="damping ratio assumed for the residual modes (the FE model has none), 1")
+    combimode_error_scale: float = Field(
+        1.0, ge=0, description="scale of the gauges' shared model error from the combimode's shape "
+        "(ImmsModel.combimode_strain_errors); 0 drops it")
     tof_model_std: float = Field(0.002, ge=0, description="ToF model error (higher modes, beam surface), m")
-    strain_model_std: float = Field(3e-6, ge=0, description="strain model error (higher modes), m/m")
+    strain_model_std: float = Field(
+        1.5e-6, ge=0, description="strain model error (higher modes, FE against plant), m/m; the combimode's share "
+        "is modelled on its own (combimode_error_scale)")
     bearing_std: float = Field(1e-4, gt=0, description="floor of the bearing sensor's noise, m")
     pseudo_h_std: float = Field(1e-4, gt=0, description="h = 0 pseudo-measurement, m")
     pseudo_h_rate_std: float = Field(1e-3, gt=0, description="ḣ = 0 pseudo-measurement, m/s")
@@ -153,6 +160,33 @@ class ImmsModel:
     stations: np.ndarray
     modal_units: UnitDeformations | None = None
     residual_participation: tuple[float, ...] = ()
+    combimode_pair: UnitDeformations | None = None
+
+    def combimode_strain_errors(self) -> np.ndarray:
+        """The strain the combimode cannot represent of the two modes it merges, per unit b_1, at
+        the selected gauges: (G, 2), signed; (G, 0) without a combimode.
+
+        The combimode stands for s̃_1 and s̃_2, alike in deflection (MAC ≈ 0.99) but with
+        curvatures 20–40 % apart at the gauges. For each of them, b is what the peripheral IMUs'
+        least squares reads (slopes for gyros, deflections for accelerometers: they read the tip of
+        either mode to 0.05–0.15 %), and the column is the strain that b predicts at each gauge
+        minus the mode's own strain there, divided by b_1: the conflict between the inputs and the
+        gauges that no b resolves (read by the four gauges alone, s̃_2's tip comes out 2 % large).
+        It is one pattern over the gauges and grows with the amplitude of modes 1 and 2, so the
+        filter carries it as a model error Σ_k ψ_k column_k · b_1 shared by the gauges of one time.
+        """
+        pair = self.combimode_pair
+        n_g = self.gauge_eta.size
+        if pair is None or self.imu_eta.size == 0 or n_g == 0:
+            return np.zeros((n_g, 0))
+        units = self.units
+        if self.kind == KIND_GYRO:
+            A, Y = units.slope(self.imu_eta), pair.slope(self.imu_eta)
+        else:
+            A, Y = units.shape(self.imu_eta), pair.shape(self.imu_eta)
+        b = np.linalg.pinv(A) @ Y  # (Γ, 2): each mode as the IMUs read it
+        miss = -0.5 * self.rig.beam.thickness * (units.curvature(self.gauge_eta) @ b - pair.curvature(self.gauge_eta))
+        return miss / b[0]
 
     @property
     def kind(self) -> int:
@@ -284,6 +318,8 @@ def build_model(
         shapes = modal_units.shapes.dofs[:, modes:]
         participation = tuple(float((s @ beam.mass @ t) / (s @ beam.mass @ s)) for s in shapes.T)
     selection = select_sensors(rig, units, peripheral=peripheral, imus=imus, tofs=tofs, gauges=gauges, aided=aided)
+    # The two body-frame modes the combimode merges, each on its own (for its model error).
+    pair = unit_deformations(beam, 2, combimode=False) if units.modes and units.modes[0] == (1, 2) else None
     by_name = {(s.kind, s.name): s for s in rig.sensors}
     return ImmsModel(
         rig=rig,
@@ -295,6 +331,7 @@ def build_model(
         stations=np.asarray(rig.truth_stations, dtype=float),
         modal_units=modal_units,
         residual_participation=participation,
+        combimode_pair=pair,
     )
 
 
@@ -508,13 +545,14 @@ def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterC
         gravity_eta=float(m.gravity_eta), reflector_distance=float(m.rig.reflector_distance), gate=cfg.gate,
         stale_after=cfg.stale_after_s, sigma_f_d_x=float(noise_D[0]), sigma_f_d_y=float(noise_D[1]),
         sigma_omega_d=float(noise_D[2]), q_b=cfg.q_b,
-        q_v=cfg.q_v if cfg.q_v is not None else (1e-4 if m.selection.gauges else 1e-3), q_beta=cfg.q_beta,
+        q_v=cfg.q_v if cfg.q_v is not None else (1e-6 if m.selection.gauges else 1e-3), q_beta=cfg.q_beta,
         q_rigid=cfg.q_rigid, bearing_var=bearing_std**2, pseudo_h_var=cfg.pseudo_h_std**2,
         pseudo_h_rate_var=cfg.pseudo_h_rate_std**2, max_step=cfg.max_step_s, q_null=cfg.q_null,
         q_beta_peripheral=cfg.q_beta_peripheral, q_residual=cfg.q_residual,
     )
     gamma = units.count
     empty = np.zeros((0, gamma))
+    pair_errors = m.combimode_strain_errors()
     aided = np.zeros(gamma)
     aided[[a - 1 for a in m.selection.aided]] = 1.0
     if m.selection.gauges:
@@ -544,6 +582,7 @@ def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterC
         strain_var=arr(c.strain_std**2 + cfg.strain_model_std**2),
         aided=arr(aided),
         tip_row=arr(units.shape(m.rig.beam.length)),
+        strain_pair=arr(cfg.combimode_error_scale * pair_errors if cfg.combimode_error_scale > 0 else pair_errors[:, :0]),
         res_omega=arr([2 * np.pi * f for group in units.frequencies_hz[m.gamma:] for f in group]),
         res_damping=arr(np.full(m.residual, cfg.residual_damping)),
         res_participation=arr(m.residual_participation),

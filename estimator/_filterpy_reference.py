@@ -119,10 +119,26 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
                                      params.reflector_distance)
             update(v[0] - arrays.tof_offset[j] - rho, H, arrays.tof_var[j], params.gate)
         elif k == EVENT_STRAIN:
-            K = arrays.strain_K[j]
-            H = np.zeros(n)
-            H[layout.modal] = K * arrays.aided
-            update(v[0] - arrays.strain_offset[j] - K @ ekf.x[layout.modal], H, arrays.strain_var[j], params.gate)
+            pair = arrays.strain_pair
+            if pair.shape[1] == 0:
+                K = arrays.strain_K[j]
+                H = np.zeros(n)
+                H[layout.modal] = K * arrays.aided
+                update(v[0] - arrays.strain_offset[j] - K @ ekf.x[layout.modal], H, arrays.strain_var[j], params.gate)
+            elif e == 0 or events.kind[e - 1] != EVENT_STRAIN or events.t[e - 1] != t:
+                # The gauges of one time stamp as one vector measurement whose model error they
+                # share: R = diag(var) + U Uᵀ with U = strain_pair · b_1 (the product updates on a
+                # state augmented by ψ instead).
+                group = [e]
+                while group[-1] + 1 < len(events) and events.kind[group[-1] + 1] == EVENT_STRAIN and events.t[group[-1] + 1] == t:
+                    group.append(group[-1] + 1)
+                rows = events.index[group]
+                Hm = np.zeros((len(group), n))
+                Hm[:, layout.modal] = arrays.strain_K[rows] * arrays.aided
+                y = events.values[group, 0] - arrays.strain_offset[rows] - arrays.strain_K[rows] @ ekf.x[layout.modal]
+                U = pair[rows] * ekf.x[layout.index.b]
+                R = np.diag(arrays.strain_var[rows]) + U @ U.T
+                ekf.update(y, lambda x: Hm, lambda x: np.zeros(len(group)), R=R)
         elif k == EVENT_BEARING:
             for index, z, R, gate in ((layout.d, v[0], params.bearing_var, params.gate), (layout.h, 0.0, params.pseudo_h_var, np.inf),
                                       (layout.h_rate, 0.0, params.pseudo_h_rate_var, np.inf)):

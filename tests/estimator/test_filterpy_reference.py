@@ -30,8 +30,8 @@ def test_project_filter_matches_filterpy(peripheral, rig):
     reference = run_filterpy(events, model, calibration, config, t0=meas.start)
     np.testing.assert_array_equal(t, reference.t)
     layout = model.state_layout
-    # the beam moved: not a trivial comparison
-    assert np.abs(x[:, layout.b.start]).max() > 1e-3
+    # the beam moved: not a trivial comparison (the 1.5 m mast's b1 stays below 1 mm in 24 s)
+    assert np.abs(x[:, layout.b.start]).max() > 3e-4
     if layout.phi is not None:
         assert np.abs(x[:, layout.phi]).max() > 1e-4
     else:
