@@ -39,7 +39,6 @@ from contract import (
     parse_rig,
 )
 
-from ._fastdecode import decode_template, scan_buffer, template_codes
 from ._writer import MAGIC, RIG_ATTACHMENT
 
 __all__ = ["Channel", "ReadReport", "Recording", "RecordingError", "TopicReport", "read_recording"]
@@ -251,6 +250,8 @@ class _ChannelReader:
         if template is None:
             values, keep = self._decode_reference(pieces, times, None)
         else:
+            from ._fastdecode import decode_template  # compiled (numba): loaded when a recording is decoded
+
             parts = [decode_template(buf, starts, stops, template, self._width) for buf, _, _, starts, stops in pieces]
             values = np.concatenate([p[0] for p in parts]) if len(parts) > 1 else parts[0][0]
             decoded = np.concatenate([p[1] for p in parts]) if len(parts) > 1 else parts[0][1]
@@ -272,6 +273,8 @@ class _ChannelReader:
         if self._template is None and None not in self.sizes:
             example = orjson.dumps({f.name: 0 if size == 0 else [0] * size for f, size in zip(self.fields, self.sizes)})
             self._width = example.count(b"0")
+            from ._fastdecode import template_codes
+
             self._template = template_codes(example.replace(b"0", b"#"))
         return self._template
 
@@ -538,6 +541,8 @@ class _Reader:
     def _scan(self, buf: bytes, pos: int, end: int) -> int:
         """Parse the records in ``buf[pos:end]``; returns where an incomplete record starts (or
         ``end``). Raises ``_Stop`` at the end of the data section."""
+        from ._fastdecode import scan_buffer  # compiled (numba): loaded when a recording is read
+
         data = np.frombuffer(buf, dtype=np.uint8)
         while True:
             n, pos, state, cids, logs, pubs, starts, stops = scan_buffer(data, pos, end)

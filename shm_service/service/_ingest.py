@@ -220,6 +220,7 @@ class IngestValidator:
         # The payload recorded is written from the validated numbers, never the client's bytes.
         return topic, log_ns, pub_ns, row, canonical
 
+
     def _validate_columns(self, messages: list, wall_ns: int, mono: float) -> IngestResult | None:
         """The whole request at once, column by column, when every message is clean: the rig's
         sensor topics, integer stamps in range and on the source's clock (no source-wide jump),
@@ -307,7 +308,6 @@ def _first_stamps(messages: list, sensors: dict) -> dict[str, int]:
                     and not isinstance(t, bool) and 0 <= t <= _MAX_NS:
                 firsts[topic] = t
     return firsts
-
 
 _MESSAGE_KEYS: Final = frozenset({"topic", "log_time_ns", "publish_time_ns", "payload"})
 
