@@ -131,10 +131,10 @@ def test_column_wise_ingest_gives_what_the_per_message_path_gives(faults, monkey
     rig = build_rig("benchmark")
     rng = np.random.default_rng(3)
     fast, reference = IngestValidator(rig, max_messages=10_000), IngestValidator(rig, max_messages=10_000)
-    monkeypatch.setattr(reference, "_validate_columns", lambda messages: None)
+    monkeypatch.setattr(reference, "_validate_columns", lambda *args: None)
     taken = []
     columns = fast._validate_columns
-    monkeypatch.setattr(fast, "_validate_columns", lambda messages: taken.append(columns(messages)) or taken[-1])
+    monkeypatch.setattr(fast, "_validate_columns", lambda *args: taken.append(columns(*args)) or taken[-1])
     for second in range(3):
         body = _body(rng, rig, 1_700_000_000_000_000_000 + second * 10**9, faults)
         a = fast.validate(json.loads(json.dumps(body)))
