@@ -102,7 +102,9 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         print(f"shm serve: error: HTTP API on {s.host}:{s.port}: {exc}", file=sys.stderr)
         service.stop()
         return 2
-    print(f"shm serve: API at {api.url} (docs {api.url}/docs); source {settings.source.spec} as '{service.source.id}'; "
+    what = (f"{len(service.structures)} structures" if service.fleet
+            else f"source {settings.source.spec} as '{service.source.id}'")
+    print(f"shm serve: API at {api.url} (docs {api.url}/docs); {what}; "
           f"data in {settings.data_dir} (db {settings.db}, recordings "
           f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
     if service.dashboard is not None:
@@ -126,9 +128,14 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         elapsed = time.monotonic() - started
         if not service.done:
             log.info("stopping")
-        status = service.status()
+        if service.fleet:
+            fleet = _fleet_summary(service, elapsed)
+        else:
+            status = service.status()
         service.stop(drain_s=5.0 if service.done else 1.0)
         api.stop()
+    if service.fleet:
+        return _print_fleet(fleet, as_json=args.json)
     p = status.pipeline
     src = status.sources[0]
     # A batch that failed was skipped: the run is not clean even if later batches succeeded.
@@ -151,3 +158,30 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
               f"{summary['windows']} windows, {summary['trend_rows']} trend rows in {summary['wall_s']} s "
               f"({summary['realtime_factor']}x real time)", flush=True)
     return code
+
+
+def _fleet_summary(service: Any, elapsed: float) -> dict[str, Any]:
+    """The final summary of a fleet: one row per structure (as ``/api/structures`` lists it, with
+    its samples, windows and errors)."""
+    rows = []
+    for summary in service.structures_document().structures:
+        row = summary.model_dump()
+        if summary.state != "failed" or summary.id in {s.id for s in service.running_structures()}:
+            st = service.status(summary.id)
+            p, src = st.pipeline, st.sources[0]
+            row.update(messages=src.messages, estimates=p.estimates, windows=p.windows, windows_committed=p.windows_committed,
+                       processed_data_s=p.processed_data_s, pipeline_errors=st.service.pipeline_errors)
+        rows.append(row)
+    return {"structures": rows, "wall_s": round(elapsed, 2)}
+
+
+def _print_fleet(fleet: dict[str, Any], *, as_json: bool) -> int:
+    rows = fleet["structures"]
+    if as_json:
+        print(json.dumps(fleet), flush=True)
+    else:
+        for r in rows:
+            print(f"shm serve: {r['id']}: {r['state']}{' (' + r['error'] + ')' if r['error'] else ''}, "
+                  f"{r.get('windows_committed', 0)} windows committed, lag {r['lag_s']} s", flush=True)
+    # Like a single structure: a failed source or a failed batch makes the run not clean.
+    return 1 if any(r["state"] == "failed" or r.get("pipeline_errors") for r in rows) else 0

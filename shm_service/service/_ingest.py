@@ -221,22 +221,6 @@ class IngestValidator:
         return topic, log_ns, pub_ns, row, canonical
 
 
-_REASONS = {"implausible_time": "outside the plausible window around it (source.time_window_s), or beyond the wall "
-                                "clock plus source.future_tolerance_s",
-            "ahead_of_source": "ahead of every other sensor of the source by more than source.max_ahead_s"}
-
-
-def _first_stamps(messages: list, sensors: dict) -> dict[str, int]:
-    """The first stamp of each topic in a request (for the whole-source jump test)."""
-    firsts: dict[str, int] = {}
-    for m in messages:
-        if isinstance(m, dict):
-            topic, t = m.get("topic"), m.get("log_time_ns")
-            if isinstance(topic, str) and topic in sensors and topic not in firsts and isinstance(t, int) \
-                    and not isinstance(t, bool) and 0 <= t <= _MAX_NS:
-                firsts[topic] = t
-    return firsts
-
     def _validate_columns(self, messages: list, wall_ns: int, mono: float) -> IngestResult | None:
         """The whole request at once, column by column, when every message is clean: the rig's
         sensor topics, integer stamps in range and on the source's clock (no source-wide jump),
@@ -310,6 +294,23 @@ def _first_stamps(messages: list, sensors: dict) -> dict[str, int]:
 
 
 _MESSAGE_KEYS: Final = frozenset({"topic", "log_time_ns", "publish_time_ns", "payload"})
+
+
+_REASONS = {"implausible_time": "outside the plausible window around it (source.time_window_s), or beyond the wall "
+                                "clock plus source.future_tolerance_s",
+            "ahead_of_source": "ahead of every other sensor of the source by more than source.max_ahead_s"}
+
+
+def _first_stamps(messages: list, sensors: dict) -> dict[str, int]:
+    """The first stamp of each topic in a request (for the whole-source jump test)."""
+    firsts: dict[str, int] = {}
+    for m in messages:
+        if isinstance(m, dict):
+            topic, t = m.get("topic"), m.get("log_time_ns")
+            if isinstance(topic, str) and topic in sensors and topic not in firsts and isinstance(t, int) \
+                    and not isinstance(t, bool) and 0 <= t <= _MAX_NS:
+                firsts[topic] = t
+    return firsts
 
 
 def _payload_columns(fields, payloads: list[dict]) -> np.ndarray | None:
