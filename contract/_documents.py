@@ -641,8 +641,8 @@ class StructureSummaryDocument(_Document):
     data_time_s: Num = Field(None, description="newest sample the pipeline has processed, UNIX s")
     lag_s: Num = Field(
         None, description="how far the data is behind its pace, s: for sim and replay at speed k, k x the wall time since "
-        "the start minus the data time since the start; for follow and ingest, the wall clock minus the data time; None "
-        "before the first data (and at speed max)")
+        "the first batch minus the data time since it (the pacer's origin); for follow and ingest, the wall clock minus "
+        "the data time; None before the first data (and at speed max); 0 once a replay or simulation has ended")
     windows: Count = Field(0, description="analysis windows committed to the database")
     active_alarms: dict[str, AlarmLevel] = Field(default_factory=dict, description="chart -> level of its active alarm")
 

@@ -251,7 +251,6 @@ class Structure:
     # -- running ----------------------------------------------------------------------------
 
     def start(self) -> None:
-        self.started_wall = time.time()
         self._thread = threading.Thread(target=self._pipeline_loop, name=f"pipeline-{self.id}", daemon=True)
         self._thread.start()
         self.source.start()
@@ -283,7 +282,9 @@ class Structure:
                     # None once a batch succeeds and nothing waits for the database
                     self.pipeline_error = pipeline.storage_error
                 if self.first_data_ns is None and pipeline.newest_ns is not None:
-                    self.first_data_ns = pipeline.newest_ns - int(1e9 * _batch_span_s(item))
+                    # the pace's origin: the first batch, as the source's pacer holds it (the
+                    # start-up before the first data, compiling and building models, is not lag)
+                    self.first_data_ns, self.started_wall = pipeline.newest_ns, time.time()
                 self.service.notifier.wake()
             pipeline.finish()
             self.pipeline_error = pipeline.storage_error
@@ -402,16 +403,6 @@ class _FailedStructure:
 
     def summary(self) -> StructureSummaryDocument:
         return StructureSummaryDocument(id=self.id, kind=self.kind, state="failed", error=self.error)
-
-
-def _batch_span_s(batch: Any) -> float:
-    """Data time a batch spans (its first to its newest sample), s."""
-    blocks = [b for b in getattr(batch, "blocks", ()) if len(b)]
-    if not blocks:
-        return 0.0
-    lo = min(int(b.log_time_ns[0]) for b in blocks)
-    hi = max(int(b.log_time_ns[-1]) for b in blocks)
-    return (hi - lo) / 1e9
 
 
 class MonitoringService:
