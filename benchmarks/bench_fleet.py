@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -217,6 +218,50 @@ def _fleet_toml(ids: list[str], block_s: float, duration_s: float) -> str:
     return "\n".join(lines)
 
 
+def _run_fleet(tmp: str, parts: list[list[str]], procs: list, urls: list, speed: float, seconds: float, block_s: float,
+               poll_s: float, worst: dict, last: dict) -> tuple[float, float, float, str]:
+    import httpx
+    import psutil
+
+    for i, part in enumerate(parts):
+        cfg = Path(tmp) / f"fleet-{i}.toml"
+        cfg.write_text(_fleet_toml(part, block_s, max(3600.0, 2 * speed * seconds)), encoding="utf-8")
+        cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(cfg), "--speed", str(speed), "--no-archive",
+               "--no-dashboard", "--port", "0", "--db", f"{tmp}/shm.sqlite", "--json"]
+        log = open(Path(tmp) / f"serve-{i}.log", "w")
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
+        procs.append(proc)
+        line = proc.stdout.readline()  # one after the other: the first creates the database
+        if "API at " not in line:
+            proc.wait(30)
+            raise RuntimeError(f"shm serve did not start: {(Path(tmp) / f'serve-{i}.log').read_text()[-2000:]}")
+        urls.append(line.split("API at ")[1].split()[0])
+    load = _load()
+    ps = [psutil.Process(p.pid) for p in procs]
+    cpu0 = sum(q.cpu_times().user + q.cpu_times().system for q in ps)
+    started = time.monotonic()
+    peak_rss = 0.0
+    with httpx.Client(timeout=30) as client:
+        while time.monotonic() - started < seconds:
+            time.sleep(poll_s)
+            for url in urls:
+                for s in client.get(f"{url}/api/structures").json()["structures"]:
+                    last[s["id"]] = s
+                    if s["lag_s"] is not None:
+                        worst[s["id"]] = max(worst.get(s["id"], -1e9), s["lag_s"])
+            peak_rss = max(peak_rss, sum(q.memory_info().rss for q in ps) / 2**20)
+    wall = time.monotonic() - started
+    cpu = sum(q.cpu_times().user + q.cpu_times().system for q in ps) - cpu0
+    for p in procs:
+        p.send_signal(signal.SIGINT)
+    for p in procs:
+        try:
+            p.wait(60)
+        except subprocess.TimeoutExpired:
+            p.kill()
+    return wall, cpu, peak_rss, load
+
+
 def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 240.0, processes: int = 1,
                      block_s: float = 2.0, poll_s: float = 5.0) -> dict:
     """``shm serve`` of ``structures`` simulated structures (``--no-archive --no-dashboard``),
@@ -224,47 +269,19 @@ def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 24
     for ``seconds`` of wall time at ``--speed``: the worst lag of every structure from
     ``/api/structures`` (polled every ``poll_s``), windows committed, the RSS of all processes
     together and the CPU per structure-second."""
-    import httpx
-    import psutil
-
     ids = [f"mast-{k + 1:03d}" for k in range(structures)]
     parts = [ids[i::processes] for i in range(processes)]
     worst: dict[str, float] = {}
     last: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
         procs, urls = [], []
-        for i, part in enumerate(parts):
-            cfg = Path(tmp) / f"fleet-{i}.toml"
-            cfg.write_text(_fleet_toml(part, block_s, max(3600.0, 2 * speed * seconds)), encoding="utf-8")
-            cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(cfg), "--speed", str(speed), "--no-archive",
-                   "--no-dashboard", "--port", "0", "--db", f"{tmp}/shm.sqlite", "--json"]
-            procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True))
-        for p in procs:
-            line = p.stdout.readline()
-            urls.append(line.split("API at ")[1].split()[0])
-        load = _load()
-        ps = [psutil.Process(p.pid) for p in procs]
-        cpu0 = sum(q.cpu_times().user + q.cpu_times().system for q in ps)
-        started = time.monotonic()
-        peak_rss = 0.0
-        with httpx.Client(timeout=30) as client:
-            while time.monotonic() - started < seconds:
-                time.sleep(poll_s)
-                for url in urls:
-                    for s in client.get(f"{url}/api/structures").json()["structures"]:
-                        last[s["id"]] = s
-                        if s["lag_s"] is not None:
-                            worst[s["id"]] = max(worst.get(s["id"], -1e9), s["lag_s"])
-                peak_rss = max(peak_rss, sum(q.memory_info().rss for q in ps) / 2**20)
-        wall = time.monotonic() - started
-        cpu = sum(q.cpu_times().user + q.cpu_times().system for q in ps) - cpu0
-        for p in procs:
-            p.send_signal(__import__("signal").SIGINT)
-        for p in procs:
-            try:
-                p.wait(60)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        try:
+            result = _run_fleet(tmp, parts, procs, urls, speed, seconds, block_s, poll_s, worst, last)
+        finally:
+            for p in procs:
+                if p.poll() is None:
+                    p.kill()
+    wall, cpu, peak_rss, load = result
     lags = [worst.get(i) for i in ids]
     windows = [last.get(i, {}).get("windows", 0) for i in ids]
     states = sorted({last.get(i, {}).get("state", "?") for i in ids})
