@@ -219,7 +219,7 @@ def _fleet_toml(ids: list[str], block_s: float, duration_s: float) -> str:
 
 
 def _run_fleet(tmp: str, parts: list[list[str]], procs: list, urls: list, speed: float, seconds: float, block_s: float,
-               poll_s: float, worst: dict, last: dict) -> tuple[float, float, float, str]:
+               poll_s: float, worst: dict, last: dict, first: dict) -> tuple[float, float, float, str]:
     import httpx
     import psutil
 
@@ -246,6 +246,8 @@ def _run_fleet(tmp: str, parts: list[list[str]], procs: list, urls: list, speed:
             time.sleep(poll_s)
             for url in urls:
                 for s in client.get(f"{url}/api/structures").json()["structures"]:
+                    if s["id"] not in last and s["data_time_s"] is not None:
+                        first[s["id"]] = s["data_time_s"]
                     last[s["id"]] = s
                     if s["lag_s"] is not None:
                         worst[s["id"]] = max(worst.get(s["id"], -1e9), s["lag_s"])
@@ -273,10 +275,11 @@ def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 24
     parts = [ids[i::processes] for i in range(processes)]
     worst: dict[str, float] = {}
     last: dict[str, dict] = {}
+    first: dict[str, float] = {}  # data time at the first poll with data
     with tempfile.TemporaryDirectory() as tmp:
         procs, urls = [], []
         try:
-            result = _run_fleet(tmp, parts, procs, urls, speed, seconds, block_s, poll_s, worst, last)
+            result = _run_fleet(tmp, parts, procs, urls, speed, seconds, block_s, poll_s, worst, last, first)
         finally:
             for p in procs:
                 if p.poll() is None:
@@ -285,6 +288,9 @@ def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 24
     lags = [worst.get(i) for i in ids]
     windows = [last.get(i, {}).get("windows", 0) for i in ids]
     states = sorted({last.get(i, {}).get("state", "?") for i in ids})
+    # the data the structures processed while measured (the CPU's denominator: a fleet that
+    # falls behind processes less than speed x wall)
+    data_s = sum((last[i]["data_time_s"] or first[i]) - first[i] for i in ids if i in first)
     result = {"structures": structures, "processes": processes, "speed": speed, "block_s": block_s, "wall_s": round(wall, 1),
               "worst_lag_s": None if None in lags else round(max(lags), 2),
               "structures_lag_over_5s": sum(1 for x in lags if x is None or x > 5.0),
@@ -292,7 +298,8 @@ def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 24
               "peak_rss_mib": round(peak_rss, 1), "rss_per_structure_mib": round(peak_rss / structures, 1),
               "budget_mib": 1024 + 150 * structures,
               "cpu_cores": round(cpu / wall, 2),
-              "cpu_ms_per_structure_second": round(1e3 * cpu / (structures * speed * wall), 2), "load_before": load,
+              "data_s_processed": round(data_s, 1), "data_s_due": round(structures * speed * wall, 1),
+              "cpu_ms_per_structure_second": round(1e3 * cpu / max(data_s, 1e-9), 2), "load_before": load,
               "load_after": _load()}
     print(f"[live] {result}", flush=True)
     return result

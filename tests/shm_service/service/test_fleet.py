@@ -225,3 +225,27 @@ def test_sim_structures_run_side_by_side_with_their_lag(tmp_path):
     finally:
         api.stop()
         service.stop(drain_s=0)
+
+
+def test_shm_serve_of_a_fleet_prints_each_structure(tmp_path, short_recording, capsys):
+    """``shm serve --config fleet.toml --json``: one summary row per structure; a structure that
+    could not start makes the run not clean (exit 1) while the other is monitored to its end."""
+    import json
+
+    from shm_service.cli import main
+
+    config = tmp_path / "fleet.toml"
+    config.write_text(
+        "[estimator]\ncalibration_s = 10.0\nwarmup_s = 5.0\n[analytics]\nwindow_s = 20.0\nbaseline_s = 40.0\n"
+        "baseline_min_windows = 3\n"
+        f'[[structures]]\nid = "blade-1"\nsource = "replay:{short_recording}"\n'
+        f'[[structures]]\nid = "blade-2"\nsource = "replay:{tmp_path / "gone.mcap"}"\n', encoding="utf-8")
+    code = main(["serve", "--config", str(config), "--speed", "max", "--no-archive", "--no-dashboard", "--port", "0",
+                 "--db", str(tmp_path / "shm.sqlite"), "--json"])
+    out = capsys.readouterr().out.strip().splitlines()
+    assert "2 structures" in out[0]
+    doc = json.loads(out[-1])
+    rows = {r["id"]: r for r in doc["structures"]}
+    assert code == 1
+    assert rows["blade-1"]["state"] == "finished" and rows["blade-1"]["windows_committed"] > 0
+    assert rows["blade-2"]["state"] == "failed" and "gone.mcap" in rows["blade-2"]["error"]
