@@ -336,6 +336,9 @@ class ServiceSettings(_Closed):
         "process, disk full, I/O error) before the window waits in memory for the next attempt, s")
     queue_batches: int = Field(8, ge=2, le=10_000, description="bounded queue between source and pipeline, batches (a batch is at most ~10 s of data or 2 MB of a file)")
     log_level: Literal["debug", "info", "warning", "error"] = Field("info", description="log level")
+    workers: int = Field(
+        1, ge=1, le=64, description="worker processes hosting the structures of a fleet, each every n-th structure on the "
+        "one database (one per core: one process holds one GIL); 1: all in this process")
     structures: tuple[StructureSettings, ...] = Field(
         (), description="a fleet: the structures this service monitors ([[structures]] tables); empty: the one structure "
         "of [source]")

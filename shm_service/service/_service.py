@@ -410,8 +410,9 @@ class MonitoringService:
     sharing one database, notifier, retention and API. ``environ`` is the environment the token
     is read from (default ``os.environ``; tests pass a dict)."""
 
-    def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None) -> None:
+    def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None, deliver: bool = True) -> None:
         self.settings = settings
+        self.deliver = deliver  # False in a worker process: the front delivers the fleet's notifications
         self.token = resolve_token(settings, environ)
         if not settings.server.loopback and self.token is None:
             raise ServiceError(f"server.host {settings.server.host} is not loopback: a token is required "
@@ -542,7 +543,8 @@ class MonitoringService:
     # -- running ----------------------------------------------------------------------------
 
     def start(self) -> None:
-        self.notifier.start()
+        if self.deliver:
+            self.notifier.start()
         self.retention.start()
         threading.Thread(target=self._housekeeping_loop, name="housekeeping", daemon=True).start()
         for structure in self.structures.values():

@@ -249,3 +249,60 @@ def test_shm_serve_of_a_fleet_prints_each_structure(tmp_path, short_recording, c
     assert code == 1
     assert rows["blade-1"]["state"] == "finished" and rows["blade-1"]["windows_committed"] > 0
     assert rows["blade-2"]["state"] == "failed" and "gone.mcap" in rows["blade-2"]["error"]
+
+
+def test_a_fleet_on_worker_processes_behind_one_api(tmp_path, short_recording):
+    """``workers = 2``: two worker processes host every other structure on one database; the
+    front answers /api/structures for all, forwards a structure's live routes to its worker,
+    serves the stored rows itself; a structure's fault stays on it."""
+    import json
+    import subprocess
+    import sys
+
+    config = tmp_path / "fleet.toml"
+    config.write_text(
+        "workers = 2\n[estimator]\ncalibration_s = 10.0\nwarmup_s = 5.0\n[analytics]\nwindow_s = 20.0\nbaseline_s = 40.0\n"
+        "baseline_min_windows = 3\n[dashboard]\nenabled = false\n[archive]\nenabled = false\n"
+        f'[[structures]]\nid = "a"\nsource = "replay:{short_recording}"\n'
+        '[[structures]]\nid = "b"\nsource = "ingest"\n'
+        f'[[structures]]\nid = "c"\nsource = "replay:{tmp_path / "gone.mcap"}"\n', encoding="utf-8")
+    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(config), "--port", "0", "--speed", "max",
+           "--db", str(tmp_path / "shm.sqlite"), "--keep-running", "--json"]
+    env = {**__import__("os").environ, "SHM_TOKEN": TOKEN}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        line = proc.stdout.readline()
+        assert "API at " in line and "2 worker processes" in line, line
+        url = line.split("API at ")[1].split()[0]
+        with httpx.Client(base_url=url, timeout=60) as c:
+            done = _wait(lambda: (lambda d: d if d["a"]["state"] == "finished" else None)(
+                {s["id"]: s for s in c.get("/api/structures").json()["structures"]}), 300, "structure a to finish")
+            assert list(done) == ["a", "b", "c"]
+            assert done["a"]["windows"] > 0 and done["b"]["state"] == "running"
+            assert done["c"]["state"] == "failed" and "gone.mcap" in done["c"]["error"]
+            # a's worker (0) and b's worker (1) answer through the front
+            st = c.get("/api/structures/a/status").json()
+            assert st["sources"][0]["id"] == "a" and st["pipeline"]["windows_committed"] == done["a"]["windows"]
+            assert c.get("/api/structures/a/spectra/latest").json()["source"] == "a"
+            rows = c.get("/api/structures/a/trends").json()["rows"]
+            assert rows and {r["source"] for r in rows} == {"a"}
+            assert c.get("/api/trends", params={"source": "a"}).json()["count"] == len(rows)
+            batch = {"messages": [{"topic": "/imu/D", "log_time_ns": int(time.time() * 1e9) + i * 5_000_000,
+                                   "payload": {"accel": [-9.81, 0.0, 0.0], "gyro": [0.0, 0.0, 1e-4]}} for i in range(20)]}
+            r = c.post("/api/structures/b/ingest", json=batch, headers=AUTH)
+            assert r.status_code == 200 and r.json()["accepted"] == 20, r.text
+            assert c.post("/api/structures/a/ingest", json=batch, headers=AUTH).status_code == 409
+            r = c.post("/api/structures/a/baseline", headers=AUTH)
+            assert r.status_code == 202 and r.json()["source"] == "a"
+            r = c.get("/api/structures/zzz/status")
+            assert r.status_code == 404 and "'zzz'" in r.json()["detail"]
+            assert c.get("/api/structures/c/status").status_code == 409
+            assert c.get("/api/status").status_code == 409
+            health = c.get("/healthz").json()
+            assert health["status"] == "degraded" and any(x.startswith("c: ") for x in health["reasons"])
+    finally:
+        proc.send_signal(__import__("signal").SIGTERM)
+        out, _ = proc.communicate(timeout=120)
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert [r["id"] for r in summary["structures"]] == ["a", "b", "c"] and summary["workers"] == 2
+    assert proc.returncode == 1  # c could not start
