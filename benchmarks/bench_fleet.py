@@ -7,8 +7,13 @@
 - memory per structure: RSS of one process as it adds simulated structures (each a
   ``MonitoringService`` of its own, ``--no-archive``, no dashboard) at real time.
 
+- the CPU per structure-second of one simulated structure (the virtual rig's generation and the
+  pipeline, apart), and how many one core hosts at real time;
+- live fleets: ``shm serve`` of N simulated structures in one and in two worker processes (one
+  database), the worst lag of each structure, windows committed, RSS of all processes, CPU.
+
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_fleet [--replay FILE] [--files 8] [--skip-reprocess]
-     [--skip-memory] [--structures 4]
+     [--skip-memory] [--structures 4] [--skip-live] [--live 10 25] [--live-s 240] [--live-speed 1]
 (``main()`` is the entry for ``python -m benchmarks``; the eight files are the one-hour recording
 under eight names, hard links: the work per file is that of eight different hours.)
 """
@@ -18,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -161,6 +167,144 @@ def bench_memory_per_structure(structures: int = 4, settle_s: float = 90.0) -> d
     return result
 
 
+def bench_structure_cost(data_s: float = 300.0, block_s: tuple[float, ...] = (1.0, 2.0)) -> dict:
+    """CPU per structure-second of one simulated structure (benchmark layout, Gamma = 4, 200 Hz),
+    split into the virtual rig's generation and the pipeline (estimator, analysis, commits), run
+    unpaced in this thread (``time.process_time``: the machine's load does not count)."""
+    from shm_service.service._config import load_settings
+    from shm_service.service._service import SinkGuard, Structure, _ModelCache
+    from shm_service.service._storage import Storage
+
+    class _Host:  # what a Structure asks of its service
+        fleet = False
+
+    results = {}
+    for block in block_s:
+        with tempfile.TemporaryDirectory() as tmp:
+            settings = load_settings(None, {"db": f"{tmp}/s.sqlite", "sim": {"duration_s": data_s, "seed": 1, "block_s": block},
+                                            "dashboard": {"enabled": False}, "archive": {"enabled": False},
+                                            "source": {"speed": "max"}})
+            structure = Structure(_Host(), settings, models=_ModelCache())
+            storage = Storage(settings.db)
+            structure.attach(storage, None, SinkGuard("dashboard", None))
+            sim_s = pipeline_s = 0.0
+            batches = structure.source.batches(block)
+            while True:
+                a = time.process_time()
+                batch = next(batches, None)
+                b = time.process_time()
+                if batch is None:
+                    break
+                structure.pipeline.process(batch)
+                sim_s += b - a
+                pipeline_s += time.process_time() - b
+            a = time.process_time()
+            structure.pipeline.finish()
+            pipeline_s += time.process_time() - a
+            storage.close()
+        r = {"block_s": block, "sim_ms_per_s": round(1e3 * sim_s / data_s, 2), "pipeline_ms_per_s": round(1e3 * pipeline_s / data_s, 2),
+             "total_ms_per_s": round(1e3 * (sim_s + pipeline_s) / data_s, 2),
+             "windows_committed": structure.pipeline.windows_committed, "load": _load()}
+        r["structures_per_core_at_real_time"] = round(1e3 / r["total_ms_per_s"], 1)
+        results[block] = r
+        print(f"[cost] {r}", flush=True)
+    return results
+
+
+def _fleet_toml(ids: list[str], block_s: float, duration_s: float) -> str:
+    lines = ["[sim]", f"duration_s = {duration_s}", f"block_s = {block_s}", ""]
+    for k, sid in enumerate(ids):
+        lines += ["[[structures]]", f'id = "{sid}"', 'source = "sim"', "[structures.sim]", f"seed = {k + 1}", ""]
+    return "\n".join(lines)
+
+
+def _run_fleet(tmp: str, parts: list[list[str]], procs: list, urls: list, speed: float, seconds: float, block_s: float,
+               poll_s: float, worst: dict, last: dict, first: dict) -> tuple[float, float, float, str]:
+    import httpx
+    import psutil
+
+    for i, part in enumerate(parts):
+        cfg = Path(tmp) / f"fleet-{i}.toml"
+        cfg.write_text(_fleet_toml(part, block_s, max(3600.0, 2 * speed * seconds)), encoding="utf-8")
+        cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(cfg), "--speed", str(speed), "--no-archive",
+               "--no-dashboard", "--port", "0", "--db", f"{tmp}/shm.sqlite", "--json"]
+        log = open(Path(tmp) / f"serve-{i}.log", "w")
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
+        procs.append(proc)
+        line = proc.stdout.readline()  # one after the other: the first creates the database
+        if "API at " not in line:
+            proc.wait(30)
+            raise RuntimeError(f"shm serve did not start: {(Path(tmp) / f'serve-{i}.log').read_text()[-2000:]}")
+        urls.append(line.split("API at ")[1].split()[0])
+    load = _load()
+    ps = [psutil.Process(p.pid) for p in procs]
+    cpu0 = sum(q.cpu_times().user + q.cpu_times().system for q in ps)
+    started = time.monotonic()
+    peak_rss = 0.0
+    with httpx.Client(timeout=30) as client:
+        while time.monotonic() - started < seconds:
+            time.sleep(poll_s)
+            for url in urls:
+                for s in client.get(f"{url}/api/structures").json()["structures"]:
+                    if s["id"] not in last and s["data_time_s"] is not None:
+                        first[s["id"]] = s["data_time_s"]
+                    last[s["id"]] = s
+                    if s["lag_s"] is not None:
+                        worst[s["id"]] = max(worst.get(s["id"], -1e9), s["lag_s"])
+            peak_rss = max(peak_rss, sum(q.memory_info().rss for q in ps) / 2**20)
+    wall = time.monotonic() - started
+    cpu = sum(q.cpu_times().user + q.cpu_times().system for q in ps) - cpu0
+    for p in procs:
+        p.send_signal(signal.SIGINT)
+    for p in procs:
+        try:
+            p.wait(60)
+        except subprocess.TimeoutExpired:
+            p.kill()
+    return wall, cpu, peak_rss, load
+
+
+def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 240.0, processes: int = 1,
+                     block_s: float = 2.0, poll_s: float = 5.0) -> dict:
+    """``shm serve`` of ``structures`` simulated structures (``--no-archive --no-dashboard``),
+    split over ``processes`` worker processes (each a service hosting its part, one database),
+    for ``seconds`` of wall time at ``--speed``: the worst lag of every structure from
+    ``/api/structures`` (polled every ``poll_s``), windows committed, the RSS of all processes
+    together and the CPU per structure-second."""
+    ids = [f"mast-{k + 1:03d}" for k in range(structures)]
+    parts = [ids[i::processes] for i in range(processes)]
+    worst: dict[str, float] = {}
+    last: dict[str, dict] = {}
+    first: dict[str, float] = {}  # data time at the first poll with data
+    with tempfile.TemporaryDirectory() as tmp:
+        procs, urls = [], []
+        try:
+            result = _run_fleet(tmp, parts, procs, urls, speed, seconds, block_s, poll_s, worst, last, first)
+        finally:
+            for p in procs:
+                if p.poll() is None:
+                    p.kill()
+    wall, cpu, peak_rss, load = result
+    lags = [worst.get(i) for i in ids]
+    windows = [last.get(i, {}).get("windows", 0) for i in ids]
+    states = sorted({last.get(i, {}).get("state", "?") for i in ids})
+    # the data the structures processed while measured (the CPU's denominator: a fleet that
+    # falls behind processes less than speed x wall)
+    data_s = sum((last[i]["data_time_s"] or first[i]) - first[i] for i in ids if i in first)
+    result = {"structures": structures, "processes": processes, "speed": speed, "block_s": block_s, "wall_s": round(wall, 1),
+              "worst_lag_s": None if None in lags else round(max(lags), 2),
+              "structures_lag_over_5s": sum(1 for x in lags if x is None or x > 5.0),
+              "min_windows": min(windows), "structures_without_windows": sum(1 for w in windows if w == 0), "states": states,
+              "peak_rss_mib": round(peak_rss, 1), "rss_per_structure_mib": round(peak_rss / structures, 1),
+              "budget_mib": 1024 + 150 * structures,
+              "cpu_cores": round(cpu / wall, 2),
+              "data_s_processed": round(data_s, 1), "data_s_due": round(structures * speed * wall, 1),
+              "cpu_ms_per_structure_second": round(1e3 * cpu / max(data_s, 1e-9), 2), "load_before": load,
+              "load_after": _load()}
+    print(f"[live] {result}", flush=True)
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--replay", default="/tmp/hour.mcap", help="one-hour recording (simulated if missing)")
@@ -168,9 +312,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--structures", type=int, default=4)
     p.add_argument("--skip-reprocess", action="store_true")
     p.add_argument("--skip-memory", action="store_true")
+    p.add_argument("--skip-live", action="store_true")
+    p.add_argument("--live", type=int, nargs="*", default=[10, 25], metavar="N",
+                   help="live fleets of N simulated structures (one and two worker processes each)")
+    p.add_argument("--live-s", type=float, default=240.0, help="wall time of each live fleet, s")
+    p.add_argument("--live-speed", type=float, default=1.0)
     args, _ = p.parse_known_args(argv)
     if not args.skip_memory:  # first: before this process imports the cluster's libraries
         bench_memory_per_structure(args.structures)
+    bench_structure_cost()
+    if not args.skip_live:
+        for n in args.live:
+            for processes in (1, 2):
+                bench_live_fleet(n, speed=args.live_speed, seconds=args.live_s, processes=processes)
     scheduler = bench_scheduler()
     if not args.skip_reprocess:
         results = bench_reprocess(Path(args.replay), args.files)

@@ -47,6 +47,9 @@ from ._documents import (
     SpectrumDocument,
     StatusDocument,
     StorageStatusDocument,
+    StructureState,
+    StructureSummaryDocument,
+    StructuresDocument,
     ThresholdsDocument,
     TrendRow,
     TrendsDocument,
@@ -105,6 +108,6 @@ __all__ = [
     "HealthDocument", "IngestErrorDocument", "IngestResultDocument", "LastEstimateDocument", "Level", "LocationDocument", "ModeDocument",
     "ModelDocument", "NotificationStatusDocument", "PipelineStatusDocument", "RestCalibrationDocument", "SensorState",
     "ServiceStatusDocument", "SinkStatusDocument", "SourceStatusDocument", "SpectrumDocument", "StatusDocument",
-    "StorageStatusDocument", "ThresholdsDocument", "TrendRow", "TrendsDocument", "WindowDocument", "WindowKind",
+    "StorageStatusDocument", "StructureState", "StructureSummaryDocument", "StructuresDocument", "ThresholdsDocument", "TrendRow", "TrendsDocument", "WindowDocument", "WindowKind",
     "chart_name", "estimate_payloads",
 ]

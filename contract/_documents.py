@@ -626,6 +626,33 @@ class BaselineRequestDocument(_Document):
     learn_s: Finite
 
 
+StructureState = Literal["starting", "running", "degraded", "failed", "finished", "stopped"]
+
+
+class StructureSummaryDocument(_Document):
+    """One structure of a fleet as ``GET /api/structures`` lists it."""
+
+    id: str = Field(description="the structure id: the source of its trend rows, alarms and notifications")
+    kind: Literal["sim", "replay", "follow", "ingest"]
+    state: StructureState = Field(
+        description="starting, running, degraded (running, but its batches fail, its filter diverged or its database "
+        "writes wait), failed (its source or its start failed: see error), finished, stopped")
+    error: str | None = Field(None, description="why the structure is failed or degraded")
+    data_time_s: Num = Field(None, description="newest sample the pipeline has processed, UNIX s")
+    lag_s: Num = Field(
+        None, description="how far the data is behind its pace, s: for sim and replay at speed k, k x the wall time since "
+        "the first batch minus the data time since it (the pacer's origin); for follow and ingest, the wall clock minus "
+        "the data time; None before the first data (and at speed max); 0 once a replay or simulation has ended")
+    windows: Count = Field(0, description="analysis windows committed to the database")
+    active_alarms: dict[str, AlarmLevel] = Field(default_factory=dict, description="chart -> level of its active alarm")
+
+
+class StructuresDocument(_Document):
+    """``GET /api/structures``."""
+
+    structures: list[StructureSummaryDocument]
+
+
 class ErrorDocument(_Document):
     """The body of every error response: a sentence saying what is wrong, or (for a request
     that does not match the API's parameter types) FastAPI's list of validation errors."""

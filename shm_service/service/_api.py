@@ -16,6 +16,7 @@ import csv
 import io
 import ipaddress
 import math
+import re
 import threading
 import time
 from collections.abc import Iterable
@@ -34,6 +35,7 @@ from contract import (
     IngestResultDocument,
     SpectrumDocument,
     StatusDocument,
+    StructuresDocument,
     TrendRow,
     TrendsDocument,
 )
@@ -216,7 +218,8 @@ class _Gate:
                 await _reject(send, 401, str(exc), [(b"www-authenticate", b'Bearer realm="shm serve"'),
                                                     (b"www-authenticate", b'Basic realm="shm serve", charset="UTF-8"')])
                 return
-        limit = self.ingest if scope.get("path") == "/api/ingest" else self.default
+        path = scope.get("path") or ""
+        limit = self.ingest if path == "/api/ingest" or _STRUCTURE_INGEST.fullmatch(path) else self.default
         length_header = headers.get(b"content-length")
         if length_header is not None:
             try:
@@ -479,6 +482,8 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
                                 status_code=503, headers={"Retry-After": "1"})
         return result
 
+    _fleet_routes(app, service, authorize)
+
     @app.get("/metrics", summary="Prometheus metrics (text format)", response_class=PlainTextResponse,
              responses={**_AUTH_RESPONSES, 200: {"content": {"text/plain": {"schema": {"type": "string"}}}}})
     def metrics() -> PlainTextResponse:
@@ -489,6 +494,124 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
                        check_token=None if loopback else (lambda token: service.check_token(token)), limiter=limiter)
     app.state.auth_limiter = limiter
     return app
+
+
+# -- a fleet: /api/structures ---------------------------------------------------------------
+
+_STRUCTURE_INGEST = re.compile(r"/api/structures/[^/]+/ingest")
+_STRUCTURE_ID = Path(..., min_length=1, max_length=64, description="structure id ([a-z0-9-])")
+_UNKNOWN = {404: _error("no such structure (the message names it)"),
+            409: _error("the structure failed to start (the message says why)")}
+
+
+def _fleet_routes(app: FastAPI, service: Any, authorize: Any) -> None:
+    """The routes of a fleet (``[[structures]]``): each single-structure route per structure.
+    Also served for a single structure (its id is its source id)."""
+    from ._service import NotSingleStructure, StructureUnavailable
+
+    def call(fn: Any, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except KeyError as exc:
+            raise HTTPException(404, exc.args[0] if exc.args else str(exc)) from None
+        except StructureUnavailable as exc:
+            raise HTTPException(409, str(exc)) from None
+
+    @app.exception_handler(NotSingleStructure)
+    async def not_single(request: Request, exc: NotSingleStructure) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=409)
+
+    @app.get("/api/structures", summary="every structure: state, lag, committed windows, active alarms",
+             response_model=StructuresDocument, responses=_AUTH_RESPONSES)
+    def structures() -> StructuresDocument:
+        return service.structures_document()
+
+    @app.get("/api/structures/{structure_id}/status", summary="one structure's status (as /api/status)",
+             response_model=StatusDocument, responses={**_AUTH_RESPONSES, **_UNKNOWN})
+    def structure_status(structure_id: str = _STRUCTURE_ID) -> StatusDocument:
+        return call(service.status, structure_id)
+
+    @app.get("/api/structures/{structure_id}/trends", summary="one structure's modal trends (as /api/trends)",
+             response_model=TrendsDocument,
+             responses={**_AUTH_RESPONSES, **_INVALID, **_UNKNOWN, 200: {"content": {"text/csv": {"schema": {"type": "string"}}}}})
+    def structure_trends(
+        structure_id: str = _STRUCTURE_ID,
+        from_: str | None = Query(None, alias="from", max_length=64, description="UNIX s or ISO 8601 (inclusive)"),
+        to: str | None = Query(None, max_length=64, description="UNIX s or ISO 8601 (exclusive)"),
+        mode: int | None = Query(None, ge=1, le=20, description="mode number (1-based)"),
+        format: Literal["json", "csv"] = Query("json", description="json or csv"),
+        limit: int = Query(100_000, ge=1, le=1_000_000, description="most rows returned"),
+    ) -> Any:
+        lo, hi = _parse_time("from", from_), _parse_time("to", to)
+        if lo is not None and hi is not None and lo > hi:
+            raise HTTPException(422, f"'from' ({lo}) is after 'to' ({hi})")
+        rows = call(service.structure_trends, structure_id, lo, hi, mode=mode, limit=limit)
+        if format == "csv":
+            buf = io.StringIO()
+            writer = csv.DictWriter(buf, fieldnames=_TREND_FIELDS, extrasaction="ignore", lineterminator="\n")
+            writer.writeheader()
+            writer.writerows(row.model_dump() for row in rows)
+            return Response(buf.getvalue(), media_type="text/csv",
+                            headers={"Content-Disposition": f'attachment; filename="trends-{structure_id}.csv"'})
+        return TrendsDocument(rows=rows, count=len(rows))
+
+    @app.get("/api/structures/{structure_id}/alarms", summary="one structure's alarms, newest first",
+             response_model=AlarmsDocument, responses={**_AUTH_RESPONSES, **_INVALID, **_UNKNOWN})
+    def structure_alarms(structure_id: str = _STRUCTURE_ID,
+                         state: Literal["active", "cleared"] | None = Query(None, description="only alarms in this state"),
+                         ) -> AlarmsDocument:
+        items = call(service.structure_alarms, structure_id, state)
+        return AlarmsDocument(alarms=items, count=len(items))
+
+    @app.get("/api/structures/{structure_id}/spectra/latest", summary="amplitude spectra of b of the structure's latest window",
+             response_model=SpectrumDocument, responses={**_AUTH_RESPONSES, **_UNKNOWN})
+    def structure_spectra(structure_id: str = _STRUCTURE_ID) -> SpectrumDocument:
+        spec = call(service.spectra, structure_id)
+        if spec is None:
+            raise HTTPException(404, f"structure {structure_id!r} has no analysis window yet")
+        return spec
+
+    @app.post("/api/structures/{structure_id}/baseline", summary="start learning a new baseline of the structure (token required)",
+              status_code=202, response_model=BaselineRequestDocument, responses={**_AUTH_RESPONSES, **_UNKNOWN})
+    def structure_baseline(request: Request, structure_id: str = _STRUCTURE_ID) -> BaselineRequestDocument:
+        authorize(request)
+        return call(service.request_baseline, structure_id)
+
+    @app.post(
+        "/api/structures/{structure_id}/ingest", summary="ingest a batch of samples for the structure (token required)",
+        response_model=IngestResultDocument,
+        responses={**_AUTH_RESPONSES, **_UNKNOWN, 400: _error("body is not a valid batch"),
+                   409: _error("the structure's source is not ingest, or it failed to start"),
+                   413: _error("body too large"), 503: _error("pipeline full, retry later")},
+        openapi_extra={"requestBody": {"required": True, "content": {"application/json": {"schema": {
+            "type": "object", "required": ["messages"], "additionalProperties": False,
+            "properties": {"messages": {"type": "array", "items": {
+                "type": "object", "required": ["topic", "log_time_ns", "payload"],
+                "properties": {"topic": {"type": "string", "examples": ["/imu/D"]},
+                               "log_time_ns": {"type": "integer", "minimum": 0},
+                               "publish_time_ns": {"type": "integer", "minimum": 0},
+                               "payload": {"type": "object"}}}}}}}}}},
+    )
+    async def structure_ingest(request: Request, structure_id: str = _STRUCTURE_ID) -> IngestResultDocument | JSONResponse:
+        authorize(request)
+        call(service.structure, structure_id)  # 404/409 before the body is read
+        body = await request.body()
+        try:
+            document = parse_body(body)
+        except IngestError as exc:
+            raise HTTPException(400, str(exc)) from None
+        from starlette.concurrency import run_in_threadpool
+
+        try:
+            result = await run_in_threadpool(call, service.ingest, document, structure_id)
+        except IngestError as exc:
+            raise HTTPException(400, str(exc)) from None
+        except LookupError as exc:
+            raise HTTPException(409, str(exc)) from None
+        if result is None:
+            return JSONResponse({"detail": "the pipeline is full; retry later (nothing of this request was taken)"},
+                                status_code=503, headers={"Retry-After": "1"})
+        return result
 
 
 def _label(value: Any) -> str:

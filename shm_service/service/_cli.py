@@ -37,6 +37,9 @@ def add_serve_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--recordings", metavar="DIR", help="directory of the rotating recordings (default DATA_DIR/recordings)")
     p.add_argument("--no-archive", action="store_true", default=None, help="do not write recordings")
     p.add_argument("--json", action="store_true", help="print the final summary as JSON")
+    p.add_argument("--workers", type=number(int, low=1, high=64),
+                   help="worker processes hosting the [[structures]] (default 1: all in this process)")
+    p.add_argument("--worker-of", metavar="I/N", help=argparse.SUPPRESS)  # internal: a worker process of a fleet
     p.set_defaults(func=run_serve)
     return p
 
@@ -67,6 +70,7 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
     put("dashboard.enabled", False if args.no_dashboard else None)
     put("archive.directory", args.recordings)
     put("archive.enabled", False if args.no_archive else None)
+    put("workers", getattr(args, "workers", None))
     if args.webhook:
         put("notify.webhooks", tuple(args.webhook))
     return o
@@ -90,6 +94,19 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s",
                         stream=sys.stderr)
     log = logging.getLogger("shm.serve")
+    worker_of = getattr(args, "worker_of", None)
+    if settings.fleet and settings.workers > 1 and worker_of is None:
+        return _run_workers(settings, args, environ)
+    if worker_of is not None:
+        from ._workers import part_of
+
+        try:
+            index, count = (int(x) for x in worker_of.split("/"))
+            settings = part_of(settings, index, count)
+        except ValueError as exc:
+            print(f"shm serve: error: --worker-of {worker_of!r}: {exc}", file=sys.stderr)
+            return 2
+    deliver = worker_of is None  # worker processes leave the notifications to the front process
     stop = threading.Event()
 
     def on_signal(signum: int, frame: Any) -> None:
@@ -101,7 +118,7 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
     s = settings.server
     api = None
     try:
-        service = MonitoringService(settings, environ=environ)
+        service = MonitoringService(settings, environ=environ, deliver=deliver)
         slot = ServiceSlot(service)
     except RigPending as pending:
         # follow: the file is not there yet. The API comes up now (healthz: degraded, the other
@@ -128,7 +145,7 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
                 api.stop()
                 return 0
             try:
-                service = MonitoringService(settings, environ=environ)
+                service = MonitoringService(settings, environ=environ, deliver=deliver)
             except RigPending:
                 continue
             except (ServiceError, SettingsError, OSError) as exc:
@@ -136,7 +153,9 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
                 api.stop()
                 return 2
         slot.current = service
-    print(f"shm serve: API at {api.url} (docs {api.url}/docs); source {settings.source.spec} as '{service.source.id}'; "
+    what = (f"{len(service.structures)} structures" if service.fleet
+            else f"source {settings.source.spec} as '{service.source.id}'")
+    print(f"shm serve: API at {api.url} (docs {api.url}/docs); {what}; "
           f"data in {settings.data_dir} (db {settings.db}, recordings "
           f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
     if service.dashboard is not None:
@@ -152,9 +171,14 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         elapsed = time.monotonic() - started
         if not service.done:
             log.info("stopping")
-        status = service.status()
+        if service.fleet:
+            fleet = _fleet_summary(service, elapsed)
+        else:
+            status = service.status()
         service.stop(drain_s=5.0 if service.done else 1.0)
         api.stop()
+    if service.fleet:
+        return _print_fleet(fleet, as_json=args.json)
     p = status.pipeline
     src = status.sources[0]
     # A batch that failed was skipped: the run is not clean even if later batches succeeded.
@@ -176,4 +200,87 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         print(f"shm serve: {summary['state']}: {summary['messages']} samples, {summary['estimates']} estimates, "
               f"{summary['windows']} windows, {summary['trend_rows']} trend rows in {summary['wall_s']} s "
               f"({summary['realtime_factor']}x real time)", flush=True)
+    return code
+
+
+def _fleet_summary(service: Any, elapsed: float) -> dict[str, Any]:
+    """The final summary of a fleet: one row per structure (as ``/api/structures`` lists it, with
+    its samples, windows and errors)."""
+    rows = []
+    for summary in service.structures_document().structures:
+        row = summary.model_dump()
+        if summary.state != "failed" or summary.id in {s.id for s in service.running_structures()}:
+            st = service.status(summary.id)
+            p, src = st.pipeline, st.sources[0]
+            row.update(messages=src.messages, estimates=p.estimates, windows=p.windows, windows_committed=p.windows_committed,
+                       processed_data_s=p.processed_data_s, pipeline_errors=st.service.pipeline_errors)
+        rows.append(row)
+    return {"structures": rows, "wall_s": round(elapsed, 2)}
+
+
+def _print_fleet(fleet: dict[str, Any], *, as_json: bool) -> int:
+    rows = fleet["structures"]
+    if as_json:
+        print(json.dumps(fleet), flush=True)
+    else:
+        for r in rows:
+            print(f"shm serve: {r['id']}: {r['state']}{' (' + r['error'] + ')' if r['error'] else ''}, "
+                  f"{r.get('windows_committed', 0)} windows committed, lag {r['lag_s']} s", flush=True)
+    # Like a single structure: a failed source or a failed batch makes the run not clean.
+    return 1 if any(r["state"] == "failed" or r.get("pipeline_errors") for r in rows) else 0
+
+
+def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, str] | None) -> int:
+    """A fleet on ``settings.workers`` worker processes behind one API (this process)."""
+    from ._api import create_app
+    from ._server import ApiServer
+    from ._service import ServiceError
+    from ._workers import WorkerFleet
+
+    try:
+        front = WorkerFleet(settings, environ=environ, json_summary=args.json)
+    except (ServiceError, OSError) as exc:
+        print(f"shm serve: error: {exc}", file=sys.stderr)
+        return 2
+    s = settings.server
+    try:
+        api = ApiServer(create_app(front, loopback=s.loopback, max_body_bytes=s.max_body_bytes,
+                                   max_ingest_bytes=s.max_ingest_bytes), s.host, s.port).start()
+    except (OSError, TimeoutError) as exc:
+        print(f"shm serve: error: HTTP API on {s.host}:{s.port}: {exc}", file=sys.stderr)
+        return 2
+    print(f"shm serve: API at {api.url} (docs {api.url}/docs); {len(settings.structures)} structures in "
+          f"{settings.workers} worker processes; data in {settings.data_dir} (db {settings.db}, recordings "
+          f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
+    stop = threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, lambda *a: stop.set())
+        signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    started = time.monotonic()
+    try:
+        front.start()
+        while not stop.is_set():
+            if front.wait(0.2) and not settings.source.keep_running:
+                break
+    except ServiceError as exc:
+        print(f"shm serve: error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        fleet = front.structures_document() if front.workers and not front.done else None
+        code = front.stop(drain_s=5.0 if front.done else 1.0)
+        api.stop()
+    if args.json:
+        rows: list[dict[str, Any]] = []
+        for worker in front.workers:
+            try:
+                rows.extend(json.loads(worker.summary or "{}").get("structures", []))
+            except ValueError:
+                pass
+        known = {r["id"] for r in rows}
+        if fleet is not None:
+            rows.extend(r.model_dump() for r in fleet.structures if r.id not in known)
+        order = {sid: k for k, sid in enumerate(s_.id for s_ in settings.structures)}
+        rows.sort(key=lambda r: order.get(r["id"], len(order)))
+        print(json.dumps({"structures": rows, "wall_s": round(time.monotonic() - started, 2),
+                          "workers": settings.workers}), flush=True)
     return code

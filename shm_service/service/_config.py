@@ -29,6 +29,7 @@ __all__ = [
     "SettingsError",
     "SimSettings",
     "SourceSettings",
+    "StructureSettings",
     "load_settings",
     "render_toml",
     "resolve_token",
@@ -189,12 +190,7 @@ class SourceSettings(_Closed):
     @field_validator("spec")
     @classmethod
     def _spec(cls, value: str) -> str:
-        kind, _, arg = value.partition(":")
-        if kind in ("sim", "ingest") and not arg:
-            return value
-        if kind in ("replay", "follow") and arg:
-            return value
-        raise ValueError(f"source {value!r} must be sim, ingest, replay:FILE.mcap or follow:FILE.mcap")
+        return _check_spec(value)
 
     @property
     def kind(self) -> str:
@@ -311,6 +307,38 @@ class NotifySettings(_Closed):
         return value
 
 
+_SOURCE_SPEC = "sim | replay:FILE.mcap | follow:FILE.mcap | ingest"
+
+
+def _check_spec(value: str) -> str:
+    kind, _, arg = value.partition(":")
+    if kind in ("sim", "ingest") and not arg:
+        return value
+    if kind in ("replay", "follow") and arg:
+        return value
+    raise ValueError(f"source {value!r} must be sim, ingest, replay:FILE.mcap or follow:FILE.mcap")
+
+
+class StructureSettings(_Closed):
+    """One structure of a fleet (``[[structures]]``). Its tables ``sim``, ``estimator``,
+    ``analytics`` and ``alarms`` override the keys of the service's tables of the same name for
+    this structure only; ``source.speed`` (``--speed``) and everything else are the service's."""
+
+    id: str = Field(..., min_length=1, max_length=64, pattern=r"^[a-z0-9-]+$",
+                    description="structure id ([a-z0-9-]): the source id of its trend rows, alarms and notifications")
+    source: str = Field("sim", description=_SOURCE_SPEC)
+    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest, or to replace a recording's rig.json")
+    sim: dict[str, Any] = Field(default_factory=dict, description="keys of [sim] for this structure (e.g. seed)")
+    estimator: dict[str, Any] = Field(default_factory=dict, description="keys of [estimator] for this structure")
+    analytics: dict[str, Any] = Field(default_factory=dict, description="keys of [analytics] for this structure")
+    alarms: dict[str, Any] = Field(default_factory=dict, description="keys of [alarms] for this structure")
+
+    @field_validator("source")
+    @classmethod
+    def _spec(cls, value: str) -> str:
+        return _check_spec(value)
+
+
 class ServiceSettings(_Closed):
     """Everything ``shm serve`` reads. Every key has a default; a TOML file sets some of them."""
 
@@ -339,6 +367,12 @@ class ServiceSettings(_Closed):
         "process, disk full, I/O error) before the window waits in memory for the next attempt, s")
     queue_batches: int = Field(8, ge=2, le=10_000, description="bounded queue between source and pipeline, batches (a batch is at most ~10 s of data or 2 MB of a file)")
     log_level: Literal["debug", "info", "warning", "error"] = Field("info", description="log level")
+    workers: int = Field(
+        1, ge=1, le=64, description="worker processes hosting the structures of a fleet, each every n-th structure on the "
+        "one database (one per core: one process holds one GIL); 1: all in this process")
+    structures: tuple[StructureSettings, ...] = Field(
+        (), description="a fleet: the structures this service monitors ([[structures]] tables); empty: the one structure "
+        "of [source]")
 
     @model_validator(mode="after")
     def _paths(self) -> "ServiceSettings":
@@ -353,7 +387,43 @@ class ServiceSettings(_Closed):
         if self.retention.recordings_max_gb * 1e3 < 2 * self.archive.rotate_mb:
             raise ValueError(f"retention.recordings_max_gb={self.retention.recordings_max_gb} must hold at least two files of "
                              f"archive.rotate_mb={self.archive.rotate_mb} (the one being written is never deleted)")
+        if self.structures:
+            ids = [s.id for s in self.structures]
+            twice = sorted({i for i in ids if ids.count(i) > 1})
+            if twice:
+                raise ValueError(f"structures: the id(s) {twice} appear more than once (each structure needs its own id)")
+            given = sorted(k for k in ("spec", "id", "rig") if k in self.source.model_fields_set)
+            if given:
+                raise ValueError(f"source.{given[0]} cannot be set with [[structures]]: each structure sets its own "
+                                 "source, id and rig in its table")
+            for structure in self.structures:
+                self.for_structure(structure)  # every override is checked now, not when the structure starts
         return self
+
+    @property
+    def fleet(self) -> bool:
+        """True when the service monitors a list of structures (``[[structures]]``)."""
+        return bool(self.structures)
+
+    def for_structure(self, structure: StructureSettings) -> "ServiceSettings":
+        """The settings of one structure of the fleet: these settings with the structure's source,
+        id and rig, and its tables over the service's (only the keys set are carried, so defaults
+        capped to the rig stay defaults)."""
+        data = self.model_dump(exclude_unset=True, exclude={"structures"})
+        data["data_dir"], data["db"] = self.data_dir, self.db
+        data.setdefault("archive", {})["directory"] = self.archive.directory
+        source = data.setdefault("source", {})
+        source.update({"spec": structure.source, "id": structure.id})
+        if structure.rig is not None:
+            source["rig"] = structure.rig
+        for table in ("sim", "estimator", "analytics", "alarms"):
+            override = getattr(structure, table)
+            if override:
+                data[table] = _merge(data.get(table, {}), override)
+        try:
+            return ServiceSettings.model_validate(data)
+        except ValidationError as exc:
+            raise ValueError(f"structure {structure.id!r}: {_message(exc)}") from None
 
     def engine_config(self) -> AnalysisConfig:
         """The analytics the engine runs: ``analytics`` with ``alarms.raise_windows``/``clear_windows``
@@ -430,6 +500,8 @@ def render_toml(settings: ServiceSettings | None = None) -> str:
     def section(model: BaseModel, name: str | None) -> None:
         scalars, tables = [], []
         for key, info in type(model).model_fields.items():
+            if key == "structures":
+                continue  # arrays of tables, after everything else
             value = getattr(model, key)
             (tables if isinstance(value, BaseModel) else scalars).append((key, info, value))
         if name is not None:
@@ -438,7 +510,9 @@ def render_toml(settings: ServiceSettings | None = None) -> str:
         for key, info, value in scalars:
             if info.description:
                 lines.append(f"# {info.description}")
-            if value is None:
+            if name == "source" and settings.structures and key in ("spec", "id", "rig"):
+                lines.append(f"# {key}: set by each [[structures]] table")
+            elif value is None:
                 lines.append(f"# {key} = ")
             else:
                 if isinstance(value, tuple):
@@ -449,4 +523,21 @@ def render_toml(settings: ServiceSettings | None = None) -> str:
             section(value, key if name is None else f"{name}.{key}")
 
     section(settings, None)
+    lines.append(f"# {ServiceSettings.model_fields['structures'].description}; each [[structures]] table has the keys:")
+    for key, info in StructureSettings.model_fields.items():
+        lines.append(f"#   {key}: {info.description}")
+    for structure in settings.structures:
+        lines.append("[[structures]]")
+        tables = []
+        for key in StructureSettings.model_fields:
+            value = getattr(structure, key)
+            if isinstance(value, dict):
+                if value:
+                    tables.append((key, value))
+            elif value is not None:
+                lines.append(f"{key} = {_toml_value(value)}")
+        for key, value in tables:
+            lines.append(f"[structures.{key}]")
+            lines.extend(f"{k} = {_toml_value(list(v) if isinstance(v, tuple) else v)}" for k, v in value.items())
+        lines.append("")
     return "\n".join(lines)

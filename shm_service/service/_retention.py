@@ -120,7 +120,7 @@ class RetentionWorker:
         self.settings = settings
         self.storage = storage
         self.directory = None if directory is None else Path(directory)
-        self.current = current  # () -> path of the file being written, or None
+        self.current = current  # () -> path(s) of the file(s) being written, or None
         self.files_deleted = 0
         self.bytes_deleted = 0
         self.trend_rows_deleted = 0
@@ -151,12 +151,13 @@ class RetentionWorker:
         if self.directory is None or not self.directory.is_dir():
             return []
         s = self.settings
-        current = self.current()
+        current = self.current()  # a path, a list of paths (a fleet's files being written), or None
+        keep = list(current) if isinstance(current, (list, tuple)) else [current] if current else []
         try:
             plan = plan_recording_retention(
                 list_recordings(self.directory), max_bytes=s.recordings_max_gb * 1e9,
                 max_age_s=None if s.recordings_max_age_days is None else s.recordings_max_age_days * _DAY_S,
-                keep=[current] if current else [],
+                keep=keep,
             )
         except OSError as exc:
             self.errors += 1

@@ -31,6 +31,8 @@ from contract import (
     SpectrumDocument,
     StatusDocument,
     StorageStatusDocument,
+    StructuresDocument,
+    StructureSummaryDocument,
     ThresholdsDocument,
     TrendRow,
     WindowDocument,
@@ -49,7 +51,7 @@ from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
 from ._storage import Storage
 
-__all__ = ["MonitoringService", "ServiceError"]
+__all__ = ["MonitoringService", "NotSingleStructure", "ServiceError", "Structure", "StructureUnavailable"]
 
 log = logging.getLogger("shm.serve")
 VERSION = "0.1.0"
@@ -64,17 +66,18 @@ class RigPending(ServiceError):
 
 
 class _DashboardSink:
-    """Adapts the pipeline's pushes to ``web.Dashboard`` (the pipeline's ``SinkGuard`` counts
-    and isolates what it raises). Nothing is pushed while every browser has paused."""
+    """Adapts a structure's pipeline pushes to ``web.Dashboard`` (the pipeline's ``SinkGuard``
+    counts and isolates what it raises). Nothing is pushed while every browser has paused."""
 
-    def __init__(self, dashboard: Any, service: "MonitoringService") -> None:
+    def __init__(self, dashboard: Any, service: "MonitoringService", structure: "Structure") -> None:
         self.dashboard = dashboard
         self.service = service
+        self.structure = structure
 
     def estimate(self, t_s: float, x: np.ndarray, truth: np.ndarray | None) -> None:
         if self.service.paused:
             return
-        pipeline = self.service.pipeline
+        pipeline = self.structure.pipeline
         states = pipeline.sensor_states() if pipeline is not None else {}
         self.dashboard.push_estimate(t_s, x, states, truth)
 
@@ -91,76 +94,88 @@ class _DashboardSink:
         self.dashboard.push_alarm(alarm)
 
 
-class MonitoringService:
-    """One running ``shm serve``. ``environ`` is the environment the token is read from
-    (default ``os.environ``; tests pass a dict)."""
+class _StructureView:
+    """The dashboard's ``DashboardService`` for one structure of a fleet (the dashboard shows
+    one structure: its status, trends and alarms)."""
 
-    def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None,
-                 rig_wait_s: float = 0.0) -> None:
+    def __init__(self, service: "MonitoringService", structure_id: str) -> None:
+        self.service = service
+        self.structure_id = structure_id
+
+    def status(self) -> StatusDocument:
+        return self.service.status(self.structure_id)
+
+    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+               limit: int = 100_000) -> list[TrendRow]:
+        return self.service.structure_trends(self.structure_id, from_s, to_s, mode=mode, limit=limit)
+
+    def alarms(self, state: str | None = None) -> list[AlarmDocument]:
+        return self.service.structure_alarms(self.structure_id, state)
+
+    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
+        return self.service.acknowledge(alarm_id, token, by)
+
+    def set_paused(self, paused: bool) -> None:
+        self.service.set_paused(paused)
+
+
+class StructureUnavailable(LookupError):
+    """The structure exists but cannot answer (its start failed: the message says why)."""
+
+
+class NotSingleStructure(LookupError):
+    """A single-structure request to a fleet (the message names the fleet's routes)."""
+
+
+class _ModelCache:
+    """``build_model`` once per distinct rig and estimator settings: identical structures of a
+    fleet share one (immutable) model, its FE matrices and unit deformations."""
+
+    def __init__(self) -> None:
+        self._models: dict[str, Any] = {}
+        self._lock = threading.Lock()
+
+    def get(self, rig: RigDescription, est: Any) -> Any:
+        key = rig.model_dump_json() + "|" + est.model_dump_json(include={"peripheral", "modes", "imus", "tofs", "gauges"})
+        with self._lock:
+            model = self._models.get(key)
+            if model is None:
+                model = build_model(rig, peripheral=est.peripheral, modes=est.modes, imus=est.imus, tofs=est.tofs,
+                                    gauges=est.gauges)
+                self._models[key] = model
+            return model
+
+
+class Structure:
+    """One monitored structure: its source, bounded queue, model, pipeline and pipeline thread,
+    with its own errors and state. A service of one structure holds one; a fleet many, each
+    isolated from the others (its own threads; what it raises is caught and shown on it)."""
+
+    def __init__(self, service: "MonitoringService", settings: ServiceSettings, *, models: _ModelCache | None = None) -> None:
+        self.service = service
         self.settings = settings
-        self._rig_wait_s = rig_wait_s
-        self.token = resolve_token(settings, environ)
-        if not settings.server.loopback and self.token is None:
-            raise ServiceError(f"server.host {settings.server.host} is not loopback: a token is required "
-                               "(server.token_file or SHM_TOKEN)")
-        if settings.dashboard.enabled and not _loopback(settings.dashboard.host) and self.token is None:
-            raise ServiceError(f"dashboard.host {settings.dashboard.host} is not loopback: a token is required "
-                               "(server.token_file or SHM_TOKEN), which the dashboard then asks for; or bind it to "
-                               "127.0.0.1, or --no-dashboard")
-        self.started_at = time.time()
-        self.paused = False
-        self.queue: queue.Queue = queue.Queue(maxsize=settings.queue_batches)
         src = settings.source
+        self.kind = src.kind
+        self.queue: queue.Queue = queue.Queue(maxsize=settings.queue_batches)
         self.source = self._make_source()
+        self.id = self.source.id
         self.rig: RigDescription = self.source.rig  # type: ignore[assignment]
         est = settings.estimator
         _check_sensor_counts(self.rig, est)
         try:
-            self.model = build_model(self.rig, peripheral=est.peripheral, modes=est.modes, imus=est.imus, tofs=est.tofs,
-                                     gauges=est.gauges)
+            self.model = (models or _ModelCache()).get(self.rig, est)
         except ValueError as exc:
             raise ServiceError(f"estimator model: {exc}") from None
-        self.storage = Storage(settings.db, notify_targets=notify_targets(settings.notify),
-                               notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
-                               notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
-                               alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
-        self.storage.touch_source(self.source.id, self.source.kind, src.spec, time.time())
-        archive = None
-        if settings.archive.enabled:
-            archive = Archive(settings.archive, self.rig, self.source.id, getattr(self.source, "metadata", None))
-        raw = settings.archive.raw == "always" or (settings.archive.raw == "auto" and self.source.kind in ("sim", "ingest"))
-        self.dashboard = None
-        sink = None
-        self.dashboard_guard = SinkGuard("dashboard", log)
-        if settings.dashboard.enabled:
-            self.dashboard = self._start_dashboard()
-            if self.dashboard is not None:
-                sink = _DashboardSink(self.dashboard, self)
-        self.pipeline = Pipeline(
-            model=self.model, source_id=self.source.id, storage=self.storage, analysis=settings.analytics,
-            calibration_s=est.calibration_s, chunk_s=est.chunk_s, lateness_s=src.lateness_s,
-            silent_after_s=src.silent_after_s, raise_windows=settings.alarms.raise_windows,
-            clear_windows=settings.alarms.clear_windows, archive=archive, archive_raw=raw,
-            archive_estimates=settings.archive.estimates, estimate_decimation=settings.archive.estimate_decimation,
-            sink=sink, sink_guard=self.dashboard_guard, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
-            commit_retry_s=settings.storage_retry_s,
-            # ingest is judged per message by its validator (its response says what was refused)
-            clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits,
-            stuck_after_s=src.stuck_after_s,
-        )
-        self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
-        self.retention = RetentionWorker(settings.retention, storage=self.storage,
-                                         directory=archive.directory if archive is not None else None,
-                                         current=lambda: archive.current if archive is not None else None)
-        self.housekeeping_guard = SinkGuard("housekeeping", log)
-        self._touched_samples = 0
-        self._lock = threading.Lock()
-        self._done = threading.Event()
-        self._stopping = threading.Event()
-        self._thread: threading.Thread | None = None
+        speed = src.speed
+        self.speed = None if speed == "max" or self.kind in ("follow", "ingest") else float(speed)
+        self.started_wall: float | None = None
+        self.first_data_ns: int | None = None
         self.pipeline_error: str | None = None  # the last batch's error; None once a batch succeeds again
         self.pipeline_errors = 0
         self.last_pipeline_error: str | None = None
+        self._touched_samples = 0
+        self._done = threading.Event()
+        self._thread: threading.Thread | None = None
         a = settings.analytics
         self.thresholds = ThresholdsDocument(
             frequency=ChartLevelsDocument(**dict(zip(("warning_sigma", "alarm_sigma"), a.chart_levels("frequency")))),
@@ -171,7 +186,28 @@ class MonitoringService:
         self.model_document = ModelDocument(peripheral=m.selection.peripheral, support=m.rig.support, gamma=m.gamma,
                                             state_names=list(m.state_layout.names),
                                             unit_modes=[list(g) for g in m.mode_map.unit_modes])
-        self.api = None
+        self.pipeline: Pipeline | None = None
+        self.archive: Archive | None = None
+
+    def attach(self, storage: Storage, sink: Any, sink_guard: SinkGuard) -> None:
+        """Create the pipeline on the shared ``storage`` (after the source, so a bad source fails first)."""
+        settings, src, est = self.settings, self.settings.source, self.settings.estimator
+        storage.touch_source(self.id, self.source.kind, src.spec, time.time())
+        if settings.archive.enabled:
+            self.archive = Archive(settings.archive, self.rig, self.id, getattr(self.source, "metadata", None))
+        raw = settings.archive.raw == "always" or (settings.archive.raw == "auto" and self.source.kind in ("sim", "ingest"))
+        self.pipeline = Pipeline(
+            model=self.model, source_id=self.id, storage=storage, analysis=settings.analytics,
+            calibration_s=est.calibration_s, chunk_s=est.chunk_s, lateness_s=src.lateness_s,
+            silent_after_s=src.silent_after_s, raise_windows=settings.alarms.raise_windows,
+            clear_windows=settings.alarms.clear_windows, archive=self.archive, archive_raw=raw,
+            archive_estimates=settings.archive.estimates, estimate_decimation=settings.archive.estimate_decimation,
+            sink=sink, sink_guard=sink_guard, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
+            commit_retry_s=settings.storage_retry_s,
+            # ingest is judged per message by its validator (its response says what was refused)
+            clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits,
+            stuck_after_s=src.stuck_after_s,
+        )
 
     # -- construction -----------------------------------------------------------------------
 
@@ -196,7 +232,7 @@ class MonitoringService:
                     if kind == "follow":
                         # The model needs the rig: without source.rig, wait for the file's rig.json
                         # (``shm serve`` serves the API meanwhile and retries; see RigPending).
-                        if source.wait_for_rig(timeout=self._rig_wait_s) is None:
+                        if source.wait_for_rig(timeout=self.service._rig_wait_s) is None:
                             raise RigPending(f"follow: waiting for {path} and its rig.json "
                                              "(or give the rig with source.rig)")
                     else:
@@ -218,7 +254,285 @@ class MonitoringService:
         return SourceClock(window_s=src.time_window_s, max_ahead_s=src.max_ahead_s or src.lateness_s, live=live,
                            future_tolerance_s=src.future_tolerance_s)
 
-    def _start_dashboard(self) -> Any:
+    # -- running ----------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._pipeline_loop, name=f"pipeline-{self.id}", daemon=True)
+        self._thread.start()
+        self.source.start()
+
+    def _pipeline_loop(self) -> None:
+        pipeline = self.pipeline
+        assert pipeline is not None
+        try:
+            while True:
+                try:
+                    item = self.queue.get(timeout=1.0)
+                except queue.Empty:
+                    # No data: windows that wait for the database are tried again meanwhile.
+                    if pipeline.pending_commits:
+                        try:
+                            pipeline.flush_commits()
+                        except Exception as exc:
+                            self._batch_failed(exc, what="pipeline error writing a window")
+                        self.pipeline_error = pipeline.storage_error
+                        self.service.notifier.wake()
+                    continue
+                if item is END:
+                    break
+                try:
+                    pipeline.process(item)
+                except Exception as exc:
+                    self._batch_failed(exc)
+                else:
+                    # None once a batch succeeds and nothing waits for the database
+                    self.pipeline_error = pipeline.storage_error
+                if self.first_data_ns is None and pipeline.newest_ns is not None:
+                    # the pace's origin: the first batch, as the source's pacer holds it (the
+                    # start-up before the first data, compiling and building models, is not lag)
+                    self.first_data_ns, self.started_wall = pipeline.newest_ns, time.time()
+                self.service.notifier.wake()
+            pipeline.finish()
+            self.pipeline_error = pipeline.storage_error
+        except Exception as exc:
+            self._batch_failed(exc, what="pipeline failed at the end of the source")
+        finally:
+            self.service.notifier.wake()
+            self._done.set()
+
+    def _batch_failed(self, exc: Exception, what: str = "pipeline error on a batch; batch skipped") -> None:
+        text = f"{type(exc).__name__}: {exc}"
+        self.pipeline_errors += 1
+        self.pipeline_error = self.last_pipeline_error = text
+        # The same error on every batch would flood the log: its first time with the traceback.
+        if self.pipeline_errors <= 3:
+            log.exception("%s%s", f"structure {self.id}: " if self.service.fleet else "", what)
+        else:
+            log.error("%s%s: %s (%d batches failed so far)", f"structure {self.id}: " if self.service.fleet else "", what,
+                      text, self.pipeline_errors)
+
+    def touch(self, storage: Storage, now: float) -> None:
+        """Note in the database that the source delivered since the last call."""
+        samples = sum(self.pipeline.samples.values())
+        if samples != self._touched_samples:
+            storage.touch_source(self.id, self.source.kind, self.settings.source.spec, now)
+            self._touched_samples = samples
+
+    def wait(self, timeout: float | None = None) -> bool:
+        return self._done.wait(timeout)
+
+    @property
+    def done(self) -> bool:
+        return self._done.is_set()
+
+    @property
+    def started(self) -> bool:
+        return self._thread is not None
+
+    def stop_source(self) -> None:
+        self.source.stop()
+
+    # -- what it reports --------------------------------------------------------------------
+
+    def health_reasons(self) -> list[str]:
+        reasons: list[str] = []
+        if self.pipeline_error is not None:
+            reasons.append(f"pipeline: {self.pipeline_error}")
+        if self.pipeline.storage_error is not None and self.pipeline.storage_error != self.pipeline_error:
+            reasons.append(self.pipeline.storage_error)
+        reasons.extend(self.pipeline.health_problems())
+        src = self.source
+        if src.state == "failed":
+            reasons.append(f"source {src.id} failed: {src.error}")
+        reasons.extend(src.health_problems())
+        return reasons
+
+    def lag_s(self, now: float | None = None) -> float | None:
+        """How far the processed data is behind its pace (see ``StructureSummaryDocument.lag_s``)."""
+        newest = self.pipeline.newest_ns
+        if newest is None:
+            return None
+        now = time.time() if now is None else now
+        if self.kind in ("follow", "ingest"):
+            return round(now - newest / 1e9, 3)
+        if self.speed is None or self.started_wall is None or self.first_data_ns is None:
+            return None
+        if self.done:  # the source ended: nothing more is due
+            return 0.0
+        return round(self.speed * (now - self.started_wall) - (newest - self.first_data_ns) / 1e9, 3)
+
+    def state(self) -> tuple[str, str | None]:
+        src = self.source
+        if src.state == "failed":
+            return "failed", src.error
+        reasons = self.health_reasons()
+        if self.done:
+            # what was wrong with the data (a damaged file read up to the damage) stays shown
+            problems = reasons or list(src.problems)
+            return ("finished" if src.state == "finished" else "stopped"), problems[-1] if problems else None
+        if src.state in ("starting", "waiting for the file"):
+            return "starting", reasons[0] if reasons else None
+        if reasons:
+            return "degraded", reasons[0]
+        return "running", None
+
+    def summary(self) -> StructureSummaryDocument:
+        state, error = self.state()
+        return StructureSummaryDocument(id=self.id, kind=self.source.kind, state=state, error=error,
+                                        data_time_s=None if self.pipeline.newest_ns is None else self.pipeline.newest_ns / 1e9,
+                                        lag_s=self.lag_s(), windows=self.pipeline.windows_committed,
+                                        active_alarms=dict(self.pipeline.committed_alarms))
+
+
+class _FailedStructure:
+    """A structure of a fleet whose start failed (a missing file, a bad rig): listed with its
+    error; the others run."""
+
+    def __init__(self, structure_id: str, kind: str, error: str) -> None:
+        self.id = structure_id
+        self.kind = kind
+        self.error = error
+        self.done = True
+        self.started = False
+
+    def start(self) -> None:
+        pass
+
+    def stop_source(self) -> None:
+        pass
+
+    def wait(self, timeout: float | None = None) -> bool:
+        return True
+
+    def health_reasons(self) -> list[str]:
+        return [f"failed to start: {self.error}"]
+
+    def summary(self) -> StructureSummaryDocument:
+        return StructureSummaryDocument(id=self.id, kind=self.kind, state="failed", error=self.error)
+
+
+class MonitoringService:
+    """One running ``shm serve``: one structure (``[source]``), or a fleet (``[[structures]]``)
+    sharing one database, notifier, retention and API. ``environ`` is the environment the token
+    is read from (default ``os.environ``; tests pass a dict)."""
+
+    def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None, deliver: bool = True,
+                 rig_wait_s: float = 0.0) -> None:
+        self.settings = settings
+        self.deliver = deliver  # False in a worker process: the front delivers the fleet's notifications
+        self._rig_wait_s = rig_wait_s
+        self.token = resolve_token(settings, environ)
+        if not settings.server.loopback and self.token is None:
+            raise ServiceError(f"server.host {settings.server.host} is not loopback: a token is required "
+                               "(server.token_file or SHM_TOKEN)")
+        if settings.dashboard.enabled and not _loopback(settings.dashboard.host) and self.token is None:
+            raise ServiceError(f"dashboard.host {settings.dashboard.host} is not loopback: a token is required "
+                               "(server.token_file or SHM_TOKEN), which the dashboard then asks for; or bind it to "
+                               "127.0.0.1, or --no-dashboard")
+        self.started_at = time.time()
+        self.paused = False
+        self.fleet = settings.fleet
+        models = _ModelCache()
+        self.structures: dict[str, Structure | _FailedStructure] = {}
+        if not self.fleet:
+            primary = Structure(self, settings, models=models)
+            self.structures[primary.id] = primary
+        else:
+            for st in settings.structures:
+                try:
+                    self.structures[st.id] = Structure(self, settings.for_structure(st), models=models)
+                except (ServiceError, SettingsError, OSError, ValueError) as exc:
+                    # One structure's bad file or rig must not keep the others from monitoring.
+                    log.error("structure %s cannot start: %s", st.id, exc)
+                    self.structures[st.id] = _FailedStructure(st.id, st.source.partition(":")[0], str(exc))
+        self.storage = Storage(settings.db, notify_targets=notify_targets(settings.notify),
+                               notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
+                               notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
+                               alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
+        self.dashboard = None
+        self.dashboard_guard = SinkGuard("dashboard", log)
+        shown = next((s for s in self.structures.values() if isinstance(s, Structure)), None)
+        if settings.dashboard.enabled and shown is not None:
+            self.dashboard = self._start_dashboard(shown)
+        for structure in self.running_structures():
+            sink = _DashboardSink(self.dashboard, self, structure) if self.dashboard is not None and structure is shown else None
+            structure.attach(self.storage, sink, self.dashboard_guard)
+        self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
+        archives = [s.archive for s in self.running_structures() if s.archive is not None]
+        self.retention = RetentionWorker(settings.retention, storage=self.storage,
+                                         directory=archives[0].directory if archives else None,
+                                         current=lambda: [a.current for a in archives if a.current is not None])
+        self.housekeeping_guard = SinkGuard("housekeeping", log)
+        self._lock = threading.Lock()
+        self._done = threading.Event()
+        self._stopping = threading.Event()
+        self.api = None
+
+    def running_structures(self) -> list[Structure]:
+        return [s for s in self.structures.values() if isinstance(s, Structure)]
+
+    # -- the single structure (a service without [[structures]]) ----------------------------
+
+    @property
+    def primary(self) -> Structure:
+        """The structure of a single-structure service (NotSingleStructure for a fleet)."""
+        if self.fleet:
+            raise NotSingleStructure("this service monitors a fleet ([[structures]]): use /api/structures and "
+                                     "/api/structures/{id}/...")
+        return next(iter(self.structures.values()))  # type: ignore[return-value]
+
+    @property
+    def source(self) -> Source:
+        return self.primary.source
+
+    @property
+    def pipeline(self) -> Pipeline:
+        return self.primary.pipeline  # type: ignore[return-value]
+
+    @property
+    def queue(self) -> queue.Queue:
+        return self.primary.queue
+
+    @property
+    def model(self) -> Any:
+        return self.primary.model
+
+    @property
+    def rig(self) -> RigDescription:
+        return self.primary.rig
+
+    @property
+    def thresholds(self) -> ThresholdsDocument:
+        return self.primary.thresholds
+
+    @property
+    def model_document(self) -> ModelDocument:
+        return self.primary.model_document
+
+    @property
+    def pipeline_error(self) -> str | None:
+        return self.primary.pipeline_error
+
+    @property
+    def pipeline_errors(self) -> int:
+        return self.primary.pipeline_errors
+
+    @property
+    def last_pipeline_error(self) -> str | None:
+        return self.primary.last_pipeline_error
+
+    def structure(self, structure_id: str) -> Structure:
+        """The running structure ``structure_id`` (KeyError naming it when there is none,
+        StructureUnavailable when its start failed)."""
+        found = self.structures.get(structure_id)
+        if found is None:
+            known = ", ".join(sorted(self.structures)[:20])
+            raise KeyError(f"no structure {structure_id!r} (this service monitors: {known})")
+        if isinstance(found, _FailedStructure):
+            raise StructureUnavailable(f"structure {structure_id!r} failed to start: {found.error}")
+        return found
+
+    def _start_dashboard(self, structure: Structure) -> Any:
         try:
             import web
 
@@ -228,40 +542,45 @@ class MonitoringService:
             return None
         d = self.settings.dashboard
         try:
-            dashboard = Dashboard(host=d.host, port=d.port, rig=self.rig, units=self.model.units,
-                                  layout=self.model.state_layout, stations=self.model.stations, service=self,
-                                  token=self.token)
+            dashboard = Dashboard(host=d.host, port=d.port, rig=structure.rig, units=structure.model.units,
+                                  layout=structure.model.state_layout, stations=structure.model.stations,
+                                  service=_StructureView(self, structure.id) if self.fleet else self, token=self.token)
         except Exception as exc:
             log.warning("dashboard failed to start (%s); running without it", exc)
             return None
-        log.info("dashboard at %s", getattr(dashboard, "url", "?"))
+        log.info("dashboard at %s%s", getattr(dashboard, "url", "?"),
+                 f" (structure {structure.id})" if self.fleet else "")
         return dashboard
 
     # -- running ----------------------------------------------------------------------------
 
     def start(self) -> None:
-        self.notifier.start()
+        if self.deliver:
+            self.notifier.start()
         self.retention.start()
-        self._thread = threading.Thread(target=self._pipeline_loop, name="pipeline", daemon=True)
-        self._thread.start()
         threading.Thread(target=self._housekeeping_loop, name="housekeeping", daemon=True).start()
-        self.source.start()
+        for structure in self.structures.values():
+            structure.start()
+        threading.Thread(target=self._watch_done, name="done", daemon=True).start()
+
+    def _watch_done(self) -> None:
+        for structure in self.structures.values():
+            structure.wait()
+        self._done.set()
 
     def _housekeeping_loop(self, period_s: float = 2.0) -> None:
         while not self._stopping.wait(period_s):
             self.housekeeping()
 
     def housekeeping(self, now: float | None = None) -> None:
-        """Every few seconds: note that the source delivers (``sources.last_seen_s``), mark stale
+        """Every few seconds: note that the sources deliver (``sources.last_seen_s``), mark stale
         the alarms of sources silent for ``alarms.stale_after_s``, re-notify alarms that still
         fire after ``alarms.repeat_interval_s``. A failure is counted and tried again next time."""
         now = time.time() if now is None else now
         a = self.settings.alarms
         try:
-            samples = sum(self.pipeline.samples.values())
-            if samples != self._touched_samples:
-                self.storage.touch_source(self.source.id, self.source.kind, self.settings.source.spec, now)
-                self._touched_samples = samples
+            for structure in self.running_structures():
+                structure.touch(self.storage, now)
             stale = self.storage.mark_stale(now - a.stale_after_s, now)
             if stale:
                 log.warning("alarm(s) %s marked stale: their source has delivered no data for %.0f s", stale, a.stale_after_s)
@@ -271,51 +590,8 @@ class MonitoringService:
         except Exception as exc:
             self.housekeeping_guard.record("housekeeping", exc)
 
-    def _pipeline_loop(self) -> None:
-        try:
-            while True:
-                try:
-                    item = self.queue.get(timeout=1.0)
-                except queue.Empty:
-                    # No data: windows that wait for the database are tried again meanwhile.
-                    if self.pipeline.pending_commits:
-                        try:
-                            self.pipeline.flush_commits()
-                        except Exception as exc:
-                            self._batch_failed(exc, what="pipeline error writing a window")
-                        self.pipeline_error = self.pipeline.storage_error
-                        self.notifier.wake()
-                    continue
-                if item is END:
-                    break
-                try:
-                    self.pipeline.process(item)
-                except Exception as exc:
-                    self._batch_failed(exc)
-                else:
-                    # None once a batch succeeds and nothing waits for the database
-                    self.pipeline_error = self.pipeline.storage_error
-                self.notifier.wake()
-            self.pipeline.finish()
-            self.pipeline_error = self.pipeline.storage_error
-        except Exception as exc:
-            self._batch_failed(exc, what="pipeline failed at the end of the source")
-        finally:
-            self.notifier.wake()
-            self._done.set()
-
-    def _batch_failed(self, exc: Exception, what: str = "pipeline error on a batch; batch skipped") -> None:
-        text = f"{type(exc).__name__}: {exc}"
-        self.pipeline_errors += 1
-        self.pipeline_error = self.last_pipeline_error = text
-        # The same error on every batch would flood the log: its first time with the traceback.
-        if self.pipeline_errors <= 3:
-            log.exception(what)
-        else:
-            log.error("%s: %s (%d batches failed so far)", what, text, self.pipeline_errors)
-
     def wait(self, timeout: float | None = None) -> bool:
-        """Wait until the source ended and everything was processed and stored."""
+        """Wait until every source ended and everything was processed and stored."""
         return self._done.wait(timeout)
 
     @property
@@ -326,9 +602,12 @@ class MonitoringService:
         if self._stopping.is_set():
             return
         self._stopping.set()
-        self.source.stop()
-        if self._thread is not None:
-            self._done.wait(30.0)
+        for structure in self.structures.values():
+            structure.stop_source()
+        deadline = time.monotonic() + 30.0
+        for structure in self.structures.values():
+            if structure.started:
+                structure.wait(max(0.0, deadline - time.monotonic()))
         self.notifier.stop(drain_s=drain_s)
         self.retention.stop()
         if self.dashboard is not None:
@@ -337,6 +616,7 @@ class MonitoringService:
             except Exception as exc:
                 log.warning("dashboard stop failed: %s", exc)
         self.storage.close()
+
 
     # -- DashboardService and API -----------------------------------------------------------
 
@@ -348,47 +628,47 @@ class MonitoringService:
             raise PermissionError("missing or wrong token")
 
     def health(self) -> HealthDocument:
-        """``/healthz``: cheap (no query of the database), "degraded" with the reasons why."""
+        """``/healthz``: cheap (no query of the database), "degraded" with the reasons why (of a
+        fleet: each reason names its structure)."""
         reasons: list[str] = []
-        if self.pipeline_error is not None:
-            reasons.append(f"pipeline: {self.pipeline_error}")
-        if self.pipeline.storage_error is not None and self.pipeline.storage_error != self.pipeline_error:
-            reasons.append(self.pipeline.storage_error)
-        reasons.extend(self.pipeline.health_problems())
-        src = self.source
-        if src.state == "failed":
-            reasons.append(f"source {src.id} failed: {src.error}")
-        reasons.extend(src.health_problems())
+        for structure in self.structures.values():
+            prefix = f"{structure.id}: " if self.fleet else ""
+            reasons.extend(prefix + r for r in structure.health_reasons())
         return HealthDocument(status="degraded" if reasons else "ok", uptime_s=round(time.time() - self.started_at, 1),
                               reasons=reasons)
 
-    def status(self) -> StatusDocument:
-        p = self.pipeline.status(queue_depth=self.queue.qsize(), queue_capacity=self.queue.maxsize)
-        src = self.source.status()
+    def status(self, structure_id: str | None = None) -> StatusDocument:
+        """The status of the single structure, or of ``structure_id`` of a fleet."""
+        structure = self.primary if structure_id is None else self.structure(structure_id)
+        pipeline = structure.pipeline
+        p = pipeline.status(queue_depth=structure.queue.qsize(), queue_capacity=structure.queue.maxsize)
+        src = structure.source.status()
         src["dropped"] = src["dropped"] + p.late_samples + p.estimator.dropped_samples
-        if self.pipeline.rejected:  # judged by the pipeline (off the clock, implausible values)
+        if pipeline.rejected:  # judged by the pipeline (off the clock, implausible values)
             by_reason = dict(src["rejected_by_reason"])
-            for reason, n in self.pipeline.rejected.items():
+            for reason, n in pipeline.rejected.items():
                 by_reason[reason] = by_reason.get(reason, 0) + n
             src["rejected_by_reason"] = by_reason
             src["rejected"] = sum(by_reason.values())
-        src["problems"] = src["problems"] + self.pipeline.health_problems()
-        src["clock_jumps"] = src.get("clock_jumps", 0) + (self.pipeline.clock.jump_count if self.pipeline.clock else 0)
+        src["problems"] = src["problems"] + pipeline.health_problems()
+        src["clock_jumps"] = src.get("clock_jumps", 0) + (pipeline.clock.jump_count if pipeline.clock else 0)
         src["latency_s"] = p.pipeline_latency_s
-        states = self.pipeline.sensor_states()
+        states = pipeline.sensor_states()
         counts = {"warning": 0, "alarm": 0}
         for a in self.storage.alarms(state="active"):
-            counts[a.level] += 1
+            if not self.fleet or a.source == structure.id:
+                counts[a.level] += 1
         return StatusDocument(
             service=ServiceStatusDocument(
                 version=VERSION, started_at=self.started_at, uptime_s=round(time.time() - self.started_at, 1),
-                paused=self.paused, done=self.done, pipeline_error=self.pipeline_error, pipeline_errors=self.pipeline_errors,
-                last_pipeline_error=self.last_pipeline_error),
+                paused=self.paused, done=structure.done if self.fleet else self.done,
+                pipeline_error=structure.pipeline_error, pipeline_errors=structure.pipeline_errors,
+                last_pipeline_error=structure.last_pipeline_error),
             sources=[SourceStatusDocument(**src)],
             pipeline=p,
             degraded_sensors=sorted(t for t, s in states.items() if s != "ok"),
             sensors=states,
-            baseline=BaselineStatusDocument(state=p.baseline, modes=self._baseline_modes()),
+            baseline=BaselineStatusDocument(state=p.baseline, modes=self._baseline_modes(structure)),
             alarms=AlarmCountsDocument(active=counts),
             notifications=NotificationStatusDocument(**self.storage.outbox_counts(), sent_this_run=self.notifier.sent,
                                                      failed_attempts_this_run=self.notifier.failed_attempts,
@@ -396,17 +676,21 @@ class MonitoringService:
                                                      last_error=self.notifier.last_error),
             storage=StorageStatusDocument(db=str(self.settings.db), schema_version=self.storage.schema_version,
                                           trend_rows=self.storage.count("trends"),
-                                          archive=None if self.pipeline.archive is None else self.pipeline.archive.status(),
+                                          archive=None if pipeline.archive is None else pipeline.archive.status(),
                                           write_retries=self.storage.retries, write_failures=self.storage.failures,
-                                          windows_waiting=self.pipeline.pending_commits, last_error=self.storage.last_error),
+                                          windows_waiting=pipeline.pending_commits, last_error=self.storage.last_error),
             sinks={"dashboard": self.dashboard_guard.status(), "notifier": self.notifier.guard.status(),
                    "housekeeping": self.housekeeping_guard.status()},
-            thresholds=self.thresholds,
-            model=self.model_document,
+            thresholds=structure.thresholds,
+            model=structure.model_document,
         )
 
-    def _baseline_modes(self) -> list[BaselineModeDocument] | None:
-        bl = self.pipeline.analytics.monitor.baseline
+    def structures_document(self) -> StructuresDocument:
+        """``GET /api/structures``: every structure's state, lag, windows and active alarms."""
+        return StructuresDocument(structures=[s.summary() for s in self.structures.values()])
+
+    def _baseline_modes(self, structure: Structure | None = None) -> list[BaselineModeDocument] | None:
+        bl = (structure or self.primary).pipeline.analytics.monitor.baseline
         if bl is None:
             return None
         return [BaselineModeDocument(mode=m.mode, unit=m.unit + 1, f_ref_hz=m.f_ref_hz, temperature_ref_c=m.temperature_ref_c,
@@ -416,8 +700,23 @@ class MonitoringService:
                limit: int = 100_000) -> list[TrendRow]:
         return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit)
 
+    def structure_trends(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
+                         limit: int = 100_000) -> list[TrendRow]:
+        self._known(structure_id)
+        return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit)
+
     def alarms(self, state: str | None = None) -> list[AlarmDocument]:
         return self.storage.alarms(state=state)
+
+    def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
+        self._known(structure_id)
+        return self.storage.alarms(state=state, source=structure_id)
+
+    def _known(self, structure_id: str) -> None:
+        """KeyError naming ``structure_id`` unless the service has such a structure (a failed
+        one still has its stored history)."""
+        if structure_id not in self.structures:
+            self.structure(structure_id)
 
     def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         self.check_token(token)
@@ -429,20 +728,25 @@ class MonitoringService:
     def set_paused(self, paused: bool) -> None:
         self.paused = bool(paused)
 
-    def request_baseline(self) -> BaselineRequestDocument:
+    def request_baseline(self, structure_id: str | None = None) -> BaselineRequestDocument:
+        """Learn a new baseline of the single structure (or of ``structure_id``) from its next windows."""
+        structure = self.primary if structure_id is None else self.structure(structure_id)
         # An operator's request waits a few seconds for the database at most (then 503: retry).
-        baseline_id = self.storage.request_baseline(self.source.id, retry_s=min(self.settings.storage_retry_s, 3.0))
-        self.pipeline.request_baseline()
-        return BaselineRequestDocument(baseline_id=baseline_id, state="learning", source=self.source.id,
-                                       learn_s=self.settings.analytics.baseline_s)
+        baseline_id = self.storage.request_baseline(structure.id, retry_s=min(self.settings.storage_retry_s, 3.0))
+        structure.pipeline.request_baseline()
+        return BaselineRequestDocument(baseline_id=baseline_id, state="learning", source=structure.id,
+                                       learn_s=structure.settings.analytics.baseline_s)
 
-    def spectra(self) -> SpectrumDocument | None:
-        return self.pipeline.analytics.latest_spectrum
+    def spectra(self, structure_id: str | None = None) -> SpectrumDocument | None:
+        structure = self.primary if structure_id is None else self.structure(structure_id)
+        return structure.pipeline.analytics.latest_spectrum
 
-    def ingest(self, document: Any) -> IngestResultDocument | None:
-        if not isinstance(self.source, IngestSource):
-            raise LookupError(f"the service's source is {self.source.kind}, not ingest")
-        result = self.source.submit(document)
+    def ingest(self, document: Any, structure_id: str | None = None) -> IngestResultDocument | None:
+        structure = self.primary if structure_id is None else self.structure(structure_id)
+        if not isinstance(structure.source, IngestSource):
+            what = "the service's source" if structure_id is None else f"the source of structure {structure_id!r}"
+            raise LookupError(f"{what} is {structure.source.kind}, not ingest")
+        result = structure.source.submit(document)
         return None if result is None else IngestResultDocument(**result.as_dict())
 
 

@@ -752,16 +752,20 @@ class Storage:
             raise ValueError(f"{table=} is not a table of the service's database")
         return int(self._read(lambda db: db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0]))
 
-    def alarms(self, *, state: str | None = None, limit: int = 1000) -> list[AlarmDocument]:
-        """Alarms, newest first (only those in ``state``: "active" or "cleared")."""
+    def alarms(self, *, state: str | None = None, limit: int = 1000, source: str | None = None) -> list[AlarmDocument]:
+        """Alarms, newest first (only those in ``state``: "active" or "cleared"; only those of
+        ``source`` when given)."""
         if state not in (None, "active", "cleared"):
             raise ValueError(f"{state=} must be 'active', 'cleared' or None")
+        where, args = _conditions([("state = ?", state), ("source = ?", source)])
+        sql = f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms"
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        sql += " ORDER BY id DESC LIMIT ?"
+        args.append(int(limit))
 
         def run(db: sqlite3.Connection) -> list:
-            if state is None:
-                return db.execute(f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms ORDER BY id DESC LIMIT ?", (limit,)).fetchall()
-            return db.execute(f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE state=? ORDER BY id DESC LIMIT ?",
-                              (state, limit)).fetchall()
+            return db.execute(sql, args).fetchall()
 
         return [AlarmDocument.model_validate(dict(r)) for r in self._read(run)]
 

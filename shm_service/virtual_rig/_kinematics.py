@@ -36,6 +36,26 @@ def foreshortening_matrix(basis: NodalShapes, x: float) -> np.ndarray:
     return np.einsum("k,ki,kj->ij", weights, slopes, slopes)
 
 
+_SHAPES: dict[tuple[int, float], tuple] = {}
+_SHAPES_MAX = 4096
+
+
+def _point_shapes(basis: NodalShapes, x: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Φ(x), Φ'(x), Φ''(x) and G(x) of a material point: fixed for the point, so computed once
+    per basis and arc length, not for every block (the simulation evaluates them per sensor)."""
+    key = (id(basis), float(x))
+    hit = _SHAPES.get(key)
+    if hit is not None and hit[0] is basis:
+        return hit[1]
+    shapes = (basis.evaluate(x, 0), basis.evaluate(x, 1), basis.evaluate(x, 2), foreshortening_matrix(basis, x))
+    for a in shapes:
+        a.setflags(write=False)
+    if len(_SHAPES) >= _SHAPES_MAX:
+        _SHAPES.clear()
+    _SHAPES[key] = (basis, shapes)  # the basis is held, so its id is not reused while cached
+    return shapes
+
+
 @dataclass(frozen=True)
 class PointMotion:
     """Motion of one material point over N samples (arrays of shape (N,))."""
@@ -67,10 +87,7 @@ def point_motion(
     gravity's component along inertial η (m/s²): +g for a hanging beam, −g for a standing one
     (η points up along it), so a standing beam's accelerometers read +g along x at rest.
     """
-    phi = basis.evaluate(x, 0)
-    dphi = basis.evaluate(x, 1)
-    ddphi = basis.evaluate(x, 2)
-    G = foreshortening_matrix(basis, x)
+    phi, dphi, ddphi, G = _point_shapes(basis, x)
     theta, omega, omega_dot = y[:, 0], yd[:, 0], ydd[:, 0]
     q, qd, qdd = y[:, 1:], yd[:, 1:], ydd[:, 1:]
     w, w_d, w_dd = q @ phi, qd @ phi, qdd @ phi
@@ -79,7 +96,7 @@ def point_motion(
     Gq = q @ G
     u = -0.5 * np.einsum("ni,ni->n", Gq, q)
     u_d = -np.einsum("ni,ni->n", Gq, qd)
-    u_dd = -(np.einsum("ni,ij,nj->n", qd, G, qd) + np.einsum("ni,ni->n", Gq, qdd))
+    u_dd = -(np.einsum("ni,ni->n", qd @ G, qd) + np.einsum("ni,ni->n", Gq, qdd))
     eta = x + u
     ct, st = np.cos(theta), np.sin(theta)
     accel_eta = bearing_acceleration * st + u_dd - 2 * omega * w_d - omega_dot * w - omega**2 * eta

@@ -201,8 +201,11 @@ def build_plant(
     )
 
 
-@numba.njit(cache=True)
-def _acceleration(y, yd, ddot, kappa, force, Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws):
+@numba.njit(cache=True, nogil=True)
+def _acceleration(y, yd, ddot, kappa, force, Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, out):
+    """ÿ of the plant into ``out`` (``rhs`` is scratch of the same size): the generalized forces
+    minus damping, gravity along and across the beam, the stiffness of bending (temperature
+    factor kappa), of the axial load and of the centrifugal field, and bearing friction on θ."""
     theta = y[0]
     omega = yd[0]
     ct = np.cos(theta)
@@ -211,48 +214,72 @@ def _acceleration(y, yd, ddot, kappa, force, Minv, Kb, Kg, Kc, c, SD, C, g, Tc, 
     g_lateral = ddot * ct + g * st
     n = y.shape[0]
     m = n - 1
-    rhs = force.copy()
-    damp = C @ yd
+    for i in range(n):
+        damp = 0.0
+        for j in range(n):
+            damp += C[i, j] * yd[j]
+        rhs[i] = force[i] - damp
     cq = 0.0
     for i in range(m):
         cq += c[i] * y[1 + i]
-    rhs[0] += -SD * g_lateral - g_axial * cq - Tc * np.tanh(omega / Ws) - damp[0]
+    rhs[0] += -SD * g_lateral - g_axial * cq - Tc * np.tanh(omega / Ws)
     w2 = omega * omega
     for i in range(m):
         acc = 0.0
         for j in range(m):
             acc += (kappa * Kb[i, j] + g_axial * Kg[i, j] + w2 * Kc[i, j]) * y[1 + j]
-        rhs[1 + i] += -acc - c[i] * g_lateral - damp[1 + i]
-    return Minv @ rhs
+        rhs[1 + i] += -acc - c[i] * g_lateral
+    for i in range(n):
+        a = 0.0
+        for j in range(n):
+            a += Minv[i, j] * rhs[j]
+        out[i] = a
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _integrate(y0, yd0, ddot_fine, kappa, force, substeps, h, Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, out_y, out_yd, out_ydd):
+    # Classical RK4 on preallocated state vectors (no allocation per stage), without the GIL:
+    # the simulations of a fleet integrate side by side on every core.
     n_samples = out_y.shape[0]
+    n = y0.shape[0]
     y = y0.copy()
     yd = yd0.copy()
+    y2 = np.empty(n)
+    yd2 = np.empty(n)
+    y3 = np.empty(n)
+    yd3 = np.empty(n)
+    y4 = np.empty(n)
+    yd4 = np.empty(n)
+    k1a = np.empty(n)
+    k2a = np.empty(n)
+    k3a = np.empty(n)
+    k4a = np.empty(n)
+    rhs = np.empty(n)
     for k in range(n_samples):
         out_y[k] = y
         out_yd[k] = yd
-        out_ydd[k] = _acceleration(y, yd, ddot_fine[2 * substeps * k], kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws)
+        _acceleration(y, yd, ddot_fine[2 * substeps * k], kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, out_ydd[k])
         for s in range(substeps):
             base = 2 * (substeps * k + s)
             a0 = ddot_fine[base]
             a1 = ddot_fine[base + 1]
             a2 = ddot_fine[base + 2]
-            k1v = yd
-            k1a = _acceleration(y, yd, a0, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws)
-            y2 = y + 0.5 * h * k1v
-            yd2 = yd + 0.5 * h * k1a
-            k2a = _acceleration(y2, yd2, a1, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws)
-            y3 = y + 0.5 * h * yd2
-            yd3 = yd + 0.5 * h * k2a
-            k3a = _acceleration(y3, yd3, a1, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws)
-            y4 = y + h * yd3
-            yd4 = yd + h * k3a
-            k4a = _acceleration(y4, yd4, a2, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws)
-            y = y + h / 6.0 * (k1v + 2.0 * yd2 + 2.0 * yd3 + yd4)
-            yd = yd + h / 6.0 * (k1a + 2.0 * k2a + 2.0 * k3a + k4a)
+            _acceleration(y, yd, a0, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, k1a)
+            for i in range(n):
+                y2[i] = y[i] + 0.5 * h * yd[i]
+                yd2[i] = yd[i] + 0.5 * h * k1a[i]
+            _acceleration(y2, yd2, a1, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, k2a)
+            for i in range(n):
+                y3[i] = y[i] + 0.5 * h * yd2[i]
+                yd3[i] = yd[i] + 0.5 * h * k2a[i]
+            _acceleration(y3, yd3, a1, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, k3a)
+            for i in range(n):
+                y4[i] = y[i] + h * yd3[i]
+                yd4[i] = yd[i] + h * k3a[i]
+            _acceleration(y4, yd4, a2, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, k4a)
+            for i in range(n):
+                y[i] = y[i] + h / 6.0 * (yd[i] + 2.0 * yd2[i] + 2.0 * yd3[i] + yd4[i])
+                yd[i] = yd[i] + h / 6.0 * (k1a[i] + 2.0 * k2a[i] + 2.0 * k3a[i] + k4a[i])
     return y, yd
 
 

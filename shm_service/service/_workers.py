@@ -1,0 +1,303 @@
+"""A fleet across worker processes (``workers = N`` with ``[[structures]]``): one GIL hosts only
+so many structures, so ``shm serve`` starts N worker processes (one per core), each a service of
+every N-th structure on the one shared database, and serves one API over them. The worker
+processes run the sources, pipelines, retention and housekeeping of their structures; this front
+process delivers the notifications of all (one deliverer per outbox) and answers the API: the
+database's rows (trends, alarms, acknowledgements) itself, a structure's live state (status,
+spectra, ingest, baseline) from the worker that hosts it."""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+from contract import (
+    AlarmDocument,
+    BaselineRequestDocument,
+    HealthDocument,
+    IngestResultDocument,
+    SpectrumDocument,
+    StatusDocument,
+    StructuresDocument,
+    StructureSummaryDocument,
+    TrendRow,
+)
+
+from ._config import ServiceSettings, render_toml, resolve_token
+from ._ingest import IngestError
+from ._notify import Notifier, notify_targets
+from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable
+from ._storage import Storage
+
+__all__ = ["WorkerFleet", "part_of"]
+
+log = logging.getLogger("shm.serve.workers")
+
+
+def part_of(settings: ServiceSettings, index: int, count: int) -> ServiceSettings:
+    """The settings of worker ``index`` of ``count``: every ``count``-th structure from ``index``."""
+    if not (0 <= index < count):
+        raise ValueError(f"worker {index=} must lie within 0..{count - 1}")
+    return settings.model_copy(update={"structures": settings.structures[index::count]})
+
+
+class _Worker:
+    def __init__(self, index: int, process: subprocess.Popen, url: str, ids: list[str]) -> None:
+        self.index = index
+        self.process = process
+        self.url = url
+        self.ids = ids
+        self.summary: str | None = None  # its last stdout line (the --json summary)
+
+
+class WorkerFleet:
+    """The front of a fleet hosted by worker processes (implements what the API needs)."""
+
+    def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None, json_summary: bool = False) -> None:
+        if not settings.fleet or settings.workers < 2:
+            raise ServiceError("worker processes need [[structures]] and workers >= 2")
+        self.settings = settings
+        self.fleet = True
+        self.token = resolve_token(settings, environ)
+        if not settings.server.loopback and self.token is None:
+            raise ServiceError(f"server.host {settings.server.host} is not loopback: a token is required "
+                               "(server.token_file or SHM_TOKEN)")
+        self.started_at = time.time()
+        self.order = [s.id for s in settings.structures]
+        # the database exists (and is migrated) before the workers open it
+        self.storage = Storage(settings.db, notify_targets=notify_targets(settings.notify),
+                               notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
+                               notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
+                               alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
+        self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
+        self.workers: list[_Worker] = []
+        self.owner: dict[str, _Worker] = {}
+        self._json = json_summary
+        self._environ = dict(os.environ if environ is None else environ)
+        self._client = httpx.Client(timeout=30.0)
+        self._done = threading.Event()
+        self._starting = False
+
+    # -- running ----------------------------------------------------------------------------
+
+    def start(self) -> None:
+        n = self.settings.workers
+        directory = Path(self.settings.data_dir or ".")
+        directory.mkdir(parents=True, exist_ok=True)
+        config = directory / "fleet-workers.toml"
+        config.write_text(render_toml(self.settings), encoding="utf-8")
+        self._starting = True
+        launched = []
+        try:
+            # all at once (the database exists already): they import and build in parallel
+            for i in range(n):
+                ids = self.order[i::n]
+                if not ids:
+                    continue
+                cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(config), "--worker-of", f"{i}/{n}",
+                       "--host", "127.0.0.1", "--port", "0"]
+                if i > 0:
+                    cmd.append("--no-dashboard")  # the dashboard shows the first structure: worker 0's
+                if self._json:
+                    cmd.append("--json")
+                launched.append((i, ids, subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=self._environ)))
+            for i, ids, process in launched:
+                line = process.stdout.readline() if process.stdout else ""
+                if "API at " not in line:
+                    code = process.wait(60)
+                    raise ServiceError(f"worker process {i} of {n} did not start (exit code {code}; its log is above)")
+                worker = _Worker(i, process, line.split("API at ")[1].split()[0], ids)
+                threading.Thread(target=self._drain, args=(worker,), name=f"worker-{i}-out", daemon=True).start()
+                self.workers.append(worker)
+                for sid in ids:
+                    self.owner[sid] = worker
+                log.info("worker %d of %d (pid %d): %d structures at %s", i, n, process.pid, len(ids), worker.url)
+        except BaseException:
+            for _, _, process in launched:
+                if process.poll() is None:
+                    process.kill()
+            raise
+        finally:
+            self._starting = False
+        self.notifier.start()
+        threading.Thread(target=self._watch, name="workers", daemon=True).start()
+
+    def _drain(self, worker: _Worker) -> None:
+        for line in worker.process.stdout:  # type: ignore[union-attr]
+            line = line.strip()
+            if line:
+                worker.summary = line
+                if not self._json:
+                    print(line, flush=True)
+
+    def _watch(self) -> None:
+        for worker in self.workers:
+            worker.process.wait()
+        self._done.set()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        return self._done.wait(timeout)
+
+    @property
+    def done(self) -> bool:
+        return self._done.is_set()
+
+    def _terminate(self, wait_s: float) -> None:
+        for worker in self.workers:
+            if worker.process.poll() is None:
+                worker.process.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + wait_s
+        for worker in self.workers:
+            try:
+                worker.process.wait(max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                worker.process.kill()
+                worker.process.wait(5.0)
+
+    def stop(self, *, drain_s: float = 2.0) -> int:
+        """Stop the workers (each drains and prints its summary) and the notifier; the worst exit code."""
+        self._terminate(wait_s=60.0)
+        self.notifier.stop(drain_s=drain_s)
+        self._client.close()
+        self.storage.close()
+        return max((w.process.returncode or 0 for w in self.workers), default=0)
+
+    # -- forwarding -------------------------------------------------------------------------
+
+    def _forward(self, method: str, structure_id: str, path: str, **kwargs: Any) -> httpx.Response:
+        worker = self.structure(structure_id)
+        headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
+        try:
+            r = self._client.request(method, f"{worker.url}/api/structures/{structure_id}/{path}", headers=headers, **kwargs)
+        except httpx.HTTPError as exc:
+            raise StructureUnavailable(f"structure {structure_id!r}: its worker process does not answer ({exc})") from None
+        if r.status_code == 404 and path != "spectra/latest":
+            raise KeyError(r.json().get("detail", f"no structure {structure_id!r}"))
+        if r.status_code == 409:
+            raise StructureUnavailable(r.json().get("detail"))
+        return r
+
+    def structure(self, structure_id: str) -> _Worker:
+        worker = self.owner.get(structure_id)
+        if worker is None:
+            if structure_id in self.order:
+                raise StructureUnavailable(f"structure {structure_id!r}: its worker process "
+                                           f"{'is starting' if self._starting else 'did not start'}")
+            known = ", ".join(sorted(self.order)[:20])
+            raise KeyError(f"no structure {structure_id!r} (this service monitors: {known})")
+        if worker.process.poll() is not None:
+            raise StructureUnavailable(f"structure {structure_id!r}: its worker process exited with code "
+                                       f"{worker.process.returncode}")
+        return worker
+
+    # -- what the API needs -----------------------------------------------------------------
+
+    def check_token(self, token: str | None) -> None:
+        MonitoringService.check_token(self, token)  # type: ignore[arg-type]
+
+    def health(self) -> HealthDocument:
+        reasons: list[str] = []
+        for worker in self.workers:
+            try:
+                doc = self._client.get(f"{worker.url}/healthz",
+                                       headers={"Authorization": f"Bearer {self.token}"} if self.token else {}).json()
+                reasons.extend(doc.get("reasons", []))
+            except (httpx.HTTPError, ValueError) as exc:
+                reasons.append(f"worker process {worker.index} ({', '.join(worker.ids[:3])}, ...) does not answer: {exc}")
+        return HealthDocument(status="degraded" if reasons else "ok", uptime_s=round(time.time() - self.started_at, 1),
+                              reasons=reasons)
+
+    def status(self, structure_id: str | None = None) -> StatusDocument:
+        if structure_id is None:
+            raise NotSingleStructure("this service monitors a fleet ([[structures]]): use /api/structures and "
+                                     "/api/structures/{id}/...")
+        r = self._forward("GET", structure_id, "status")
+        r.raise_for_status()
+        return StatusDocument.model_validate(r.json())
+
+    def structures_document(self) -> StructuresDocument:
+        found: dict[str, StructureSummaryDocument] = {}
+        for worker in self.workers:
+            try:
+                doc = self._client.get(f"{worker.url}/api/structures",
+                                       headers={"Authorization": f"Bearer {self.token}"} if self.token else {}).json()
+                for s in doc["structures"]:
+                    found[s["id"]] = StructureSummaryDocument.model_validate(s)
+            except (httpx.HTTPError, ValueError, KeyError) as exc:
+                code = worker.process.poll()
+                why = f"its worker process exited with code {code}" if code is not None else f"its worker does not answer: {exc}"
+                for sid in worker.ids:
+                    found[sid] = StructureSummaryDocument(id=sid, kind=self._kind(sid), state="failed", error=why)
+        for sid in self.order:
+            if sid not in found:
+                found[sid] = (StructureSummaryDocument(id=sid, kind=self._kind(sid), state="starting") if self._starting else
+                              StructureSummaryDocument(id=sid, kind=self._kind(sid), state="failed",
+                                                       error="its worker process did not start"))
+        return StructuresDocument(structures=[found[sid] for sid in self.order])
+
+    def _kind(self, structure_id: str) -> Any:
+        return next(s.source for s in self.settings.structures if s.id == structure_id).partition(":")[0]
+
+    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+               limit: int = 100_000) -> list[TrendRow]:
+        return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit)
+
+    def structure_trends(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
+                         limit: int = 100_000) -> list[TrendRow]:
+        self._known(structure_id)
+        return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit)
+
+    def alarms(self, state: str | None = None) -> list[AlarmDocument]:
+        return self.storage.alarms(state=state)
+
+    def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
+        self._known(structure_id)
+        return self.storage.alarms(state=state, source=structure_id)
+
+    def _known(self, structure_id: str) -> None:
+        if structure_id not in self.order:
+            self.structure(structure_id)
+
+    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
+        self.check_token(token)
+        alarm = self.storage.acknowledge(alarm_id, by, retry_s=min(self.settings.storage_retry_s, 3.0))
+        if alarm is None:
+            raise KeyError(f"alarm {alarm_id} does not exist")
+        return alarm
+
+    def request_baseline(self, structure_id: str | None = None) -> BaselineRequestDocument:
+        if structure_id is None:
+            self.status(None)
+        r = self._forward("POST", structure_id, "baseline")  # type: ignore[arg-type]
+        r.raise_for_status()
+        return BaselineRequestDocument.model_validate(r.json())
+
+    def spectra(self, structure_id: str | None = None) -> SpectrumDocument | None:
+        if structure_id is None:
+            self.status(None)
+        r = self._forward("GET", structure_id, "spectra/latest")  # type: ignore[arg-type]
+        if r.status_code == 404:
+            return None
+        r.raise_for_status()
+        return SpectrumDocument.model_validate(r.json())
+
+    def ingest(self, document: Any, structure_id: str | None = None) -> IngestResultDocument | None:
+        if structure_id is None:
+            self.status(None)
+        r = self._forward("POST", structure_id, "ingest", json=document)  # type: ignore[arg-type]
+        if r.status_code == 503:
+            return None
+        if r.status_code == 400:
+            raise IngestError(r.json().get("detail", "bad batch"))
+        r.raise_for_status()
+        return IngestResultDocument.model_validate(r.json())
