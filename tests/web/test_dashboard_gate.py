@@ -97,6 +97,8 @@ def test_a_browser_opens_the_gated_dashboard_with_the_token(tmp_path):
                     assert page.goto(f"http://127.0.0.1:{gate.port}/").status == 401
                 except PlaywrightError as exc:
                     assert "ERR_INVALID_AUTH_CREDENTIALS" in str(exc)
+                page.close()  # the refused navigation left an error page behind
+                page = context.new_page()
                 page.goto(f"http://127.0.0.1:{gate.port}/?token={TOKEN}")
                 page.wait_for_selector("canvas", timeout=30_000)
                 page.get_by_text("gate probe: live").first.wait_for(timeout=30_000)
