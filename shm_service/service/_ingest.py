@@ -313,23 +313,6 @@ def _first_stamps(messages: list, sensors: dict) -> dict[str, int]:
 _MESSAGE_KEYS: Final = frozenset({"topic", "log_time_ns", "publish_time_ns", "payload"})
 
 
-_REASONS = {"implausible_time": "outside the plausible window around it (source.time_window_s), or beyond the wall "
-                                "clock plus source.future_tolerance_s",
-            "ahead_of_source": "ahead of every other sensor of the source by more than source.max_ahead_s"}
-
-
-def _first_stamps(messages: list, sensors: dict) -> dict[str, int]:
-    """The first stamp of each topic in a request (for the whole-source jump test)."""
-    firsts: dict[str, int] = {}
-    for m in messages:
-        if isinstance(m, dict):
-            topic, t = m.get("topic"), m.get("log_time_ns")
-            if isinstance(topic, str) and topic in sensors and topic not in firsts and isinstance(t, int) \
-                    and not isinstance(t, bool) and 0 <= t <= _MAX_NS:
-                firsts[topic] = t
-    return firsts
-
-
 def _payload_columns(fields, payloads: list[dict]) -> np.ndarray | None:
     """Rows (n, width) of payloads that each hold exactly ``fields`` (scalars and lists of
     their size, numbers only, finite), or None if any does not."""

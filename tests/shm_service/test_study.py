@@ -111,7 +111,9 @@ def test_design_picks_fewest_gauges_then_fewest_boards(study):
     assert len(chosen) == len(result.results)
     keys = [(r.config.gauges, r.boards) for r in chosen]
     assert keys == sorted(keys) and keys[0][0] == 0
-    tight = DesignTargets(phi_deg=bm.rmse_truth["phi_deg"] * 1.05, e_m=bm.rmse_truth["e_m"] * 1.05)
+    # a target 5 % above the benchmark's own upper bound (mean + std over the seeds)
+    upper = {k: bm.rmse_truth[k] + bm.rmse_truth_std[k] for k in ("phi_deg", "e_m")}
+    tight = DesignTargets(phi_deg=upper["phi_deg"] * 1.05, e_m=upper["e_m"] * 1.05)
     chosen = cheapest(result.results, tight)
     assert bm in chosen and all(tight.met_by(r) for r in chosen)
     assert cheapest(result.results, DesignTargets(phi_deg=1e-6)) == []
