@@ -136,6 +136,11 @@ class Notifier:
     def failed_attempts(self) -> int:
         return self.outcomes["retry"] + self.outcomes["permanent"] + self.outcomes["given_up"]
 
+    def snapshot(self) -> tuple[Counter, Any]:
+        """(outcomes of this run, the notifier sink's status) read at one instant."""
+        with self._lock:
+            return Counter(self.outcomes), self.guard.status()
+
     # -- lifecycle ------------------------------------------------------------------------------
 
     def start(self) -> None:
@@ -212,17 +217,17 @@ class Notifier:
             delay = min(max(delay, result.retry_after_s), s.retry_max_s)
         self.storage.record_attempt(row["id"], result.outcome == "sent", result.detail, next_attempt_at=time.time() + delay,
                                     give_up=give_up, permanent=result.outcome == "permanent")
-        with self._lock:
+        text = None if result.outcome == "sent" else f"notification {row['id']} to {row['target']} (attempt {attempt}): {result.detail}"
+        with self._lock:  # the outcome and the sink error together: a status reads both at once (snapshot)
             self.outcomes[kind] += 1
             self.by_target[target[1]][kind] += 1
-        if result.outcome == "sent":
+            if text is not None:
+                self.last_error = text
+                self.guard.record(str(row["channel"]), text)
+        if text is None:
             return 1
-        text = f"notification {row['id']} to {row['target']} (attempt {attempt}): {result.detail}"
-        with self._lock:
-            self.last_error = text
         if give_up:
             log.error("%s: %s", "refused for good" if kind == "permanent" else "given up", text)
-        self.guard.record(str(row["channel"]), text)
         return 0
 
     def _send(self, row: dict[str, Any]) -> DeliveryResult:

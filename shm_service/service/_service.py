@@ -658,6 +658,7 @@ class MonitoringService:
         for a in self.storage.alarms(state="active"):
             if not self.fleet or a.source == structure.id:
                 counts[a.level] += 1
+        outcomes, notifier_sink = self.notifier.snapshot()
         return StatusDocument(
             service=ServiceStatusDocument(
                 version=VERSION, started_at=self.started_at, uptime_s=round(time.time() - self.started_at, 1),
@@ -670,16 +671,17 @@ class MonitoringService:
             sensors=states,
             baseline=BaselineStatusDocument(state=p.baseline, modes=self._baseline_modes(structure)),
             alarms=AlarmCountsDocument(active=counts),
-            notifications=NotificationStatusDocument(**self.storage.outbox_counts(), sent_this_run=self.notifier.sent,
-                                                     failed_attempts_this_run=self.notifier.failed_attempts,
-                                                     outcomes_this_run=dict(self.notifier.outcomes),
+            notifications=NotificationStatusDocument(**self.storage.outbox_counts(), sent_this_run=outcomes["sent"],
+                                                     failed_attempts_this_run=outcomes["retry"] + outcomes["permanent"]
+                                                     + outcomes["given_up"],
+                                                     outcomes_this_run=dict(outcomes),
                                                      last_error=self.notifier.last_error),
             storage=StorageStatusDocument(db=str(self.settings.db), schema_version=self.storage.schema_version,
                                           trend_rows=self.storage.count("trends"),
                                           archive=None if pipeline.archive is None else pipeline.archive.status(),
                                           write_retries=self.storage.retries, write_failures=self.storage.failures,
                                           windows_waiting=pipeline.pending_commits, last_error=self.storage.last_error),
-            sinks={"dashboard": self.dashboard_guard.status(), "notifier": self.notifier.guard.status(),
+            sinks={"dashboard": self.dashboard_guard.status(), "notifier": notifier_sink,
                    "housekeeping": self.housekeeping_guard.status()},
             thresholds=structure.thresholds,
             model=structure.model_document,
