@@ -338,6 +338,17 @@ _AUTH_RESPONSES: dict[int | str, dict[str, Any]] = {
 _INVALID = {422: _error("a parameter is invalid")}
 
 
+#: The documented body of both ingest routes (validated by hand: see ``_ingest``).
+_INGEST_BODY: dict[str, Any] = {"requestBody": {"required": True, "content": {"application/json": {"schema": {
+    "type": "object", "required": ["messages"], "additionalProperties": False,
+    "properties": {"messages": {"type": "array", "items": {
+        "type": "object", "required": ["topic", "log_time_ns", "payload"],
+        "properties": {"topic": {"type": "string", "examples": ["/imu/D"]},
+                       "log_time_ns": {"type": "integer", "minimum": 0},
+                       "publish_time_ns": {"type": "integer", "minimum": 0},
+                       "payload": {"type": "object"}}}}}}}}}}
+
+
 def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: int = 64 * 1024,
                max_ingest_bytes: int = 8 * 1024 * 1024, host: str = "127.0.0.1", allowed_hosts: Iterable[str] = (),
                check_host: bool = True, auth_failures_per_minute: int = 10) -> FastAPI:
@@ -453,14 +464,7 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
         response_model=IngestResultDocument,
         responses={**_AUTH_RESPONSES, 400: _error("body is not a valid batch"), 409: _error("source is not ingest"),
                    413: _error("body too large"), 503: _error("pipeline full, retry later")},
-        openapi_extra={"requestBody": {"required": True, "content": {"application/json": {"schema": {
-            "type": "object", "required": ["messages"], "additionalProperties": False,
-            "properties": {"messages": {"type": "array", "items": {
-                "type": "object", "required": ["topic", "log_time_ns", "payload"],
-                "properties": {"topic": {"type": "string", "examples": ["/imu/D"]},
-                               "log_time_ns": {"type": "integer", "minimum": 0},
-                               "publish_time_ns": {"type": "integer", "minimum": 0},
-                               "payload": {"type": "object"}}}}}}}}}},
+        openapi_extra=_INGEST_BODY,
     )
     async def ingest(request: Request) -> IngestResultDocument | JSONResponse:
         authorize(request)
@@ -583,14 +587,7 @@ def _fleet_routes(app: FastAPI, service: Any, authorize: Any) -> None:
         responses={**_AUTH_RESPONSES, **_UNKNOWN, 400: _error("body is not a valid batch"),
                    409: _error("the structure's source is not ingest, or it failed to start"),
                    413: _error("body too large"), 503: _error("pipeline full, retry later")},
-        openapi_extra={"requestBody": {"required": True, "content": {"application/json": {"schema": {
-            "type": "object", "required": ["messages"], "additionalProperties": False,
-            "properties": {"messages": {"type": "array", "items": {
-                "type": "object", "required": ["topic", "log_time_ns", "payload"],
-                "properties": {"topic": {"type": "string", "examples": ["/imu/D"]},
-                               "log_time_ns": {"type": "integer", "minimum": 0},
-                               "publish_time_ns": {"type": "integer", "minimum": 0},
-                               "payload": {"type": "object"}}}}}}}}}},
+        openapi_extra=_INGEST_BODY,
     )
     async def structure_ingest(request: Request, structure_id: str = _STRUCTURE_ID) -> IngestResultDocument | JSONResponse:
         authorize(request)

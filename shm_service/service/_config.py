@@ -90,7 +90,7 @@ class ServerSettings(_Closed):
 
     @property
     def loopback(self) -> bool:
-        return ipaddress.ip_address(self.host).is_loopback
+        return is_loopback(self.host)
 
 
 def _is_ip(value: str) -> bool:
@@ -101,6 +101,16 @@ def _is_ip(value: str) -> bool:
     return True
 
 
+def is_loopback(host: str) -> bool:
+    """``localhost`` or a loopback address (anything else may be reached from other machines)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 class DashboardSettings(_Closed):
     """The live 3-D dashboard (package ``web``), in the same process."""
 
@@ -108,6 +118,10 @@ class DashboardSettings(_Closed):
     host: str = Field("127.0.0.1", description="address of the dashboard")
     port: int = Field(8080, ge=0, le=65535, description="dashboard port (0: a free port)")
     estimate_hz: float = Field(15.0, ge=1, le=100, description="rate of estimate pushes, Hz (decimated)")
+
+    @property
+    def loopback(self) -> bool:
+        return is_loopback(self.host)
 
 
 class SimSettings(_Closed):

@@ -425,7 +425,7 @@ class MonitoringService:
         if not settings.server.loopback and self.token is None:
             raise ServiceError(f"server.host {settings.server.host} is not loopback: a token is required "
                                "(server.token_file or SHM_TOKEN)")
-        if settings.dashboard.enabled and not _loopback(settings.dashboard.host) and self.token is None:
+        if settings.dashboard.enabled and not settings.dashboard.loopback and self.token is None:
             raise ServiceError(f"dashboard.host {settings.dashboard.host} is not loopback: a token is required "
                                "(server.token_file or SHM_TOKEN), which the dashboard then asks for; or bind it to "
                                "127.0.0.1, or --no-dashboard")
@@ -767,13 +767,3 @@ def _check(settings: ServiceSettings) -> None:
     if settings.source.kind == "replay" and not Path(settings.source.path or "").is_file():
         raise SettingsError(f"replay: {settings.source.path} does not exist")
 
-
-def _loopback(host: str) -> bool:
-    import ipaddress
-
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
