@@ -411,7 +411,34 @@ class _FailedStructure:
         return StructureSummaryDocument(id=self.id, kind=self.kind, state="failed", error=self.error)
 
 
-class MonitoringService:
+class _StoredRows:
+    """The stored trend rows and alarms, of all structures or of one: what a service and the
+    front of its worker processes answer alike from the one database. ``_known`` raises
+    KeyError naming an id the service does not have."""
+
+    storage: Storage
+
+    def _known(self, structure_id: str) -> None:
+        raise NotImplementedError
+
+    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+               limit: int = 100_000) -> list[TrendRow]:
+        return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit)
+
+    def structure_trends(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
+                         limit: int = 100_000) -> list[TrendRow]:
+        self._known(structure_id)
+        return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit)
+
+    def alarms(self, state: str | None = None) -> list[AlarmDocument]:
+        return self.storage.alarms(state=state)
+
+    def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
+        self._known(structure_id)
+        return self.storage.alarms(state=state, source=structure_id)
+
+
+class MonitoringService(_StoredRows):
     """One running ``shm serve``: one structure (``[source]``), or a fleet (``[[structures]]``)
     sharing one database, notifier, retention and API. ``environ`` is the environment the token
     is read from (default ``os.environ``; tests pass a dict)."""
@@ -697,22 +724,6 @@ class MonitoringService:
             return None
         return [BaselineModeDocument(mode=m.mode, unit=m.unit + 1, f_ref_hz=m.f_ref_hz, temperature_ref_c=m.temperature_ref_c,
                                      slope_per_k=m.slope_per_k, sigma_rel=m.sigma_rel) for m in bl.modes]
-
-    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
-               limit: int = 100_000) -> list[TrendRow]:
-        return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit)
-
-    def structure_trends(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
-                         limit: int = 100_000) -> list[TrendRow]:
-        self._known(structure_id)
-        return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit)
-
-    def alarms(self, state: str | None = None) -> list[AlarmDocument]:
-        return self.storage.alarms(state=state)
-
-    def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
-        self._known(structure_id)
-        return self.storage.alarms(state=state, source=structure_id)
 
     def _known(self, structure_id: str) -> None:
         """KeyError naming ``structure_id`` unless the service has such a structure (a failed

@@ -30,13 +30,12 @@ from contract import (
     StatusDocument,
     StructuresDocument,
     StructureSummaryDocument,
-    TrendRow,
 )
 
 from ._config import ServiceSettings, render_toml, resolve_token
 from ._ingest import IngestError
 from ._notify import Notifier, notify_targets
-from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable
+from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable, _StoredRows
 from ._storage import Storage
 
 __all__ = ["WorkerFleet", "part_of"]
@@ -60,7 +59,7 @@ class _Worker:
         self.summary: str | None = None  # its last stdout line (the --json summary)
 
 
-class WorkerFleet:
+class WorkerFleet(_StoredRows):
     """The front of a fleet hosted by worker processes (implements what the API needs)."""
 
     def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None, json_summary: bool = False) -> None:
@@ -247,22 +246,6 @@ class WorkerFleet:
 
     def _kind(self, structure_id: str) -> Any:
         return next(s.source for s in self.settings.structures if s.id == structure_id).partition(":")[0]
-
-    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
-               limit: int = 100_000) -> list[TrendRow]:
-        return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit)
-
-    def structure_trends(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
-                         limit: int = 100_000) -> list[TrendRow]:
-        self._known(structure_id)
-        return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit)
-
-    def alarms(self, state: str | None = None) -> list[AlarmDocument]:
-        return self.storage.alarms(state=state)
-
-    def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
-        self._known(structure_id)
-        return self.storage.alarms(state=state, source=structure_id)
 
     def _known(self, structure_id: str) -> None:
         if structure_id not in self.order:
