@@ -71,7 +71,8 @@ class FilterConfig(BaseModel):
         description="model error of b̈ (accelerometers) beyond their noise (which the input noise already "
         "carries), 1/s³; None: 1e-6 with strain gauges, 1e-3 without (nothing then corrects b̈ at 200 Hz, and "
         "with 1e-4 the NEES of φ shows the filter overconfident by ~2). With gauges 1e-4 was 20 times the "
-        "accelerometers' own b̈ noise and let b follow the gauges, which misread the combimode",
+        "accelerometers' own b̈ noise and let b follow the gauges, which misread the combimode (then the pair's "
+        "singular vector)",
     )
     q_beta: float = Field(1e-11, ge=0, description="random walk of the gyro bias at D, rad²/s³")
     q_beta_peripheral: float = Field(
@@ -167,13 +168,15 @@ class ImmsModel:
         the selected gauges: (G, 2), signed; (G, 0) without a combimode.
 
         The combimode stands for s̃_1 and s̃_2, alike in deflection (MAC ≈ 0.99) but with
-        curvatures 20–40 % apart at the gauges. For each of them, b is what the peripheral IMUs'
-        least squares reads (slopes for gyros, deflections for accelerometers: they read the tip of
-        either mode to 0.05–0.15 %), and the column is the strain that b predicts at each gauge
-        minus the mode's own strain there, divided by b_1: the conflict between the inputs and the
-        gauges that no b resolves (read by the four gauges alone, s̃_2's tip comes out 2 % large).
-        It is one pattern over the gauges and grows with the amplitude of modes 1 and 2, so the
-        filter carries it as a model error Σ_k ψ_k column_k · b_1 shared by the gauges of one time.
+        curvatures 20–40 % apart at the gauges. Its shape is s̃_2 (``unit_deformations``), so
+        mode 2's column is zero; for s̃_1, b is what the peripheral IMUs' least squares reads
+        (slopes for gyros, deflections for accelerometers: they read its tip to 0.1–0.25 %), and
+        the column is the strain that b predicts at each gauge minus the mode's own strain there,
+        divided by b_1: the conflict between the inputs and the gauges that no b resolves (read by
+        the four gauges alone, s̃_1's tip comes out 4 % small). It is one pattern over the gauges
+        and grows with the amplitude of mode 1, which b_1 bounds, so the filter carries it as a
+        model error Σ_k ψ_k column_k · b_1 shared by the gauges of one time (conservative: most of
+        b_1 is mode 2).
         """
         pair = self.combimode_pair
         n_g = self.gauge_eta.size
@@ -600,8 +603,10 @@ class ImmsFilter:
         nu = len(model.selection.imus)
         g = model.gravity_eta
         self.state = FilterState(
-            x=np.zeros(n), P=np.eye(n) * config.initial_std**2, clock=np.array([float(t0), float(t0)]),
+            x=np.zeros(n), P=np.eye(n) * config.initial_std**2, clock=np.array([float(t0), float(t0), np.nan]),
             held_fD=np.array([-g, 0.0]), held_wD=np.zeros(1), held_fj=np.tile([-g, 0.0], (nu, 1)), held_wj=np.zeros(nu),
+            prev_fD=np.array([-g, 0.0]), prev_wD=np.zeros(1), prev_fj=np.tile([-g, 0.0], (nu, 1)), prev_wj=np.zeros(nu),
+            held_real=np.zeros(1, dtype=np.bool_),
             last_seen=np.full(nu, float(t0)), active=np.ones(nu, dtype=np.bool_), pending=np.zeros(1, dtype=np.bool_),
         )
         self._tail = Events.empty()

@@ -19,6 +19,7 @@ from ._imms import (
     EVENT_IMU_PERIPHERAL,
     EVENT_STRAIN,
     EVENT_TOF,
+    input_weights,
     least_squares_map,
     propagate,
     tof_measurement,
@@ -52,6 +53,9 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
     held_fj = np.tile([-model.gravity_eta, 0.0], (nu, 1))
     held_wj = np.zeros(nu)
     held_t = t0
+    prev_fD, prev_wD, prev_fj, prev_wj = held_fD, held_wD, held_fj, held_wj
+    prev_t = np.nan
+    held_real = False
     t_now = t0
     pending = False
     out_t, out_x, out_P = [], [], []
@@ -92,9 +96,9 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
             while remaining > 1e-12:
                 dt = min(remaining, params.max_step)
                 if have_next:
-                    w = min(max((start + 0.5 * dt - held_t) / (t_next - held_t), 0.0), 1.0)
-                    u = (held_fD + w * (next_fD - held_fD), held_wD + w * (next_wD - held_wD),
-                         held_fj + w * (next_fj - held_fj), held_wj + w * (next_wj - held_wj))
+                    wp, wh, wn = input_weights(start + 0.5 * dt, prev_t, held_t, t_next)
+                    u = (wp * prev_fD + wh * held_fD + wn * next_fD, wp * prev_wD + wh * held_wD + wn * next_wD,
+                         wp * prev_fj + wh * held_fj + wn * next_fj, wp * prev_wj + wh * held_wj + wn * next_wj)
                 else:
                     u = (held_fD, held_wD, held_fj, held_wj)
                 x_new, F, Q = propagate(arrays, ekf.x, dt, u[0], u[1], u[2], u[3], active, lsq)
@@ -106,10 +110,13 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
             t_now = t
         k, j, v = events.kind[e], events.index[e], events.values[e]
         if k == EVENT_IMU_D:
+            prev_fD, prev_wD, prev_t = held_fD, held_wD, (held_t if held_real else np.nan)
             held_fD, held_wD = v[:2] - bias_D[:2], v[2] - bias_D[2]
-            held_t = t
+            held_t, held_real = t, True
             pending = True
         elif k == EVENT_IMU_PERIPHERAL:
+            prev_fj, prev_wj = prev_fj.copy(), prev_wj.copy()
+            prev_fj[j], prev_wj[j] = held_fj[j], held_wj[j]
             held_fj = held_fj.copy()
             held_wj = held_wj.copy()
             held_fj[j] = v[:2] - bias_j[j, :2]
