@@ -173,7 +173,7 @@ class ImmsModel:
         (slopes for gyros, deflections for accelerometers: they read its tip to 0.1–0.25 %), and
         the column is the strain that b predicts at each gauge minus the mode's own strain there,
         divided by b_1: the conflict between the inputs and the gauges that no b resolves (read by
-        the four gauges alone, s̃_1's tip comes out 4 % small). It is one pattern over the gauges
+        the four gauges alone, s̃_1's tip comes out 3.6 % small). It is one pattern over the gauges
         and grows with the amplitude of mode 1, which b_1 bounds, so the filter carries it as a
         model error Σ_k ψ_k column_k · b_1 shared by the gauges of one time (conservative: most of
         b_1 is mode 2).
