@@ -33,6 +33,8 @@ from contract import (
     ErrorDocument,
     HealthDocument,
     IngestResultDocument,
+    LiveEstimatesDocument,
+    RigDescription,
     SpectrumDocument,
     StatusDocument,
     StructuresDocument,
@@ -574,6 +576,20 @@ def _fleet_routes(app: FastAPI, service: Any, authorize: Any) -> None:
         if spec is None:
             raise HTTPException(404, f"structure {structure_id!r} has no analysis window yet")
         return spec
+
+    @app.get("/api/structures/{structure_id}/rig", summary="the rig the structure is monitored with (rig.json)",
+             response_model=RigDescription, responses={**_AUTH_RESPONSES, **_UNKNOWN})
+    def structure_rig(structure_id: str = _STRUCTURE_ID) -> RigDescription:
+        return call(service.structure_rig, structure_id)
+
+    @app.get("/api/structures/{structure_id}/live",
+             summary="the structure's newest state estimates (about 10 per second of data) for a live view",
+             description="A read makes the structure keep its newest estimates for `watch_s` more seconds (nothing is "
+                         "kept for a structure nobody reads); poll with `after` = the last `seq` seen.",
+             response_model=LiveEstimatesDocument, responses={**_AUTH_RESPONSES, **_INVALID, **_UNKNOWN})
+    def structure_live(structure_id: str = _STRUCTURE_ID,
+                       after: int = Query(0, ge=0, le=2**62, description="only estimates after this seq")) -> LiveEstimatesDocument:
+        return call(service.live, structure_id, after)
 
     @app.post("/api/structures/{structure_id}/baseline", summary="start learning a new baseline of the structure (token required)",
               status_code=202, response_model=BaselineRequestDocument, responses={**_AUTH_RESPONSES, **_UNKNOWN})
