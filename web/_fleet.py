@@ -4,8 +4,9 @@ One poller thread reads the overview (``structures_document``: every structure's
 windows and active alarms) every few seconds and, only for the structures some browser shows
 (or has just chosen), their model once (``structure_model``: rig and unit deformations), their
 estimates a few times a second (``live``), their status, alarms and, after a new window, their new
-trend rows and spectra. A structure nobody shows any more is dropped after ``DROP_AFTER_S``;
-the cost of a fleet of hundreds is the overview and the few structures on screen.
+trend rows and spectra. A structure nobody shows any more is read no more at once and its feed
+forgotten after ``DROP_AFTER_S``: the cost of a fleet of hundreds is the overview and the few
+structures on screen.
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ STATUS_S = 2.0
 ALARMS_S = 5.0
 SPECTRA_S = 15.0  # at the latest (sooner after a new window)
 RETRY_S = 5.0  # a structure whose model could not be read is tried again after this
-DROP_AFTER_S = 30.0
+SHOWN_S = 1.0  # a structure no browser asked for within this is not read (the views ask every frame)
+DROP_AFTER_S = 30.0  # and its feed (its history) is forgotten after this
 OVERVIEW_ROWS = 60
 
 #: Sort order of the overview: what needs an operator first.
@@ -204,8 +206,8 @@ class FleetPoller:
                     if now - watch.seen_s > DROP_AFTER_S:
                         with self.lock:
                             self._watches.pop(sid, None)
-                        continue
-                    self._read_structure(sid, watch, now)
+                    elif now - watch.seen_s <= SHOWN_S:  # shown now: read; else only kept for a switch back
+                        self._read_structure(sid, watch, now)
             except Exception:
                 log.exception("fleet dashboard poll failed")
             self._stop.wait(TICK_S)
@@ -246,8 +248,12 @@ class FleetPoller:
                 messages.append((f"{s.id}: {chart} alarm cleared", "-", "green", 10.0))
         if not messages:
             return
+        if len(messages) > 3:  # many at once (a fleet): one notification naming them
+            red = any(color == "red" for _, _, color, _ in messages)
+            messages = [(f"{len(messages)} changes in the fleet", "; ".join(title for title, *_ in messages[:8])
+                         + (" …" if len(messages) > 8 else ""), "red" if red else "yellow", None if red else 30.0)]
         for client in list(self.dash.server.get_clients().values()):
-            for title, body, color, close in messages[:10]:
+            for title, body, color, close in messages:
                 try:
                     client.add_notification(title, body, color=color, auto_close_seconds=close)
                 except Exception:

@@ -46,6 +46,7 @@ from ._archive import Archive
 from ._config import ServiceSettings, SettingsError, resolve_token
 from ._dashboard_port import StructureModel, start_dashboard
 from ._live import LiveRing
+from ._metrics import fleet_metrics
 from ._notify import Notifier, notify_targets
 from ._pipeline import Pipeline
 from ._plausibility import SourceClock
@@ -633,6 +634,24 @@ class MonitoringService(_StoredRows):
     def status(self, structure_id: str | None = None) -> StatusDocument:
         """The status of the single structure, or of ``structure_id`` of a fleet."""
         structure = self.primary if structure_id is None else self.structure(structure_id)
+        return self._status_of(structure, self._service_state())
+
+    def _service_state(self) -> dict[str, Any]:
+        """What every structure's status shares: the database's counts and the notifier's (read once
+        for all structures of ``/metrics``)."""
+        return {"active": self.storage.alarms(state="active"), "outbox": self.storage.outbox_counts(),
+                "trend_rows": self.storage.count("trends"), "notifier": self.notifier.snapshot()}
+
+    def statuses(self) -> dict[str, StatusDocument]:
+        """The status of every running structure (the database read once)."""
+        shared = self._service_state()
+        return {s.id: self._status_of(s, shared) for s in self.running_structures()}
+
+    def fleet_metrics(self) -> str:
+        """``/metrics`` of a fleet: every structure's samples labelled ``structure``."""
+        return fleet_metrics(self.structures_document(), self.statuses())
+
+    def _status_of(self, structure: Structure, shared: dict[str, Any]) -> StatusDocument:
         pipeline = structure.pipeline
         p = pipeline.status(queue_depth=structure.queue.qsize(), queue_capacity=structure.queue.maxsize)
         src = structure.source.status()
@@ -648,10 +667,10 @@ class MonitoringService(_StoredRows):
         src["latency_s"] = p.pipeline_latency_s
         states = pipeline.sensor_states()
         counts = {"warning": 0, "alarm": 0}
-        for a in self.storage.alarms(state="active"):
+        for a in shared["active"]:
             if not self.fleet or a.source == structure.id:
                 counts[a.level] += 1
-        outcomes, notifier_sink = self.notifier.snapshot()
+        outcomes, notifier_sink = shared["notifier"]
         return StatusDocument(
             service=ServiceStatusDocument(
                 version=VERSION, started_at=self.started_at, uptime_s=round(time.time() - self.started_at, 1),
@@ -664,13 +683,13 @@ class MonitoringService(_StoredRows):
             sensors=states,
             baseline=BaselineStatusDocument(state=p.baseline, modes=self._baseline_modes(structure)),
             alarms=AlarmCountsDocument(active=counts),
-            notifications=NotificationStatusDocument(**self.storage.outbox_counts(), sent_this_run=outcomes["sent"],
+            notifications=NotificationStatusDocument(**shared["outbox"], sent_this_run=outcomes["sent"],
                                                      failed_attempts_this_run=outcomes["retry"] + outcomes["permanent"]
                                                      + outcomes["given_up"],
                                                      outcomes_this_run=dict(outcomes),
                                                      last_error=self.notifier.last_error),
             storage=StorageStatusDocument(db=str(self.settings.db), schema_version=self.storage.schema_version,
-                                          trend_rows=self.storage.count("trends"),
+                                          trend_rows=shared["trend_rows"],
                                           archive=None if pipeline.archive is None else pipeline.archive.status(),
                                           write_retries=self.storage.retries, write_failures=self.storage.failures,
                                           windows_waiting=pipeline.pending_commits, last_error=self.storage.last_error),

@@ -36,6 +36,7 @@ from contract import (
 
 from ._config import ServiceSettings, render_toml, resolve_token
 from ._dashboard_port import StructureModel, start_dashboard
+from ._metrics import fleet_metrics, merge_expositions
 from ._ingest import IngestError
 from ._notify import Notifier, notify_targets
 from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable, _ModelCache, _StoredRows
@@ -300,6 +301,27 @@ class WorkerFleet(_StoredRows):
             raise IngestError(r.json().get("detail", "bad batch"))
         r.raise_for_status()
         return IngestResultDocument.model_validate(r.json())
+
+    def fleet_metrics(self) -> str:
+        """``/metrics``: the workers' expositions merged (each structure's samples as its worker gives
+        them, the processes' counters summed); the notifications are the front's (it delivers them)."""
+        texts = []
+        headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
+        for worker in self.workers:
+            if worker.process.poll() is not None:
+                continue
+            try:
+                r = self._client.get(f"{worker.url}/metrics", headers=headers)
+                r.raise_for_status()
+                texts.append(r.text)
+            except httpx.HTTPError as exc:
+                log.warning("worker %d: /metrics failed: %s", worker.index, exc)
+        outcomes, _ = self.notifier.snapshot()
+        overrides = {"shm_notifications_total": [({"outcome": k}, float(outcomes.get(k, 0)))
+                                                 for k in ("sent", "retry", "permanent", "given_up")],
+                     "shm_uptime_seconds": [({}, round(time.time() - self.started_at, 1))]}
+        # the structures as the front lists them (a worker that died: its structures failed)
+        return merge_expositions(texts, overrides, front=fleet_metrics(self.structures_document(), {}))
 
     # -- the dashboard's port (FleetDashboardService) ---------------------------------------
 
