@@ -300,7 +300,8 @@ class FleetPoller:
 
     def _read_structure(self, sid: str, watch: _Watch, now: float) -> None:
         feed, store = watch.feed, watch.feed.store
-        paused = all(v.paused for v in self.dash.views() if v.feed is feed)
+        showing = [v for v in self.dash.views() if v.feed is feed]
+        paused = bool(showing) and all(v.paused for v in showing)  # every browser showing it paused: no live reads
         if not paused and self._due(watch, "live", LIVE_S, now):
             try:
                 doc = self._call("live", sid, watch.after)

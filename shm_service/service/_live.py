@@ -31,7 +31,7 @@ class LiveRing:
             raise ValueError(f"{hz=} must be > 0, {capacity=} >= 1 and {watch_s=} > 0")
         self.source_id = source_id
         self.state_names = list(state_names)
-        self.period_s = 1.0 / hz
+        self.hz = float(hz)
         self.watch_s = float(watch_s)
         self._items: deque[tuple[int, float, np.ndarray]] = deque(maxlen=capacity)
         self._seq = 0
@@ -50,7 +50,7 @@ class LiveRing:
         t = np.asarray(t_s, dtype=float)
         if t.size == 0:
             return
-        tick = np.floor(t / self.period_s)
+        tick = np.floor(t * self.hz + 1e-6)  # (a stamp on a tick is in it, whatever the rounding of t·hz)
         with self._lock:
             # the first estimate of each new tick of data time (ticks of 1/hz s)
             keep = np.flatnonzero(np.diff(np.concatenate([[self._last_tick], tick])) > 0)
