@@ -43,7 +43,7 @@ from contract import (
 )
 
 from ._docs import serve_docs_offline
-from ._metrics import _metrics, metrics_text
+from ._metrics import _metrics, metrics_text  # noqa: F401  (_metrics: one structure's exposition, for the tests)
 from ._ingest import IngestError, parse_body
 from ._starting import ServiceStarting
 from ._storage import StorageUnavailable

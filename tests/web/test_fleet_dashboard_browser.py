@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import re
-import signal
 import subprocess
 import sys
 import time
@@ -18,7 +17,9 @@ from pathlib import Path
 import httpx
 import pytest
 
-from test_dashboard_browser import CHROMIUM_ARGS, VIEWPORT, _image, _support_offset, _visible, _wait, chromium  # noqa: F401
+from test_dashboard_browser import (  # noqa: F401  (chromium: the fixture)
+    CHROMIUM_ARGS, VIEWPORT, _image, _support_offset, _visible, _wait, chromium, stop_process,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "fleet-dashboard-token"
@@ -93,13 +94,7 @@ def fleet(tmp_path_factory):
     try:
         yield _wait(urls, 120, "shm serve to print its API and dashboard addresses")
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(60)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(10)
+        stop_process(proc)
     text = log.read_text()
     assert "Traceback" not in text and " ERROR " not in text, text[-3000:]
 

@@ -19,6 +19,7 @@ from shm_service.service._server import ApiServer
 from shm_service.service._service import MonitoringService
 
 from svc_helpers import fast_overrides
+from test_fleet import _wait
 
 
 def test_the_live_ring_keeps_one_estimate_per_tick_only_while_watched():
@@ -90,16 +91,6 @@ def fleet_api(tmp_path_factory):
     finally:
         api.stop()
         service.stop(drain_s=0)
-
-
-def _wait(predicate, timeout, what):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.25)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
 @pytest.mark.timeout(120)
