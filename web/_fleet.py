@@ -1,7 +1,7 @@
 """A fleet's dashboard: what it reads from the service's port, and the overview it shows.
 
-One poller thread reads the overview (``structures_document``: every structure's state, lag,
-windows and active alarms) every few seconds and, only for the structures some browser shows
+One poller thread reads, while a browser is connected, the overview (``structures_document``:
+every structure's state, lag, windows and active alarms) every few seconds and, only for the structures some browser shows
 (or has just chosen), their model once (``structure_model``: rig and unit deformations), their
 estimates a few times a second (``live``), their status, alarms and, after a new window, their new
 trend rows and spectra. A structure nobody shows any more is read no more at once and its feed
@@ -196,6 +196,10 @@ class FleetPoller:
         while not self._stop.is_set():
             now = time.monotonic()
             try:
+                if not self._looked_at(now):  # nobody looks: read nothing (at once when a browser comes)
+                    self._last_overview = -math.inf
+                    self._stop.wait(TICK_S)
+                    continue
                 if now - self._last_overview >= OVERVIEW_S:
                     self._last_overview = now
                     self._read_overview()
@@ -211,6 +215,12 @@ class FleetPoller:
             except Exception:
                 log.exception("fleet dashboard poll failed")
             self._stop.wait(TICK_S)
+
+    def _looked_at(self, now: float) -> bool:
+        """A browser is connected, or a structure was asked for just now."""
+        with self.lock:
+            asked = any(now - t <= SHOWN_S for t in self._wanted.values())
+        return asked or self.dash.client_count > 0
 
     def _read_overview(self) -> None:
         try:

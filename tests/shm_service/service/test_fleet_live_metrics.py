@@ -147,9 +147,11 @@ def test_the_dashboard_of_a_fleet_in_one_process_reads_only_the_structure_shown(
         dash = service.dashboard
         assert dash is not None and dash.fleet and dash.primary is None
         poller = dash.poller
-        _wait(lambda: poller.ids() == ["a", "b"], 30, "the overview")
+        time.sleep(1.0)
+        assert poller.polls == {}  # no browser, nothing asked for: the dashboard reads nothing
         feed = _wait(lambda: (lambda f: f if f is not None and not isinstance(f, str) else None)(poller.feed("b")), 30,
-                     "the feed of b")
+                     "the feed of b")  # asked for as a browser that chose b does (every frame)
+        _wait(lambda: (poller.feed("b"), poller.ids() == ["a", "b"])[1], 30, "the overview")
         assert feed.id == "b" and tuple(feed.layout.names) == tuple(service.structure("b").model.state_layout.names)
 
         def drawn():
