@@ -196,7 +196,7 @@ class Structure:
         s = self.settings
         src = s.source
         kind = src.kind
-        truth = s.dashboard.enabled
+        truth = s.dashboard.enabled and not self.service.fleet  # the truth shape is drawn for one structure only
         rig_override = None
         if src.rig:
             try:
