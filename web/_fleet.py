@@ -86,7 +86,7 @@ def overview_html(doc: StructuresDocument | None, error: str | None, selected: s
     cells = []
     for s in rows[:OVERVIEW_ROWS]:
         sev = severity(s)
-        bg, fg = _BADGE.get(sev, ("#888", "white"))
+        bg, fg = _BADGE.get(s.state, ("#888", "white"))  # the state's badge; the row's colour: its severity
         alarms = ", ".join(f"{html.escape(c)}: {html.escape(v)}" for c, v in sorted(s.active_alarms.items())) or "–"
         name = html.escape(s.id)
         if s.id == selected:

@@ -11,6 +11,7 @@ import os
 import re
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -22,6 +23,8 @@ from test_dashboard_browser import (  # noqa: F401  (chromium: the fixture)
 )
 
 ROOT = Path(__file__).resolve().parents[2]
+# The README's picture of a fleet's dashboard: SHM_FLEET_SCREENSHOT=docs/fleet-dashboard.png (else a temporary file).
+SCREENSHOT = Path(os.environ.get("SHM_FLEET_SCREENSHOT", Path(tempfile.gettempdir()) / "shm-fleet-dashboard.png"))
 TOKEN = "fleet-dashboard-token"
 IDS = ("mast-01", "pendulum-02", "pendulum-03")
 
@@ -161,6 +164,8 @@ def test_the_fleets_dashboard_switches_structure_in_chromium(chromium, fleet, tm
             assert offset < -0.1, f"the pendulum should hang below its pin: support at {offset:+.2f}"
             time.sleep(1.0)
             assert (abs(shot_a - _scene(page)) > 30).any(), "the pendulum does not move"
+            SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+            SCREENSHOT.write_bytes(page.screenshot())
 
             # Only the structures shown were read live: the third kept nothing.
             with httpx.Client(base_url=api_url, timeout=30) as c:
