@@ -647,29 +647,29 @@ class ClientView:
             self.overview_html.content = overview_html(poller.overview, poller.overview_error, shown)
 
     def _render_scene(self, est: Any, mean: BeamState | None, *, texts: bool) -> None:
-        dash = self.dash
+        feed = self.feed
         state: BeamState = est.state
         if self.auto_scale.value:
             self._auto_overscale(state)
         es, rs = self.elastic_scale, self.rigid_scale
-        standing, up = self.feed.standing, self.up
-        line = centreline(state, self.feed.units, self._eta, elastic_scale=es, rigid_scale=rs)
-        self.beam.vertices = ribbon(line, self.feed.width, standing=standing)
+        standing, up = feed.standing, self.up
+        line = centreline(state, feed.units, self._eta, elastic_scale=es, rigid_scale=rs)
+        self.beam.vertices = ribbon(line, feed.width, standing=standing)
         ghost_on = bool(self.show_ghost.value)
         self.ghost.visible = ghost_on
         if ghost_on:
             if str(self.ghost_mode.value).startswith("running") and mean is not None:
-                ghost = centreline(mean, self.feed.units, self._eta, elastic_scale=es, rigid_scale=rs)
+                ghost = centreline(mean, feed.units, self._eta, elastic_scale=es, rigid_scale=rs)
             else:
-                ghost = centreline(BeamState(0.0, 0.0, 0.0, np.zeros(self.feed.gamma)), self.feed.units, self._eta)
-            self.ghost.vertices = ribbon(ghost, self.feed.width, standing=standing)
+                ghost = centreline(BeamState(0.0, 0.0, 0.0, np.zeros(feed.gamma)), feed.units, self._eta)
+            self.ghost.vertices = ribbon(ghost, feed.width, standing=standing)
         truth_on = est.truth_deflection is not None and bool(self.show_truth.value)
         self.truth.visible = truth_on
         if truth_on:
-            eta = np.concatenate([[0.0], self.feed.stations]) if self.feed.stations[0] > 0 else self.feed.stations
-            delta = np.concatenate([[0.0], est.truth_deflection]) if self.feed.stations[0] > 0 else est.truth_deflection
-            tline = centreline(state, self.feed.units, eta, elastic_scale=es, rigid_scale=rs, deflection=delta)
-            pts = to_world(tline, y=0.5 * self.feed.width + 0.01, standing=standing)
+            eta = np.concatenate([[0.0], feed.stations]) if feed.stations[0] > 0 else feed.stations
+            delta = np.concatenate([[0.0], est.truth_deflection]) if feed.stations[0] > 0 else est.truth_deflection
+            tline = centreline(state, feed.units, eta, elastic_scale=es, rigid_scale=rs, deflection=delta)
+            pts = to_world(tline, y=0.5 * feed.width + 0.01, standing=standing)
             self.truth.points = segments(pts)
         d_world = np.array([rs * state.d, 0.0, up * rs * state.h], dtype=np.float32)
         if self.bearing is not None:
@@ -679,7 +679,7 @@ class ClientView:
             self.tangent.points = np.array([[d_world, d_world + 1.0 * np.array([math.sin(phi), 0.0, up * math.cos(phi)])]],
                                            dtype=np.float32)
         if self.clamp:
-            for handle, (centre, _) in zip(self.clamp, clamp_boxes(state, self.feed.width, rigid_scale=rs, standing=standing)):
+            for handle, (centre, _) in zip(self.clamp, clamp_boxes(state, feed.width, rigid_scale=rs, standing=standing)):
                 handle.position = centre
             if texts:
                 self.clamp_label.position = (float(d_world[0]) - 0.12, 0.0, float(d_world[2]) - up * 0.05)
@@ -689,7 +689,7 @@ class ClientView:
             self.bearing_marker.colors = np.array([STATE_COLOURS.get(states.get(self.bearing_topic, "unknown"), STATE_COLOURS["unknown"])], dtype=np.uint8)
         for kind, items in self.sensor_groups.items():
             eta = np.array([e for _, e in items])
-            pos = to_world(centreline(state, self.feed.units, eta, elastic_scale=es, rigid_scale=rs), y=self.marker_offsets[kind],
+            pos = to_world(centreline(state, feed.units, eta, elastic_scale=es, rigid_scale=rs), y=self.marker_offsets[kind],
                            standing=standing)
             if kind == "strain":  # on the +ζ face
                 pos[:, 0] += 0.01
@@ -703,7 +703,7 @@ class ClientView:
             if rays_on:
                 items = self.sensor_groups["tof"]
                 eta = np.array([e for _, e in items])
-                rays = tof_rays(state, self.feed.units, eta, self.feed.reflector_distance, elastic_scale=es, rigid_scale=rs,
+                rays = tof_rays(state, feed.units, eta, feed.reflector_distance, elastic_scale=es, rigid_scale=rs,
                                 standing=standing)
                 rays[:, :, 1] = self.marker_offsets["tof"]
                 self.rays.points = rays
@@ -712,8 +712,8 @@ class ClientView:
                 self.rays.colors = np.repeat(cols[:, None, :], 2, axis=1)
         labels_on = bool(self.show_labels.value)
         if self.labels and texts:  # HTML labels are costly for the browser: at the text rate
-            pos = to_world(centreline(state, self.feed.units, self.label_eta, elastic_scale=es, rigid_scale=rs),
-                           y=0.5 * self.feed.width + 0.1, standing=standing)
+            pos = to_world(centreline(state, feed.units, self.label_eta, elastic_scale=es, rigid_scale=rs),
+                           y=0.5 * feed.width + 0.1, standing=standing)
             for handle, p in zip(self.labels, pos):
                 handle.visible = labels_on
                 if labels_on:
@@ -721,7 +721,7 @@ class ClientView:
         tip = line[-1]
         if texts:
             self.tip_label.position = (float(tip[1]), 0.0, float(up * (tip[0] + 0.08)))
-            delta_tip = float(self.feed.units.shape(np.array([self.feed.length]))[0] @ state.b)
+            delta_tip = float(feed.units.shape(np.array([feed.length]))[0] @ state.b)
             self.tip_label.text = f"tip Δ = {1e3 * delta_tip:+.1f} mm  (×{es:g})"
 
     def _auto_overscale(self, state: BeamState) -> None:
@@ -760,7 +760,7 @@ class ClientView:
         return times
 
     def _render_trends(self, snap: "Snapshot") -> None:
-        dash = self.dash
+        feed = self.feed
         windows = snap.windows
         if not windows:
             return
@@ -781,13 +781,13 @@ class ClientView:
             if not visible:
                 continue
             f = _arr([w.frequency_hz.get(mode) for w in shown])
-            bands = [self.feed.band(snap, w, mode) for w in shown]
+            bands = [feed.band(snap, w, mode) for w in shown]
             plot.data = (x, f, _arr([b[0] for b in bands]), _arr([b[1] for b in bands]), _arr([b[2] for b in bands]))
-        modes = self.feed.mode_map.modes
+        modes = feed.mode_map.modes
         damping = [_arr([None if w.damping_ratio.get(m) is None else 100 * w.damping_ratio[m] for w in shown]) for m in modes]
         self.damping_plot.data = (x, *damping)
         self.damping_plot.visible = any(np.isfinite(d).any() for d in damping)
-        th = self._drawn_thresholds = self.feed.thresholds(snap)
+        th = self._drawn_thresholds = feed.thresholds(snap)
         scores = [_arr([w.score_sigma.get(m) for w in shown]) for m in modes]
         self.score_plot.data = (x, *scores, *_threshold_lines(th.get("frequency"), x.size))
         self.score_plot.visible = any(np.isfinite(s).any() for s in scores)
@@ -815,7 +815,7 @@ class ClientView:
         profiles = [w.curvature_profile for w in shown if w.curvature_profile is not None]
         if profiles:
             stack = np.array(profiles)
-            self.curv_profile_plot.data = (self.feed.stations, profiles[-1], np.nanmax(stack, axis=0))
+            self.curv_profile_plot.data = (feed.stations, profiles[-1], np.nanmax(stack, axis=0))
             self.curv_profile_plot.visible = True
         self.trend_info.content = self._trend_info_html(windows[-1], len(windows))
 
