@@ -48,6 +48,7 @@ __all__ = [
     "IngestErrorDocument",
     "IngestResultDocument",
     "LastEstimateDocument",
+    "LiveEstimatesDocument",
     "Level",
     "LocationDocument",
     "ModeDocument",
@@ -651,6 +652,21 @@ class StructuresDocument(_Document):
     """``GET /api/structures``."""
 
     structures: list[StructureSummaryDocument]
+
+
+class LiveEstimatesDocument(_Document):
+    """``GET /api/structures/{id}/live``: a structure's newest state estimates, decimated in data
+    time, for a live view (the dashboard of a fleet polls it for the structure it shows). A
+    structure keeps them only while someone reads them: a read starts (or extends) a watch of
+    ``watch_s``; before the first read, and once nobody read for ``watch_s``, nothing is kept."""
+
+    source: str
+    seq: Count = Field(description="number of the newest estimate kept (pass it as after= to get only newer ones)")
+    state_names: list[str] = Field(description="the names of x's entries: the estimator's StateLayout")
+    t_s: list[Finite] = Field(default_factory=list, description="data time of each estimate, UNIX s, increasing")
+    x: list[list[Finite]] = Field(default_factory=list, description="the state vector of each estimate")
+    sensors: dict[str, SensorState] = Field(default_factory=dict, description="topic -> state, now")
+    watch_s: Finite = Field(description="how long the structure keeps estimates after this read, s")
 
 
 class ErrorDocument(_Document):

@@ -3,8 +3,10 @@
 The service constructs one :class:`Dashboard` and feeds it (``push_estimate``, ``push_spectra``,
 ``push_window``, ``push_alarm``, with the ``contract``'s documents); the dashboard reads the rest
 through a ``DashboardService`` (duck typed: ``status``, ``trends``, ``alarms``, ``acknowledge``,
-``set_paused``). Upper layer: imports the ``contract`` (state layout, mode map, documents) and
-gets the estimator's objects only as arguments, never the service.
+``set_paused``). A fleet's dashboard (``Dashboard(..., fleet=True)``) is pushed nothing: it reads
+a ``FleetDashboardService`` (overview, and for the structures its browsers choose their model,
+live estimates, status, rows and spectra). Upper layer: imports the ``contract`` (state layout,
+mode map, documents) and gets the estimator's objects only as arguments, never the service.
 """
 
 from ._dashboard import SENSOR_STATES, Dashboard

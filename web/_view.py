@@ -15,6 +15,7 @@ import viser
 from contract import AlarmDocument, StatusDocument
 
 from ._data import WindowRecord, frequencies_of, spectrum_plot
+from ._fleet import overview_html
 from ._geometry import (
     BeamState,
     centreline,
@@ -28,7 +29,8 @@ from ._geometry import (
 )
 
 if TYPE_CHECKING:
-    from ._dashboard import Dashboard, Snapshot
+    from ._dashboard import Dashboard
+    from ._feed import Snapshot, StructureFeed
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +56,61 @@ TEXT_MIN_PERIOD_S = 0.25
 ALARM_ROWS = 30
 #: uPlot draws NaN as missing points (canvas ignores non-finite coordinates).
 NAN = float("nan")
+
+
+class _Tracked:
+    """A scene whose ``add_*`` calls record the handles made (a structure's nodes, removed on a switch)."""
+
+    def __init__(self, scene: Any, nodes: list[Any]) -> None:
+        self._scene = scene
+        self._nodes = nodes
+
+    def __getattr__(self, name: str) -> Any:
+        attr = getattr(self._scene, name)
+        if not name.startswith("add_"):
+            return attr
+
+        def add(*args: Any, **kwargs: Any) -> Any:
+            handle = attr(*args, **kwargs)
+            self._nodes.append(handle)
+            return handle
+
+        return add
+
+
+def camera_of(feed: "StructureFeed") -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(position, look-at) of a front view of the beam's plane (ζ to the right, z up: −η hanging,
+    +η standing), slightly from the side; the look-at point sits right of the beam so the beam is
+    not hidden behind the GUI panel."""
+    L, refl, up = feed.length, feed.reflector_distance, up_sign(feed.standing)
+    look_x = 0.55 + 0.6 * refl
+    return (look_x + 0.9, -0.95 * L, up * 0.40 * L), (look_x, 0.0, up * 0.5 * L)
+
+
+def add_rig(scene: Any, feed: "StructureFeed") -> None:
+    """The rig's static parts: the rail the support runs on (above D for a hanging beam, below a
+    standing mast), the reflector, a grid in the beam's plane and the plumb line."""
+    L, refl = feed.length, feed.reflector_distance
+    up = up_sign(feed.standing)  # world z per unit η: the beam hangs down or stands up from D
+    rail_lo, rail_hi = min(-0.6, refl - 1.2), refl + 0.05
+    scene.add_box(
+        "/rig/rail", color=(90, 90, 100), dimensions=(rail_hi - rail_lo, 0.08, 0.04),
+        position=(0.5 * (rail_lo + rail_hi), 0.0, -up * 0.09), cast_shadow=False,
+    )
+    scene.add_label("/rig/rail_label", "bearing rail", position=(rail_lo, 0.0, -up * 0.16), font_screen_scale=0.8)
+    scene.add_box(
+        "/rig/reflector", color=(150, 175, 205), dimensions=(0.01, 0.9, L + 0.4),
+        position=(refl + 0.005, 0.0, up * 0.5 * L), opacity=0.35, side="double", cast_shadow=False,
+    )
+    scene.add_label("/rig/reflector_label", f"reflector ζ = {refl:g} m", position=(refl, 0.45, -up * 0.1),
+                    font_screen_scale=0.8)
+    scene.add_grid(
+        "/rig/grid", width=max(2.0, 2 * refl + 1.5), height=L + 1.0, plane="xz",
+        cell_size=0.1, section_size=0.5, position=(0.5 * refl, 0.45, up * 0.5 * L), shadow_opacity=0.0,
+    )
+    scene.add_line_segments(
+        "/rig/plumb", np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, up * L]]]), (160, 160, 160), thickness=0.004,
+    )
 
 
 def fmt_time(t: float | None) -> str:
@@ -84,8 +141,6 @@ class ClientView:
     @staticmethod
     def setup_shared(dash: "Dashboard") -> None:
         server = dash.server
-        L, refl = dash.length, dash.reflector_distance
-        up = up_sign(dash.standing)  # world z per unit η: the beam hangs down or stands up from D
         server.gui.configure_theme(
             control_width="large", show_logo=False, show_share_button=False, brand_color=(30, 100, 200)
         )
@@ -96,84 +151,128 @@ class ClientView:
         server.scene.configure_environment_map(None)
         server.scene.add_light_ambient("/lights/ambient", intensity=1.6)
         server.scene.add_light_hemisphere("/lights/sky", sky_color=(255, 255, 255), ground_color=(200, 205, 215), intensity=1.2)
-        # A front view of the beam's plane (ζ to the right, z up: −η hanging, +η standing), slightly
-        # from the side; the look-at point sits right of the beam so the beam is not hidden behind
-        # the GUI panel.
-        look_x = 0.55 + 0.6 * refl
-        server.initial_camera.position = (look_x + 0.9, -0.95 * L, up * 0.40 * L)
-        server.initial_camera.look_at = (look_x, 0.0, up * 0.5 * L)
-        # The rail the support runs on: above D for a hanging beam, below a standing mast.
-        rail_lo, rail_hi = min(-0.6, refl - 1.2), refl + 0.05
-        server.scene.add_box(
-            "/rig/rail", color=(90, 90, 100), dimensions=(rail_hi - rail_lo, 0.08, 0.04),
-            position=(0.5 * (rail_lo + rail_hi), 0.0, -up * 0.09), cast_shadow=False,
-        )
-        server.scene.add_label("/rig/rail_label", "bearing rail", position=(rail_lo, 0.0, -up * 0.16), font_screen_scale=0.8)
-        server.scene.add_box(
-            "/rig/reflector", color=(150, 175, 205), dimensions=(0.01, 0.9, L + 0.4),
-            position=(refl + 0.005, 0.0, up * 0.5 * L), opacity=0.35, side="double", cast_shadow=False,
-        )
-        server.scene.add_label("/rig/reflector_label", f"reflector ζ = {refl:g} m", position=(refl, 0.45, -up * 0.1),
-                               font_screen_scale=0.8)
-        server.scene.add_grid(
-            "/rig/grid", width=max(2.0, 2 * refl + 1.5), height=L + 1.0, plane="xz",
-            cell_size=0.1, section_size=0.5, position=(0.5 * refl, 0.45, up * 0.5 * L), shadow_opacity=0.0,
-        )
-        server.scene.add_line_segments(
-            "/rig/plumb", np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, up * L]]]), (160, 160, 160), thickness=0.004,
-        )
+        if dash.primary is not None:  # one structure: its rig is the same for every browser
+            server.initial_camera.position, server.initial_camera.look_at = camera_of(dash.primary)
+            add_rig(server.scene, dash.primary)
 
     # ------------------------------------------------------------------ per client
-    def __init__(self, dash: "Dashboard", client: viser.ClientHandle) -> None:
+    def __init__(self, dash: "Dashboard", client: viser.ClientHandle, feed: "StructureFeed | None" = None) -> None:
         self.dash = dash
         self.client = client
         self.closed = False
         self.paused = False
         self.elastic_scale = 20.0
-        self.rigid_scale = 1.0
-        self.units_shown = set(range(1, dash.gamma + 1))  # unit deformations (and their modes) shown
-        self.trend_window_s = TREND_WINDOWS["1 h"]
-        self.dirty_scene = True
-        self.dirty_trends = True
-        self._drawn_estimate: Any = None
-        self._est_version = -1
-        self._spec_version = -1
-        self._win_version = -1
-        self._alarm_version = -1
-        self._status_version = -1
-        self._last_spectra = -math.inf
+        self.feed: StructureFeed | None = None
+        self.wanted: str | None = None  # a fleet: the structure chosen (shown once its feed is ready)
+        self.tabs: Any = None
+        self._nodes: list[Any] = []  # the shown structure's scene nodes (removed on a switch)
+        self._overview_version = -1
+        self._overview_selected: str | None = None
+        self._camera: tuple | None = None  # a camera to set once the browser's is known
         self._last_text = -math.inf
-        self._time_axis: bool | None = None
-        self._drawn_thresholds: dict[str, tuple[float, float]] | None = None
-        self._envelope = 0.0
-        self._eta = np.linspace(0.0, dash.length, N_BEAM_POINTS)
-        self._faces = ribbon_faces(N_BEAM_POINTS)
-        self._shape_eta = np.asarray(dash.units.shape(self._eta), dtype=float)
-        self._build_scene_groups()
         with client.atomic():
-            self._build_scene()
-            self._build_gui()
+            self._build_controls()
+        if feed is not None:
+            self.show(feed)
+
+    def show(self, feed: "StructureFeed") -> None:
+        """Draw ``feed``'s structure: its rig, beam and sensors, and its spectra, trends, alarms,
+        status and view settings (a switch removes the previous structure's first)."""
+        with self.client.atomic():
+            for node in self._nodes:
+                node.remove()
+            self._nodes = []
+            if self.tabs is not None:
+                self.tabs.remove()
+            self.feed = feed
+            self.rigid_scale = 1.0
+            self.units_shown = set(range(1, feed.gamma + 1))  # unit deformations (and their modes) shown
+            self.trend_window_s = TREND_WINDOWS["1 h"]
+            self.dirty_scene = True
+            self.dirty_trends = True
+            self._drawn_estimate: Any = None
+            self._est_version = -1
+            self._spec_version = -1
+            self._win_version = -1
+            self._alarm_version = -1
+            self._status_version = -1
+            self._last_spectra = -math.inf
+            self._last_text = -math.inf
+            self._time_axis: bool | None = None
+            self._drawn_thresholds: dict[str, tuple[float, float]] | None = None
+            self._envelope = 0.0
+            self._eta = np.linspace(0.0, feed.length, N_BEAM_POINTS)
+            self._faces = ribbon_faces(N_BEAM_POINTS)
+            self._shape_eta = np.asarray(feed.units.shape(self._eta), dtype=float)
+            scene = _Tracked(self.client.scene, self._nodes)
+            if self.dash.fleet:  # each browser its own structure: its rig and camera
+                add_rig(scene, feed)
+                self._camera = camera_of(feed)
+                self._place_camera()
+            self._build_scene_groups()
+            self._build_scene(scene)
+            self._build_tabs()
+
+    def _place_camera(self) -> None:
+        """Frame the structure shown (once the browser has told viser its camera)."""
+        if self._camera is None:
+            return
+        try:
+            self.client.camera.position, self.client.camera.look_at = self._camera
+        except AssertionError:  # viser: this browser's camera is not known yet; try again next frame
+            return
+        self._camera = None
+
+    def sync_selection(self) -> None:
+        """A fleet (render thread): keep the selector's options current and switch to the chosen
+        structure once its feed is ready (keeping the poller reading the one shown)."""
+        poller = self.dash.poller
+        if poller is None or self.closed:
+            return
+        self._place_camera()
+        ids = tuple(poller.ids())
+        if ids and tuple(self.selector.options) != ids:
+            current = self.wanted
+            self.selector.options = ids
+            if current in ids:
+                self.selector.value = current
+        if self.wanted is None and ids:
+            first = next((s.id for s in sorted(poller.overview.structures, key=lambda s: s.state == "failed")), ids[0])
+            self.wanted = first
+            self.selector.value = first
+        if self.wanted is None:
+            return
+        if self.feed is not None and self.feed.id == self.wanted:
+            poller.feed(self.wanted)  # still shown: keep it read
+            return
+        got = poller.feed(self.wanted)
+        if isinstance(got, str):
+            self.select_info.content = f"<p style='color:#dc2626;font-size:12px'>{html.escape(got)}</p>"
+        elif got is None:
+            self.select_info.content = f"<p style='font-size:12px'>Loading {html.escape(self.wanted)}…</p>"
+        else:
+            self.select_info.content = ""
+            self.show(got)
 
     def _build_scene_groups(self) -> None:
         """Sensors on the beam, by kind, and one label per board/gauge name."""
         groups: dict[str, list[tuple[str, float]]] = {"imu": [], "tof": [], "strain": []}
-        for topic, sensor in self.dash.sensor_topics.items():
+        for topic, sensor in self.feed.sensor_topics.items():
             if sensor.kind in groups:
                 groups[sensor.kind].append((topic, float(sensor.position)))
         self.sensor_groups = {k: v for k, v in groups.items() if v}
         labels: dict[str, float] = {}
-        for sensor in self.dash.rig.sensors:
+        for sensor in self.feed.rig.sensors:
             if sensor.kind in groups and sensor.name not in labels:
                 labels[sensor.name] = float(sensor.position)
         self.label_names = list(labels)
         self.label_eta = np.array(list(labels.values()), dtype=float)
-        self.bearing_topic = next((t for t, s in self.dash.sensor_topics.items() if s.kind == "bearing"), None)
+        self.bearing_topic = next((t for t, s in self.feed.sensor_topics.items() if s.kind == "bearing"), None)
 
-    def _build_scene(self) -> None:
-        scene, dash = self.client.scene, self.dash
-        rest = BeamState(0.0, 0.0, 0.0, np.zeros(dash.gamma))
-        up = self.up = up_sign(dash.standing)
-        verts = ribbon(centreline(rest, dash.units, self._eta), dash.width, standing=dash.standing)
+    def _build_scene(self, scene: Any) -> None:
+        rest = BeamState(0.0, 0.0, 0.0, np.zeros(self.feed.gamma))
+        up = self.up = up_sign(self.feed.standing)
+        verts = ribbon(centreline(rest, self.feed.units, self._eta), self.feed.width, standing=self.feed.standing)
         self.ghost = scene.add_mesh_simple(
             "/live/ghost", verts, self._faces, color=GHOST_COLOUR, opacity=0.28, side="double", cast_shadow=False
         )
@@ -187,9 +286,9 @@ class ClientView:
         # both faces of the root and the carriage they sit on; φ ≡ 0, so no tangent to show).
         self.bearing = self.tangent = None
         self.clamp: list[Any] = []
-        if dash.clamped:
+        if self.feed.clamped:
             for name, (centre, dims) in zip(("jaw_minus", "jaw_plus", "carriage"),
-                                            clamp_boxes(rest, dash.width, standing=dash.standing)):
+                                            clamp_boxes(rest, self.feed.width, standing=self.feed.standing)):
                 self.clamp.append(scene.add_box(f"/live/clamp/{name}", color=CLAMP_COLOUR, dimensions=dims,
                                                 position=centre, cast_shadow=False))
             self.clamp_label = scene.add_label(
@@ -198,7 +297,7 @@ class ClientView:
             )
         else:
             self.bearing = scene.add_cylinder(
-                "/live/bearing", radius=0.045, height=dash.width + 0.12, color=(20, 20, 20),
+                "/live/bearing", radius=0.045, height=self.feed.width + 0.12, color=(20, 20, 20),
                 wxyz=(math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0), cast_shadow=False,
             )
         self.bearing_marker = scene.add_point_cloud(
@@ -206,12 +305,12 @@ class ClientView:
             point_size=0.07, point_shape="circle", precision="float32", point_shading="flat",
             visible=self.bearing_topic is not None,
         )
-        if not dash.clamped:
+        if not self.feed.clamped:
             self.tangent = scene.add_line_segments(
                 "/live/tangent", np.zeros((1, 2, 3)), (20, 20, 20), thickness=0.006
             )
         self.markers: dict[str, Any] = {}
-        shapes = {"imu": ("circle", -0.5 * dash.width - 0.03), "tof": ("square", 0.5 * dash.width + 0.03), "strain": ("diamond", 0.0)}
+        shapes = {"imu": ("circle", -0.5 * self.feed.width - 0.03), "tof": ("square", 0.5 * self.feed.width + 0.03), "strain": ("diamond", 0.0)}
         for kind, items in self.sensor_groups.items():
             shape, _ = shapes[kind]
             self.markers[kind] = scene.add_point_cloud(
@@ -233,12 +332,28 @@ class ClientView:
         ]
         # Beyond the tip: below a hanging beam, above a standing mast.
         self.tip_label = scene.add_label("/live/tip_label", "", font_screen_scale=0.8,
-                                         anchor="bottom-center" if dash.standing else "top-center")
+                                         anchor="bottom-center" if self.feed.standing else "top-center")
 
     # ------------------------------------------------------------------ GUI
-    def _build_gui(self) -> None:
+    def _build_controls(self) -> None:
+        """What does not depend on the structure shown: the header, pause, overscale, and for a
+        fleet the structure selector and the overview."""
         gui, dash = self.client.gui, self.dash
         self.header = gui.add_html(self._header_html(None), order=0)
+        if dash.fleet:
+            with gui.add_folder("Fleet", order=0.5):
+                self.selector = gui.add_dropdown(
+                    "Structure", ("(waiting for the fleet)",), initial_value="(waiting for the fleet)",
+                    hint="The structure this browser shows: its 3-D view, spectra, trends, alarms and status",
+                )
+                self.select_info = gui.add_html("")
+                self.overview_html = gui.add_html("<p style='font-size:12px'>Waiting for the fleet…</p>")
+
+            @self.selector.on_update
+            def _(_: Any) -> None:
+                value = str(self.selector.value)
+                if value in self.dash.poller.ids():
+                    self.wanted = value
         self.pause = gui.add_checkbox(
             "Pause live view", False, order=1,
             hint="Freezes this browser's beam, spectra and trends (alarms and status stay live). Never changes data.",
@@ -270,7 +385,9 @@ class ClientView:
             self._envelope = 0.0
             self.dirty_scene = True
 
-        tabs = gui.add_tab_group(order=3)
+    def _build_tabs(self) -> None:
+        gui = self.client.gui
+        tabs = self.tabs = gui.add_tab_group(order=3)
         with tabs.add_tab("Spectra", viser.Icon.WAVE_SINE):
             self._build_spectra(gui)
         with tabs.add_tab("Trends", viser.Icon.CHART_LINE):
@@ -284,13 +401,13 @@ class ClientView:
 
     def _unit_label(self, unit: int) -> str:
         """``b1 · mode 1+2 (0.30, 0.86 Hz model)``: the spectra's and the mode switches' label."""
-        label = self.dash.mode_map.unit_label(unit)
+        label = self.feed.mode_map.unit_label(unit)
         freqs = self._model_freqs(unit)
         return f"{label} ({', '.join(f'{f:.2f}' for f in freqs)} Hz model)" if freqs else label
 
     def _model_freqs(self, unit: int) -> tuple[float, ...]:
         try:
-            return tuple(float(f) for f in self.dash.units.frequencies_hz[unit - 1])
+            return tuple(float(f) for f in self.feed.units.frequencies_hz[unit - 1])
         except (AttributeError, IndexError, TypeError, ValueError):
             return ()
 
@@ -299,13 +416,13 @@ class ClientView:
         return freqs[-1] if freqs else None
 
     def _f_max(self) -> float:
-        freqs = [self._model_hz(u) for u in range(1, self.dash.gamma + 1)]
+        freqs = [self._model_hz(u) for u in range(1, self.feed.gamma + 1)]
         freqs = [f for f in freqs if f]
         return 1.4 * max(freqs) if freqs else 10.0
 
     def _modes_shown(self) -> list[int]:
         """The eigenmodes of the unit deformations shown."""
-        mm = self.dash.mode_map
+        mm = self.feed.mode_map
         return [m for m in mm.modes if mm.unit_of(m) in self.units_shown]
 
     def _build_spectra(self, gui: Any) -> None:
@@ -316,7 +433,7 @@ class ClientView:
         self.spectra_plots = {}
         f_max = self._f_max()
         f = np.linspace(0.0, f_max, 200)
-        for unit in range(1, self.dash.gamma + 1):
+        for unit in range(1, self.feed.gamma + 1):
             x, y, tr, bl = spectrum_plot(f, np.ones(f.size), None, self._model_freqs(unit))
             self.spectra_plots[unit] = gui.add_uplot(
                 data=(x, y, tr, bl),
@@ -346,7 +463,7 @@ class ClientView:
     def _build_trends(self, gui: Any) -> None:
         self.trend_info = gui.add_html("<p>Waiting for the first analysis window…</p>")
         self.freq_plots = {}
-        mm = self.dash.mode_map
+        mm = self.feed.mode_map
         modes = mm.modes
         x0 = np.array([0.0, 1.0])
         z = np.zeros(2)
@@ -387,7 +504,7 @@ class ClientView:
             series=({"label": "time"}, {"label": "T °C", "stroke": "#b45309", "width": 1.5}),
             scales={"x": {"time": False}}, title="Temperature (°C)", height=120, visible=False, legend={"live": False},
         )
-        st = self.dash.stations
+        st = self.feed.stations
         self.curv_profile_plot = gui.add_uplot(
             data=(st, np.zeros(st.size), np.zeros(st.size)),
             series=(
@@ -441,7 +558,7 @@ class ClientView:
             self.ack_result.content = f"<p style='color:#dc2626'>Acknowledge failed: {html.escape(type(exc).__name__)}: {html.escape(str(exc))}</p>"
             return
         if isinstance(result, AlarmDocument):
-            self.dash.push_alarm(result)
+            self.feed.push_alarm(result)
         self.ack_result.content = f"<p style='color:#15803d'>Alarm #{alarm_id} acknowledged.</p>"
 
     def _build_settings(self, gui: Any) -> None:
@@ -456,7 +573,7 @@ class ClientView:
         self.show_rays = gui.add_checkbox("Show ToF rays", True)
         self.show_labels = gui.add_checkbox("Show sensor labels", True)
         gui.add_markdown("**Modes shown** (spectra and trends)")
-        self.unit_boxes = {u: gui.add_checkbox(self._unit_label(u), True) for u in range(1, self.dash.gamma + 1)}
+        self.unit_boxes = {u: gui.add_checkbox(self._unit_label(u), True) for u in range(1, self.feed.gamma + 1)}
         self.trend_window = gui.add_dropdown("Trend window", tuple(TREND_WINDOWS), initial_value="1 h")
         gui.add_markdown(
             "Marker colours: <span style='color:#28a745'>●</span> ok, <span style='color:#ffaa00'>●</span> degraded, "
@@ -482,10 +599,18 @@ class ClientView:
             handle.on_update(modes_changed)
 
     # ------------------------------------------------------------------ rendering
-    def render(self, snap: "Snapshot") -> None:
+    def render(self, snap: "Snapshot | None") -> None:
+        """Draw what changed (``snap``: the shown structure's; None while a fleet's browser has none yet)."""
         if self.closed:
             return
         now = time.monotonic()
+        if self.dash.fleet:
+            self._render_overview()
+        if snap is None or self.feed is None:
+            if now - self._last_text >= TEXT_MIN_PERIOD_S:
+                self._last_text = now
+                self.header.content = self._header_html(None)
+            return
         with self.client.atomic():
             if not self.paused and snap.estimate is not None and snap.estimate_version != self._est_version:
                 self._drawn_estimate = (snap.estimate, snap.mean_state)
@@ -498,7 +623,7 @@ class ClientView:
                 self._spec_version = snap.spectra_version
                 self._last_spectra = now
                 self._render_spectra(snap)
-            if self.dash.thresholds(snap) != self._drawn_thresholds:  # the service's levels arrived or changed
+            if self.feed.thresholds(snap) != self._drawn_thresholds:  # the service's levels arrived or changed
                 self.dirty_trends = True
             if (not self.paused and snap.windows_version != self._win_version) or (self.dirty_trends and snap.windows):
                 self._win_version = snap.windows_version
@@ -514,30 +639,37 @@ class ClientView:
                 self._last_text = now
                 self.header.content = self._header_html(snap)
 
+    def _render_overview(self) -> None:
+        poller = self.dash.poller
+        shown = None if self.feed is None else self.feed.id
+        if poller.overview_version != self._overview_version or shown != self._overview_selected:
+            self._overview_version, self._overview_selected = poller.overview_version, shown
+            self.overview_html.content = overview_html(poller.overview, poller.overview_error, shown)
+
     def _render_scene(self, est: Any, mean: BeamState | None, *, texts: bool) -> None:
-        dash = self.dash
+        feed = self.feed
         state: BeamState = est.state
         if self.auto_scale.value:
             self._auto_overscale(state)
         es, rs = self.elastic_scale, self.rigid_scale
-        standing, up = dash.standing, self.up
-        line = centreline(state, dash.units, self._eta, elastic_scale=es, rigid_scale=rs)
-        self.beam.vertices = ribbon(line, dash.width, standing=standing)
+        standing, up = feed.standing, self.up
+        line = centreline(state, feed.units, self._eta, elastic_scale=es, rigid_scale=rs)
+        self.beam.vertices = ribbon(line, feed.width, standing=standing)
         ghost_on = bool(self.show_ghost.value)
         self.ghost.visible = ghost_on
         if ghost_on:
             if str(self.ghost_mode.value).startswith("running") and mean is not None:
-                ghost = centreline(mean, dash.units, self._eta, elastic_scale=es, rigid_scale=rs)
+                ghost = centreline(mean, feed.units, self._eta, elastic_scale=es, rigid_scale=rs)
             else:
-                ghost = centreline(BeamState(0.0, 0.0, 0.0, np.zeros(dash.gamma)), dash.units, self._eta)
-            self.ghost.vertices = ribbon(ghost, dash.width, standing=standing)
+                ghost = centreline(BeamState(0.0, 0.0, 0.0, np.zeros(feed.gamma)), feed.units, self._eta)
+            self.ghost.vertices = ribbon(ghost, feed.width, standing=standing)
         truth_on = est.truth_deflection is not None and bool(self.show_truth.value)
         self.truth.visible = truth_on
         if truth_on:
-            eta = np.concatenate([[0.0], dash.stations]) if dash.stations[0] > 0 else dash.stations
-            delta = np.concatenate([[0.0], est.truth_deflection]) if dash.stations[0] > 0 else est.truth_deflection
-            tline = centreline(state, dash.units, eta, elastic_scale=es, rigid_scale=rs, deflection=delta)
-            pts = to_world(tline, y=0.5 * dash.width + 0.01, standing=standing)
+            eta = np.concatenate([[0.0], feed.stations]) if feed.stations[0] > 0 else feed.stations
+            delta = np.concatenate([[0.0], est.truth_deflection]) if feed.stations[0] > 0 else est.truth_deflection
+            tline = centreline(state, feed.units, eta, elastic_scale=es, rigid_scale=rs, deflection=delta)
+            pts = to_world(tline, y=0.5 * feed.width + 0.01, standing=standing)
             self.truth.points = segments(pts)
         d_world = np.array([rs * state.d, 0.0, up * rs * state.h], dtype=np.float32)
         if self.bearing is not None:
@@ -547,7 +679,7 @@ class ClientView:
             self.tangent.points = np.array([[d_world, d_world + 1.0 * np.array([math.sin(phi), 0.0, up * math.cos(phi)])]],
                                            dtype=np.float32)
         if self.clamp:
-            for handle, (centre, _) in zip(self.clamp, clamp_boxes(state, dash.width, rigid_scale=rs, standing=standing)):
+            for handle, (centre, _) in zip(self.clamp, clamp_boxes(state, feed.width, rigid_scale=rs, standing=standing)):
                 handle.position = centre
             if texts:
                 self.clamp_label.position = (float(d_world[0]) - 0.12, 0.0, float(d_world[2]) - up * 0.05)
@@ -557,7 +689,7 @@ class ClientView:
             self.bearing_marker.colors = np.array([STATE_COLOURS.get(states.get(self.bearing_topic, "unknown"), STATE_COLOURS["unknown"])], dtype=np.uint8)
         for kind, items in self.sensor_groups.items():
             eta = np.array([e for _, e in items])
-            pos = to_world(centreline(state, dash.units, eta, elastic_scale=es, rigid_scale=rs), y=self.marker_offsets[kind],
+            pos = to_world(centreline(state, feed.units, eta, elastic_scale=es, rigid_scale=rs), y=self.marker_offsets[kind],
                            standing=standing)
             if kind == "strain":  # on the +ζ face
                 pos[:, 0] += 0.01
@@ -571,7 +703,7 @@ class ClientView:
             if rays_on:
                 items = self.sensor_groups["tof"]
                 eta = np.array([e for _, e in items])
-                rays = tof_rays(state, dash.units, eta, dash.reflector_distance, elastic_scale=es, rigid_scale=rs,
+                rays = tof_rays(state, feed.units, eta, feed.reflector_distance, elastic_scale=es, rigid_scale=rs,
                                 standing=standing)
                 rays[:, :, 1] = self.marker_offsets["tof"]
                 self.rays.points = rays
@@ -580,8 +712,8 @@ class ClientView:
                 self.rays.colors = np.repeat(cols[:, None, :], 2, axis=1)
         labels_on = bool(self.show_labels.value)
         if self.labels and texts:  # HTML labels are costly for the browser: at the text rate
-            pos = to_world(centreline(state, dash.units, self.label_eta, elastic_scale=es, rigid_scale=rs),
-                           y=0.5 * dash.width + 0.1, standing=standing)
+            pos = to_world(centreline(state, feed.units, self.label_eta, elastic_scale=es, rigid_scale=rs),
+                           y=0.5 * feed.width + 0.1, standing=standing)
             for handle, p in zip(self.labels, pos):
                 handle.visible = labels_on
                 if labels_on:
@@ -589,7 +721,7 @@ class ClientView:
         tip = line[-1]
         if texts:
             self.tip_label.position = (float(tip[1]), 0.0, float(up * (tip[0] + 0.08)))
-            delta_tip = float(dash.units.shape(np.array([dash.length]))[0] @ state.b)
+            delta_tip = float(feed.units.shape(np.array([feed.length]))[0] @ state.b)
             self.tip_label.text = f"tip Δ = {1e3 * delta_tip:+.1f} mm  (×{es:g})"
 
     def _auto_overscale(self, state: BeamState) -> None:
@@ -597,8 +729,8 @@ class ClientView:
         self._envelope = max(peak, self._envelope * AUTO_DECAY_PER_FRAME)
         if self._envelope <= 0:
             return
-        wanted = AUTO_TARGET_FRACTION * self.dash.length / self._envelope
-        drawn = self.elastic_scale * self._envelope / (AUTO_TARGET_FRACTION * self.dash.length)
+        wanted = AUTO_TARGET_FRACTION * self.feed.length / self._envelope
+        drawn = self.elastic_scale * self._envelope / (AUTO_TARGET_FRACTION * self.feed.length)
         if 0.4 <= drawn <= 1.6:  # hysteresis: keep a steady factor while the picture is readable
             return
         nice = _nice(min(max(wanted, 1.0), MAX_OVERSCALE))
@@ -628,7 +760,7 @@ class ClientView:
         return times
 
     def _render_trends(self, snap: "Snapshot") -> None:
-        dash = self.dash
+        feed = self.feed
         windows = snap.windows
         if not windows:
             return
@@ -649,13 +781,13 @@ class ClientView:
             if not visible:
                 continue
             f = _arr([w.frequency_hz.get(mode) for w in shown])
-            bands = [dash.band(snap, w, mode) for w in shown]
+            bands = [feed.band(snap, w, mode) for w in shown]
             plot.data = (x, f, _arr([b[0] for b in bands]), _arr([b[1] for b in bands]), _arr([b[2] for b in bands]))
-        modes = dash.mode_map.modes
+        modes = feed.mode_map.modes
         damping = [_arr([None if w.damping_ratio.get(m) is None else 100 * w.damping_ratio[m] for w in shown]) for m in modes]
         self.damping_plot.data = (x, *damping)
         self.damping_plot.visible = any(np.isfinite(d).any() for d in damping)
-        th = self._drawn_thresholds = dash.thresholds(snap)
+        th = self._drawn_thresholds = feed.thresholds(snap)
         scores = [_arr([w.score_sigma.get(m) for w in shown]) for m in modes]
         self.score_plot.data = (x, *scores, *_threshold_lines(th.get("frequency"), x.size))
         self.score_plot.visible = any(np.isfinite(s).any() for s in scores)
@@ -683,12 +815,12 @@ class ClientView:
         profiles = [w.curvature_profile for w in shown if w.curvature_profile is not None]
         if profiles:
             stack = np.array(profiles)
-            self.curv_profile_plot.data = (dash.stations, profiles[-1], np.nanmax(stack, axis=0))
+            self.curv_profile_plot.data = (feed.stations, profiles[-1], np.nanmax(stack, axis=0))
             self.curv_profile_plot.visible = True
         self.trend_info.content = self._trend_info_html(windows[-1], len(windows))
 
     def _trend_info_html(self, w: WindowRecord, count: int) -> str:
-        mm = self.dash.mode_map
+        mm = self.feed.mode_map
         cells = []
         for m in mm.modes:
             if m not in w.frequency_hz:
@@ -712,7 +844,7 @@ class ClientView:
         )
 
     def _alarm_label(self, a: AlarmDocument) -> str:
-        mm = self.dash.mode_map
+        mm = self.feed.mode_map
         if a.kind == "frequency" and a.mode is not None and a.mode in mm.modes:
             return mm.mode_label(a.mode)
         return a.chart
@@ -751,17 +883,30 @@ class ClientView:
     def _render_status(self, snap: "Snapshot") -> None:
         self.status_html.content = _status_html(snap, self.dash)
 
+    def _title(self) -> str:
+        """The label; for a fleet, the structure shown with its state and lag (as the overview lists it)."""
+        title = f"<b>{html.escape(self.dash.label)}</b>"
+        if not self.dash.fleet or self.feed is None:
+            return title
+        summary = self.dash.poller.summary(self.feed.id)
+        extra = ""
+        if summary is not None:
+            lag = "" if summary.lag_s is None else f", lag {summary.lag_s:.1f} s"
+            extra = f" ({html.escape(summary.state)}{lag})"
+        return f"{title}<br><b style='font-size:14px'>Structure {html.escape(str(self.feed.id))}</b>{extra}"
+
     def _header_html(self, snap: "Snapshot | None") -> str:
         dash = self.dash
         if snap is None:
-            return f"<div style='font-size:13px'><b>{html.escape(dash.label)}</b><br>Connecting to the data…</div>"
+            waiting = "Choose a structure (loading the fleet…)" if dash.fleet else "Connecting to the data…"
+            return f"<div style='font-size:13px'>{self._title()}<br>{waiting}</div>"
         live = "<span style='color:#b45309;font-weight:bold'>■ PAUSED</span>" if self.paused else "<span style='color:#15803d;font-weight:bold'>● LIVE</span>"
         est = snap.estimate if not self.paused or self._drawn_estimate is None else self._drawn_estimate[0]
         if est is None:
             motion = "waiting for estimates"
         else:
             s = est.state
-            phi = "φ ≡ 0 (clamped)" if dash.layout.phi is None else f"φ = {1e3 * s.phi:+.2f} mrad"
+            phi = "φ ≡ 0 (clamped)" if self.feed.layout.phi is None else f"φ = {1e3 * s.phi:+.2f} mrad"
             motion = (
                 f"t = {fmt_time(est.t_s)} · d = {1e3 * s.d:+.1f} mm · {phi} · "
                 f"b = [{', '.join(f'{v:+.2e}' for v in s.b)}]"
@@ -787,7 +932,7 @@ class ClientView:
         )
         error = f"<br><span style='color:#dc2626'>service: {html.escape(snap.status_error)}</span>" if snap.status_error else ""
         return (
-            f"<div style='font-size:12.5px;line-height:1.45'><b>{html.escape(dash.label)}</b> {live} {badge}<br>"
+            f"<div style='font-size:12.5px;line-height:1.45'>{self._title()} {live} {badge}<br>"
             f"{motion}<br>{_rates(snap)} · {sensors}{error}</div>"
         )
 

@@ -33,6 +33,8 @@ from contract import (
     ErrorDocument,
     HealthDocument,
     IngestResultDocument,
+    LiveEstimatesDocument,
+    RigDescription,
     SpectrumDocument,
     StatusDocument,
     StructuresDocument,
@@ -41,6 +43,7 @@ from contract import (
 )
 
 from ._docs import serve_docs_offline
+from ._metrics import _metrics, metrics_text  # noqa: F401  (_metrics: one structure's exposition, for the tests)
 from ._ingest import IngestError, parse_body
 from ._starting import ServiceStarting
 from ._storage import StorageUnavailable
@@ -488,10 +491,10 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
 
     _fleet_routes(app, service, authorize)
 
-    @app.get("/metrics", summary="Prometheus metrics (text format)", response_class=PlainTextResponse,
+    @app.get("/metrics", summary="Prometheus metrics (text format); of a fleet, per structure (label structure)", response_class=PlainTextResponse,
              responses={**_AUTH_RESPONSES, 200: {"content": {"text/plain": {"schema": {"type": "string"}}}}})
     def metrics() -> PlainTextResponse:
-        return PlainTextResponse(_metrics(service.status()), media_type="text/plain; version=0.0.4; charset=utf-8")
+        return PlainTextResponse(metrics_text(service), media_type="text/plain; version=0.0.4; charset=utf-8")
 
     app.add_middleware(_Gate, default=max_body_bytes, ingest=max_ingest_bytes,
                        hosts=HostCheck(host, allowed_hosts) if check_host else None,
@@ -575,6 +578,20 @@ def _fleet_routes(app: FastAPI, service: Any, authorize: Any) -> None:
             raise HTTPException(404, f"structure {structure_id!r} has no analysis window yet")
         return spec
 
+    @app.get("/api/structures/{structure_id}/rig", summary="the rig the structure is monitored with (rig.json)",
+             response_model=RigDescription, responses={**_AUTH_RESPONSES, **_UNKNOWN})
+    def structure_rig(structure_id: str = _STRUCTURE_ID) -> RigDescription:
+        return call(service.structure_rig, structure_id)
+
+    @app.get("/api/structures/{structure_id}/live",
+             summary="the structure's newest state estimates (about 10 per second of data) for a live view",
+             description="A read makes the structure keep its newest estimates for `watch_s` more seconds (nothing is "
+                         "kept for a structure nobody reads); poll with `after` = the last `seq` seen.",
+             response_model=LiveEstimatesDocument, responses={**_AUTH_RESPONSES, **_INVALID, **_UNKNOWN})
+    def structure_live(structure_id: str = _STRUCTURE_ID,
+                       after: int = Query(0, ge=0, le=2**62, description="only estimates after this seq")) -> LiveEstimatesDocument:
+        return call(service.live, structure_id, after)
+
     @app.post("/api/structures/{structure_id}/baseline", summary="start learning a new baseline of the structure (token required)",
               status_code=202, response_model=BaselineRequestDocument, responses={**_AUTH_RESPONSES, **_UNKNOWN})
     def structure_baseline(request: Request, structure_id: str = _STRUCTURE_ID) -> BaselineRequestDocument:
@@ -609,75 +626,3 @@ def _fleet_routes(app: FastAPI, service: Any, authorize: Any) -> None:
             return JSONResponse({"detail": "the pipeline is full; retry later (nothing of this request was taken)"},
                                 status_code=503, headers={"Retry-After": "1"})
         return result
-
-
-def _label(value: Any) -> str:
-    return str(value).replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
-
-
-def _metrics(st: StatusDocument) -> str:
-    lines: list[str] = []
-
-    def metric(name: str, kind: str, help_text: str, samples: list[tuple[dict[str, Any], Any]]) -> None:
-        lines.append(f"# HELP {name} {help_text}")
-        lines.append(f"# TYPE {name} {kind}")
-        for labels, value in samples:
-            if value is None:
-                continue
-            text = ",".join(f'{k}="{_label(v)}"' for k, v in labels.items())
-            lines.append(f"{name}{{{text}}} {float(value):.17g}" if text else f"{name} {float(value):.17g}")
-
-    p = st.pipeline
-    srcs = st.sources
-    n = st.notifications
-    metric("shm_uptime_seconds", "gauge", "seconds since the service started", [({}, st.service.uptime_s)])
-    sinks = st.sinks
-    metric("shm_pipeline_errors_total", "counter", "batches the pipeline failed on (skipped)", [({}, st.service.pipeline_errors)])
-    metric("shm_errors_total", "counter", "errors by component; the monitoring goes on (a failed batch is skipped, a "
-           "failed write waits in memory and is retried, a failing sink is isolated)",
-           [({"component": "pipeline"}, st.service.pipeline_errors), ({"component": "storage"}, st.storage.write_failures),
-            *[({"component": "source"}, int(s.state == "failed")) for s in srcs[:1]],
-            *[({"component": name}, sink.errors) for name, sink in sinks.items()]])
-    metric("shm_batches_skipped_total", "counter", "batches of samples skipped because the pipeline failed on them",
-           [({}, st.service.pipeline_errors)])
-    metric("shm_source_messages_total", "counter", "samples accepted from the source",
-           [({"source": s.id, "kind": s.kind}, s.messages) for s in srcs])
-    metric("shm_source_rejected_total", "counter", "samples rejected, by reason (malformed, nonfinite, duplicate, backwards, "
-           "implausible_time, ahead_of_source, implausible_value, ...)",
-           [({"source": s.id, "reason": r}, v) for s in srcs for r, v in s.rejected_by_reason.items()])
-    metric("shm_source_dropped_total", "counter", "samples dropped (late, or without the reference IMU)",
-           [({"source": s.id}, s.dropped) for s in srcs])
-    metric("shm_samples_dropped_total", "counter", "samples accepted but not estimated, by reason",
-           [({"reason": "late"}, p.late_samples), ({"reason": "reference_imu_silent"}, p.estimator.dropped_samples)])
-    metric("shm_source_clock_jumps_total", "counter", "stamps or batches found off the source's clock",
-           [({"source": s.id}, s.clock_jumps) for s in srcs])
-    metric("shm_source_rate_hz", "gauge", "incoming samples per second", [({"source": s.id}, s.rate_hz) for s in srcs])
-    metric("shm_source_data_time_seconds", "gauge", "newest sample time (UNIX s)", [({"source": s.id}, s.data_time_s) for s in srcs])
-    metric("shm_pipeline_latency_seconds", "gauge", "time from a batch's arrival to its processing", [({}, p.pipeline_latency_s)])
-    metric("shm_queue_depth", "gauge", "batches waiting in the pipeline queue", [({}, p.queue_depth)])
-    metric("shm_estimates_total", "counter", "estimator outputs", [({}, p.estimates)])
-    metric("shm_windows_total", "counter", "analysis windows processed", [({}, p.windows)])
-    metric("shm_windows_skipped_total", "counter", "analysis windows not analysed, by reason (incomplete data; warmup: "
-           "the filter converging after the start or a restart)",
-           [({"reason": "incomplete"}, p.windows_skipped_incomplete), ({"reason": "warmup"}, p.windows_skipped_warmup)])
-    est = p.estimator
-    metric("shm_filter_restarts_total", "counter", "restarts of the estimator's filter, by reason (bounds, nis, rejections, "
-           "nonfinite: diverged; gap: the reference IMU fell silent)",
-           [({"reason": r}, v) for r, v in sorted(est.filter_restarts_by_reason.items())] or [({"reason": "none"}, 0)])
-    metric("shm_estimator_healthy", "gauge", "1 while the estimator's health check finds it tracking, 0 while it is diverged "
-           "or recovering", [({}, int(est.health == "ok"))])
-    metric("shm_notifications_total", "counter", "notification delivery attempts this run, by outcome (sent; retry: a "
-           "temporary failure; permanent: refused by the target; given_up)",
-           [({"outcome": k}, n.outcomes_this_run.get(k, 0)) for k in ("sent", "retry", "permanent", "given_up")])
-    metric("shm_storage_write_retries_total", "counter", "database writes retried after a transient error",
-           [({}, st.storage.write_retries)])
-    metric("shm_storage_windows_waiting", "gauge", "analysed windows waiting for the database", [({}, st.storage.windows_waiting)])
-    metric("shm_sensor_degraded", "gauge", "1 when a sensor is degraded or silent",
-           [({"topic": t}, 0 if v == "ok" else 1) for t, v in st.sensors.items()])
-    metric("shm_alarms_active", "gauge", "active alarms by level", [({"level": k}, v) for k, v in st.alarms.active.items()])
-    metric("shm_notifications", "gauge", "notifications in the outbox by status",
-           [({"status": "pending"}, n.pending), ({"status": "sent"}, n.sent), ({"status": "failed"}, n.failed)])
-    metric("shm_sink_errors_total", "counter", "failures of a sink (dashboard, notifier) by what it was doing",
-           [({"sink": name, "kind": kind}, v) for name, sink in st.sinks.items() for kind, v in sink.errors_by_kind.items()])
-    metric("shm_trend_rows", "gauge", "trend rows stored", [({}, st.storage.trend_rows)])
-    return "\n".join(lines) + "\n"

@@ -259,6 +259,8 @@ def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, 
     started = time.monotonic()
     try:
         front.start()
+        if front.dashboard is not None:
+            print(f"shm serve: dashboard at {getattr(front.dashboard, 'url', '?')}", flush=True)
         while not stop.is_set():
             if front.wait(0.2) and not settings.source.keep_running:
                 break

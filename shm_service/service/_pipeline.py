@@ -95,6 +95,12 @@ class PipelineSink(Protocol):
     def alarm(self, alarm: AlarmDocument) -> None: ...
 
 
+class LiveRingLike(Protocol):
+    """A structure's live ring (``_live.LiveRing``): takes every batch's estimates (``t_s`` (n,), ``x`` (n, nx))."""
+
+    def add(self, t_s: np.ndarray, x: np.ndarray) -> None: ...
+
+
 _blas_limit = None
 
 
@@ -610,6 +616,7 @@ class Pipeline:
         self.archive_estimates = archive_estimates and archive is not None
         self.decimation = estimate_decimation
         self.sink = sink
+        self.live: "LiveRingLike | None" = None  # set by the service: the batches' estimates for a live view of the structure
         # A failing sink is counted and logged once per kind; it never stops a batch.
         self.sink_guard = sink_guard or SinkGuard("dashboard", log)
         self.sink_period = 1.0 / sink_estimate_hz
@@ -822,6 +829,8 @@ class Pipeline:
         self.archive.write_estimates(stamps, encode_payloads_json(rows))
 
     def _push_estimates(self, t_abs: np.ndarray, out: FilterOutput) -> None:
+        if self.live is not None:  # the structure's live ring: keeps them (decimated) only while watched
+            self.sink_guard.call("live", self.live.add, t_abs, out.x)
         if self.sink is None:
             return
         now = time.monotonic()

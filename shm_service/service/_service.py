@@ -23,6 +23,7 @@ from contract import (
     ChartLevelsDocument,
     HealthDocument,
     IngestResultDocument,
+    LiveEstimatesDocument,
     ModelDocument,
     NotificationStatusDocument,
     RigDescription,
@@ -43,6 +44,9 @@ from estimator import build_model
 from ..recording import RecordingError
 from ._archive import Archive
 from ._config import ServiceSettings, SettingsError, resolve_token
+from ._dashboard_port import StructureModel, start_dashboard
+from ._live import LiveRing
+from ._metrics import fleet_metrics
 from ._notify import Notifier, notify_targets
 from ._pipeline import Pipeline
 from ._plausibility import SourceClock
@@ -92,31 +96,6 @@ class _DashboardSink:
     def alarm(self, alarm: AlarmDocument) -> None:
         # Alarms reach the dashboard while paused too: pausing freezes the picture, not the alarms.
         self.dashboard.push_alarm(alarm)
-
-
-class _StructureView:
-    """The dashboard's ``DashboardService`` for one structure of a fleet (the dashboard shows
-    one structure: its status, trends and alarms)."""
-
-    def __init__(self, service: "MonitoringService", structure_id: str) -> None:
-        self.service = service
-        self.structure_id = structure_id
-
-    def status(self) -> StatusDocument:
-        return self.service.status(self.structure_id)
-
-    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
-               limit: int = 100_000) -> list[TrendRow]:
-        return self.service.structure_trends(self.structure_id, from_s, to_s, mode=mode, limit=limit)
-
-    def alarms(self, state: str | None = None) -> list[AlarmDocument]:
-        return self.service.structure_alarms(self.structure_id, state)
-
-    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
-        return self.service.acknowledge(alarm_id, token, by)
-
-    def set_paused(self, paused: bool) -> None:
-        self.service.set_paused(paused)
 
 
 class StructureUnavailable(LookupError):
@@ -188,6 +167,7 @@ class Structure:
                                             unit_modes=[list(g) for g in m.mode_map.unit_modes])
         self.pipeline: Pipeline | None = None
         self.archive: Archive | None = None
+        self.live = LiveRing(self.id, list(m.state_layout.names))  # its estimates for a live view, kept while watched
 
     def attach(self, storage: Storage, sink: Any, sink_guard: SinkGuard) -> None:
         """Create the pipeline on the shared ``storage`` (after the source, so a bad source fails first)."""
@@ -208,6 +188,7 @@ class Structure:
             clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits,
             stuck_after_s=src.stuck_after_s,
         )
+        self.pipeline.live = self.live
 
     # -- construction -----------------------------------------------------------------------
 
@@ -215,7 +196,7 @@ class Structure:
         s = self.settings
         src = s.source
         kind = src.kind
-        truth = s.dashboard.enabled
+        truth = s.dashboard.enabled and not self.service.fleet  # the truth shape is drawn for one structure only
         rig_override = None
         if src.rig:
             try:
@@ -480,9 +461,11 @@ class MonitoringService(_StoredRows):
         self.dashboard_guard = SinkGuard("dashboard", log)
         shown = next((s for s in self.structures.values() if isinstance(s, Structure)), None)
         if settings.dashboard.enabled and shown is not None:
-            self.dashboard = self._start_dashboard(shown)
+            # a fleet's dashboard reads the structure each browser selects through the port (live ring, status,
+            # rows, spectra); a single structure's is pushed its data
+            self.dashboard = self._start_dashboard(None if self.fleet else shown)
         for structure in self.running_structures():
-            sink = _DashboardSink(self.dashboard, self, structure) if self.dashboard is not None and structure is shown else None
+            sink = _DashboardSink(self.dashboard, self, structure) if self.dashboard is not None and not self.fleet else None
             structure.attach(self.storage, sink, self.dashboard_guard)
         self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
         archives = [s.archive for s in self.running_structures() if s.archive is not None]
@@ -559,25 +542,9 @@ class MonitoringService(_StoredRows):
             raise StructureUnavailable(f"structure {structure_id!r} failed to start: {found.error}")
         return found
 
-    def _start_dashboard(self, structure: Structure) -> Any:
-        try:
-            import web
-
-            Dashboard = getattr(web, "Dashboard")
-        except (ImportError, AttributeError):
-            log.warning("dashboard: web.Dashboard is not available; running without the dashboard")
-            return None
-        d = self.settings.dashboard
-        try:
-            dashboard = Dashboard(host=d.host, port=d.port, rig=structure.rig, units=structure.model.units,
-                                  layout=structure.model.state_layout, stations=structure.model.stations,
-                                  service=_StructureView(self, structure.id) if self.fleet else self, token=self.token)
-        except Exception as exc:
-            log.warning("dashboard failed to start (%s); running without it", exc)
-            return None
-        log.info("dashboard at %s%s", getattr(dashboard, "url", "?"),
-                 f" (structure {structure.id})" if self.fleet else "")
-        return dashboard
+    def _start_dashboard(self, structure: Structure | None) -> Any:
+        """The dashboard of the single ``structure``, or of the fleet (``None``)."""
+        return start_dashboard(self, self.settings, structure, self.token)
 
     # -- running ----------------------------------------------------------------------------
 
@@ -667,6 +634,24 @@ class MonitoringService(_StoredRows):
     def status(self, structure_id: str | None = None) -> StatusDocument:
         """The status of the single structure, or of ``structure_id`` of a fleet."""
         structure = self.primary if structure_id is None else self.structure(structure_id)
+        return self._status_of(structure, self._service_state())
+
+    def _service_state(self) -> dict[str, Any]:
+        """What every structure's status shares: the database's counts and the notifier's (read once
+        for all structures of ``/metrics``)."""
+        return {"active": self.storage.alarms(state="active"), "outbox": self.storage.outbox_counts(),
+                "trend_rows": self.storage.count("trends"), "notifier": self.notifier.snapshot()}
+
+    def statuses(self) -> dict[str, StatusDocument]:
+        """The status of every running structure (the database read once)."""
+        shared = self._service_state()
+        return {s.id: self._status_of(s, shared) for s in self.running_structures()}
+
+    def fleet_metrics(self) -> str:
+        """``/metrics`` of a fleet: every structure's samples labelled ``structure``."""
+        return fleet_metrics(self.structures_document(), self.statuses())
+
+    def _status_of(self, structure: Structure, shared: dict[str, Any]) -> StatusDocument:
         pipeline = structure.pipeline
         p = pipeline.status(queue_depth=structure.queue.qsize(), queue_capacity=structure.queue.maxsize)
         src = structure.source.status()
@@ -682,10 +667,10 @@ class MonitoringService(_StoredRows):
         src["latency_s"] = p.pipeline_latency_s
         states = pipeline.sensor_states()
         counts = {"warning": 0, "alarm": 0}
-        for a in self.storage.alarms(state="active"):
+        for a in shared["active"]:
             if not self.fleet or a.source == structure.id:
                 counts[a.level] += 1
-        outcomes, notifier_sink = self.notifier.snapshot()
+        outcomes, notifier_sink = shared["notifier"]
         return StatusDocument(
             service=ServiceStatusDocument(
                 version=VERSION, started_at=self.started_at, uptime_s=round(time.time() - self.started_at, 1),
@@ -698,13 +683,13 @@ class MonitoringService(_StoredRows):
             sensors=states,
             baseline=BaselineStatusDocument(state=p.baseline, modes=self._baseline_modes(structure)),
             alarms=AlarmCountsDocument(active=counts),
-            notifications=NotificationStatusDocument(**self.storage.outbox_counts(), sent_this_run=outcomes["sent"],
+            notifications=NotificationStatusDocument(**shared["outbox"], sent_this_run=outcomes["sent"],
                                                      failed_attempts_this_run=outcomes["retry"] + outcomes["permanent"]
                                                      + outcomes["given_up"],
                                                      outcomes_this_run=dict(outcomes),
                                                      last_error=self.notifier.last_error),
             storage=StorageStatusDocument(db=str(self.settings.db), schema_version=self.storage.schema_version,
-                                          trend_rows=self.storage.count("trends"),
+                                          trend_rows=shared["trend_rows"],
                                           archive=None if pipeline.archive is None else pipeline.archive.status(),
                                           write_retries=self.storage.retries, write_failures=self.storage.failures,
                                           windows_waiting=pipeline.pending_commits, last_error=self.storage.last_error),
@@ -753,6 +738,28 @@ class MonitoringService(_StoredRows):
     def spectra(self, structure_id: str | None = None) -> SpectrumDocument | None:
         structure = self.primary if structure_id is None else self.structure(structure_id)
         return structure.pipeline.analytics.latest_spectrum
+
+    # -- the fleet's dashboard port (FleetDashboardService) and its routes --------------------
+
+    def structure_status(self, structure_id: str) -> StatusDocument:
+        return self.status(structure_id)
+
+    def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
+        return self.spectra(structure_id)
+
+    def structure_rig(self, structure_id: str) -> RigDescription:
+        """The rig structure ``structure_id`` is monitored with (``GET /api/structures/{id}/rig``)."""
+        return self.structure(structure_id).rig
+
+    def structure_model(self, structure_id: str) -> StructureModel:
+        structure = self.structure(structure_id)
+        m = structure.model
+        return StructureModel(id=structure.id, rig=structure.rig, units=m.units, layout=m.state_layout, stations=m.stations)
+
+    def live(self, structure_id: str, after: int = 0) -> LiveEstimatesDocument:
+        """The structure's newest estimates after ``after`` (``GET /api/structures/{id}/live``); starts its watch."""
+        structure = self.structure(structure_id)
+        return structure.live.document(after, structure.pipeline.sensor_states())
 
     def ingest(self, document: Any, structure_id: str | None = None) -> IngestResultDocument | None:
         structure = self.primary if structure_id is None else self.structure(structure_id)

@@ -26,6 +26,8 @@ from contract import (
     BaselineRequestDocument,
     HealthDocument,
     IngestResultDocument,
+    LiveEstimatesDocument,
+    RigDescription,
     SpectrumDocument,
     StatusDocument,
     StructuresDocument,
@@ -33,9 +35,11 @@ from contract import (
 )
 
 from ._config import ServiceSettings, render_toml, resolve_token
+from ._dashboard_port import StructureModel, start_dashboard
+from ._metrics import fleet_metrics, merge_expositions
 from ._ingest import IngestError
 from ._notify import Notifier, notify_targets
-from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable, _StoredRows
+from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable, _ModelCache, _StoredRows
 from ._storage import Storage
 
 __all__ = ["WorkerFleet", "part_of"]
@@ -84,8 +88,15 @@ class WorkerFleet(_StoredRows):
         self._json = json_summary
         self._environ = dict(os.environ if environ is None else environ)
         self._client = httpx.Client(timeout=30.0)
+        # the dashboard polls the structure it shows a few times a second: not a line each in the log
+        logging.getLogger("httpx").setLevel(max(logging.WARNING, logging.getLogger("httpx").getEffectiveLevel()))
         self._done = threading.Event()
         self._starting = False
+        self.paused = False
+        # the dashboard lives here (it serves every structure); the workers run none
+        self.dashboard: Any = None
+        self._models = _ModelCache()
+        self._structure_models: dict[str, StructureModel] = {}
 
     # -- running ----------------------------------------------------------------------------
 
@@ -105,8 +116,7 @@ class WorkerFleet(_StoredRows):
                     continue
                 cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(config), "--worker-of", f"{i}/{n}",
                        "--host", "127.0.0.1", "--port", "0"]
-                if i > 0:
-                    cmd.append("--no-dashboard")  # the dashboard shows the first structure: worker 0's
+                cmd.append("--no-dashboard")  # the front's dashboard reads each structure from its worker
                 if self._json:
                     cmd.append("--json")
                 launched.append((i, ids, subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=self._environ)))
@@ -130,6 +140,8 @@ class WorkerFleet(_StoredRows):
             self._starting = False
         self.notifier.start()
         threading.Thread(target=self._watch, name="workers", daemon=True).start()
+        if self.settings.dashboard.enabled:
+            self.dashboard = start_dashboard(self, self.settings, None, self.token)
 
     def _drain(self, worker: _Worker) -> None:
         for line in worker.process.stdout:  # type: ignore[union-attr]
@@ -165,6 +177,11 @@ class WorkerFleet(_StoredRows):
 
     def stop(self, *, drain_s: float = 2.0) -> int:
         """Stop the workers (each drains and prints its summary) and the notifier; the worst exit code."""
+        if self.dashboard is not None:
+            try:
+                self.dashboard.stop()
+            except Exception as exc:
+                log.warning("dashboard stop failed: %s", exc)
         self._terminate(wait_s=60.0)
         self.notifier.stop(drain_s=drain_s)
         self._client.close()
@@ -284,3 +301,59 @@ class WorkerFleet(_StoredRows):
             raise IngestError(r.json().get("detail", "bad batch"))
         r.raise_for_status()
         return IngestResultDocument.model_validate(r.json())
+
+    def fleet_metrics(self) -> str:
+        """``/metrics``: the workers' expositions merged (each structure's samples as its worker gives
+        them, the processes' counters summed); the notifications are the front's (it delivers them)."""
+        texts = []
+        headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
+        for worker in self.workers:
+            if worker.process.poll() is not None:
+                continue
+            try:
+                r = self._client.get(f"{worker.url}/metrics", headers=headers)
+                r.raise_for_status()
+                texts.append(r.text)
+            except httpx.HTTPError as exc:
+                log.warning("worker %d: /metrics failed: %s", worker.index, exc)
+        outcomes, _ = self.notifier.snapshot()
+        overrides = {"shm_notifications_total": [({"outcome": k}, float(outcomes.get(k, 0)))
+                                                 for k in ("sent", "retry", "permanent", "given_up")],
+                     "shm_uptime_seconds": [({}, round(time.time() - self.started_at, 1))]}
+        # the structures as the front lists them (a worker that died: its structures failed)
+        return merge_expositions(texts, overrides, front=fleet_metrics(self.structures_document(), {}))
+
+    # -- the dashboard's port (FleetDashboardService) ---------------------------------------
+
+    def set_paused(self, paused: bool) -> None:
+        self.paused = bool(paused)  # the fleet's dashboard is pushed nothing: it stops polling what no browser shows
+
+    def structure_status(self, structure_id: str) -> StatusDocument:
+        return self.status(structure_id)
+
+    def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
+        return self.spectra(structure_id)
+
+    def structure_rig(self, structure_id: str) -> RigDescription:
+        r = self._forward("GET", structure_id, "rig")
+        r.raise_for_status()
+        return RigDescription.model_validate(r.json())
+
+    def live(self, structure_id: str, after: int = 0) -> LiveEstimatesDocument:
+        r = self._forward("GET", structure_id, "live", params={"after": int(after)})
+        r.raise_for_status()
+        return LiveEstimatesDocument.model_validate(r.json())
+
+    def structure_model(self, structure_id: str) -> StructureModel:
+        """The structure's rig from its worker and the model built here from it with the
+        structure's estimator settings, as its worker built it (once per distinct rig and
+        settings; only for a structure a browser selects)."""
+        found = self._structure_models.get(structure_id)
+        if found is not None:
+            return found
+        rig = self.structure_rig(structure_id)
+        settings = next(s for s in self.settings.structures if s.id == structure_id)
+        model = self._models.get(rig, self.settings.for_structure(settings).estimator)
+        found = StructureModel(id=structure_id, rig=rig, units=model.units, layout=model.state_layout, stations=model.stations)
+        self._structure_models[structure_id] = found
+        return found

@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import os
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -289,6 +290,17 @@ def _support_offset(scene: np.ndarray) -> float:
     return float(np.median(np.nonzero(dark)[0]) - np.median(np.nonzero(blue)[0])) / scene.shape[0]
 
 
+def stop_process(proc: subprocess.Popen) -> None:
+    """SIGTERM (``shm serve`` drains and prints its summary), then kill after a minute."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(10)
+
+
 def _wait(predicate, timeout: float, what: str, poll: float = 0.25):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -318,7 +330,6 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, case)
     acknowledged over the HTTP API shown as such."""
     import contextlib
     import re
-    import signal
     import sys
 
     import httpx
@@ -453,13 +464,7 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, case)
             assert len(names) == 5 + modes + max(4, modes) + 1
     finally:
         stack.close()
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(60)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(10)
+        stop_process(proc)
     text = log.read_text()
     assert proc.returncode == 0, text[-3000:]
     assert "Traceback" not in text and " ERROR " not in text, text[-3000:]

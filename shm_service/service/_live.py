@@ -1,0 +1,78 @@
+"""A structure's live estimates for a dashboard that does not share its process (the front of a
+fleet's worker processes): a small ring of the newest state estimates, decimated in data time,
+kept only while someone watches (reads) the structure. An unwatched structure pays one clock
+read per batch and keeps nothing, so a fleet of hundreds costs nothing for the ones not shown.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+import numpy as np
+
+from contract import LiveEstimatesDocument
+
+__all__ = ["LiveRing"]
+
+#: Estimates kept per second of data (a live 3-D view needs no more) and how many (≈ 60 s).
+LIVE_HZ = 10.0
+LIVE_CAPACITY = 600
+#: A read keeps the ring filled this long (a dashboard polls every fraction of a second).
+WATCH_S = 20.0
+
+
+class LiveRing:
+    """The newest estimates of one structure (thread-safe: the pipeline adds, the API reads)."""
+
+    def __init__(self, source_id: str, state_names: list[str], *, hz: float = LIVE_HZ, capacity: int = LIVE_CAPACITY,
+                 watch_s: float = WATCH_S) -> None:
+        if not (hz > 0 and capacity >= 1 and watch_s > 0):
+            raise ValueError(f"{hz=} must be > 0, {capacity=} >= 1 and {watch_s=} > 0")
+        self.source_id = source_id
+        self.state_names = list(state_names)
+        self.hz = float(hz)
+        self.watch_s = float(watch_s)
+        self._items: deque[tuple[int, float, np.ndarray]] = deque(maxlen=capacity)
+        self._seq = 0
+        self._last_tick = -np.inf
+        self._watch_until = -np.inf  # monotonic s
+        self._lock = threading.Lock()
+
+    @property
+    def watched(self) -> bool:
+        return time.monotonic() < self._watch_until
+
+    def add(self, t_s: np.ndarray, x: np.ndarray) -> None:
+        """A batch's estimates (``t_s`` (n,) UNIX s, ``x`` (n, nx)): kept at ``hz`` while watched."""
+        if time.monotonic() >= self._watch_until:
+            return
+        t = np.asarray(t_s, dtype=float)
+        if t.size == 0:
+            return
+        tick = np.floor(t * self.hz + 1e-6)  # (a stamp on a tick is in it, whatever the rounding of t·hz)
+        with self._lock:
+            # the first estimate of each new tick of data time (ticks of 1/hz s)
+            keep = np.flatnonzero(np.diff(np.concatenate([[self._last_tick], tick])) > 0)
+            for k in keep:
+                self._seq += 1
+                self._items.append((self._seq, float(t[k]), np.array(x[k], dtype=float)))
+            if keep.size:
+                self._last_tick = float(tick[keep[-1]])
+
+    def read(self, after: int = 0) -> tuple[int, list[float], list[list[float]]]:
+        """(newest seq, times, states) of the estimates newer than ``after``; starts or extends the watch."""
+        if after < 0:
+            raise ValueError(f"{after=} must be >= 0")
+        with self._lock:
+            if not self.watched:  # a new watch: what was kept before is stale
+                self._items.clear()
+                self._last_tick = -np.inf
+            self._watch_until = time.monotonic() + self.watch_s
+            items = [it for it in self._items if it[0] > after]
+            return self._seq, [it[1] for it in items], [it[2].tolist() for it in items]
+
+    def document(self, after: int, sensors: dict[str, str]) -> LiveEstimatesDocument:
+        seq, times, states = self.read(after)
+        return LiveEstimatesDocument(source=self.source_id, seq=seq, state_names=self.state_names, t_s=times, x=states,
+                                     sensors=sensors, watch_s=self.watch_s)
