@@ -63,7 +63,7 @@ class WorkerFleet(_StoredRows):
     """The front of a fleet hosted by worker processes (implements what the API needs)."""
 
     def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None, json_summary: bool = False) -> None:
-        if not settings.fleet or settings.workers < 2:
+        if not settings.fleet or settings.worker_count < 2:
             raise ServiceError("worker processes need [[structures]] and workers >= 2")
         self.settings = settings
         self.fleet = True
@@ -90,7 +90,7 @@ class WorkerFleet(_StoredRows):
     # -- running ----------------------------------------------------------------------------
 
     def start(self) -> None:
-        n = self.settings.workers
+        n = self.settings.worker_count
         directory = Path(self.settings.data_dir or ".")
         directory.mkdir(parents=True, exist_ok=True)
         config = directory / "fleet-workers.toml"

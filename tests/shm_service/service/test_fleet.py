@@ -58,6 +58,23 @@ def test_without_structures_the_service_is_one_structure(tmp_path):
     settings.for_structure  # noqa: B018 - exists, unused without a list
 
 
+def test_a_fleet_takes_one_worker_process_per_core_unless_told(tmp_path, monkeypatch):
+    """``workers = "auto"`` (the default): one worker process per core the service may run on, at
+    most one per structure; a number is taken as given; a single structure has no workers."""
+    import os
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    three = [{"id": f"m{k}"} for k in range(3)]
+    assert _fleet(tmp_path, three).workers == "auto" and _fleet(tmp_path, three).worker_count == 2
+    assert _fleet(tmp_path, three[:1]).worker_count == 1  # one structure: no second process
+    assert _fleet(tmp_path, three, workers=1).worker_count == 1
+    assert _fleet(tmp_path, three, workers=3).worker_count == 3
+    assert load_settings(None, fast_overrides(tmp_path)).worker_count == 1
+    for bad in (0, "two"):
+        with pytest.raises(SettingsError, match="workers"):
+            _fleet(tmp_path, three, workers=bad)
+
+
 @pytest.mark.parametrize("structures, words", [
     ([{"id": "Mast_1"}], ["id"]),
     ([{"id": "a"}, {"id": "a"}], ["'a'", "more than once"]),
