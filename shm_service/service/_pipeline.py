@@ -60,7 +60,7 @@ from ..recording import FollowBlock, encode_payloads_json
 from ._alarms import alarm_changes, clear_changes
 from ._archive import Archive
 from ._sinks import SinkGuard
-from ._plausibility import SourceClock, ValueLimits, implausible_values
+from ._plausibility import SourceClock, ValueLimits, all_plausible, implausible_values
 from ._storage import AlarmChange, Storage, WindowCommit, is_transient
 
 __all__ = ["Batch", "Pipeline", "PipelineSink"]
@@ -692,7 +692,8 @@ class Pipeline:
                 if not ok.all():
                     self.rejected.update(clock.count(b.topic, codes, b.log_time_ns, mono=mono))
                     keep = ok
-            if self.limits is not None and b.kind in ("imu", "tof", "strain", "bearing", "temperature"):
+            if self.limits is not None and b.kind in ("imu", "tof", "strain", "bearing", "temperature") \
+                    and not all_plausible(b.kind, b.values, self.limits):
                 taken = np.ones(len(b), dtype=bool) if keep is None else keep
                 nonfinite = ~np.all(np.isfinite(b.values.reshape(len(b), -1)), axis=1)
                 bad = implausible_values(b.kind, b.values, self.limits) & ~nonfinite
