@@ -50,6 +50,17 @@ def part_of(settings: ServiceSettings, index: int, count: int) -> ServiceSetting
     return settings.model_copy(update={"structures": settings.structures[index::count]})
 
 
+def _api_line(process: subprocess.Popen) -> str | None:
+    """The worker's "API at URL" line (None: it ended before printing one). What it prints before
+    (the dashboard's banner of worker 0) is passed on to stderr, not taken for a failed start."""
+    for line in process.stdout or ():
+        if "API at " in line:
+            return line
+        if line.strip():
+            print(line.rstrip(), file=sys.stderr, flush=True)
+    return None
+
+
 class _Worker:
     def __init__(self, index: int, process: subprocess.Popen, url: str, ids: list[str]) -> None:
         self.index = index
@@ -111,8 +122,8 @@ class WorkerFleet(_StoredRows):
                     cmd.append("--json")
                 launched.append((i, ids, subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=self._environ)))
             for i, ids, process in launched:
-                line = process.stdout.readline() if process.stdout else ""
-                if "API at " not in line:
+                line = _api_line(process)
+                if line is None:
                     code = process.wait(60)
                     raise ServiceError(f"worker process {i} of {n} did not start (exit code {code}; its log is above)")
                 worker = _Worker(i, process, line.split("API at ")[1].split()[0], ids)

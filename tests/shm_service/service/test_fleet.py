@@ -323,3 +323,37 @@ def test_a_fleet_on_worker_processes_behind_one_api(tmp_path, short_recording):
     summary = json.loads(out.strip().splitlines()[-1])
     assert [r["id"] for r in summary["structures"]] == ["a", "b", "c"] and summary["workers"] == 2
     assert proc.returncode == 1  # c could not start
+
+
+def test_a_fleet_on_worker_processes_with_its_dashboard_on(tmp_path, short_recording):
+    """The default invocation of a fleet (``workers = "auto"`` on this machine's cores, the
+    dashboard on): worker 0 serves the dashboard (whatever it prints before its API line is not
+    taken for a failed start), the front serves every structure's state."""
+    import os
+    import subprocess
+    import sys
+
+    config = tmp_path / "fleet.toml"
+    config.write_text(
+        "workers = 2\n[estimator]\ncalibration_s = 10.0\nwarmup_s = 5.0\n[analytics]\nwindow_s = 20.0\nbaseline_s = 40.0\n"
+        "baseline_min_windows = 3\n[dashboard]\nport = 0\n[archive]\nenabled = false\n"
+        f'[[structures]]\nid = "a"\nsource = "replay:{short_recording}"\n'
+        f'[[structures]]\nid = "b"\nsource = "replay:{short_recording}"\n', encoding="utf-8")
+    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(config), "--port", "0", "--speed", "max",
+           "--db", str(tmp_path / "shm.sqlite"), "--keep-running"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env={**os.environ, "SHM_TOKEN": TOKEN})
+    try:
+        line = proc.stdout.readline()
+        assert "API at " in line and "2 worker processes" in line, line
+        url = line.split("API at ")[1].split()[0]
+        dashboard = _wait(lambda: next((x for x in iter(proc.stdout.readline, "") if "dashboard at " in x), None), 120,
+                          "the dashboard's line")
+        page = httpx.get(dashboard.split("dashboard at ")[1].split()[0], timeout=30)
+        assert page.status_code == 200
+        with httpx.Client(base_url=url, timeout=60) as c:
+            done = _wait(lambda: (lambda d: d if all(s["state"] == "finished" for s in d.values()) else None)(
+                {s["id"]: s for s in c.get("/api/structures").json()["structures"]}), 300, "both structures to finish")
+            assert list(done) == ["a", "b"] and done["a"]["windows"] == done["b"]["windows"] > 0
+    finally:
+        proc.send_signal(__import__("signal").SIGTERM)
+        proc.communicate(timeout=120)
