@@ -311,12 +311,16 @@ class Structure:
             log.error("%s%s: %s (%d batches failed so far)", f"structure {self.id}: " if self.service.fleet else "", what,
                       text, self.pipeline_errors)
 
-    def touch(self, storage: Storage, now: float) -> None:
-        """Note in the database that the source delivered since the last call."""
+    def untouched(self) -> tuple[int, tuple[str, str, str]] | None:
+        """(samples, (id, kind, spec)) when the source delivered since it was last noted in the
+        database (``Storage.touch_sources``, then ``touched(samples)``), else None."""
         samples = sum(self.pipeline.samples.values())
-        if samples != self._touched_samples:
-            storage.touch_source(self.id, self.source.kind, self.settings.source.spec, now)
-            self._touched_samples = samples
+        if samples == self._touched_samples:
+            return None
+        return samples, (self.id, self.source.kind, self.settings.source.spec)
+
+    def touched(self, samples: int) -> None:
+        self._touched_samples = samples
 
     def wait(self, timeout: float | None = None) -> bool:
         return self._done.wait(timeout)
@@ -606,8 +610,11 @@ class MonitoringService(_StoredRows):
         now = time.time() if now is None else now
         a = self.settings.alarms
         try:
-            for structure in self.running_structures():
-                structure.touch(self.storage, now)
+            # one transaction for all the structures (each its own would take the database's lock)
+            due = [(s, u) for s, u in ((s, s.untouched()) for s in self.running_structures()) if u is not None]
+            self.storage.touch_sources([row for _, (_, row) in due], now)
+            for structure, (samples, _) in due:
+                structure.touched(samples)
             stale = self.storage.mark_stale(now - a.stale_after_s, now)
             if stale:
                 log.warning("alarm(s) %s marked stale: their source has delivered no data for %.0f s", stale, a.stale_after_s)

@@ -449,11 +449,19 @@ class Storage:
 
     def touch_source(self, source: str, kind: str, detail: str, seen_at: float) -> None:
         """Record that ``source`` delivered data at ``seen_at`` (UNIX s, wall clock)."""
+        self.touch_sources([(source, kind, detail)], seen_at)
+
+    def touch_sources(self, sources: Sequence[tuple[str, str, str]], seen_at: float) -> None:
+        """``touch_source`` of several (source, kind, detail) in one transaction (a fleet's
+        housekeeping: one write for all its structures, not one each taking the database's lock)."""
+        if not sources:
+            return
+
         def run(db: sqlite3.Connection) -> None:
-            db.execute(
+            db.executemany(
                 "INSERT INTO sources (id, kind, detail, first_seen_s, last_seen_s) VALUES (?, ?, ?, ?, ?) "
                 "ON CONFLICT(id) DO UPDATE SET kind=excluded.kind, detail=excluded.detail, last_seen_s=excluded.last_seen_s",
-                (source, kind, detail, seen_at, seen_at),
+                [(source, kind, detail, seen_at, seen_at) for source, kind, detail in sources],
             )
         self._write(run)
 
