@@ -206,7 +206,7 @@ class Structure:
             commit_retry_s=settings.storage_retry_s,
             # ingest is judged per message by its validator (its response says what was refused)
             clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits,
-            stuck_after_s=src.stuck_after_s,
+            stuck_after_s=src.stuck_after_s, analysis_thread=True,
         )
 
     # -- construction -----------------------------------------------------------------------
@@ -257,6 +257,9 @@ class Structure:
     # -- running ----------------------------------------------------------------------------
 
     def start(self) -> None:
+        # the windows are analysed and committed in a thread of their own: the estimator keeps pace meanwhile
+        self.pipeline.start_analysis(on_error=lambda exc: self._batch_failed(exc, what="analysis error; the chunk's windows skipped"),
+                                     name=f"analysis-{self.id}")
         self._thread = threading.Thread(target=self._pipeline_loop, name=f"pipeline-{self.id}", daemon=True)
         self._thread.start()
         self.source.start()
@@ -269,8 +272,9 @@ class Structure:
                 try:
                     item = self.queue.get(timeout=1.0)
                 except queue.Empty:
-                    # No data: windows that wait for the database are tried again meanwhile.
-                    if pipeline.pending_commits:
+                    # No data: windows that wait for the database are tried again meanwhile
+                    # (by the analysis thread when there is one).
+                    if pipeline.pending_commits and not pipeline.analysis_threaded:
                         try:
                             pipeline.flush_commits()
                         except Exception as exc:
@@ -344,6 +348,8 @@ class Structure:
             reasons.append(f"pipeline: {self.pipeline_error}")
         if self.pipeline.storage_error is not None and self.pipeline.storage_error != self.pipeline_error:
             reasons.append(self.pipeline.storage_error)
+        if self.pipeline.analysis_error is not None and self.pipeline.analysis_error != self.pipeline_error:
+            reasons.append(f"analysis: {self.pipeline.analysis_error}")
         reasons.extend(self.pipeline.health_problems())
         src = self.source
         if src.state == "failed":
