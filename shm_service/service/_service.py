@@ -329,6 +329,11 @@ class Structure:
     def wait(self, timeout: float | None = None) -> bool:
         return self._done.wait(timeout)
 
+    def skip(self) -> None:
+        """The service stopped before this structure started: it is done without running."""
+        self.source.state = "stopped"
+        self._done.set()
+
     @property
     def done(self) -> bool:
         return self._done.is_set()
@@ -503,6 +508,7 @@ class MonitoringService(_StoredRows):
         self._lock = threading.Lock()
         self._done = threading.Event()
         self._stopping = threading.Event()
+        self._starting = threading.Lock()
         self.api = None
 
     def running_structures(self) -> list[Structure]:
@@ -596,9 +602,43 @@ class MonitoringService(_StoredRows):
             self.notifier.start()
         self.retention.start()
         threading.Thread(target=self._housekeeping_loop, name="housekeeping", daemon=True).start()
+        paced = [s for s in self.running_structures() if s.kind in ("sim", "replay") and s.speed is not None]
         for structure in self.structures.values():
-            structure.start()
+            if structure not in paced:
+                structure.start()
+        delay = self.start_stagger_s(paced)
+        if delay > 0:
+            paced[0].start()
+            threading.Thread(target=self._start_staggered, args=(paced[1:], delay), name="starting", daemon=True).start()
+        else:
+            for structure in paced:
+                structure.start()
         threading.Thread(target=self._watch_done, name="done", daemon=True).start()
+
+    @staticmethod
+    def start_stagger_s(paced: list[Structure], most_s: float = 0.5, span_s: float = 30.0) -> float:
+        """Seconds between the starts of the paced structures (sim, replay at a speed) of a fleet.
+
+        Started together, they would run in step: their rest calibrations end, and their windows
+        fall due, at the same wall instant, and each such burst of work (a calibration and the
+        filter's first minute, ~0.2 s of CPU; a window's analysis) hits every structure at once.
+        Spread over one window step of wall time (at most ``span_s``), at most ``most_s`` apart,
+        the bursts come one structure after the other. Nothing of the data changes: a paced
+        structure's data time and pace start with its own first batch."""
+        if len(paced) < 2:
+            return 0.0
+        step_wall = max(s.settings.analytics.window_s * (1 - s.settings.analytics.overlap) / s.speed for s in paced)
+        return min(most_s, min(step_wall, span_s) / len(paced))
+
+    def _start_staggered(self, structures: list[Structure], delay_s: float) -> None:
+        for k, structure in enumerate(structures):
+            self._stopping.wait(delay_s)
+            with self._starting:  # stop() sees a structure either started or skipped
+                if self._stopping.is_set():
+                    for rest in structures[k:]:
+                        rest.skip()  # stopped before it started: it is done
+                    return
+                structure.start()
 
     def _watch_done(self) -> None:
         for structure in self.structures.values():
@@ -642,6 +682,8 @@ class MonitoringService(_StoredRows):
         if self._stopping.is_set():
             return
         self._stopping.set()
+        with self._starting:
+            pass  # a structure being started (staggered) is started now
         for structure in self.structures.values():
             structure.stop_source()
         deadline = time.monotonic() + 30.0

@@ -357,3 +357,20 @@ def test_a_fleet_on_worker_processes_with_its_dashboard_on(tmp_path, short_recor
     finally:
         proc.send_signal(__import__("signal").SIGTERM)
         proc.communicate(timeout=120)
+
+
+def test_paced_structures_start_one_after_the_other_over_a_window_step():
+    """The starts of a fleet's paced structures are spread over one window step of wall time (so
+    their calibrations and windows do not all fall due at once), at most 0.5 s apart."""
+    from types import SimpleNamespace
+
+    def paced(n, speed, window_s=60.0, overlap=0.5):
+        analytics = SimpleNamespace(window_s=window_s, overlap=overlap)
+        return [SimpleNamespace(settings=SimpleNamespace(analytics=analytics), speed=speed) for _ in range(n)]
+
+    stagger = MonitoringService.start_stagger_s
+    assert stagger(paced(1, 1.0)) == 0.0  # nothing to spread
+    assert stagger(paced(50, 2.0)) == pytest.approx(15.0 / 50)  # 30 s of data per step = 15 s of wall time
+    assert stagger(paced(100, 1.0)) == pytest.approx(30.0 / 100)
+    assert stagger(paced(25, 2.0)) == stagger(paced(2, 1.0)) == 0.5  # at most half a second apart
+    assert stagger(paced(100, 0.5)) == pytest.approx(30.0 / 100)  # over at most 30 s
