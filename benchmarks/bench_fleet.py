@@ -9,11 +9,12 @@
 
 - the CPU per structure-second of one simulated structure (the virtual rig's generation and the
   pipeline, apart), and how many one core hosts at real time;
-- live fleets: ``shm serve`` of N simulated structures in one and in two worker processes (one
-  database), the worst lag of each structure, windows committed, RSS of all processes, CPU.
+- live fleets: ``shm serve --workers 1|2`` of N simulated structures (all in one process, or in
+  two worker processes behind one API on one database), the worst lag of each structure (overall
+  and after the first minute), windows committed, RSS of all processes, CPU.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_fleet [--replay FILE] [--files 8] [--skip-reprocess]
-     [--skip-memory] [--structures 4] [--skip-live] [--live 10 25] [--live-s 240] [--live-speed 1]
+     [--skip-memory] [--structures 4] [--skip-live] [--live 10 25] [--live-s 240] [--live-speed 1] [--live-dashboard]
 (``main()`` is the entry for ``python -m benchmarks``; the eight files are the one-hour recording
 under eight names, hard links: the work per file is that of eight different hours.)
 """
@@ -218,81 +219,80 @@ def _fleet_toml(ids: list[str], block_s: float, duration_s: float) -> str:
     return "\n".join(lines)
 
 
-def _run_fleet(tmp: str, parts: list[list[str]], procs: list, urls: list, speed: float, seconds: float, block_s: float,
-               poll_s: float, worst: dict, last: dict, first: dict) -> tuple[float, float, float, str]:
+def _run_fleet(tmp: str, ids: list[str], workers: int, speed: float, seconds: float, block_s: float, poll_s: float,
+               dashboard: bool, worst: dict, last: dict, first: dict, after_s: float) -> tuple[float, float, float, str, dict]:
+    """One ``shm serve`` of the fleet on ``workers`` worker processes (``--workers``; 1: all in the
+    process started), polled at its one API; RSS and CPU of that process and its workers."""
     import httpx
     import psutil
 
-    for i, part in enumerate(parts):
-        cfg = Path(tmp) / f"fleet-{i}.toml"
-        cfg.write_text(_fleet_toml(part, block_s, max(3600.0, 2 * speed * seconds)), encoding="utf-8")
-        cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(cfg), "--speed", str(speed), "--no-archive",
-               "--no-dashboard", "--port", "0", "--db", f"{tmp}/shm.sqlite", "--json"]
-        log = open(Path(tmp) / f"serve-{i}.log", "w")
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
-        procs.append(proc)
-        line = proc.stdout.readline()  # one after the other: the first creates the database
-        if "API at " not in line:
-            proc.wait(30)
-            raise RuntimeError(f"shm serve did not start: {(Path(tmp) / f'serve-{i}.log').read_text()[-2000:]}")
-        urls.append(line.split("API at ")[1].split()[0])
+    cfg = Path(tmp) / "fleet.toml"
+    cfg.write_text(_fleet_toml(ids, block_s, max(3600.0, 2 * speed * seconds)), encoding="utf-8")
+    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(cfg), "--speed", str(speed), "--no-archive",
+           "--port", "0", "--db", f"{tmp}/shm.sqlite", "--workers", str(workers), "--json"]
+    cmd += ["--dashboard-port", "0"] if dashboard else ["--no-dashboard"]
+    log = open(Path(tmp) / "serve.log", "w")
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
+    line = proc.stdout.readline()
+    if "API at " not in line:
+        proc.wait(30)
+        raise RuntimeError(f"shm serve did not start: {(Path(tmp) / 'serve.log').read_text()[-2000:]}")
+    url = line.split("API at ")[1].split()[0]
+    front = psutil.Process(proc.pid)
     load = _load()
-    ps = [psutil.Process(p.pid) for p in procs]
-    cpu0 = sum(q.cpu_times().user + q.cpu_times().system for q in ps)
     started = time.monotonic()
     peak_rss = 0.0
+    cpu0 = None
+    worst_after: dict[str, float] = {}
     with httpx.Client(timeout=30) as client:
         while time.monotonic() - started < seconds:
             time.sleep(poll_s)
-            for url in urls:
-                for s in client.get(f"{url}/api/structures").json()["structures"]:
-                    if s["id"] not in last and s["data_time_s"] is not None:
-                        first[s["id"]] = s["data_time_s"]
-                    last[s["id"]] = s
-                    if s["lag_s"] is not None:
-                        worst[s["id"]] = max(worst.get(s["id"], -1e9), s["lag_s"])
+            ps = [front, *front.children(recursive=True)]
+            if cpu0 is None and len(ps) >= workers:  # the workers are up: CPU from here
+                cpu0, cpu_started = sum(q.cpu_times().user + q.cpu_times().system for q in ps), time.monotonic()
+            for s in client.get(f"{url}/api/structures").json()["structures"]:
+                if s["id"] not in last and s["data_time_s"] is not None:
+                    first[s["id"]] = s["data_time_s"]
+                last[s["id"]] = s
+                if s["lag_s"] is not None:
+                    worst[s["id"]] = max(worst.get(s["id"], -1e9), s["lag_s"])
+                    if time.monotonic() - started >= after_s:
+                        worst_after[s["id"]] = max(worst_after.get(s["id"], -1e9), s["lag_s"])
             peak_rss = max(peak_rss, sum(q.memory_info().rss for q in ps) / 2**20)
-    wall = time.monotonic() - started
-    cpu = sum(q.cpu_times().user + q.cpu_times().system for q in ps) - cpu0
-    for p in procs:
-        p.send_signal(signal.SIGINT)
-    for p in procs:
-        try:
-            p.wait(60)
-        except subprocess.TimeoutExpired:
-            p.kill()
-    return wall, cpu, peak_rss, load
+    ps = [front, *front.children(recursive=True)]
+    wall = time.monotonic() - cpu_started if cpu0 is not None else time.monotonic() - started
+    cpu = sum(q.cpu_times().user + q.cpu_times().system for q in ps) - (cpu0 or 0.0)
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(90)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+    return wall, cpu, peak_rss, load, worst_after
 
 
 def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 240.0, processes: int = 1,
-                     block_s: float = 2.0, poll_s: float = 5.0) -> dict:
-    """``shm serve`` of ``structures`` simulated structures (``--no-archive --no-dashboard``),
-    split over ``processes`` worker processes (each a service hosting its part, one database),
-    for ``seconds`` of wall time at ``--speed``: the worst lag of every structure from
-    ``/api/structures`` (polled every ``poll_s``), windows committed, the RSS of all processes
-    together and the CPU per structure-second."""
+                     block_s: float = 2.0, poll_s: float = 5.0, dashboard: bool = False, after_s: float = 60.0) -> dict:
+    """``shm serve`` of ``structures`` simulated structures (``--no-archive``, with or without the
+    dashboard) on ``processes`` worker processes (``--workers``: each hosts every n-th structure,
+    one database, one API), for ``seconds`` of wall time at ``--speed``: the worst lag of every
+    structure from ``/api/structures`` (polled every ``poll_s``; overall and after ``after_s``),
+    windows committed, the RSS of all processes together and the CPU per structure-second."""
     ids = [f"mast-{k + 1:03d}" for k in range(structures)]
-    parts = [ids[i::processes] for i in range(processes)]
     worst: dict[str, float] = {}
     last: dict[str, dict] = {}
     first: dict[str, float] = {}  # data time at the first poll with data
     with tempfile.TemporaryDirectory() as tmp:
-        procs, urls = [], []
-        try:
-            result = _run_fleet(tmp, parts, procs, urls, speed, seconds, block_s, poll_s, worst, last, first)
-        finally:
-            for p in procs:
-                if p.poll() is None:
-                    p.kill()
-    wall, cpu, peak_rss, load = result
+        wall, cpu, peak_rss, load, worst_after = _run_fleet(tmp, ids, processes, speed, seconds, block_s, poll_s, dashboard,
+                                                            worst, last, first, after_s)
     lags = [worst.get(i) for i in ids]
     windows = [last.get(i, {}).get("windows", 0) for i in ids]
     states = sorted({last.get(i, {}).get("state", "?") for i in ids})
     # the data the structures processed while measured (the CPU's denominator: a fleet that
     # falls behind processes less than speed x wall)
     data_s = sum((last[i]["data_time_s"] or first[i]) - first[i] for i in ids if i in first)
-    result = {"structures": structures, "processes": processes, "speed": speed, "block_s": block_s, "wall_s": round(wall, 1),
-              "worst_lag_s": None if None in lags else round(max(lags), 2),
+    result = {"structures": structures, "processes": processes, "dashboard": dashboard, "speed": speed, "block_s": block_s,
+              "wall_s": round(wall, 1), "worst_lag_s": None if None in lags else round(max(lags), 2),
+              f"worst_lag_after_{after_s:g}s": round(max(worst_after.values()), 2) if worst_after else None,
               "structures_lag_over_5s": sum(1 for x in lags if x is None or x > 5.0),
               "min_windows": min(windows), "structures_without_windows": sum(1 for w in windows if w == 0), "states": states,
               "peak_rss_mib": round(peak_rss, 1), "rss_per_structure_mib": round(peak_rss / structures, 1),
@@ -317,6 +317,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="live fleets of N simulated structures (one and two worker processes each)")
     p.add_argument("--live-s", type=float, default=240.0, help="wall time of each live fleet, s")
     p.add_argument("--live-speed", type=float, default=1.0)
+    p.add_argument("--live-dashboard", action="store_true", help="live fleets with the dashboard on (worker 0 serves it)")
     args, _ = p.parse_known_args(argv)
     if not args.skip_memory:  # first: before this process imports the cluster's libraries
         bench_memory_per_structure(args.structures)
@@ -324,7 +325,8 @@ def main(argv: list[str] | None = None) -> int:
     if not args.skip_live:
         for n in args.live:
             for processes in (1, 2):
-                bench_live_fleet(n, speed=args.live_speed, seconds=args.live_s, processes=processes)
+                bench_live_fleet(n, speed=args.live_speed, seconds=args.live_s, processes=processes,
+                                 dashboard=args.live_dashboard)
     scheduler = bench_scheduler()
     if not args.skip_reprocess:
         results = bench_reprocess(Path(args.replay), args.files)

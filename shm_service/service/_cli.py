@@ -38,7 +38,8 @@ def add_serve_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--no-archive", action="store_true", default=None, help="do not write recordings")
     p.add_argument("--json", action="store_true", help="print the final summary as JSON")
     p.add_argument("--workers", type=number(int, low=1, high=64),
-                   help="worker processes hosting the [[structures]] (default 1: all in this process)")
+                   help="worker processes hosting the [[structures]] (default: one per core, at most one per structure; "
+                   "1: all in this process)")
     p.add_argument("--worker-of", metavar="I/N", help=argparse.SUPPRESS)  # internal: a worker process of a fleet
     p.set_defaults(func=run_serve)
     return p
@@ -95,7 +96,7 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
                         stream=sys.stderr)
     log = logging.getLogger("shm.serve")
     worker_of = getattr(args, "worker_of", None)
-    if settings.fleet and settings.workers > 1 and worker_of is None:
+    if settings.worker_count > 1 and worker_of is None:
         return _run_workers(settings, args, environ)
     if worker_of is not None:
         from ._workers import part_of
@@ -231,7 +232,7 @@ def _print_fleet(fleet: dict[str, Any], *, as_json: bool) -> int:
 
 
 def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, str] | None) -> int:
-    """A fleet on ``settings.workers`` worker processes behind one API (this process)."""
+    """A fleet on ``settings.worker_count`` worker processes behind one API (this process)."""
     from ._api import create_app
     from ._server import ApiServer
     from ._service import ServiceError
@@ -250,7 +251,7 @@ def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, 
         print(f"shm serve: error: HTTP API on {s.host}:{s.port}: {exc}", file=sys.stderr)
         return 2
     print(f"shm serve: API at {api.url} (docs {api.url}/docs); {len(settings.structures)} structures in "
-          f"{settings.workers} worker processes; data in {settings.data_dir} (db {settings.db}, recordings "
+          f"{settings.worker_count} worker processes; data in {settings.data_dir} (db {settings.db}, recordings "
           f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():
@@ -284,5 +285,5 @@ def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, 
         order = {sid: k for k, sid in enumerate(s_.id for s_ in settings.structures)}
         rows.sort(key=lambda r: order.get(r["id"], len(order)))
         print(json.dumps({"structures": rows, "wall_s": round(time.monotonic() - started, 2),
-                          "workers": settings.workers}), flush=True)
+                          "workers": settings.worker_count}), flush=True)
     return code

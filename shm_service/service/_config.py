@@ -9,7 +9,7 @@ import os
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -381,9 +381,10 @@ class ServiceSettings(_Closed):
         "process, disk full, I/O error) before the window waits in memory for the next attempt, s")
     queue_batches: int = Field(8, ge=2, le=10_000, description="bounded queue between source and pipeline, batches (a batch is at most ~10 s of data or 2 MB of a file)")
     log_level: Literal["debug", "info", "warning", "error"] = Field("info", description="log level")
-    workers: int = Field(
-        1, ge=1, le=64, description="worker processes hosting the structures of a fleet, each every n-th structure on the "
-        "one database (one per core: one process holds one GIL); 1: all in this process")
+    workers: Annotated[int, Field(ge=1, le=64)] | Literal["auto"] = Field(
+        "auto", description="worker processes hosting the structures of a fleet, each every n-th structure on the "
+        "one database (one process holds one GIL): \"auto\" one per core (at most one per structure), 1: all in this "
+        "process")
     structures: tuple[StructureSettings, ...] = Field(
         (), description="a fleet: the structures this service monitors ([[structures]] tables); empty: the one structure "
         "of [source]")
@@ -413,6 +414,17 @@ class ServiceSettings(_Closed):
             for structure in self.structures:
                 self.for_structure(structure)  # every override is checked now, not when the structure starts
         return self
+
+    @property
+    def worker_count(self) -> int:
+        """The worker processes of the fleet (``workers``; "auto": one per core this process may run
+        on, at most one per structure); 1 without a fleet."""
+        if not self.structures:
+            return 1
+        if self.workers != "auto":
+            return int(self.workers)
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        return max(1, min(cores, len(self.structures), 64))
 
     @property
     def fleet(self) -> bool:

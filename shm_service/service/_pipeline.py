@@ -12,6 +12,8 @@ from __future__ import annotations
 import logging
 import math
 import os
+import queue
+import threading
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field
@@ -60,7 +62,7 @@ from ..recording import FollowBlock, encode_payloads_json
 from ._alarms import alarm_changes, clear_changes
 from ._archive import Archive
 from ._sinks import SinkGuard
-from ._plausibility import SourceClock, ValueLimits, implausible_values
+from ._plausibility import SourceClock, ValueLimits, all_plausible, implausible_values
 from ._storage import AlarmChange, Storage, WindowCommit, is_transient
 
 __all__ = ["Batch", "Pipeline", "PipelineSink"]
@@ -564,7 +566,7 @@ class Pipeline:
                  archive_estimates: bool = True, estimate_decimation: int = 1, sink: PipelineSink | None = None,
                  sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0,
                  commit_retry_s: float = 5.0, max_pending_commits: int = 20_000, clock: SourceClock | None = None,
-                 limits: ValueLimits | None = None, stuck_after_s: float = 1.0) -> None:
+                 limits: ValueLimits | None = None, stuck_after_s: float = 1.0, analysis_thread: bool = False) -> None:
         _one_blas_thread()
         self.model = model
         self.rig = model.rig
@@ -640,6 +642,13 @@ class Pipeline:
         self._pending_estimator: dict[str, list] = {}
         self._estimate_maps: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._warmup_set = False
+        # The analysis stage (windows, commits) in a thread of its own (``start_analysis``), so that
+        # a window's analysis never holds up the estimator and the batches behind it; None: it
+        # runs inline, within ``process`` (replays into a database, tests, benchmarks).
+        self._analysis: queue.Queue | None = queue.Queue(maxsize=256) if analysis_thread else None
+        self._analysis_thread: threading.Thread | None = None
+        self._on_analysis_error = None
+        self.analysis_error: str | None = None  # the last chunk's analysis error; None once one analyses fine
 
     # -- control ----------------------------------------------------------------------------
 
@@ -647,11 +656,58 @@ class Pipeline:
         """Learn a new baseline from the next windows (called from the API thread)."""
         self._reset_requested = True
 
+    def start_analysis(self, on_error=None, name: str = "analysis") -> None:
+        """Start the analysis thread (``analysis_thread=True``); ``on_error(exc)`` is called for
+        what a chunk's analysis raises (the chunk's windows are skipped, the next are analysed)."""
+        if self._analysis is None or self._analysis_thread is not None:
+            return
+        self._on_analysis_error = on_error
+        self._analysis_thread = threading.Thread(target=self._analysis_loop, name=name, daemon=True)
+        self._analysis_thread.start()
+
+    def _analysis_loop(self) -> None:
+        assert self._analysis is not None
+        while True:
+            try:
+                item = self._analysis.get(timeout=1.0)
+            except queue.Empty:
+                # No data: windows that wait for the database are tried again meanwhile.
+                if self._pending_commits:
+                    self._guarded(self.flush_commits)
+                continue
+            if item is None:
+                return
+            kind, args = item
+            if kind == "chunk":
+                if self._guarded(self._flush_then_analyse, *args):
+                    self.analysis_error = None
+            elif kind == "not_before":
+                self._not_before_now(args)
+            else:
+                raise ValueError(f"unknown analysis item {kind!r}")
+
+    def _flush_then_analyse(self, *args) -> None:
+        if self._pending_commits:
+            self.flush_commits()
+        self._analyse_now(*args)
+
+    def _guarded(self, fn, *args) -> bool:
+        try:
+            fn(*args)
+            return True
+        except Exception as exc:  # one chunk's failure must not stop the analysis of the next
+            self.analysis_error = f"{type(exc).__name__}: {exc}"
+            if self._on_analysis_error is not None:
+                self._on_analysis_error(exc)
+            else:
+                log.exception("%s: analysis error; chunk skipped", self.source_id)
+            return False
+
     # -- data path --------------------------------------------------------------------------
 
     def process(self, batch: Batch) -> None:
         began = time.monotonic()
-        if self._pending_commits:
+        if self._pending_commits and self._analysis_thread is None:
             self.flush_commits()
         for block in self._plausible(batch.blocks):
             if not len(block):
@@ -699,7 +755,8 @@ class Pipeline:
                 if not ok.all():
                     self.rejected.update(clock.count(b.topic, codes, b.log_time_ns, mono=mono))
                     keep = ok
-            if self.limits is not None and b.kind in ("imu", "tof", "strain", "bearing", "temperature"):
+            if self.limits is not None and b.kind in ("imu", "tof", "strain", "bearing", "temperature") \
+                    and not all_plausible(b.kind, b.values, self.limits):
                 taken = np.ones(len(b), dtype=bool) if keep is None else keep
                 nonfinite = ~np.all(np.isfinite(b.values.reshape(len(b), -1)), axis=1)
                 bad = implausible_values(b.kind, b.values, self.limits) & ~nonfinite
@@ -773,7 +830,7 @@ class Pipeline:
         if self.estimator.resets != restarts and self.estimator.restarted_at_s is not None and self.estimator.epoch_ns:
             # Windows that would hold the diverged filter's b (or the new one's first seconds) are not analysed.
             settle = self.estimator.epoch_ns + int(round((self.estimator.restarted_at_s + self.estimator.health_config.settle_s) * _NS))
-            self.analytics.set_not_before(max(self.analytics.not_before_ns or settle, settle))
+            self._not_before(settle)
         if final:
             tail = self.estimator.flush()
             if tail is not None and out is not None:
@@ -791,13 +848,13 @@ class Pipeline:
         temperature = None if temp is None else ((temp[0] - epoch) * 1e-9, temp[1][:, 0])
         if out is None or not len(out.t):
             if temperature is not None:
-                self.analytics.add(epoch, np.zeros(0), np.zeros((0, self.model.gamma)), None, temperature)
+                self._analyse(epoch, np.zeros(0), np.zeros((0, self.model.gamma)), None, temperature, None)
             return
         self.estimates += len(out.t)
         if not self._warmup_set and self.estimator.calibration is not None:
             self._warmup_set = True
             warm = epoch + int(round((float(self.estimator.calibration.rest_end) + self.warmup_s) * _NS))
-            self.analytics.set_not_before(max(self.analytics.not_before_ns or warm, warm))
+            self._not_before(warm)
         t_abs = epoch / _NS + out.t
         layout = self.model.state_layout
         b = layout.b_of(out.x)
@@ -806,12 +863,45 @@ class Pipeline:
         if self.archive_estimates:
             self._archive_estimates(out)
         self._push_estimates(t_abs, out)
-        if self._reset_requested:
+        self._analyse(epoch, out.t, b, d, temperature, float(t_abs[0]))
+
+    # -- the analysis stage (inline, or in its thread in this order) ----------------------------
+
+    def _analyse(self, epoch: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None, temperature, first_s: float | None) -> None:
+        if self._analysis_thread is None:
+            self._analyse_now(epoch, t, b, d, temperature, first_s)
+        else:
+            self._put(("chunk", (epoch, t, b, d, temperature, first_s)))
+
+    def _not_before(self, ns: int) -> None:
+        if self._analysis_thread is None:
+            self._not_before_now(ns)
+        else:
+            self._put(("not_before", ns))
+
+    def _put(self, item) -> None:
+        if self._analysis_thread is not None and not self._analysis_thread.is_alive():
+            raise RuntimeError("the analysis thread has ended")
+        self._analysis.put(item)  # bounded: an analysis falling behind holds the data path back
+
+    def _not_before_now(self, ns: int) -> None:
+        self.analytics.set_not_before(max(self.analytics.not_before_ns or ns, ns))
+
+    def _analyse_now(self, epoch: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None, temperature,
+                     first_s: float | None) -> None:
+        if first_s is not None and self._reset_requested:
             self._reset_requested = False
             self.analytics.reset()
-            self._clear_for_new_baseline(float(t_abs[0]))
-        for window in self.analytics.add(epoch, out.t, b, d, temperature):
+            self._clear_for_new_baseline(first_s)
+        for window in self.analytics.add(epoch, t, b, d, temperature):
             self._commit(window)
+
+    def drain_analysis(self) -> None:
+        """Wait until the analysis thread analysed everything handed to it, and end it."""
+        if self._analysis_thread is None:
+            return
+        self._put(None)
+        self._analysis_thread.join()
 
     def _archive_estimates(self, out: FilterOutput) -> None:
         k = self.decimation
@@ -915,6 +1005,11 @@ class Pipeline:
         return True
 
     @property
+    def analysis_threaded(self) -> bool:
+        """Whether the windows are analysed in the analysis thread (``start_analysis``)."""
+        return self._analysis_thread is not None
+
+    @property
     def pending_commits(self) -> int:
         return len(self._pending_commits)
 
@@ -934,8 +1029,9 @@ class Pipeline:
                     guard.call("alarm", self.sink.alarm, alarm)
 
     def finish(self) -> None:
-        """The source ended: release everything, flush the filter, close the recording."""
+        """The source ended: release everything, flush the filter, analyse what is left, close the recording."""
         self._advance(self.merger.release(final=True), final=True)
+        self.drain_analysis()
         if self._pending_commits:
             self.flush_commits(retry_s=max(self.commit_retry_s, 30.0))
         if self.archive is not None:

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-__all__ = ["ClockJump", "SourceClock", "StampJudge", "ValueLimits", "implausible_row", "implausible_values"]
+__all__ = ["ClockJump", "SourceClock", "StampJudge", "ValueLimits", "all_plausible", "implausible_row", "implausible_values"]
 
 _NS = 1_000_000_000
 
@@ -105,6 +105,29 @@ def implausible_values(kind: str, values: np.ndarray, limits: ValueLimits) -> np
         else:
             raise ValueError(f"{kind=} is not a sensor kind (imu, tof, strain, bearing, temperature)")
     return ~ok
+
+
+def all_plausible(kind: str, values: np.ndarray, limits: ValueLimits) -> bool:
+    """True when no sample of ``values`` is implausible or non-finite (``implausible_values`` all
+    False), from the extremes of the block: the usual block is decided without per-sample masks.
+    False only means that ``implausible_values`` has to look (NaN, infinity or a value beyond
+    the limits is there); it also answers False for a kind it does not know."""
+    v = np.asarray(values, dtype=float)
+    if not v.size:
+        return True
+    if v.ndim == 1:
+        v = v[:, None]
+    with np.errstate(invalid="ignore"):
+        if kind == "imu" and v.ndim == 2 and v.shape[1] == 6:
+            a = np.abs(v)
+            return bool(a[:, :3].max() <= limits.accel_m_s2 and a[:, 3:].max() <= limits.gyro_rad_s)
+        bounds = {"tof": (limits.distance_min_m, limits.distance_max_m), "strain": (-limits.strain, limits.strain),
+                  "bearing": (-limits.bearing_m, limits.bearing_m),
+                  "temperature": (limits.temperature_min_c, limits.temperature_max_c)}.get(kind)
+        if bounds is None or v.ndim != 2 or v.shape[1] != 1:
+            return False
+        # NaN fails both comparisons, so a NaN anywhere answers False
+        return bool(v.min() >= bounds[0] and v.max() <= bounds[1])
 
 
 def implausible_row(kind: str, row: list[float], limits: ValueLimits) -> bool:
@@ -182,11 +205,15 @@ class SourceClock:
 
     def reference(self, topic: str, mono: float | None = None) -> int | None:
         """The newest time of the source's OTHER topics now (None while there is none)."""
+        if not self.live:  # the stamps themselves (called per topic and batch: no call per topic)
+            return max((v for t, v in self.last.items() if t != topic), default=None)
         mono = time.monotonic() if mono is None else mono
         others = [self._now(t, mono) for t in self.last if t != topic]
         return max(others) if others else None
 
     def current(self, mono: float | None = None) -> int | None:
+        if not self.live:
+            return max(self.last.values()) if self.last else None
         mono = time.monotonic() if mono is None else mono
         return max(self._now(t, mono) for t in self.last) if self.last else None
 
@@ -212,6 +239,8 @@ class SourceClock:
         whole source (``source_jump``): only the wall-clock bound applies."""
         t = np.asarray(stamps, dtype=np.int64)
         mono = time.monotonic() if mono is None else mono
+        if self._all_taken(topic, t, wall_ns, mono, whole_source):
+            return np.ones(len(t), dtype=bool), np.zeros(len(t), dtype=np.int8)
         code = np.zeros(len(t), dtype=np.int8)
         if self.live:
             wall = time.time_ns() if wall_ns is None else wall_ns
@@ -231,6 +260,21 @@ class SourceClock:
                     # ahead of the others: a jump only if the topic's own stamps stepped there
                     code[self._jumped(t, suspect, own)] = 2
         return code == 0, code
+
+    def _all_taken(self, topic: str, t: np.ndarray, wall_ns: int | None, mono: float, whole_source: bool) -> bool:
+        """Whether every stamp of ``t`` passes ``judge``, decided from its first and last (the
+        usual block: on the clock, nothing ahead) without the per-stamp masks."""
+        if not len(t):
+            return True
+        lo, hi = int(t.min()), int(t.max())
+        if self.live and hi > (time.time_ns() if wall_ns is None else wall_ns) + self.tolerance_ns:
+            return False
+        if not self.last or whole_source:
+            return True
+        if lo < self.newest() - self.window_ns or hi > self.current(mono) + self.window_ns:
+            return False
+        ref = self.reference(topic, mono)
+        return ref is None or topic not in self.last or hi <= ref + self.ahead_ns
 
     def _jumped(self, t: np.ndarray, suspect: np.ndarray, own: int) -> np.ndarray:
         """Which suspect stamps lie more than ``max_ahead_s`` after the topic's latest taken one."""

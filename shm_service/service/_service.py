@@ -186,7 +186,7 @@ class Structure:
             commit_retry_s=settings.storage_retry_s,
             # ingest is judged per message by its validator (its response says what was refused)
             clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits,
-            stuck_after_s=src.stuck_after_s,
+            stuck_after_s=src.stuck_after_s, analysis_thread=True,
         )
         self.pipeline.live = self.live
 
@@ -238,6 +238,9 @@ class Structure:
     # -- running ----------------------------------------------------------------------------
 
     def start(self) -> None:
+        # the windows are analysed and committed in a thread of their own: the estimator keeps pace meanwhile
+        self.pipeline.start_analysis(on_error=lambda exc: self._batch_failed(exc, what="analysis error; the chunk's windows skipped"),
+                                     name=f"analysis-{self.id}")
         self._thread = threading.Thread(target=self._pipeline_loop, name=f"pipeline-{self.id}", daemon=True)
         self._thread.start()
         self.source.start()
@@ -250,8 +253,9 @@ class Structure:
                 try:
                     item = self.queue.get(timeout=1.0)
                 except queue.Empty:
-                    # No data: windows that wait for the database are tried again meanwhile.
-                    if pipeline.pending_commits:
+                    # No data: windows that wait for the database are tried again meanwhile
+                    # (by the analysis thread when there is one).
+                    if pipeline.pending_commits and not pipeline.analysis_threaded:
                         try:
                             pipeline.flush_commits()
                         except Exception as exc:
@@ -292,15 +296,24 @@ class Structure:
             log.error("%s%s: %s (%d batches failed so far)", f"structure {self.id}: " if self.service.fleet else "", what,
                       text, self.pipeline_errors)
 
-    def touch(self, storage: Storage, now: float) -> None:
-        """Note in the database that the source delivered since the last call."""
+    def untouched(self) -> tuple[int, tuple[str, str, str]] | None:
+        """(samples, (id, kind, spec)) when the source delivered since it was last noted in the
+        database (``Storage.touch_sources``, then ``touched(samples)``), else None."""
         samples = sum(self.pipeline.samples.values())
-        if samples != self._touched_samples:
-            storage.touch_source(self.id, self.source.kind, self.settings.source.spec, now)
-            self._touched_samples = samples
+        if samples == self._touched_samples:
+            return None
+        return samples, (self.id, self.source.kind, self.settings.source.spec)
+
+    def touched(self, samples: int) -> None:
+        self._touched_samples = samples
 
     def wait(self, timeout: float | None = None) -> bool:
         return self._done.wait(timeout)
+
+    def skip(self) -> None:
+        """The service stopped before this structure started: it is done without running."""
+        self.source.state = "stopped"
+        self._done.set()
 
     @property
     def done(self) -> bool:
@@ -321,6 +334,8 @@ class Structure:
             reasons.append(f"pipeline: {self.pipeline_error}")
         if self.pipeline.storage_error is not None and self.pipeline.storage_error != self.pipeline_error:
             reasons.append(self.pipeline.storage_error)
+        if self.pipeline.analysis_error is not None and self.pipeline.analysis_error != self.pipeline_error:
+            reasons.append(f"analysis: {self.pipeline.analysis_error}")
         reasons.extend(self.pipeline.health_problems())
         src = self.source
         if src.state == "failed":
@@ -476,6 +491,7 @@ class MonitoringService(_StoredRows):
         self._lock = threading.Lock()
         self._done = threading.Event()
         self._stopping = threading.Event()
+        self._starting = threading.Lock()
         self.api = None
 
     def running_structures(self) -> list[Structure]:
@@ -553,9 +569,43 @@ class MonitoringService(_StoredRows):
             self.notifier.start()
         self.retention.start()
         threading.Thread(target=self._housekeeping_loop, name="housekeeping", daemon=True).start()
+        paced = [s for s in self.running_structures() if s.kind in ("sim", "replay") and s.speed is not None]
         for structure in self.structures.values():
-            structure.start()
+            if structure not in paced:
+                structure.start()
+        delay = self.start_stagger_s(paced)
+        if delay > 0:
+            paced[0].start()
+            threading.Thread(target=self._start_staggered, args=(paced[1:], delay), name="starting", daemon=True).start()
+        else:
+            for structure in paced:
+                structure.start()
         threading.Thread(target=self._watch_done, name="done", daemon=True).start()
+
+    @staticmethod
+    def start_stagger_s(paced: list[Structure], most_s: float = 0.5, span_s: float = 30.0) -> float:
+        """Seconds between the starts of the paced structures (sim, replay at a speed) of a fleet.
+
+        Started together, they would run in step: their rest calibrations end, and their windows
+        fall due, at the same wall instant, and each such burst of work (a calibration and the
+        filter's first minute, ~0.2 s of CPU; a window's analysis) hits every structure at once.
+        Spread over one window step of wall time (at most ``span_s``), at most ``most_s`` apart,
+        the bursts come one structure after the other. Nothing of the data changes: a paced
+        structure's data time and pace start with its own first batch."""
+        if len(paced) < 2:
+            return 0.0
+        step_wall = max(s.settings.analytics.window_s * (1 - s.settings.analytics.overlap) / s.speed for s in paced)
+        return min(most_s, min(step_wall, span_s) / len(paced))
+
+    def _start_staggered(self, structures: list[Structure], delay_s: float) -> None:
+        for k, structure in enumerate(structures):
+            self._stopping.wait(delay_s)
+            with self._starting:  # stop() sees a structure either started or skipped
+                if self._stopping.is_set():
+                    for rest in structures[k:]:
+                        rest.skip()  # stopped before it started: it is done
+                    return
+                structure.start()
 
     def _watch_done(self) -> None:
         for structure in self.structures.values():
@@ -573,8 +623,11 @@ class MonitoringService(_StoredRows):
         now = time.time() if now is None else now
         a = self.settings.alarms
         try:
-            for structure in self.running_structures():
-                structure.touch(self.storage, now)
+            # one transaction for all the structures (each its own would take the database's lock)
+            due = [(s, u) for s, u in ((s, s.untouched()) for s in self.running_structures()) if u is not None]
+            self.storage.touch_sources([row for _, (_, row) in due], now)
+            for structure, (samples, _) in due:
+                structure.touched(samples)
             stale = self.storage.mark_stale(now - a.stale_after_s, now)
             if stale:
                 log.warning("alarm(s) %s marked stale: their source has delivered no data for %.0f s", stale, a.stale_after_s)
@@ -596,6 +649,8 @@ class MonitoringService(_StoredRows):
         if self._stopping.is_set():
             return
         self._stopping.set()
+        with self._starting:
+            pass  # a structure being started (staggered) is started now
         for structure in self.structures.values():
             structure.stop_source()
         deadline = time.monotonic() + 30.0

@@ -222,6 +222,8 @@ class SimSource(Source):
         from ..virtual_rig._record import encode_payloads
 
         start_ns = self.settings.start_time_ns
+        sensors = self.rig.sensor_by_topic()
+        kinds: dict[str, tuple[str, str]] = {}  # topic -> (kind, name): the same for every block
         for block in self.rigsim.blocks(block_s or self.block_s):
             blocks, raw = [], [] if self.raw else None
             for topic, (times, values) in block.measurements.items():
@@ -235,10 +237,11 @@ class SimSource(Source):
                     self.rejected.update(dropped)
                 if not len(stamps):
                     continue
-                info = classify_topic(topic)
-                sensor = self.rig.sensor_by_topic().get(topic)
-                blocks.append(FollowBlock(topic, info.kind, sensor.name if sensor else topic, stamps, stamps + delays,
-                                          np.asarray(values, dtype=float)))
+                if topic not in kinds:
+                    sensor = sensors.get(topic)
+                    kinds[topic] = (classify_topic(topic).kind, sensor.name if sensor else topic)
+                kind, name = kinds[topic]
+                blocks.append(FollowBlock(topic, kind, name, stamps, stamps + delays, np.asarray(values, dtype=float)))
                 if raw is not None:
                     raw.extend(zip([topic] * len(stamps), stamps.tolist(), encode_payloads(topic, values), (stamps + delays).tolist()))
             if raw is not None:

@@ -449,11 +449,19 @@ class Storage:
 
     def touch_source(self, source: str, kind: str, detail: str, seen_at: float) -> None:
         """Record that ``source`` delivered data at ``seen_at`` (UNIX s, wall clock)."""
+        self.touch_sources([(source, kind, detail)], seen_at)
+
+    def touch_sources(self, sources: Sequence[tuple[str, str, str]], seen_at: float) -> None:
+        """``touch_source`` of several (source, kind, detail) in one transaction (a fleet's
+        housekeeping: one write for all its structures, not one each taking the database's lock)."""
+        if not sources:
+            return
+
         def run(db: sqlite3.Connection) -> None:
-            db.execute(
+            db.executemany(
                 "INSERT INTO sources (id, kind, detail, first_seen_s, last_seen_s) VALUES (?, ?, ?, ?, ?) "
                 "ON CONFLICT(id) DO UPDATE SET kind=excluded.kind, detail=excluded.detail, last_seen_s=excluded.last_seen_s",
-                (source, kind, detail, seen_at, seen_at),
+                [(source, kind, detail, seen_at, seen_at) for source, kind, detail in sources],
             )
         self._write(run)
 
@@ -581,21 +589,25 @@ class Storage:
             if r.source != commit.source:
                 raise ValueError(f"trend row of source {r.source!r} in a commit of source {commit.source!r}")
 
+        # What needs no database is made before the transaction: the write lock, which the other
+        # processes of a fleet wait for, is held for the statements only.
+        rows = [tuple(getattr(r, c) for c in TREND_COLUMNS) for r in commit.rows]
+        monitor = None if commit.monitor_state is None else json.dumps(commit.monitor_state)
+        calibration = None if commit.calibration is None else json.dumps(commit.calibration)
+
         def run(db: sqlite3.Connection) -> list[int]:
             now = time.time()
             events: list[int] = []
             db.executemany(
                 f"INSERT OR IGNORE INTO trends ({', '.join(TREND_COLUMNS)}, created_at) VALUES ({', '.join('?' * (len(TREND_COLUMNS) + 1))})",
-                [(*(getattr(r, c) for c in TREND_COLUMNS), now) for r in commit.rows],
+                [(*row, now) for row in rows],
             )
             db.execute(
                 "INSERT INTO monitor_state (source, last_window_start_s, data_time_s, monitor, calibration, updated_at) "
                 "VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT(source) DO UPDATE SET last_window_start_s=excluded.last_window_start_s, "
                 "data_time_s=excluded.data_time_s, monitor=excluded.monitor, "
                 "calibration=COALESCE(excluded.calibration, monitor_state.calibration), updated_at=excluded.updated_at",
-                (commit.source, commit.window_start_s, commit.data_time_s,
-                 None if commit.monitor_state is None else json.dumps(commit.monitor_state),
-                 None if commit.calibration is None else json.dumps(commit.calibration), now),
+                (commit.source, commit.window_start_s, commit.data_time_s, monitor, calibration, now),
             )
             # The source is judged again: its alarms are no longer stale.
             db.execute("UPDATE alarms SET stale=0 WHERE source=? AND stale=1", (commit.source,))

@@ -54,6 +54,17 @@ def part_of(settings: ServiceSettings, index: int, count: int) -> ServiceSetting
     return settings.model_copy(update={"structures": settings.structures[index::count]})
 
 
+def _api_line(process: subprocess.Popen) -> str | None:
+    """The worker's "API at URL" line (None: it ended before printing one). What it prints before
+    (the dashboard's banner of worker 0) is passed on to stderr, not taken for a failed start."""
+    for line in process.stdout or ():
+        if "API at " in line:
+            return line
+        if line.strip():
+            print(line.rstrip(), file=sys.stderr, flush=True)
+    return None
+
+
 class _Worker:
     def __init__(self, index: int, process: subprocess.Popen, url: str, ids: list[str]) -> None:
         self.index = index
@@ -67,7 +78,7 @@ class WorkerFleet(_StoredRows):
     """The front of a fleet hosted by worker processes (implements what the API needs)."""
 
     def __init__(self, settings: ServiceSettings, *, environ: Mapping[str, str] | None = None, json_summary: bool = False) -> None:
-        if not settings.fleet or settings.workers < 2:
+        if not settings.fleet or settings.worker_count < 2:
             raise ServiceError("worker processes need [[structures]] and workers >= 2")
         self.settings = settings
         self.fleet = True
@@ -101,7 +112,7 @@ class WorkerFleet(_StoredRows):
     # -- running ----------------------------------------------------------------------------
 
     def start(self) -> None:
-        n = self.settings.workers
+        n = self.settings.worker_count
         directory = Path(self.settings.data_dir or ".")
         directory.mkdir(parents=True, exist_ok=True)
         config = directory / "fleet-workers.toml"
@@ -121,8 +132,8 @@ class WorkerFleet(_StoredRows):
                     cmd.append("--json")
                 launched.append((i, ids, subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=self._environ)))
             for i, ids, process in launched:
-                line = process.stdout.readline() if process.stdout else ""
-                if "API at " not in line:
+                line = _api_line(process)
+                if line is None:
                     code = process.wait(60)
                     raise ServiceError(f"worker process {i} of {n} did not start (exit code {code}; its log is above)")
                 worker = _Worker(i, process, line.split("API at ")[1].split()[0], ids)

@@ -16,7 +16,7 @@ import numpy as np
 
 from estimator import NodalShapes
 
-__all__ = ["PointMotion", "foreshortening_matrix", "point_motion"]
+__all__ = ["PointMotion", "foreshortening_matrix", "point_motion", "points_motion"]
 
 _GAUSS_XI, _GAUSS_W = np.polynomial.legendre.leggauss(6)
 _GAUSS_XI = 0.5 * (_GAUSS_XI + 1.0)
@@ -71,6 +71,23 @@ class PointMotion:
     inertial_zeta: np.ndarray  # inertial ζ of the point (m)
 
 
+def _stacked_shapes(basis: NodalShapes, xs: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``_point_shapes`` of several points side by side: Φ, Φ', Φ'' (m, S) and G (S, m, m)."""
+    key = (id(basis), xs)
+    hit = _SHAPES.get(key)
+    if hit is not None and hit[0] is basis:
+        return hit[1]
+    each = [_point_shapes(basis, x) for x in xs]
+    shapes = (np.column_stack([e[0] for e in each]), np.column_stack([e[1] for e in each]),
+              np.column_stack([e[2] for e in each]), np.stack([e[3] for e in each]))
+    for a in shapes:
+        a.setflags(write=False)
+    if len(_SHAPES) >= _SHAPES_MAX:
+        _SHAPES.clear()
+    _SHAPES[key] = (basis, shapes)
+    return shapes
+
+
 def point_motion(
     basis: NodalShapes,
     x: float,
@@ -87,18 +104,38 @@ def point_motion(
     gravity's component along inertial η (m/s²): +g for a hanging beam, −g for a standing one
     (η points up along it), so a standing beam's accelerometers read +g along x at rest.
     """
-    phi, dphi, ddphi, G = _point_shapes(basis, x)
-    theta, omega, omega_dot = y[:, 0], yd[:, 0], ydd[:, 0]
+    both = points_motion(basis, (x,), y, yd, ydd, bearing, bearing_acceleration, gravity)
+    return PointMotion(*(getattr(both, f)[:, 0] for f in PointMotion.__dataclass_fields__))
+
+
+def points_motion(
+    basis: NodalShapes,
+    xs: tuple[float, ...] | list[float],
+    y: np.ndarray,
+    yd: np.ndarray,
+    ydd: np.ndarray,
+    bearing: np.ndarray,
+    bearing_acceleration: np.ndarray,
+    gravity: float,
+) -> PointMotion:
+    """``point_motion`` of the points at arc lengths ``xs`` (S,) at once: every field of the
+    result is (N, S), column s that of ``xs[s]`` (one pass over the states for all the sensors
+    of a block instead of one per sensor)."""
+    xs = tuple(float(x) for x in xs)
+    phi, dphi, ddphi, G = _stacked_shapes(basis, xs)
+    x = np.asarray(xs)[None, :]
+    theta, omega, omega_dot = y[:, :1], yd[:, :1], ydd[:, :1]
     q, qd, qdd = y[:, 1:], yd[:, 1:], ydd[:, 1:]
     w, w_d, w_dd = q @ phi, qd @ phi, qdd @ phi
     slope, slope_d = q @ dphi, qd @ dphi
     w2 = q @ ddphi
-    Gq = q @ G
-    u = -0.5 * np.einsum("ni,ni->n", Gq, q)
-    u_d = -np.einsum("ni,ni->n", Gq, qd)
-    u_dd = -(np.einsum("ni,ni->n", qd @ G, qd) + np.einsum("ni,ni->n", Gq, qdd))
+    Gq = q @ G  # (S, N, m)
+    u = (-0.5 * np.einsum("sni,ni->ns", Gq, q))
+    u_d = -np.einsum("sni,ni->ns", Gq, qd)
+    u_dd = -(np.einsum("sni,ni->ns", qd @ G, qd) + np.einsum("sni,ni->ns", Gq, qdd))
     eta = x + u
     ct, st = np.cos(theta), np.sin(theta)
+    bearing_acceleration = np.asarray(bearing_acceleration)[:, None]
     accel_eta = bearing_acceleration * st + u_dd - 2 * omega * w_d - omega_dot * w - omega**2 * eta
     accel_zeta = bearing_acceleration * ct + w_dd + 2 * omega * u_d + omega_dot * eta - omega**2 * w
     force_eta = accel_eta - gravity * ct
@@ -114,5 +151,5 @@ def point_motion(
         specific_force_y=-sa * force_eta + ca * force_zeta,
         rate=omega + slope_d / ca,
         inertial_eta=ct * eta - st * w,
-        inertial_zeta=bearing + st * eta + ct * w,
+        inertial_zeta=np.asarray(bearing)[:, None] + st * eta + ct * w,
     )

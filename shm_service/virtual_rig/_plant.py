@@ -201,11 +201,18 @@ def build_plant(
     )
 
 
-@numba.njit(cache=True, nogil=True)
-def _acceleration(y, yd, ddot, kappa, force, Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, out):
-    """ÿ of the plant into ``out`` (``rhs`` is scratch of the same size): the generalized forces
-    minus damping, gravity along and across the beam, the stiffness of bending (temperature
-    factor kappa), of the axial load and of the centrifugal field, and bearing friction on θ."""
+# Reassociation lets the compiler vectorize the short dot products below (the sums' order is the
+# only freedom taken: no assumption about NaN or infinity, which stay visible in the output).
+_FAST = {"reassoc", "contract"}
+
+
+@numba.njit(cache=True, nogil=True, fastmath=_FAST)
+def _acceleration(y, yd, ddot, kappa, mf, AC, AKb, AKg, AKc, u0, ug, c, g, Tc, Ws, out):
+    """ÿ of the plant into ``out``: M⁻¹ times the generalized forces minus damping, gravity along
+    and across the beam, the stiffness of bending (temperature factor kappa), of the axial load and
+    of the centrifugal field, and bearing friction on θ. M⁻¹ is folded into the matrices once per
+    block (``_folded``): ``mf`` = M⁻¹F of the sample, AC = M⁻¹C, AK* = M⁻¹[:, q] K*, u0 = M⁻¹[:, θ],
+    ug = M⁻¹ [S_D, c], so one call costs n² + 3nm products instead of 2n² + 3m²."""
     theta = y[0]
     omega = yd[0]
     ct = np.cos(theta)
@@ -214,30 +221,28 @@ def _acceleration(y, yd, ddot, kappa, force, Minv, Kb, Kg, Kc, c, SD, C, g, Tc, 
     g_lateral = ddot * ct + g * st
     n = y.shape[0]
     m = n - 1
-    for i in range(n):
-        damp = 0.0
-        for j in range(n):
-            damp += C[i, j] * yd[j]
-        rhs[i] = force[i] - damp
     cq = 0.0
     for i in range(m):
         cq += c[i] * y[1 + i]
-    rhs[0] += -SD * g_lateral - g_axial * cq - Tc * np.tanh(omega / Ws)
+    s0 = g_axial * cq + Tc * np.tanh(omega / Ws)
     w2 = omega * omega
-    for i in range(m):
-        acc = 0.0
-        for j in range(m):
-            acc += (kappa * Kb[i, j] + g_axial * Kg[i, j] + w2 * Kc[i, j]) * y[1 + j]
-        rhs[1 + i] += -acc - c[i] * g_lateral
     for i in range(n):
-        a = 0.0
+        damp = 0.0
         for j in range(n):
-            a += Minv[i, j] * rhs[j]
-        out[i] = a
+            damp += AC[i, j] * yd[j]
+        kb = 0.0
+        kg = 0.0
+        kc = 0.0
+        for j in range(m):
+            qj = y[1 + j]
+            kb += AKb[i, j] * qj
+            kg += AKg[i, j] * qj
+            kc += AKc[i, j] * qj
+        out[i] = mf[i] - damp - kappa * kb - g_axial * kg - w2 * kc - g_lateral * ug[i] - s0 * u0[i]
 
 
-@numba.njit(cache=True, nogil=True)
-def _integrate(y0, yd0, ddot_fine, kappa, force, substeps, h, Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, out_y, out_yd, out_ydd):
+@numba.njit(cache=True, nogil=True, fastmath=_FAST)
+def _integrate(y0, yd0, ddot_fine, kappa, mf, substeps, h, AC, AKb, AKg, AKc, u0, ug, c, g, Tc, Ws, out_y, out_yd, out_ydd):
     # Classical RK4 on preallocated state vectors (no allocation per stage), without the GIL:
     # the simulations of a fleet integrate side by side on every core.
     n_samples = out_y.shape[0]
@@ -254,33 +259,43 @@ def _integrate(y0, yd0, ddot_fine, kappa, force, substeps, h, Minv, Kb, Kg, Kc, 
     k2a = np.empty(n)
     k3a = np.empty(n)
     k4a = np.empty(n)
-    rhs = np.empty(n)
     for k in range(n_samples):
         out_y[k] = y
         out_yd[k] = yd
-        _acceleration(y, yd, ddot_fine[2 * substeps * k], kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, out_ydd[k])
+        f = mf[k]
+        kk = kappa[k]
+        _acceleration(y, yd, ddot_fine[2 * substeps * k], kk, f, AC, AKb, AKg, AKc, u0, ug, c, g, Tc, Ws, out_ydd[k])
         for s in range(substeps):
             base = 2 * (substeps * k + s)
             a0 = ddot_fine[base]
             a1 = ddot_fine[base + 1]
             a2 = ddot_fine[base + 2]
-            _acceleration(y, yd, a0, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, k1a)
+            _acceleration(y, yd, a0, kk, f, AC, AKb, AKg, AKc, u0, ug, c, g, Tc, Ws, k1a)
             for i in range(n):
                 y2[i] = y[i] + 0.5 * h * yd[i]
                 yd2[i] = yd[i] + 0.5 * h * k1a[i]
-            _acceleration(y2, yd2, a1, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, k2a)
+            _acceleration(y2, yd2, a1, kk, f, AC, AKb, AKg, AKc, u0, ug, c, g, Tc, Ws, k2a)
             for i in range(n):
                 y3[i] = y[i] + 0.5 * h * yd2[i]
                 yd3[i] = yd[i] + 0.5 * h * k2a[i]
-            _acceleration(y3, yd3, a1, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, k3a)
+            _acceleration(y3, yd3, a1, kk, f, AC, AKb, AKg, AKc, u0, ug, c, g, Tc, Ws, k3a)
             for i in range(n):
                 y4[i] = y[i] + h * yd3[i]
                 yd4[i] = yd[i] + h * k3a[i]
-            _acceleration(y4, yd4, a2, kappa[k], force[k], Minv, Kb, Kg, Kc, c, SD, C, g, Tc, Ws, rhs, k4a)
+            _acceleration(y4, yd4, a2, kk, f, AC, AKb, AKg, AKc, u0, ug, c, g, Tc, Ws, k4a)
             for i in range(n):
                 y[i] = y[i] + h / 6.0 * (yd[i] + 2.0 * yd2[i] + 2.0 * yd3[i] + yd4[i])
                 yd[i] = yd[i] + h / 6.0 * (k1a[i] + 2.0 * k2a[i] + 2.0 * k3a[i] + k4a[i])
     return y, yd
+
+
+def _folded(plant: Plant) -> tuple[np.ndarray, ...]:
+    """The plant's matrices with M⁻¹ applied (``_acceleration``), C-contiguous."""
+    Minv = plant.inverse_mass
+    Mq = Minv[:, 1:]
+    ug = plant.first_moment * Minv[:, 0] + Mq @ plant.modal_first_moment
+    return tuple(np.ascontiguousarray(a, dtype=float) for a in (
+        Minv @ plant.damping, Mq @ plant.bending, Mq @ plant.tension, Mq @ plant.centrifugal, Minv[:, 0], ug))
 
 
 def integrate(
@@ -312,11 +327,12 @@ def integrate(
     out_yd = np.empty((n_samples, n))
     out_ydd = np.empty((n_samples, n))
     kappa = plant.youngs_factor(temperature_c).astype(float)
+    AC, AKb, AKg, AKc, u0, ug = _folded(plant)
+    mf = np.ascontiguousarray(np.asarray(generalized_force, float) @ plant.inverse_mass.T)  # M⁻¹F, held over each sample
     y_end, yd_end = _integrate(
         np.asarray(y0, float), np.asarray(yd0, float), np.ascontiguousarray(bearing_acceleration_fine, float),
-        kappa, np.ascontiguousarray(generalized_force, float), int(substeps), sample_period / substeps,
-        plant.inverse_mass, plant.bending, plant.tension, plant.centrifugal,
-        plant.modal_first_moment, plant.first_moment, plant.damping, plant.gravity,
+        kappa, mf, int(substeps), sample_period / substeps, AC, AKb, AKg, AKc, u0, ug,
+        np.ascontiguousarray(plant.modal_first_moment, float), plant.gravity,
         plant.friction_torque, plant.friction_smoothing, out_y, out_yd, out_ydd,
     )
     return out_y, out_yd, out_ydd, y_end, yd_end

@@ -17,7 +17,7 @@ from estimator import BucklingError, RigDescription, assemble_beam, natural_mode
 
 from ..rig_layouts import build_rig
 from ._excitation import DistributedLoad, Excitation, OperationalExcitation, make_excitation
-from ._kinematics import point_motion
+from ._kinematics import points_motion
 from ._plant import Plant, build_plant, clamped_basis, integrate
 from ._settings import SimulationSettings
 
@@ -283,13 +283,14 @@ class VirtualRig:
 
         accel_wander = self._accel_wander.next(n)
         gyro_wander = self._gyro_wander.next(n)
+        # every sensor's kinematics in one pass (fields (n, sensors)), its own column taken below
+        fast = points_motion(self.basis, [s.position for s in (*self.imus, *self.gauges)], y, yd, ydd, d, d_acc, plant_g)
         for i, imu in enumerate(self.imus):
-            motion = point_motion(self.basis, imu.position, y, yd, ydd, d, d_acc, plant_g)
-            fx, fy = motion.specific_force_x, motion.specific_force_y
+            fx, fy = fast.specific_force_x[:, i], fast.specific_force_y[:, i]
             mis = self._misalignment[i]
             cm, sm = np.cos(mis), np.sin(mis)
             accel = np.column_stack([cm * fx + sm * fy, -sm * fx + cm * fy, np.zeros(n)])
-            gyro = np.column_stack([np.zeros(n), np.zeros(n), motion.rate])
+            gyro = np.column_stack([np.zeros(n), np.zeros(n), fast.rate[:, i]])
             accel = accel * self._accel_scale[i] + self._accel_bias[i] + accel_wander[:, i] + e.accel_noise * rng.standard_normal((n, 3))
             gyro = gyro * self._gyro_scale[i] + self._gyro_bias[i] + gyro_wander[:, i] + e.gyro_noise * rng.standard_normal((n, 3))
             meas[imu.topic] = (t, np.hstack([accel, gyro]))
@@ -297,8 +298,8 @@ class VirtualRig:
 
         half_thickness = 0.5 * rig.beam.thickness
         for i, gauge in enumerate(self.gauges):
-            motion = point_motion(self.basis, gauge.position, y, yd, ydd, d, d_acc, plant_g)
-            strain = -half_thickness * motion.curvature + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
+            curvature = fast.curvature[:, len(self.imus) + i]
+            strain = -half_thickness * curvature + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
             meas[gauge.topic] = (t, strain[:, None])
             delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
 
@@ -316,9 +317,11 @@ class VirtualRig:
             t_slow = t_slow + s[:, 0] * self.dt
             d_slow, _, d_acc_slow = self.excitation.bearing(t_slow)
         theta_slow = y_slow[:, 0]
+        slow_motion = points_motion(self.basis, [s.position for s in self.tofs], y_slow, yd_slow, ydd_slow, d_slow,
+                                    d_acc_slow, plant_g) if self.tofs else None
         for i, tof in enumerate(self.tofs):
-            motion = point_motion(self.basis, tof.position, y_slow, yd_slow, ydd_slow, d_slow, d_acc_slow, plant_g)
-            distance = (rig.reflector_distance - motion.inertial_zeta) / np.cos(theta_slow + motion.slope_angle)
+            zeta, slope_angle = slow_motion.inertial_zeta[:, i], slow_motion.slope_angle[:, i]
+            distance = (rig.reflector_distance - zeta) / np.cos(theta_slow + slope_angle)
             distance = distance + self._tof_offset[i] + e.tof_noise * rng.standard_normal(distance.size)
             if e.tof_resolution > 0:
                 distance = np.round(distance / e.tof_resolution) * e.tof_resolution

@@ -58,6 +58,23 @@ def test_without_structures_the_service_is_one_structure(tmp_path):
     settings.for_structure  # noqa: B018 - exists, unused without a list
 
 
+def test_a_fleet_takes_one_worker_process_per_core_unless_told(tmp_path, monkeypatch):
+    """``workers = "auto"`` (the default): one worker process per core the service may run on, at
+    most one per structure; a number is taken as given; a single structure has no workers."""
+    import os
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    three = [{"id": f"m{k}"} for k in range(3)]
+    assert _fleet(tmp_path, three).workers == "auto" and _fleet(tmp_path, three).worker_count == 2
+    assert _fleet(tmp_path, three[:1]).worker_count == 1  # one structure: no second process
+    assert _fleet(tmp_path, three, workers=1).worker_count == 1
+    assert _fleet(tmp_path, three, workers=3).worker_count == 3
+    assert load_settings(None, fast_overrides(tmp_path)).worker_count == 1
+    for bad in (0, "two"):
+        with pytest.raises(SettingsError, match="workers"):
+            _fleet(tmp_path, three, workers=bad)
+
+
 @pytest.mark.parametrize("structures, words", [
     ([{"id": "Mast_1"}], ["id"]),
     ([{"id": "a"}, {"id": "a"}], ["'a'", "more than once"]),
@@ -306,3 +323,54 @@ def test_a_fleet_on_worker_processes_behind_one_api(tmp_path, short_recording):
     summary = json.loads(out.strip().splitlines()[-1])
     assert [r["id"] for r in summary["structures"]] == ["a", "b", "c"] and summary["workers"] == 2
     assert proc.returncode == 1  # c could not start
+
+
+def test_a_fleet_on_worker_processes_with_its_dashboard_on(tmp_path, short_recording):
+    """The default invocation of a fleet (``workers = "auto"`` on this machine's cores, the
+    dashboard on): worker 0 serves the dashboard (whatever it prints before its API line is not
+    taken for a failed start), the front serves every structure's state."""
+    import os
+    import subprocess
+    import sys
+
+    config = tmp_path / "fleet.toml"
+    config.write_text(
+        "workers = 2\n[estimator]\ncalibration_s = 10.0\nwarmup_s = 5.0\n[analytics]\nwindow_s = 20.0\nbaseline_s = 40.0\n"
+        "baseline_min_windows = 3\n[dashboard]\nport = 0\n[archive]\nenabled = false\n"
+        f'[[structures]]\nid = "a"\nsource = "replay:{short_recording}"\n'
+        f'[[structures]]\nid = "b"\nsource = "replay:{short_recording}"\n', encoding="utf-8")
+    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(config), "--port", "0", "--speed", "max",
+           "--db", str(tmp_path / "shm.sqlite"), "--keep-running"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env={**os.environ, "SHM_TOKEN": TOKEN})
+    try:
+        line = proc.stdout.readline()
+        assert "API at " in line and "2 worker processes" in line, line
+        url = line.split("API at ")[1].split()[0]
+        dashboard = _wait(lambda: next((x for x in iter(proc.stdout.readline, "") if "dashboard at " in x), None), 120,
+                          "the dashboard's line")
+        page = httpx.get(dashboard.split("dashboard at ")[1].split()[0], timeout=30)
+        assert page.status_code == 200
+        with httpx.Client(base_url=url, timeout=60) as c:
+            done = _wait(lambda: (lambda d: d if all(s["state"] == "finished" for s in d.values()) else None)(
+                {s["id"]: s for s in c.get("/api/structures").json()["structures"]}), 300, "both structures to finish")
+            assert list(done) == ["a", "b"] and done["a"]["windows"] == done["b"]["windows"] > 0
+    finally:
+        proc.send_signal(__import__("signal").SIGTERM)
+        proc.communicate(timeout=120)
+
+
+def test_paced_structures_start_one_after_the_other_over_a_window_step():
+    """The starts of a fleet's paced structures are spread over one window step of wall time (so
+    their calibrations and windows do not all fall due at once), at most 0.5 s apart."""
+    from types import SimpleNamespace
+
+    def paced(n, speed, window_s=60.0, overlap=0.5):
+        analytics = SimpleNamespace(window_s=window_s, overlap=overlap)
+        return [SimpleNamespace(settings=SimpleNamespace(analytics=analytics), speed=speed) for _ in range(n)]
+
+    stagger = MonitoringService.start_stagger_s
+    assert stagger(paced(1, 1.0)) == 0.0  # nothing to spread
+    assert stagger(paced(50, 2.0)) == pytest.approx(15.0 / 50)  # 30 s of data per step = 15 s of wall time
+    assert stagger(paced(100, 1.0)) == pytest.approx(30.0 / 100)
+    assert stagger(paced(25, 2.0)) == stagger(paced(2, 1.0)) == 0.5  # at most half a second apart
+    assert stagger(paced(100, 0.5)) == pytest.approx(30.0 / 100)  # over at most 30 s

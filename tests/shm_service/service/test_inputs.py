@@ -203,3 +203,28 @@ def test_ingest_never_fails_on_what_a_message_holds_and_moves_time_only_when_tak
     assert r.accepted == 30 and dict(r.rejected) == {"implausible_time": 1}
     v.commit(r)
     assert any("clock jump" in p for p in v.clock.problems())
+
+
+@pytest.mark.parametrize("kind, good, bad", [
+    ("imu", [-9.81, 0.1, 0.0, 0.01, -0.02, 0.0], [[2000.5, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, -200.5], [0, math.nan, 0, 0, 0, 0],
+                                                   [0, 0, 0, math.inf, 0, 0]]),
+    ("tof", [0.4], [[-0.01], [100.5], [math.nan]]),
+    ("strain", [-1e-4], [[0.06], [-0.06], [math.inf]]),
+    ("bearing", [0.002], [[-101.0], [math.nan]]),
+    ("temperature", [21.5], [[-101.0], [201.0], [math.nan]]),
+])
+def test_all_plausible_agrees_with_the_per_sample_judgement(kind, good, bad):
+    """The block shortcut of the pipeline: True exactly when no sample is implausible or
+    non-finite, a single bad sample anywhere in the block making it False."""
+    from shm_service.service._plausibility import ValueLimits, all_plausible, implausible_values
+
+    limits = ValueLimits()
+    block = np.array([good] * 50, dtype=float)
+    assert all_plausible(kind, block, limits) and not implausible_values(kind, block, limits).any()
+    assert all_plausible(kind, block[:0], limits)
+    for row in bad:
+        spoilt = block.copy()
+        spoilt[17] = row
+        assert not all_plausible(kind, spoilt, limits)
+        assert implausible_values(kind, spoilt, limits)[17] or not np.isfinite(spoilt[17]).all()
+    assert not all_plausible("sonar", block[:, :1], limits)  # an unknown kind is left to the per-sample path
