@@ -6,6 +6,7 @@ Bottom layer: imports no other package of the project (numpy and pydantic only),
 other package imports its layouts and documents from here instead of re-deriving them.
 """
 
+from ._network import is_loopback
 from ._documents import (
     CURVATURE_CHART,
     SENSOR_STATES,
@@ -93,6 +94,7 @@ from ._rig import (
 from ._state import Peripheral, StateIndex, StateLayout
 
 __all__ = [
+    "is_loopback",
     # rig.json
     "Beam", "Orientation", "PointMass", "RigDescription", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
     "STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT", "Support", "load_rig", "parse_rig",

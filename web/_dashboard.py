@@ -21,7 +21,6 @@ spectra.
 
 from __future__ import annotations
 
-import ipaddress
 import logging
 import math
 import threading
@@ -31,7 +30,7 @@ from typing import Any
 import numpy as np
 import viser
 
-from contract import SENSOR_STATES, AlarmDocument, SpectrumDocument, StateLayout, StatusDocument, WindowDocument
+from contract import SENSOR_STATES, AlarmDocument, SpectrumDocument, StateLayout, StatusDocument, WindowDocument, is_loopback
 
 from ._data import windows_from_trend_rows
 from ._feed import Snapshot, StructureFeed, _Store  # noqa: F401  (_Store: the tests' rates)
@@ -89,7 +88,7 @@ class Dashboard:
         token: str | None = None,
         fleet: bool = False,
     ) -> None:
-        off_loopback = not _is_loopback(host)
+        off_loopback = not is_loopback(host)
         if off_loopback and not token:
             raise ValueError(f"dashboard host {host!r} is not loopback: a token is required (server.token_file or "
                              "SHM_TOKEN); viser itself has no authentication")
@@ -369,12 +368,3 @@ class Dashboard:
                 next_t = time.monotonic()
                 delay = 0.0
             self._stop.wait(delay)
-
-
-def _is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
