@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -242,7 +243,6 @@ def _service_test_helpers():
 @pytest.mark.timeout(300)
 def test_alarm_raised_by_the_service_shows_on_the_page(chromium, tmp_path):
     """End to end: shm serve (replay of a damaged recording) with its dashboard on free ports."""
-    import re
 
     from playwright.sync_api import sync_playwright
 
@@ -301,6 +301,16 @@ def stop_process(proc: subprocess.Popen) -> None:
             proc.wait(10)
 
 
+def serve_urls(proc: subprocess.Popen, out: Path, log: Path, what: str = "shm serve") -> tuple[str, str] | None:
+    """The API and dashboard addresses ``what`` printed to ``out`` (None: not yet); its log's tail
+    when it ended before printing them."""
+    text = out.read_text()
+    if proc.poll() is not None:
+        raise AssertionError(f"{what} ended early ({proc.returncode}): {log.read_text()[-3000:]}")
+    api, dash = re.search(r"API at (http://\S+?) ", text), re.search(r"dashboard at (http://\S+)", text)
+    return (api.group(1), dash.group(1)) if api and dash else None
+
+
 def _wait(predicate, timeout: float, what: str, poll: float = 0.25):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -329,7 +339,6 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, case)
     trends labelled like the spectra by the model's modes (no combimode for the clamp), an alarm
     acknowledged over the HTTP API shown as such."""
     import contextlib
-    import re
     import sys
 
     import httpx
@@ -357,15 +366,7 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, case)
         proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=stdout, stderr=stderr, env={**os.environ, "PYTHONPATH": str(root)})
     stack = contextlib.ExitStack()
     try:
-        def urls():
-            text = out.read_text()
-            api = re.search(r"API at (http://\S+?) ", text)
-            dash = re.search(r"dashboard at (http://\S+)", text)
-            if proc.poll() is not None:
-                raise AssertionError(f"shm serve ended early ({proc.returncode}): {log.read_text()[-2000:]}")
-            return (api.group(1), dash.group(1)) if api and dash else None
-
-        api_url, dash_url = _wait(urls, 180, "shm serve to print its API and dashboard addresses")
+        api_url, dash_url = _wait(lambda: serve_urls(proc, out, log), 180, "shm serve to print its API and dashboard addresses")
         api = stack.enter_context(httpx.Client(base_url=api_url, timeout=10))
         # The clamped mast: b_k is mode k (no combimode); the pendulum's b1 carries modes 1 and 2.
         gamma_text = "b3 · mode 3" if mast else "b5 · mode 6"

@@ -19,7 +19,7 @@ import httpx
 import pytest
 
 from test_dashboard_browser import (  # noqa: F401  (chromium: the fixture)
-    CHROMIUM_ARGS, VIEWPORT, _image, _support_offset, _visible, _wait, chromium, stop_process,
+    CHROMIUM_ARGS, VIEWPORT, _image, _support_offset, _visible, _wait, chromium, serve_urls, stop_process,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -86,16 +86,8 @@ def fleet(tmp_path_factory):
     with open(out, "w") as stdout, open(log, "w") as stderr:
         proc = subprocess.Popen(cmd, cwd=tmp, stdout=stdout, stderr=stderr, env={**os.environ, "PYTHONPATH": str(ROOT)})
 
-    def urls():
-        text = out.read_text()
-        api = re.search(r"API at (http://\S+?) ", text)
-        dash = re.search(r"dashboard at (http://\S+)", text)
-        if proc.poll() is not None:
-            raise AssertionError(f"shm serve ended early ({proc.returncode}): {log.read_text()[-2000:]}")
-        return (api.group(1), dash.group(1)) if api and dash else None
-
     try:
-        yield _wait(urls, 120, "shm serve to print its API and dashboard addresses")
+        yield _wait(lambda: serve_urls(proc, out, log), 120, "shm serve to print its API and dashboard addresses")
     finally:
         stop_process(proc)
     text = log.read_text()
