@@ -6,6 +6,14 @@ Everything that one analysis window produces (its trend rows, the monitor state 
 changes, alarm events and the outbox rows of their notifications) is written in ONE transaction
 (``commit_window``), so a crash at any instant leaves either all of it or none of it.
 
+Group commit: the windows that threads of one process hand to ``commit_window`` while a write is
+under way are written together by one of those threads, in one transaction, each in a savepoint
+of its own (a bad window is rolled back alone). A fleet's worker process thus takes the
+database's write lock once for all its structures' windows of the moment, from one thread, and
+not once per window from as many threads as it hosts structures: under a saturated CPU a holder
+that waits for its process's GIL behind a hundred others would keep the other processes waiting
+for the lock.
+
 Durability: a transaction that writes alarms or the outbox is committed with
 ``synchronous = FULL`` (it survives a power loss, not only a crash of the process); trend rows
 alone may use NORMAL (``sync``). Every alarm event has a UUID, so a notification's id
@@ -251,6 +259,18 @@ class AlarmChange:
     message: str
 
 
+@dataclass(eq=False)
+class _Ticket:
+    """A window handed to the group commit: its statements, and what became of them."""
+
+    run: Any  # fn(db) -> list[int], the window's statements
+    durable: bool
+    retry_s: float
+    done: bool = False
+    result: list[int] | None = None
+    error: BaseException | None = None
+
+
 @dataclass
 class WindowCommit:
     """Everything one window writes, committed atomically."""
@@ -295,6 +315,13 @@ class Storage:
         self.failures = 0  # transactions given up after retry_s
         self.last_error: str | None = None
         self._lock = threading.RLock()
+        # the group commit of windows (see the module's docstring): those waiting, and whether a
+        # thread is writing a group
+        self._group = threading.Condition(threading.Lock())
+        self._queued: list[_Ticket] = []
+        self._leading = False
+        self.groups = 0  # group transactions written
+        self.grouped_windows = 0  # windows written in them
         self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None, timeout=busy_timeout_s)
         self._db.row_factory = sqlite3.Row
         self._db.execute("PRAGMA journal_mode=WAL")
@@ -619,7 +646,72 @@ class Storage:
                     events.append(event)
             return events
 
-        return self._write(run, durable=bool(commit.alarm_changes), retry_s=retry_s)
+        return self._group_commit(_Ticket(run, bool(commit.alarm_changes), self.retry_s if retry_s is None else float(retry_s)))
+
+    #: the most windows written in one group transaction (a bound on how long the lock is held)
+    MAX_GROUP = 64
+
+    def _group_commit(self, ticket: _Ticket) -> list[int]:
+        """Write ``ticket`` with the others waiting: the first thread to find no group under way
+        writes everything queued meanwhile (and what queues while it writes, until its own window
+        is written); the others wait for it."""
+        with self._group:
+            self._queued.append(ticket)
+            while not ticket.done and self._leading:
+                self._group.wait()
+            leader = not ticket.done
+            if leader:
+                self._leading = True
+        if leader:
+            try:
+                while not ticket.done:
+                    with self._group:
+                        batch, self._queued = self._queued[:self.MAX_GROUP], self._queued[self.MAX_GROUP:]
+                    self._write_group(batch)
+                    with self._group:
+                        self._group.notify_all()
+            finally:
+                with self._group:
+                    self._leading = False  # a waiting thread writes the next group
+                    self._group.notify_all()
+        if ticket.error is not None:
+            raise ticket.error
+        assert ticket.result is not None
+        return ticket.result
+
+    def _write_group(self, batch: list[_Ticket]) -> None:
+        """One transaction for the windows of ``batch``, each in a savepoint: a window whose
+        statements fail for good (not a passing fault) is rolled back alone and gets the error;
+        a passing fault retries the whole group; when it outlasts the retry time (the longest of
+        the group's), every window of the group gets ``StorageUnavailable`` and none is kept."""
+
+        def run(db: sqlite3.Connection) -> None:
+            for t in batch:
+                t.result, t.error = None, None
+            for t in batch:
+                db.execute("SAVEPOINT window")
+                try:
+                    t.result = t.run(db)
+                except Exception as exc:
+                    if is_transient(exc):
+                        raise
+                    db.execute("ROLLBACK TO window")
+                    t.error = exc
+                db.execute("RELEASE window")
+
+        try:
+            if batch:
+                self._write(run, durable=any(t.durable for t in batch), retry_s=max(t.retry_s for t in batch))
+                self.groups += 1
+                self.grouped_windows += len(batch)
+        except BaseException as exc:
+            for t in batch:
+                t.result, t.error = None, exc
+            if not isinstance(exc, Exception):
+                raise
+        finally:
+            for t in batch:
+                t.done = True
 
     def _store_baseline(self, db: sqlite3.Connection, source: str, baseline: dict, now: float) -> None:
         row = db.execute("SELECT id FROM baselines WHERE source=? AND state='learning' ORDER BY id DESC LIMIT 1", (source,)).fetchone()

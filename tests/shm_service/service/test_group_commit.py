@@ -1,0 +1,109 @@
+"""The group commit of windows (issue 14, the fleet's write lock): windows handed to one
+``Storage`` by many threads while a write is under way are written in one transaction, each in
+a savepoint (a bad window fails alone), and a fault of the database fails the whole group."""
+
+from __future__ import annotations
+
+import sqlite3
+import threading
+import time
+
+import pytest
+
+from shm_service.service._storage import AlarmChange, Storage, StorageUnavailable, WindowCommit
+
+
+def _row_commit(source: str, k: int, changes=()) -> WindowCommit:
+    return WindowCommit(source, 30.0 * k, 30.0 * k + 60.0, [], {"monitor": {"k": k}}, None, list(changes))
+
+
+def _wait_queued(st: Storage, n: int, timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while len(st._queued) < n:
+        assert time.monotonic() < deadline, f"only {len(st._queued)} of {n} windows queued"
+        time.sleep(0.005)
+
+
+def _commit_in_threads(st: Storage, commits: list[WindowCommit]) -> tuple[list[threading.Thread], dict]:
+    """The first commit starts (and becomes the group's writer), blocked on the held write lock;
+    the others queue behind it."""
+    outcome: dict = {}
+
+    def one(c: WindowCommit) -> None:
+        try:
+            outcome[c.source] = st.commit_window(c)
+        except Exception as exc:  # what the caller gets is the test's subject
+            outcome[c.source] = exc
+
+    threads = [threading.Thread(target=one, args=(c,)) for c in commits]
+    threads[0].start()
+    deadline = time.monotonic() + 10
+    while not st._leading:
+        assert time.monotonic() < deadline
+        time.sleep(0.005)
+    for t in threads[1:]:
+        t.start()
+    _wait_queued(st, len(commits) - 1)
+    return threads, outcome
+
+
+def test_windows_of_many_threads_are_written_in_one_transaction(tmp_path):
+    st = Storage(tmp_path / "s.sqlite")
+    commits = [_row_commit(f"mast-{i:02d}", i) for i in range(12)]
+    with st._lock:  # a write under way: the windows arriving meanwhile queue
+        threads, outcome = _commit_in_threads(st, commits)
+    for t in threads:
+        t.join(30)
+    assert all(outcome[c.source] == [] for c in commits), outcome
+    # the first window alone (it was taken before the lock was free), then the eleven together
+    assert (st.groups, st.grouped_windows) == (2, 12)
+    stored = {r["source"]: r["data_time_s"] for r in st._read(lambda db: db.execute("SELECT * FROM monitor_state").fetchall())}
+    assert stored == {c.source: c.data_time_s for c in commits}
+    assert st.integrity_check() == "ok" and not st._leading and st._queued == []
+
+
+def test_a_bad_window_fails_alone_in_its_group(tmp_path):
+    st = Storage(tmp_path / "s.sqlite")
+    good = AlarmChange("raise", "mode2", "frequency", 2, "alarm", 40.0, 6.0, 5.0, "m")
+    bad = AlarmChange("bogus", "mode3", "frequency", 3, "alarm", 40.0, 6.0, 5.0, "m")
+    commits = [_row_commit("a", 0), _row_commit("b", 1, [good]), _row_commit("c", 2, [good, bad]), _row_commit("d", 3, [good])]
+    with st._lock:
+        threads, outcome = _commit_in_threads(st, commits)
+    for t in threads:
+        t.join(30)
+    assert isinstance(outcome["c"], ValueError) and "bogus" in str(outcome["c"])
+    assert outcome["a"] == [] and len(outcome["b"]) == 1 and len(outcome["d"]) == 1
+    # nothing of c is kept (not its first, good change either); the others of its group are
+    assert sorted(a.source for a in st.alarms()) == ["b", "d"]
+    assert st._read(lambda db: db.execute("SELECT COUNT(*) FROM monitor_state WHERE source='c'").fetchone()[0]) == 0
+    assert (st.groups, st.grouped_windows) == (2, 4)
+
+
+def test_a_locked_database_fails_the_whole_group_and_keeps_nothing(tmp_path):
+    st = Storage(tmp_path / "s.sqlite", retry_s=0.3, busy_timeout_s=0.05)
+    other = sqlite3.connect(str(tmp_path / "s.sqlite"), isolation_level=None)
+    other.execute("BEGIN IMMEDIATE")  # another process's writer holds the lock throughout
+    try:
+        commits = [_row_commit(f"s{i}", i) for i in range(5)]
+        with st._lock:
+            threads, outcome = _commit_in_threads(st, commits)
+        for t in threads:
+            t.join(30)
+        assert all(isinstance(outcome[c.source], StorageUnavailable) for c in commits), outcome
+        assert st.failures == 2 and st.groups == 0  # the first window's group, then the other four's
+    finally:
+        other.execute("ROLLBACK")
+        other.close()
+    assert st._read(lambda db: db.execute("SELECT COUNT(*) FROM monitor_state").fetchone()[0]) == 0
+    assert st.commit_window(commits[0]) == []  # the lock is free: the next window is written
+    assert not st._leading and st._queued == []
+
+
+def test_a_commit_of_another_source_row_is_refused_before_the_group(tmp_path):
+    from contract import TrendRow
+
+    st = Storage(":memory:")
+    row = TrendRow(source="x", window_start_s=0.0, window_end_s=60.0, mode=1, unit=1, kind="ambient")
+    with pytest.raises(ValueError, match="source 'x' in a commit of source 'y'"):
+        st.commit_window(WindowCommit("y", 0.0, 60.0, [row], None, None))
+    assert st._queued == [] and st.groups == 0
