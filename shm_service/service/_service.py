@@ -53,7 +53,7 @@ from ._plausibility import SourceClock
 from ._retention import RetentionWorker
 from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
-from ._storage import Storage
+from ._storage import Storage, is_transient
 
 __all__ = ["MonitoringService", "NotSingleStructure", "ServiceError", "Structure", "StructureUnavailable"]
 
@@ -635,7 +635,10 @@ class MonitoringService(_StoredRows):
                 pass
             self.notifier.wake()
         except Exception as exc:
-            self.housekeeping_guard.record("housekeeping", exc)
+            if is_transient(exc):  # the database locked or full for a while: expected, no traceback
+                self.housekeeping_guard.record("storage", f"{type(exc).__name__}: {exc}")
+            else:
+                self.housekeeping_guard.record("housekeeping", exc)
 
     def wait(self, timeout: float | None = None) -> bool:
         """Wait until every source ended and everything was processed and stored."""

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import sqlite3
 import subprocess
 import sys
 import threading
@@ -123,4 +124,29 @@ def test_reads_answer_while_another_process_holds_the_write_lock(tmp_path):
         holder.wait()
         holder.stdout.close()
         api.stop()
+        service.stop(drain_s=0)
+
+
+def test_housekeeping_on_a_locked_database_counts_it_without_a_traceback(tmp_path, caplog):
+    settings = load_settings(None, fast_overrides(tmp_path, **{"source.spec": "ingest", "storage_retry_s": 0.2}))
+    service = MonitoringService(settings, environ={})
+    try:
+        structure = service.primary
+        structure.touched(-1)  # samples seen since the last note: the next housekeeping writes
+        other = sqlite3.connect(str(settings.db), isolation_level=None)
+        other.execute("BEGIN IMMEDIATE")  # another process's writer
+        try:
+            with caplog.at_level("WARNING", logger="shm.serve"):
+                service.housekeeping()
+                service.housekeeping()
+        finally:
+            other.execute("ROLLBACK")
+            other.close()
+        doc = service.housekeeping_guard.status()
+        assert doc.errors_by_kind == {"storage": 2} and "locked" in doc.last_error
+        logged = [r for r in caplog.records if "housekeeping storage failed" in r.getMessage()]
+        assert len(logged) == 1 and logged[0].exc_info is None  # once, as a line: an expected, passing fault
+        service.housekeeping()  # the lock is free: the note is written
+        assert service.housekeeping_guard.errors == 2
+    finally:
         service.stop(drain_s=0)
