@@ -11,10 +11,12 @@
   pipeline, apart), and how many one core hosts at real time;
 - live fleets: ``shm serve --workers 1|2`` of N simulated structures (all in one process, or in
   two worker processes behind one API on one database), the worst lag of each structure (overall
-  and after the first minute), windows committed, RSS of all processes, CPU.
+  and after the first minute), windows committed (and any analysed but not written at the end),
+  RSS of all processes, CPU. By default 100 at real time for 690 s: the budget's ten minutes after
+  the start-up.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_fleet [--replay FILE] [--files 8] [--skip-reprocess]
-     [--skip-memory] [--structures 4] [--skip-live] [--live 10 25] [--live-s 240] [--live-speed 1] [--live-dashboard]
+     [--skip-memory] [--structures 4] [--skip-live] [--live 100] [--live-s 690] [--live-speed 1] [--live-dashboard]
 (``main()`` is the entry for ``python -m benchmarks``; the eight files are the one-hour recording
 under eight names, hard links: the work per file is that of eight different hours.)
 """
@@ -116,6 +118,74 @@ def bench_commit(rows_per_file: int = 560, files: int = 20) -> float:
         storage.close()
     print(f"[commit] {1e3 * per_file:.1f} ms per reprocessed hour ({rows_per_file} trend rows)", flush=True)
     return per_file
+
+
+_PROBE = """
+import sqlite3, sys, time
+db = sqlite3.connect(sys.argv[1], isolation_level=None, timeout=60)
+waits = []
+deadline = time.monotonic() + float(sys.argv[2])
+while time.monotonic() < deadline:
+    a = time.perf_counter()
+    db.execute("BEGIN IMMEDIATE")
+    waits.append(time.perf_counter() - a)
+    db.execute("UPDATE meta SET value = value WHERE key = 'instance'")
+    db.execute("COMMIT")
+    time.sleep(0.02)
+waits.sort()
+print(len(waits), waits[len(waits) // 2], waits[int(0.99 * len(waits))], waits[-1])
+"""
+
+
+def bench_lock_hold(busy_threads: int = 20, group: int = 19, seconds: float = 20.0) -> dict:
+    """What another process waits for the write lock (``BEGIN IMMEDIATE``, every 20 ms) while this
+    one, its CPU taken by ``busy_threads`` pure-Python threads, commits windows ``group`` at a time
+    (30 kB monitor states, 5 trend rows each): with the plain windows moved in one statement (as
+    shipped) and with every window in a savepoint of one transaction (the path of windows with
+    alarm changes, and of every window before). The other process's median, 99th percentile and
+    longest wait, in ms."""
+    import threading
+
+    from contract import TrendRow
+    from shm_service.service._storage import Storage, WindowCommit
+
+    results = {}
+    for path in ("one statement", "transaction"):
+        with tempfile.TemporaryDirectory() as tmp:
+            st = Storage(Path(tmp) / "s.sqlite")
+            if path == "transaction":
+                st._write_plain = lambda batch: False  # type: ignore[method-assign]
+            stop = threading.Event()
+
+            def spin() -> None:
+                x = 0
+                while not stop.is_set():
+                    x += 1
+
+            def commits(i: int) -> None:
+                k = 0
+                while not stop.is_set():
+                    rows = [TrendRow(source=f"s{i}", window_start_s=30.0 * k, window_end_s=30.0 * k + 60, mode=m, unit=m,
+                                     kind="ambient", frequency_hz=1.0) for m in range(1, 6)]
+                    st.commit_window(WindowCommit(f"s{i}", 30.0 * k, 30.0 * k + 60, rows, {"monitor": "y" * 30000}, None))
+                    k += 1
+                    time.sleep(0.05)
+
+            threads = [threading.Thread(target=spin, daemon=True) for _ in range(busy_threads)]
+            threads += [threading.Thread(target=commits, args=(i,), daemon=True) for i in range(group)]
+            for t in threads:
+                t.start()
+            out = subprocess.run([sys.executable, "-c", _PROBE, str(st.path), str(seconds)], capture_output=True, text=True,
+                                 check=True).stdout.split()
+            stop.set()
+            for t in threads:
+                t.join(30)
+            n, median, p99, worst = int(out[0]), *(1e3 * float(x) for x in out[1:])
+            results[path] = {"probe_writes": n, "median_wait_ms": round(median, 2), "p99_wait_ms": round(p99, 1),
+                             "worst_wait_ms": round(worst, 1), "windows_written": st.grouped_windows, "groups": st.groups}
+            st.close()
+    print(f"[lock] {busy_threads} busy threads, {group} committing: {json.dumps(results)}", flush=True)
+    return results
 
 
 def on_paper(per_file_s: float, overhead_s: float, commit_s: float, files: int = 1000, cores: int = 2) -> None:
@@ -220,7 +290,8 @@ def _fleet_toml(ids: list[str], block_s: float, duration_s: float) -> str:
 
 
 def _run_fleet(tmp: str, ids: list[str], workers: int, speed: float, seconds: float, block_s: float, poll_s: float,
-               dashboard: bool, worst: dict, last: dict, first: dict, after_s: float) -> tuple[float, float, float, str, dict]:
+               dashboard: bool, worst: dict, last: dict, first: dict, after_s: float,
+               uncommitted: dict) -> tuple[float, float, float, str, dict]:
     """One ``shm serve`` of the fleet on ``workers`` worker processes (``--workers``; 1: all in the
     process started), polled at its one API; RSS and CPU of that process and its workers."""
     import httpx
@@ -259,6 +330,10 @@ def _run_fleet(tmp: str, ids: list[str], workers: int, speed: float, seconds: fl
                     if time.monotonic() - started >= after_s:
                         worst_after[s["id"]] = max(worst_after.get(s["id"], -1e9), s["lag_s"])
             peak_rss = max(peak_rss, sum(q.memory_info().rss for q in ps) / 2**20)
+        # every window analysed is committed: what each structure analysed and wrote, at the end
+        for sid in ids:
+            p = client.get(f"{url}/api/structures/{sid}/status").json()["pipeline"]
+            uncommitted[sid] = p["windows"] - p["windows_committed"]
     ps = [front, *front.children(recursive=True)]
     wall = time.monotonic() - cpu_started if cpu0 is not None else time.monotonic() - started
     cpu = sum(q.cpu_times().user + q.cpu_times().system for q in ps) - (cpu0 or 0.0)
@@ -281,9 +356,10 @@ def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 24
     worst: dict[str, float] = {}
     last: dict[str, dict] = {}
     first: dict[str, float] = {}  # data time at the first poll with data
+    uncommitted: dict[str, int] = {}  # windows analysed but not (yet) written, at the end
     with tempfile.TemporaryDirectory() as tmp:
         wall, cpu, peak_rss, load, worst_after = _run_fleet(tmp, ids, processes, speed, seconds, block_s, poll_s, dashboard,
-                                                            worst, last, first, after_s)
+                                                            worst, last, first, after_s, uncommitted)
     lags = [worst.get(i) for i in ids]
     windows = [last.get(i, {}).get("windows", 0) for i in ids]
     states = sorted({last.get(i, {}).get("state", "?") for i in ids})
@@ -294,7 +370,8 @@ def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 24
               "wall_s": round(wall, 1), "worst_lag_s": None if None in lags else round(max(lags), 2),
               f"worst_lag_after_{after_s:g}s": round(max(worst_after.values()), 2) if worst_after else None,
               "structures_lag_over_5s": sum(1 for x in lags if x is None or x > 5.0),
-              "min_windows": min(windows), "structures_without_windows": sum(1 for w in windows if w == 0), "states": states,
+              "min_windows": min(windows), "structures_without_windows": sum(1 for w in windows if w == 0),
+              "windows_not_committed": sum(uncommitted.values()), "states": states,
               "peak_rss_mib": round(peak_rss, 1), "rss_per_structure_mib": round(peak_rss / structures, 1),
               "budget_mib": 1024 + 150 * structures,
               "cpu_cores": round(cpu / wall, 2),
@@ -313,15 +390,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--skip-reprocess", action="store_true")
     p.add_argument("--skip-memory", action="store_true")
     p.add_argument("--skip-live", action="store_true")
-    p.add_argument("--live", type=int, nargs="*", default=[10, 25], metavar="N",
+    p.add_argument("--live", type=int, nargs="*", default=[100], metavar="N",
                    help="live fleets of N simulated structures (one and two worker processes each)")
-    p.add_argument("--live-s", type=float, default=240.0, help="wall time of each live fleet, s")
+    p.add_argument("--live-s", type=float, default=690.0,
+                   help="wall time of each live fleet, s (the budget: ten minutes at real time after the start-up)")
     p.add_argument("--live-speed", type=float, default=1.0)
     p.add_argument("--live-dashboard", action="store_true", help="live fleets with the dashboard on (worker 0 serves it)")
     args, _ = p.parse_known_args(argv)
     if not args.skip_memory:  # first: before this process imports the cluster's libraries
         bench_memory_per_structure(args.structures)
     bench_structure_cost()
+    bench_lock_hold()
     if not args.skip_live:
         for n in args.live:
             for processes in (1, 2):

@@ -107,3 +107,79 @@ def test_a_commit_of_another_source_row_is_refused_before_the_group(tmp_path):
     with pytest.raises(ValueError, match="source 'x' in a commit of source 'y'"):
         st.commit_window(WindowCommit("y", 0.0, 60.0, [row], None, None))
     assert st._queued == [] and st.groups == 0
+
+
+def _contents(st: Storage) -> dict:
+    def run(db):
+        return {
+            "trends": [tuple(r) for r in db.execute("SELECT source, window_start_s, mode, frequency_hz FROM trends ORDER BY 1, 2, 3")],
+            "state": [tuple(r) for r in db.execute(
+                "SELECT source, last_window_start_s, data_time_s, monitor, calibration FROM monitor_state ORDER BY 1")],
+            "alarms": [tuple(r) for r in db.execute("SELECT source, chart, state, stale FROM alarms ORDER BY 1, 2")],
+        }
+    return st._read(run)
+
+
+def _sequence() -> list[WindowCommit]:
+    from contract import TrendRow
+
+    def rows(source, k):
+        return [TrendRow(source=source, window_start_s=30.0 * k, window_end_s=30.0 * k + 60, mode=m, unit=m, kind="ambient",
+                         frequency_hz=1.0 + m + 0.01 * k) for m in (1, 2)]
+
+    raise_ = AlarmChange("raise", "mode2", "frequency", 2, "alarm", 60.0, 6.0, 5.0, "m")
+    return [
+        WindowCommit("a", 0.0, 60.0, rows("a", 0), {"monitor": 1}, {"cal": 1}),
+        WindowCommit("b", 0.0, 60.0, rows("b", 0), {"monitor": 1}, None, [raise_]),
+        WindowCommit("a", 30.0, 90.0, rows("a", 1), {"monitor": 2}, None),  # keeps a's calibration
+        WindowCommit("a", 30.0, 90.0, rows("a", 1), {"monitor": 3}, None),  # the same window again: rows ignored
+    ]
+
+
+def test_plain_windows_in_one_statement_store_what_a_transaction_each_stores(tmp_path, monkeypatch):
+    one = Storage(tmp_path / "one.sqlite")
+    statements: list[str] = []
+    one._db.set_trace_callback(statements.append)
+    for c in _sequence():
+        one.commit_window(c)
+    one.touch_source("b", "sim", "", 0.0)
+    assert one.mark_stale(silent_since=1e12, now=1.0)  # b's alarm goes stale; b's next window judges it again
+    assert _contents(one)["alarms"] == [("b", "mode2", "active", 1)]
+    one.commit_window(WindowCommit("b", 30.0, 90.0, [], {"monitor": 2}, None))
+    one._db.set_trace_callback(None)
+
+    each = Storage(tmp_path / "each.sqlite")
+    monkeypatch.setattr(each, "_write_plain", lambda batch: False)  # every window in a transaction of its own
+    for c in _sequence():
+        each.commit_window(c)
+    each.touch_source("b", "sim", "", 0.0)
+    assert each.mark_stale(silent_since=1e12, now=1.0)
+    each.commit_window(WindowCommit("b", 30.0, 90.0, [], {"monitor": 2}, None))
+
+    assert _contents(one) == _contents(each)
+    got = _contents(one)
+    assert got["state"][0][3:] == ('{"monitor": 3}', '{"cal": 1}') and len(got["trends"]) == 6
+    assert got["alarms"] == [("b", "mode2", "active", 0)]
+    # the plain windows took the database's lock in one statement each, not in a transaction
+    # (whose statements each wait for the GIL while the lock is held)
+    # (SQLite's trace names the trigger's statements by the statement that fired them)
+    flushes = {s for s in statements if s.startswith("INSERT INTO stage_flush")}
+    begins = [s for s in statements if s.startswith("BEGIN")]
+    assert len(flushes) == 4 and len(begins) == 2  # the transactions: b's alarm, mark_stale
+
+
+def test_a_plain_group_with_a_bad_window_falls_back_to_one_savepoint_each(tmp_path):
+    st = Storage(tmp_path / "s.sqlite")
+    commits = [_row_commit("a", 0), _row_commit("b", 1), _row_commit("c", 2)]
+    # a value SQLite cannot store, in c only (a malformed window that bypassed its document's validation)
+    from contract import TrendRow
+    commits[2].rows = [TrendRow.model_construct(source="c", window_start_s=60.0, window_end_s=120.0, mode=1, unit=1,
+                                                kind="ambient", frequency_hz=[1.0])]
+    with st._lock:
+        threads, outcome = _commit_in_threads(st, commits)
+    for t in threads:
+        t.join(30)
+    assert outcome["a"] == [] and outcome["b"] == []
+    assert isinstance(outcome["c"], sqlite3.ProgrammingError), outcome["c"]
+    assert sorted(r[0] for r in _contents(st)["state"]) == ["a", "b"]
+    assert st.integrity_check() == "ok" and st.commit_window(_row_commit("c", 3)) == []
