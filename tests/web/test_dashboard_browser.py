@@ -47,7 +47,9 @@ def chromium() -> str:
         if shutil.which("apt-get") and hasattr(os, "geteuid") and os.geteuid() == 0:
             env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
             problem = ""
-            for cmd in (["apt-get", "update"], ["apt-get", "install", "-y", "--no-install-recommends", "chromium"]):
+            # test files on other xdist workers may install at the same moment: wait for dpkg's lock
+            wait = ["-o", "DPkg::Lock::Timeout=600"]
+            for cmd in (["apt-get", *wait, "update"], ["apt-get", *wait, "install", "-y", "--no-install-recommends", "chromium"]):
                 result = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=env)
                 if result.returncode != 0:
                     problem = f"{' '.join(cmd)} failed: {result.stderr.strip()[-500:]}"

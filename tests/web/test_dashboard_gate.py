@@ -14,6 +14,7 @@ import viser
 from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus
 
+from test_dashboard_browser import chromium  # noqa: F401  (the fixture that installs Debian's chromium when missing)
 from web._gate import COOKIE, TokenGate
 
 TOKEN = "dashboard-token-1"
@@ -74,8 +75,7 @@ def test_the_dashboard_refuses_to_listen_off_loopback_without_a_token():
         TokenGate(host="127.0.0.1", port=0, upstream_port=1, token="short")
 
 
-@pytest.mark.skipif(not __import__("pathlib").Path("/usr/bin/chromium").exists(), reason="needs Debian's chromium")
-def test_a_browser_opens_the_gated_dashboard_with_the_token(tmp_path):
+def test_a_browser_opens_the_gated_dashboard_with_the_token(chromium, tmp_path):  # noqa: F811
     """Headless chromium: without the token the gate answers 401; with ``?token=`` once the
     page loads, its websocket passes the gate with the cookie and viser's GUI appears."""
     from playwright.sync_api import sync_playwright
@@ -87,7 +87,7 @@ def test_a_browser_opens_the_gated_dashboard_with_the_token(tmp_path):
             "--disable-sync"]
     try:
         with sync_playwright() as p:
-            context = p.chromium.launch_persistent_context(str(tmp_path / "profile"), executable_path="/usr/bin/chromium",
+            context = p.chromium.launch_persistent_context(str(tmp_path / "profile"), executable_path=chromium,
                                                            headless=True, args=args)
             try:
                 page = context.pages[0] if context.pages else context.new_page()
