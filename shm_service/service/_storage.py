@@ -441,13 +441,14 @@ class Storage:
 
     @property
     def schema_version(self) -> int:
-        with self._lock:
-            return int(self._db.execute("PRAGMA user_version").fetchone()[0])
+        """The schema's version, read on the reading connection: a status query never waits for
+        the writers' lock (a fleet's status asks it once per structure)."""
+        return int(self._read(lambda db: db.execute("PRAGMA user_version").fetchone()[0]))
 
     def migrate(self) -> None:
         """Bring the schema to ``SCHEMA_VERSION``; refuses a database of a newer version."""
         with self._lock:
-            version = self.schema_version
+            version = int(self._db.execute("PRAGMA user_version").fetchone()[0])
             if version > SCHEMA_VERSION:
                 raise RuntimeError(f"{self.path}: schema version {version} is newer than this program's {SCHEMA_VERSION}")
             if version == SCHEMA_VERSION:

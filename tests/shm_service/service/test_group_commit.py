@@ -183,3 +183,28 @@ def test_a_plain_group_with_a_bad_window_falls_back_to_one_savepoint_each(tmp_pa
     assert isinstance(outcome["c"], sqlite3.ProgrammingError), outcome["c"]
     assert sorted(r[0] for r in _contents(st)["state"]) == ["a", "b"]
     assert st.integrity_check() == "ok" and st.commit_window(_row_commit("c", 3)) == []
+
+
+def test_the_schema_version_is_read_without_the_writers_lock(tmp_path):
+    from shm_service.service._storage import SCHEMA_VERSION
+
+    st = Storage(tmp_path / "s.sqlite")
+    held, release = threading.Event(), threading.Event()
+
+    def writer() -> None:  # a group being written, for as long as the test wants
+        with st._lock:
+            held.set()
+            release.wait(10)
+
+    t = threading.Thread(target=writer)
+    t.start()
+    try:
+        assert held.wait(10)
+        answer: list[int] = []
+        reader = threading.Thread(target=lambda: answer.append(st.schema_version))
+        reader.start()
+        reader.join(2.0)
+        assert answer == [SCHEMA_VERSION]  # a fleet's status asks it per structure: it must not wait for the writer
+    finally:
+        release.set()
+        t.join(10)
