@@ -212,6 +212,13 @@ SCHEMA_VERSION = len(_MIGRATIONS)
 #: The trend table's columns are the trend row document's fields, the alarm table's the alarm document's.
 TREND_COLUMNS = tuple(TrendRow.model_fields)
 ALARM_COLUMNS = tuple(AlarmDocument.model_fields)
+#: A window's monitor state row (then ``updated_at``), and how it replaces the stored one (a
+#: window without a calibration keeps the stored calibration); written by a window's transaction
+#: and by the plain windows' trigger alike.
+_STATE_COLUMNS = ("source", "last_window_start_s", "data_time_s", "monitor", "calibration")
+_STATE_UPSERT = ("ON CONFLICT(source) DO UPDATE SET last_window_start_s=excluded.last_window_start_s, "
+                 "data_time_s=excluded.data_time_s, monitor=excluded.monitor, "
+                 "calibration=COALESCE(excluded.calibration, monitor_state.calibration), updated_at=excluded.updated_at")
 
 
 class StorageUnavailable(RuntimeError):
@@ -356,7 +363,7 @@ class Storage:
         """The writing connection's TEMP tables and trigger of the plain windows (module docstring):
         staged rows are moved into the database's tables by one ``INSERT INTO stage_flush``."""
         cols = ", ".join(TREND_COLUMNS)
-        state = "source, last_window_start_s, data_time_s, monitor, calibration"
+        state = ", ".join(_STATE_COLUMNS)
         with self._lock:
             self._db.execute("PRAGMA temp_store=MEMORY")
             self._db.execute(f"CREATE TEMP TABLE IF NOT EXISTS stage_trends ({cols})")
@@ -367,10 +374,7 @@ class Storage:
                 CREATE TEMP TRIGGER IF NOT EXISTS stage_flush_windows AFTER INSERT ON stage_flush BEGIN
                     INSERT OR IGNORE INTO trends ({cols}, created_at) SELECT {cols}, NEW.at FROM stage_trends;
                     INSERT INTO monitor_state ({state}, updated_at) SELECT {state}, NEW.at FROM stage_state WHERE true
-                        ORDER BY rowid
-                        ON CONFLICT(source) DO UPDATE SET last_window_start_s=excluded.last_window_start_s,
-                        data_time_s=excluded.data_time_s, monitor=excluded.monitor,
-                        calibration=COALESCE(excluded.calibration, monitor_state.calibration), updated_at=excluded.updated_at;
+                        ORDER BY rowid {_STATE_UPSERT};
                     UPDATE alarms SET stale=0 WHERE stale=1 AND source IN (SELECT source FROM stage_state);
                     DELETE FROM stage_trends;
                     DELETE FROM stage_state;
@@ -411,6 +415,13 @@ class Storage:
                 return fn(self._rdb)
         return self._call_with_retry(attempt)
 
+    def _use_synchronous(self, wanted: str) -> None:
+        """The writing connection's synchronous mode for its next transaction (between
+        transactions only; the caller holds ``_lock``)."""
+        if wanted != self._synchronous:
+            self._db.execute(f"PRAGMA synchronous={wanted}")
+            self._synchronous = wanted
+
     def _write(self, fn: Any, *, durable: bool = False, retry_s: float | None = None) -> Any:
         """Run ``fn(db)`` in one IMMEDIATE transaction (``durable``: synchronous = alarm_sync),
         retried as a whole on transient errors. A failed COMMIT is rolled back, so the
@@ -418,10 +429,7 @@ class Storage:
 
         def attempt() -> Any:
             with self._lock:
-                wanted = self.alarm_sync if durable else self.sync
-                if wanted != self._synchronous:
-                    self._db.execute(f"PRAGMA synchronous={wanted}")  # between transactions only
-                    self._synchronous = wanted
+                self._use_synchronous(self.alarm_sync if durable else self.sync)
                 self._db.execute("BEGIN IMMEDIATE")
                 try:
                     result = fn(self._db)
@@ -479,10 +487,7 @@ class Storage:
     def transaction(self, *, durable: bool = False) -> Iterator[sqlite3.Connection]:
         """One write transaction (not retried: for callers that do their own)."""
         with self._lock:
-            wanted = self.alarm_sync if durable else self.sync
-            if wanted != self._synchronous:
-                self._db.execute(f"PRAGMA synchronous={wanted}")
-                self._synchronous = wanted
+            self._use_synchronous(self.alarm_sync if durable else self.sync)
             self._db.execute("BEGIN IMMEDIATE")
             try:
                 yield self._db
@@ -666,6 +671,7 @@ class Storage:
         rows = [tuple(getattr(r, c) for c in TREND_COLUMNS) for r in commit.rows]
         monitor = None if commit.monitor_state is None else json.dumps(commit.monitor_state)
         calibration = None if commit.calibration is None else json.dumps(commit.calibration)
+        state = (commit.source, commit.window_start_s, commit.data_time_s, monitor, calibration)  # _STATE_COLUMNS
 
         def run(db: sqlite3.Connection) -> list[int]:
             now = time.time()
@@ -674,13 +680,8 @@ class Storage:
                 f"INSERT OR IGNORE INTO trends ({', '.join(TREND_COLUMNS)}, created_at) VALUES ({', '.join('?' * (len(TREND_COLUMNS) + 1))})",
                 [(*row, now) for row in rows],
             )
-            db.execute(
-                "INSERT INTO monitor_state (source, last_window_start_s, data_time_s, monitor, calibration, updated_at) "
-                "VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT(source) DO UPDATE SET last_window_start_s=excluded.last_window_start_s, "
-                "data_time_s=excluded.data_time_s, monitor=excluded.monitor, "
-                "calibration=COALESCE(excluded.calibration, monitor_state.calibration), updated_at=excluded.updated_at",
-                (commit.source, commit.window_start_s, commit.data_time_s, monitor, calibration, now),
-            )
+            db.execute(f"INSERT INTO monitor_state ({', '.join(_STATE_COLUMNS)}, updated_at) "
+                       f"VALUES ({', '.join('?' * (len(_STATE_COLUMNS) + 1))}) {_STATE_UPSERT}", (*state, now))
             # The source is judged again: its alarms are no longer stale.
             db.execute("UPDATE alarms SET stale=0 WHERE source=? AND stale=1", (commit.source,))
             if commit.baseline is not None:
@@ -693,7 +694,7 @@ class Storage:
 
         plain = None
         if not commit.alarm_changes and commit.baseline is None:
-            plain = (rows, (commit.source, commit.window_start_s, commit.data_time_s, monitor, calibration))
+            plain = (rows, state)
         return self._group_commit(_Ticket(run, bool(commit.alarm_changes), self.retry_s if retry_s is None else float(retry_s),
                                           plain))
 
@@ -735,10 +736,10 @@ class Storage:
         transaction of savepoints (``_write_savepoints``)."""
         try:
             plain = [t for t in batch if t.plain is not None]
-            if plain and not self._write_plain(plain):
-                plain = []  # a bad window among them: each in its savepoint, to find it
-            plain_ids = {id(t) for t in plain}
-            self._write_savepoints([t for t in batch if id(t) not in plain_ids])
+            if plain and self._write_plain(plain):
+                self._write_savepoints([t for t in batch if t.plain is None])
+            else:  # none plain, or a bad window among them: each in its savepoint, to find it
+                self._write_savepoints(batch)
         except BaseException as exc:  # never leave a window of the group waiting for nobody
             for t in batch:
                 if not t.done:
@@ -756,13 +757,11 @@ class Storage:
         def attempt() -> None:
             with self._lock:
                 db = self._db
-                if self._synchronous != self.sync:
-                    db.execute(f"PRAGMA synchronous={self.sync}")
-                    self._synchronous = self.sync
+                self._use_synchronous(self.sync)
                 db.execute("DELETE FROM stage_trends")  # what a failed attempt staged
                 db.execute("DELETE FROM stage_state")
                 db.executemany(f"INSERT INTO stage_trends VALUES ({', '.join('?' * columns)})", trends)
-                db.executemany("INSERT INTO stage_state VALUES (?, ?, ?, ?, ?)", states)
+                db.executemany(f"INSERT INTO stage_state VALUES ({', '.join('?' * len(_STATE_COLUMNS))})", states)
                 db.execute("INSERT INTO stage_flush (at) VALUES (?)", (time.time(),))
 
         try:

@@ -14,7 +14,7 @@ import viser
 from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus
 
-from test_dashboard_browser import chromium  # noqa: F401  (the fixture that installs Debian's chromium when missing)
+from test_dashboard_browser import CHROMIUM_ARGS, chromium  # noqa: F401  (the fixture that installs Debian's chromium when missing)
 from web._gate import COOKIE, TokenGate
 
 TOKEN = "dashboard-token-1"
@@ -83,12 +83,10 @@ def test_a_browser_opens_the_gated_dashboard_with_the_token(chromium, tmp_path):
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     server.gui.add_markdown("gate probe: live")
     gate = TokenGate(host="127.0.0.1", port=0, upstream_port=server.get_port(), token=TOKEN)
-    args = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-            "--disable-sync"]
     try:
         with sync_playwright() as p:
             context = p.chromium.launch_persistent_context(str(tmp_path / "profile"), executable_path=chromium,
-                                                           headless=True, args=args)
+                                                           headless=True, args=CHROMIUM_ARGS)
             try:
                 page = context.pages[0] if context.pages else context.new_page()
                 from playwright.sync_api import Error as PlaywrightError
