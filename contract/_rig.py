@@ -132,7 +132,7 @@ class RigDescription(_ContractModel):
 
     beam: Beam
     gravity: float = Field(ge=0.0)
-    reflector_distance: float
+    reflector_distance: float | None = None
     support: Support = "pinned"
     orientation: Orientation = "hanging"
     point_masses: tuple[PointMass, ...] = ()
@@ -147,6 +147,11 @@ class RigDescription(_ContractModel):
                 "support='pinned' with orientation='standing' is an inverted pendulum, unstable at any length: "
                 "a standing beam needs support='clamped'"
             )
+        if self.reflector_distance is None and self.sensors_of("tof"):
+            names = ", ".join(s.name for s in self.sensors_of("tof"))
+            raise ValueError(f"reflector_distance is required: the rig has ToF sensors ({names}) that measure to the reflector plane")
+        if self.reflector_distance is not None and not math.isfinite(self.reflector_distance):
+            raise ValueError(f"reflector_distance={self.reflector_distance} must be finite")
         seen: set[tuple[str, str]] = set()
         for index, sensor in enumerate(self.sensors):
             key = (sensor.kind, sensor.name)
@@ -171,6 +176,11 @@ class RigDescription(_ContractModel):
             if not (0.0 <= station <= length):
                 raise ValueError(f"truth_stations[{index}]={station} is outside the beam [0, {length}]")
         return self
+
+    @property
+    def support_fixed_to_ground(self) -> bool:
+        """No ``bearing`` sensor: the support D is fixed to the ground (d ≡ 0), as a mast on its foundation."""
+        return not self.sensors_of("bearing")
 
     def sensors_of(self, kind: SensorKind) -> tuple[Sensor, ...]:
         return tuple(s for s in self.sensors if s.kind == kind)

@@ -174,7 +174,8 @@ class StructureFeed:
         self.width = float(rig.beam.width)
         if not (self.length > 0 and self.width > 0):
             raise ValueError(f"rig beam length and width must be > 0, got {self.length}, {self.width}")
-        self.reflector_distance = float(rig.reflector_distance)
+        # A rig without ToFs has no reflector (None): nothing is drawn for it.
+        self.reflector_distance = None if rig.reflector_distance is None else float(rig.reflector_distance)
         # How the beam is held and drawn: a pin or a clamp at D; hanging below it or standing up.
         support, orientation = getattr(rig, "support", "pinned"), getattr(rig, "orientation", "hanging")
         if support not in ("pinned", "clamped"):
