@@ -391,8 +391,12 @@ class RestCalibration:
         }
 
 
-def _rest_end(meas: Measurements, config: FilterConfig) -> float:
-    """End of the initial rest: the first sign of motion at D (gyro, lateral accel) or the bearing."""
+def _rest_end(meas: Measurements, config: FilterConfig, model: "ImmsModel | None" = None) -> float:
+    """End of the initial rest: the first sign of motion at D (gyro, lateral accel) or the bearing.
+
+    A support fixed to the ground (``model.fixed_support``) does not move when the structure
+    starts to: there the selected peripheral IMUs and strain gauges tell the motion too (the wind
+    moves a mast's top long before its foundation)."""
     d_imu = meas.imu["D"]
     t = d_imu.times
     start = t[0]
@@ -401,14 +405,24 @@ def _rest_end(meas: Measurements, config: FilterConfig) -> float:
     if quiet.sum() < 20:
         return start
     end = limit
-    for column in (1, 2):
-        x = d_imu.values[:, column]
-        ref = x[quiet]
+    watched: list[tuple[SensorSeries, int, float]] = [(d_imu, 1, 0.05), (d_imu, 2, 0.01)]
+    if model is not None and model.fixed_support:
+        for name in model.selection.imus:
+            if name in meas.imu:
+                watched += [(meas.imu[name], 1, 0.05), (meas.imu[name], 2, 0.01)]
+        watched += [(meas.strain[name], 0, 2e-6) for name in model.selection.gauges if name in meas.strain]
+    for series, column, floor in watched:
+        ts = series.times
+        x = series.values[:, column]
+        ref = x[ts < start + min(2.0, config.rest_max_s)]
+        ref = ref[np.isfinite(ref)]
+        if ref.size < 20:
+            continue
         level, spread = np.median(ref), np.std(ref)
-        threshold = max(8.0 * spread, 0.01 if column == 2 else 0.05)
-        moving = np.nonzero((np.abs(x - level) > threshold) & (t < limit))[0]
+        threshold = max(8.0 * spread, floor)
+        moving = np.nonzero((np.abs(x - level) > threshold) & (ts < limit))[0]
         if moving.size:
-            end = min(end, t[moving[0]])
+            end = min(end, ts[moving[0]])
     if meas.bearing is not None and meas.bearing.times.size:
         b = meas.bearing
         ref = b.values[b.times < start + 2.0, 0]
@@ -431,7 +445,7 @@ def calibrate_at_rest(meas: Measurements, model: ImmsModel, config: FilterConfig
         raise ValueError("measurements have no IMU 'D' (the IMU at the bearing)")
     g_eta = model.gravity_eta
     start = meas.start
-    end = _rest_end(meas, config)
+    end = _rest_end(meas, config, model)
     rested = end - start >= config.rest_min_s
     # Specific force along the beam at rest (−g hanging, +g standing: x points from D along the
     # beam, up a mast), nothing across, no rate.
