@@ -205,7 +205,8 @@ class Structure:
                 raise ServiceError(f"source.rig: {exc}") from None
         try:
             if kind == "sim":
-                return SimSource(src.id or "sim", self.queue, s, raw=s.archive.enabled and s.archive.raw != "never", truth=truth)
+                return SimSource(src.id or "sim", self.queue, s, raw=s.archive.enabled and s.archive.raw != "never", truth=truth,
+                                 rig=rig_override)
             if kind in ("replay", "follow"):
                 path = Path(src.path or "")
                 source = FileSource(src.id or path.stem, self.queue, s, follow=kind == "follow", rig=rig_override, truth=truth)

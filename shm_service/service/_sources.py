@@ -197,13 +197,19 @@ class SimSource(Source):
 
     kind = "sim"
 
-    def __init__(self, source_id: str, out: queue.Queue, settings: ServiceSettings, *, raw: bool, truth: bool) -> None:
+    def __init__(self, source_id: str, out: queue.Queue, settings: ServiceSettings, *, raw: bool, truth: bool,
+                 rig: RigDescription | None = None) -> None:
         super().__init__(source_id, out)
-        from ..virtual_rig import VirtualRig
+        from ..virtual_rig import VirtualRig, settings_for_rig
 
         s = settings.sim
         self.settings = simulation_settings(settings)
-        self.rigsim = VirtualRig(self.settings)
+        if rig is not None:
+            # source.rig: simulate that rig (its simulator settings under the service's sim section).
+            given = {name for name in ("duration", "seed", "excitation", "damage", "damage_at", "temperature_mean",
+                                       "temperature_swing") if name in self.settings.model_fields_set}
+            self.settings = settings_for_rig(rig, self.settings, given)
+        self.rigsim = VirtualRig(self.settings, rig)
         self.rig = self.rigsim.nominal_rig
         self.block_s = s.block_s
         speed = settings.source.speed
