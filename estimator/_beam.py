@@ -268,6 +268,26 @@ def critical_load_factor(
     return float("inf") if mu <= 0 else float(1.0 / mu)
 
 
+def element_bending_stiffness(beam, start: float, end: float, temperature_c: float | None = None) -> np.ndarray:
+    """The 4×4 bending stiffness ∫ EI(η) N''ᵀ N'' dη (N/m … N·m) of one Hermite element [start, end] (m)
+    of ``beam`` (a ``contract.Beam``), nominal (without stiffness segments), E at ``temperature_c`` (°C).
+
+    Gauss quadrature on 5 points: exact for the polynomial EI of rectangles, tubes and tables
+    within one stretch between stations.
+
+    Raises
+    ------
+    ValueError
+        ``end <= start`` or an element off the beam.
+    """
+    if not (np.isfinite(start) and np.isfinite(end) and 0.0 <= start < end <= beam.length * (1 + 1e-12)):
+        raise ValueError(f"element [{start}, {end}] must satisfy 0 <= start < end <= length={beam.length}")
+    l = end - start
+    x = np.minimum(start + l * _GAUSS_XI, beam.length)
+    N2 = _hermite(_GAUSS_XI, l, 2)
+    return np.einsum("g,g,gi,gj->ij", l * _GAUSS_W, beam.bending_stiffness(x, temperature_c), N2, N2)
+
+
 def _beyond(beam) -> tuple:
     """Functions x ↦ ∫_x^L μ dη (the beam's mass beyond x, kg) and x ↦ ∫_x^L μ η dη (kg·m) of a
     sectioned beam, exact for its polynomial μ (Gauss–Legendre on each stretch between stations)."""
