@@ -287,3 +287,60 @@ def test_sectioned_beam_frequencies_follow_the_temperature():
     f20 = natural_modes(assemble_beam(rig, temperature_c=20.0), 3).frequencies_hz
     f50 = natural_modes(assemble_beam(rig, temperature_c=50.0), 3).frequencies_hz
     assert f50 / f20 == pytest.approx(np.sqrt(1 - 3e-4 * 30) * np.ones(3), rel=1e-7)
+
+
+# -- the estimator and the damage signatures on a sectioned beam --------------------------------------
+def _example_mast_with_bearing():
+    import json
+    from pathlib import Path
+
+    data = json.loads((Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json").read_text())
+    data["sensors"].append({"name": "bearing", "kind": "bearing"})
+    return parse_rig(data)
+
+
+def test_strain_aiding_uses_the_fibre_distance_of_the_section():
+    from estimator import build_model
+
+    rig = _example_mast_with_bearing()
+    model = build_model(rig, modes=4, imus=4, tofs=0, gauges=3)
+    eta = model.gauge_eta
+    # Eq. (19) with c(η) = D(η)/2 of the tube at each gauge instead of h*/2
+    outer = np.interp(eta, [0.0, 8.0, 20.0], [0.5, 0.38, 0.2])  # the example's taper (the step at 8 m is in t only)
+    expected = -0.5 * outer[:, None] * model.modal.curvature(eta)
+    np.testing.assert_allclose(model.strain_matrix(), expected, rtol=1e-13, atol=0)
+
+
+def test_damage_signatures_of_a_tapered_mast_match_an_exact_fe_solve():
+    from estimator import PointMass, StiffnessSegment, damage_signatures
+
+    rig = _example_mast_with_bearing()
+    sig = damage_signatures(rig, step=2.0, segment_length=2.0)
+    pick = lambda kind, eta: int(np.flatnonzero((np.array(sig.kind) == kind) & np.isclose(sig.eta, eta))[0])  # noqa: E731
+    seg = StiffnessSegment(start=2.0, end=4.0, factor=0.8)
+    damaged = rig.model_copy(update={"beam": rig.beam.model_copy(update={"stiffness_segments": (seg,)})})
+    f0 = natural_modes(assemble_beam(rig, extra_nodes=(2.0, 4.0)), 4).frequencies_hz
+    f1 = natural_modes(assemble_beam(damaged, extra_nodes=(2.0, 4.0)), 4).frequencies_hz
+    np.testing.assert_allclose(sig.frequency_shift[pick("stiffness", 3.0)], f1 / f0 - 1, rtol=2e-3, atol=1e-7)
+    tip = PointMass(position=20.0, mass=0.01 * rig.beam.mass)
+    heavy = rig.model_copy(update={"point_masses": tuple(rig.point_masses) + (tip,)})
+    f2 = natural_modes(assemble_beam(heavy, extra_nodes=(20.0,)), 4).frequencies_hz
+    np.testing.assert_allclose(sig.frequency_shift[pick("mass", 20.0)], f2 / f0 - 1, rtol=2e-3, atol=1e-7)
+
+
+@pytest.mark.parametrize(("start", "end"), [(1.0, 1.0), (-0.1, 1.0), (1.0, 20.5), (float("nan"), 1.0)])
+def test_element_bending_stiffness_refuses_a_bad_element(start, end):
+    from estimator._beam import element_bending_stiffness
+
+    with pytest.raises(ValueError, match="element"):
+        element_bending_stiffness(parse_rig(_mast()).beam, start, end)
+
+
+def test_element_bending_stiffness_of_a_uniform_stretch_is_the_textbook_matrix():
+    from estimator._beam import element_bending_stiffness
+
+    beam = _rig(2.0, [table(0.0, 50.0, 1.0, 0.01), table(2.0, 50.0, 1.0, 0.01)]).beam
+    l = 0.5
+    textbook = 50.0 / l**3 * np.array([[12, 6 * l, -12, 6 * l], [6 * l, 4 * l * l, -6 * l, 2 * l * l],
+                                       [-12, -6 * l, 12, -6 * l], [6 * l, 2 * l * l, -6 * l, 4 * l * l]])
+    np.testing.assert_allclose(element_bending_stiffness(beam, 0.5, 1.0), textbook, rtol=1e-13, atol=1e-11)
