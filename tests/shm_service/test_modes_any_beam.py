@@ -74,3 +74,30 @@ def test_shm_modes_on_the_example_matches_the_shooting_reference(name, capsys):
     assert np.array(out["frequencies_hz"]) == pytest.approx(ref, rel=1e-4)
     if RECORDED[name]:
         assert ref == pytest.approx(RECORDED[name], rel=1e-6)
+
+
+@pytest.mark.parametrize("name", ["mast", "blade"])
+def test_the_examples_serve_configuration_and_rig_load(name):
+    from contract import load_rig
+    from shm_service.service._config import load_settings
+
+    settings = load_settings(EXAMPLES / name / "serve.toml")
+    assert settings.source.rig == f"examples/{name}/rig.json"
+    assert settings.estimator.tofs == 0  # neither has a reflector
+    rig = load_rig(EXAMPLES / name / "rig.json")
+    assert rig.support == "clamped" and rig.beam.sections is not None
+    assert rig.reflector_distance is None and not rig.sensors_of("tof") and not rig.sensors_of("bearing")
+    assert settings.estimator.gauges == len(rig.sensors_of("strain"))
+    assert settings.estimator.imus == len([s for s in rig.sensors_of("imu") if s.name != "D"])
+
+
+def test_the_blade_stiffness_falls_two_orders_of_magnitude_and_the_mast_tapers():
+    from contract import load_rig
+
+    blade = load_rig(EXAMPLES / "blade" / "rig.json").beam
+    assert blade.bending_stiffness(0.0) / blade.bending_stiffness(8.0) == pytest.approx(100.0)
+    mast = load_rig(EXAMPLES / "mast" / "rig.json")
+    assert mast.orientation == "standing"
+    assert mast.beam.fibre_distance([0.0, 20.0]) == pytest.approx([0.25, 0.1])
+    spots = json.loads((EXAMPLES / "mast" / "rig.json").read_text())["hot_spots"]
+    assert {h["name"]: h["curve"] for h in spots} == {"base_flange_weld": "EN1993-1-9:71", "door_opening": "EN1993-1-9:90"}
