@@ -42,6 +42,23 @@ MEAN_TAU_S = 60.0  # time constant of the running-mean ghost
 MAX_PENDING = 600
 
 
+def _widest_section(beam: Any) -> float:
+    """The largest across-beam size (m) of the stations of ``beam.sections``."""
+    sizes = []
+    for station in beam.sections or ():
+        if station.shape == "tube":
+            sizes.append(station.outer_diameter)
+        elif station.shape == "rectangle":
+            sizes.append(station.width)
+        elif station.shape == "table":
+            sizes.append(2.0 * station.fibre_distance)
+        else:
+            raise ValueError(f"section shape {station.shape!r} must be 'rectangle', 'tube' or 'table'")
+    if not sizes:
+        raise ValueError("the rig's beam has neither a width nor sections")
+    return float(max(sizes))
+
+
 @dataclass(frozen=True)
 class Estimate:
     t_s: float
@@ -171,10 +188,13 @@ class StructureFeed:
         if mode_map.gamma != gamma:
             raise ValueError(f"units.modes names the modes of {mode_map.gamma} unit deformations, units.count is {gamma}")
         self.length = float(rig.beam.length)
-        self.width = float(rig.beam.width)
+        # drawn width: the sheet's width, or the widest section of a beam described by sections
+        # (a tube's outer diameter, a rectangle's width, twice a table's fibre distance)
+        self.width = float(rig.beam.width) if rig.beam.width is not None else _widest_section(rig.beam)
         if not (self.length > 0 and self.width > 0):
             raise ValueError(f"rig beam length and width must be > 0, got {self.length}, {self.width}")
-        self.reflector_distance = float(rig.reflector_distance)
+        # no reflector without ToF sensors (a mast, a blade): nothing to draw there
+        self.reflector_distance = None if rig.reflector_distance is None else float(rig.reflector_distance)
         # How the beam is held and drawn: a pin or a clamp at D; hanging below it or standing up.
         support, orientation = getattr(rig, "support", "pinned"), getattr(rig, "orientation", "hanging")
         if support not in ("pinned", "clamped"):
