@@ -11,7 +11,7 @@ import json
 import math
 import tomllib
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -86,7 +86,7 @@ class TubeSection(_ContractModel):
     wall_thickness: float = Field(gt=0.0, allow_inf_nan=False)
 
     @model_validator(mode="after")
-    def _wall_fits(self) -> "TubeSection":
+    def _wall_fits(self) -> TubeSection:
         if self.wall_thickness > 0.5 * self.outer_diameter:
             raise ValueError(
                 f"wall_thickness={self.wall_thickness} m exceeds half the outer_diameter={self.outer_diameter} m"
@@ -104,7 +104,7 @@ class TableSection(_ContractModel):
     fibre_distance: float = Field(gt=0.0, allow_inf_nan=False)
 
 
-Section = Annotated[Union[RectangleSection, TubeSection, TableSection], Field(discriminator="shape")]
+Section = Annotated[RectangleSection | TubeSection | TableSection, Field(discriminator="shape")]
 
 #: The dimensions of each shape that vary linearly along a taper.
 _SECTION_DIMENSIONS = {
@@ -149,7 +149,7 @@ class Beam(_ContractModel):
     sections: tuple[Section, ...] | None = None
 
     @model_validator(mode="after")
-    def _sections_consistent(self) -> "Beam":
+    def _sections_consistent(self) -> Beam:
         if self.sections is None:
             for key in ("width", "thickness", "youngs_modulus", "density"):
                 if getattr(self, key) is None:

@@ -20,7 +20,8 @@ caller gives EI(x) and μ(x) as plain functions written from the closed forms.
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+import itertools
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import scipy.integrate
@@ -30,7 +31,7 @@ Profile = Callable[[float], float]
 
 def _total_mass(mu: Profile, breaks: Sequence[float]) -> float:
     return float(sum(scipy.integrate.quad(mu, a, b, epsabs=0.0, epsrel=1e-13, limit=200)[0]
-                     for a, b in zip(breaks[:-1], breaks[1:]) if b > a))
+                     for a, b in itertools.pairwise(breaks) if b > a))
 
 
 def tip_determinant(omega, *, length: float, EI: Profile, mu: Profile, breaks: Sequence[float] = (),

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 
 import numpy as np
 import pytest
+from section_reference import frequencies as shooting_frequencies
 
 from contract import RigError, parse_rig
 from estimator import BucklingError, assemble_beam, natural_modes
-from section_reference import frequencies as shooting_frequencies
 
 E, RHO = 2.1e11, 7850.0
 
@@ -56,7 +57,7 @@ def test_a_taper_varies_every_dimension_linearly():
     assert beam.mass_per_length_at(2.5) == pytest.approx(RHO * math.pi / 4 * (outer**2 - inner**2), rel=1e-13)
     assert beam.fibre_distance(np.array([0.0, 2.5, 10.0])) == pytest.approx([0.3, 0.25, 0.1], rel=1e-14)
     # ∫ ρ π t (D − t) dx with D, t linear: a quadratic, Simpson's rule is exact
-    f = lambda x: RHO * math.pi * (0.02 - 0.001 * x) * (0.6 - 0.04 * x - (0.02 - 0.001 * x))  # noqa: E731
+    f = lambda x: RHO * math.pi * (0.02 - 0.001 * x) * (0.6 - 0.04 * x - (0.02 - 0.001 * x))
     assert beam.mass == pytest.approx(10.0 / 6 * (f(0) + 4 * f(5) + f(10)), rel=1e-13)
 
 
@@ -167,8 +168,8 @@ def _tube_profile(length, d0, d1, t0, t1):
     def wall(x):
         return t0 + (t1 - t0) * x / length
 
-    EI = lambda x: E * math.pi / 64 * (outer(x) ** 4 - (outer(x) - 2 * wall(x)) ** 4)  # noqa: E731
-    mu = lambda x: RHO * math.pi / 4 * (outer(x) ** 2 - (outer(x) - 2 * wall(x)) ** 2)  # noqa: E731
+    EI = lambda x: E * math.pi / 64 * (outer(x) ** 4 - (outer(x) - 2 * wall(x)) ** 4)
+    mu = lambda x: RHO * math.pi / 4 * (outer(x) ** 2 - (outer(x) - 2 * wall(x)) ** 2)
     return EI, mu
 
 
@@ -226,7 +227,7 @@ def _table_profile(stations):
 
     def pick(x, column):
         # the stretch that holds x (the integration never evaluates exactly at a step)
-        for (xa, *a), (xb, *b) in zip(stations[:-1], stations[1:]):
+        for (xa, *a), (xb, *b) in itertools.pairwise(stations):
             if xb > xa and xa <= x <= xb:
                 return a[column] + (b[column] - a[column]) * (x - xa) / (xb - xa)
         raise ValueError(x)
@@ -316,7 +317,7 @@ def test_damage_signatures_of_a_tapered_mast_match_an_exact_fe_solve():
 
     rig = _example_mast_with_bearing()
     sig = damage_signatures(rig, step=2.0, segment_length=2.0)
-    pick = lambda kind, eta: int(np.flatnonzero((np.array(sig.kind) == kind) & np.isclose(sig.eta, eta))[0])  # noqa: E731
+    pick = lambda kind, eta: int(np.flatnonzero((np.array(sig.kind) == kind) & np.isclose(sig.eta, eta))[0])
     seg = StiffnessSegment(start=2.0, end=4.0, factor=0.8)
     damaged = rig.model_copy(update={"beam": rig.beam.model_copy(update={"stiffness_segments": (seg,)})})
     f0 = natural_modes(assemble_beam(rig, extra_nodes=(2.0, 4.0)), 4).frequencies_hz

@@ -7,6 +7,7 @@ The reference builds EI(x) and μ(x) from the stations of each ``rig.json`` with
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import sys
@@ -18,7 +19,7 @@ import pytest
 from shm_service.cli import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "estimator"))
-from section_reference import frequencies as shooting_frequencies  # noqa: E402
+from section_reference import frequencies as shooting_frequencies
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -35,7 +36,7 @@ def _profile(rig: dict):
     E, rho = beam.get("youngs_modulus"), beam.get("density")
 
     def props(s: dict, t: float, n: dict) -> tuple[float, float]:
-        lin = lambda key: s[key] + t * (n[key] - s[key])  # noqa: E731
+        lin = lambda key: s[key] + t * (n[key] - s[key])
         if s["shape"] == "tube":
             outer = lin("outer_diameter")
             inner = outer - 2 * lin("wall_thickness")
@@ -45,7 +46,7 @@ def _profile(rig: dict):
         raise AssertionError(s["shape"])
 
     def at(x: float, which: int) -> float:
-        for a, b in zip(stations[:-1], stations[1:]):
+        for a, b in itertools.pairwise(stations):
             if b["position"] > a["position"] and a["position"] <= x <= b["position"]:
                 return props(a, (x - a["position"]) / (b["position"] - a["position"]), b)[which]
         raise AssertionError(x)
