@@ -100,3 +100,5 @@ def test_a_feed_of_a_sectioned_mast_without_a_reflector():
     feed = StructureFeed(rig=rig, units=units, layout=LAYOUT, stations=np.linspace(2.0, 20.0, 10))
     assert feed.width == pytest.approx(0.5)  # the tube's diameter at the foundation
     assert feed.reflector_distance is None and feed.standing and feed.clamped
+    # drawn to scale: the tube's diameter along the taper, the section beyond the 8 m joint's step
+    np.testing.assert_allclose(feed.width_at([0.0, 4.0, 8.0, 14.0, 20.0]), [0.5, 0.44, 0.38, 0.29, 0.2], rtol=1e-12)
