@@ -391,7 +391,7 @@ class RigDescription(_ContractModel):
 
     beam: Beam
     gravity: float = Field(ge=0.0)
-    reflector_distance: float | None = Field(default=None, allow_inf_nan=False)
+    reflector_distance: float | None = None
     support: Support = "pinned"
     orientation: Orientation = "hanging"
     point_masses: tuple[PointMass, ...] = ()
@@ -406,8 +406,11 @@ class RigDescription(_ContractModel):
                 "support='pinned' with orientation='standing' is an inverted pendulum, unstable at any length: "
                 "a standing beam needs support='clamped'"
             )
-        if self.reflector_distance is None and any(s.kind == "tof" for s in self.sensors):
-            raise ValueError("reflector_distance is required: the rig has ToF sensors, which measure the distance to it")
+        if self.reflector_distance is None and self.sensors_of("tof"):
+            names = ", ".join(s.name for s in self.sensors_of("tof"))
+            raise ValueError(f"reflector_distance is required: the rig has ToF sensors ({names}) that measure to the reflector plane")
+        if self.reflector_distance is not None and not math.isfinite(self.reflector_distance):
+            raise ValueError(f"reflector_distance={self.reflector_distance} must be finite")
         seen: set[tuple[str, str]] = set()
         for index, sensor in enumerate(self.sensors):
             key = (sensor.kind, sensor.name)

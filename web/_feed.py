@@ -196,7 +196,7 @@ class StructureFeed:
         self.width = float(rig.beam.width) if rig.beam.width is not None else _widest_section(rig.beam)
         if not (self.length > 0 and self.width > 0):
             raise ValueError(f"rig beam length and width must be > 0, got {self.length}, {self.width}")
-        # no reflector without ToF sensors (a mast, a blade): nothing to draw there
+        # A rig without ToFs has no reflector (None): nothing is drawn for it.
         self.reflector_distance = None if rig.reflector_distance is None else float(rig.reflector_distance)
         # How the beam is held and drawn: a pin or a clamp at D; hanging below it or standing up.
         support, orientation = getattr(rig, "support", "pinned"), getattr(rig, "orientation", "hanging")

@@ -92,7 +92,7 @@ def add_rig(scene: Any, feed: "StructureFeed") -> None:
     """The rig's static parts: the rail the support runs on (above D for a hanging beam, below a
     standing mast), the reflector, a grid in the beam's plane and the plumb line."""
     L, has_reflector = feed.length, feed.reflector_distance is not None
-    refl = feed.reflector_distance if has_reflector else 0.0
+    refl = feed.reflector_distance if has_reflector else 0.0  # no ToFs: no reflector to draw
     up = up_sign(feed.standing)  # world z per unit η: the beam hangs down or stands up from D
     rail_lo, rail_hi = min(-0.6, refl - 1.2), refl + 0.05
     scene.add_box(
@@ -100,7 +100,7 @@ def add_rig(scene: Any, feed: "StructureFeed") -> None:
         position=(0.5 * (rail_lo + rail_hi), 0.0, -up * 0.09), cast_shadow=False,
     )
     scene.add_label("/rig/rail_label", "bearing rail", position=(rail_lo, 0.0, -up * 0.16), font_screen_scale=0.8)
-    if has_reflector:  # a rig without ToFs has none
+    if has_reflector:
         scene.add_box(
             "/rig/reflector", color=(150, 175, 205), dimensions=(0.01, 0.9, L + 0.4),
             position=(refl + 0.005, 0.0, up * 0.5 * L), opacity=0.35, side="double", cast_shadow=False,
