@@ -436,6 +436,11 @@ class RigDescription(_ContractModel):
                 raise ValueError(f"truth_stations[{index}]={station} is outside the beam [0, {length}]")
         return self
 
+    @property
+    def support_fixed_to_ground(self) -> bool:
+        """No ``bearing`` sensor: the support D is fixed to the ground (d ≡ 0), as a mast on its foundation."""
+        return not self.sensors_of("bearing")
+
     def sensors_of(self, kind: SensorKind) -> tuple[Sensor, ...]:
         return tuple(s for s in self.sensors if s.kind == kind)
 
