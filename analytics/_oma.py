@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from scipy import linalg, signal, stats
 
 from ._damping import DampingEstimate
+from ._moving import subwindow_frequencies
 from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
 from ._ssi import SsiModel, modal_assurance, ssi_poles, toeplitz_from_data
 from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, stabilisation_diagram
@@ -63,6 +64,9 @@ class OmaConfig(BaseModel):
     min_contribution: float = Field(0.05, ge=0, le=1, description="see sure_orders: a drifting mode split in two carries a large share, a noise pole next to nothing [0.05]")
     harmonic_kurtosis: float = Field(2.0, gt=1.5, lt=3, description="band-passed kurtosis below this with ζ < harmonic_damping: a harmonic [2.0]")
     harmonic_damping: float = Field(0.002, ge=0, lt=1, description="see harmonic_kurtosis [0.002]")
+    min_visibility: float = Field(0.8, ge=0, le=1, description="a mode must carry this share of the modelled response spectrum at its own frequency in some channel, else it is buried under a neighbour [0.8]")
+    resolution_cycles: float = Field(1.5, ge=0, le=10, description="poles of one shape closer than resolution_cycles/T to a stronger mode are that mode, unresolved by a window of T s [1.5]")
+    moving_modes: bool = Field(True, description="follow each mode through sub-windows; one that moves is listed once with its start and end frequency [True]")
 
     @model_validator(mode="after")
     def _band(self) -> "OmaConfig":
@@ -86,6 +90,13 @@ class IdentifiedMode:
     statistical_std_hz, order_spread_hz : the two parts of frequency_std_hz (segment jackknife,
         scatter across model orders), combined in quadrature.
     damping_method : "ssi" (the subspace pole).
+    visibility : the mode's share (0 … 1) of the modelled response spectrum at its own frequency,
+        in the channel where it is largest.
+    moving : the mode's frequency changed within the window (sub-window estimates); then
+        frequency_hz is its time average, start_hz/end_hz the straight line through the
+        sub-window estimates at the window's start and end, sweep the (time s, frequency Hz) of
+        each sub-window; the damping of a moving mode is that of its spread pole (an upper bound).
+    track : id of the physical mode followed across windows (None outside a windowed run).
     """
 
     frequency_hz: float
@@ -102,13 +113,21 @@ class IdentifiedMode:
     statistical_std_hz: float
     order_spread_hz: float
     damping_method: str = "ssi"
+    visibility: float = 1.0
+    moving: bool = False
+    start_hz: float | None = None
+    end_hz: float | None = None
+    sweep: tuple[tuple[float, float], ...] = ()
+    track: int | None = None
 
     def as_dict(self) -> dict:
         return {
             "frequency_hz": self.frequency_hz, "damping_ratio": self.damping_ratio,
             "frequency_std_hz": self.frequency_std_hz, "damping_std": self.damping_std,
             "mpc": self.mpc, "shape": list(self.shape), "mac": self.mac, "contribution": self.contribution,
-            "orders": self.orders, "damping_method": self.damping_method,
+            "orders": self.orders, "damping_method": self.damping_method, "visibility": self.visibility,
+            "moving": self.moving, "start_hz": self.start_hz, "end_hz": self.end_hz,
+            "sweep": [list(p) for p in self.sweep], "track": self.track,
         }
 
 
@@ -308,15 +327,23 @@ def identify_modes(
     jack = _jackknife(model, Tm, Tsegs) if segs >= 3 else None
     modes, kept, rejected = [], [], []
     orders_cache: dict = {}
-    contrib = _contributions(model, clusters, orders_cache)
+    lam_c, amp_c = _residues(model, clusters, orders_cache)
+    tot_c = float(np.linalg.norm(amp_c, axis=1).sum()) if len(clusters) else 0.0
+    contrib = [float(np.linalg.norm(a)) / tot_c if tot_c > 0 else 0.0 for a in amp_c]
+    visible = local_visibility(lam_c, amp_c)
     refs = None if reference_shapes is None else np.atleast_2d(np.asarray(reference_shapes, dtype=float))
     if refs is not None and refs.shape[1] != l:
         raise ValueError(f"reference_shapes has {refs.shape[1]} components, y has {l} channels")
     n_orders = len(orders)
-    for c, share in zip(clusters, contrib):
+    for c, share, vis in zip(clusters, contrib, visible):
         f, z = c.frequency_hz, c.damping_ratio
         if c.orders < cfg.sure_orders * n_orders and share < cfg.min_contribution:
             rejected.append((f, f"noise: stable at {c.orders} of {n_orders} orders and {100 * share:.1f} % of the response"))
+            continue
+        if vis < cfg.min_visibility:
+            j = int(np.argmax(np.linalg.norm(amp_c, axis=1) / np.maximum(np.abs(np.abs(lam_c) - 2 * np.pi * f), 1e-9)))
+            rejected.append((f, f"buried: {100 * vis:.0f} % of the modelled response at its frequency, under the mode at "
+                                f"{clusters[j].frequency_hz:.3f} Hz ({100 * contrib[j]:.0f} % of the response)"))
             continue
         # a steady line and a lightly damped mode look alike until the window spans many of the
         # mode's correlation times 1/(ζω): test only windows that long (Brincker et al. 2000)
@@ -337,8 +364,12 @@ def identify_modes(
             ref = int(np.argmax(m))
             mac = float(m[ref])
         modes.append(IdentifiedMode(f, z, fstd, zstd, float(model.poles.mpc[c.representative]), tuple(float(v) for v in shape), mac, ref,
-                                    float(share), c.orders, int(model.poles.order[c.representative]), sf, spread_f))
+                                    float(share), c.orders, int(model.poles.order[c.representative]), sf, spread_f,
+                                    visibility=float(vis)))
         kept.append(c)
+    if modes:
+        modes, kept, merged = _one_mode_each(modes, kept, yb * scale, fsb, T, cfg, max(cfg.fmin_hz, 0.0), min(fmax, 0.49 * fsb))
+        rejected.extend(merged)
     exc, io_modes = None, ()
     if inputs is not None:
         u = as_signal("inputs", inputs, min_len=16)
@@ -354,6 +385,70 @@ def identify_modes(
             rejected.extend(dropped)
             kept = [c for c in kept if any(abs(c.frequency_hz - m.frequency_hz) < 1e-12 for m in modes)]
     return ModalIdentification(tuple(modes), tuple(rejected), diag, tuple(kept), fsb, i, tuple(int(o) for o in orders), exc, io_modes)
+
+
+def _same_shape(a: IdentifiedMode, b: IdentifiedMode, mac_min: float = 0.9) -> bool:
+    if len(a.shape) < 2:
+        return True
+    return bool(modal_assurance(np.array(a.shape)[None], np.array(b.shape)[None])[0, 0] >= mac_min)
+
+
+def _one_mode_each(modes: list[IdentifiedMode], kept: list[PoleCluster], y: np.ndarray, fs: float, T: float, cfg: OmaConfig,
+                   band_lo: float, band_hi: float) -> tuple[list[IdentifiedMode], list[PoleCluster], list[tuple[float, str]]]:
+    """One entry per physical mode. Strongest first, each mode takes in the weaker poles of its
+    shape that it explains: those within resolution_cycles/T of it (a window of T s cannot
+    separate them: leakage, beating, a ring-down's modulation), and, if its sub-window estimates
+    show it moving, those inside the range it swept (a time-varying mode spread over several
+    poles of the window's time-invariant model). A mode that moved is listed once, with its
+    time-averaged frequency and its frequency at the start and the end of the window."""
+    order = sorted(range(len(modes)), key=lambda j: -modes[j].contribution)
+    gone: dict[int, str] = {}
+    out: dict[int, IdentifiedMode] = {}
+    res = cfg.resolution_cycles / T
+    for j in order:
+        if j in gone:
+            continue
+        m = modes[j]
+        others = [k for k in order if k != j and k not in gone and k not in out]
+        mine = [k for k in others if _same_shape(m, modes[k])]
+        # the search band stops halfway to a mode it cannot take in (another shape, or stronger)
+        lo, hi = max(band_lo, m.frequency_hz / 1.35), min(band_hi, m.frequency_hz * 1.35)
+        for k in range(len(modes)):
+            if k == j or (k in mine) or k in gone:
+                continue
+            mid = 0.5 * (modes[k].frequency_hz + m.frequency_hz)
+            if modes[k].frequency_hz < m.frequency_hz:
+                lo = max(lo, mid)
+            else:
+                hi = min(hi, mid)
+        track = None
+        if cfg.moving_modes and lo < m.frequency_hz < hi:
+            x = y @ np.array(m.shape) if y.shape[1] == len(m.shape) else y[:, 0]
+            track = subwindow_frequencies(x, fs, m.frequency_hz, lo_hz=lo, hi_hz=hi)
+        moving = track is not None and track.moving()
+        span_lo, span_hi = m.frequency_hz - res, m.frequency_hz + res
+        if moving:
+            span_lo = min(span_lo, min(track.start_hz, track.end_hz) - 0.5 * res)
+            span_hi = max(span_hi, max(track.start_hz, track.end_hz) + 0.5 * res)
+        for k in mine:
+            fk = modes[k].frequency_hz
+            if span_lo <= fk <= span_hi and lo <= fk <= hi or abs(fk - m.frequency_hz) < res:
+                if moving:
+                    gone[k] = (f"moving: part of the mode that moved {track.start_hz:.3f} → {track.end_hz:.3f} Hz within the "
+                               f"window (listed at {track.mean_hz:.3f} Hz)")
+                else:
+                    gone[k] = (f"unresolved: {abs(fk - m.frequency_hz):.3f} Hz from the stronger mode at {m.frequency_hz:.3f} Hz "
+                               f"of the same shape, within the window's resolution {cfg.resolution_cycles:g}/T = {res:.3f} Hz")
+        if moving:
+            share = m.contribution + sum(modes[k].contribution for k in gone if k in mine)
+            std = math.hypot(track.mean_std_hz, m.statistical_std_hz) if math.isfinite(m.statistical_std_hz) else track.mean_std_hz
+            m = replace(m, frequency_hz=track.mean_hz, frequency_std_hz=max(std, m.frequency_std_hz), contribution=share, moving=True,
+                        start_hz=track.start_hz, end_hz=track.end_hz,
+                        sweep=tuple((float(t), float(f)) for t, f in zip(track.times_s, track.frequency_hz)))
+        out[j] = m
+    keep = sorted(out)
+    return ([out[j] for j in keep], [kept[j] for j in keep],
+            [(modes[k].frequency_hz, why) for k, why in sorted(gone.items())])
 
 
 def _io_modes(ub: np.ndarray, yb: np.ndarray, fs: float, T: float, cfg: OmaConfig, fmax: float,
@@ -486,15 +581,17 @@ def _pole_std(model: SsiModel, c: PoleCluster, jack: _Jackknife, cache: dict) ->
     return float(np.sqrt(var_f)), float(np.sqrt(var_z))
 
 
-def _contributions(model: SsiModel, clusters: tuple[PoleCluster, ...], cache: dict) -> list[float]:
-    """Each cluster's share of the correlation amplitude: |φ|·|g| of its representative pole,
-    g = ψ⁻¹G from the controllability part of the SVD (T = O·[A^{i-1}G … G])."""
-    if not clusters:
-        return []
+def _residues(model: SsiModel, clusters: tuple[PoleCluster, ...], cache: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Per cluster the representative's continuous pole λ (rad/s) and the per-channel amplitude
+    |φ_c|·|g| of its term in the output correlations, g = ψ⁻¹G from the controllability part of
+    the SVD (T = O·[A^{i-1}G … G]): R(τ) = Σ_k φ_k g_kᴴ μ_k^τ."""
     l = model.channels
+    lam = np.zeros(len(clusters), complex)
+    amp = np.zeros((len(clusters), l))
+    if not clusters:
+        return lam, amp
     r = model.right_vectors.shape[0] // model.block_rows
-    vals = []
-    for c in clusters:
+    for j, c in enumerate(clusters):
         n = int(model.poles.order[c.representative])
         om = _order_model(model, n, cache)
         k = int(np.argmin(np.abs(om.lam - model.poles.eigenvalue[c.representative])))
@@ -502,9 +599,49 @@ def _contributions(model: SsiModel, clusters: tuple[PoleCluster, ...], cache: di
         w, v = om.left[:, k], om.right[:, k]
         g = (np.conj(w) @ G) / (np.conj(w) @ v)  # the k-th row of ψ⁻¹G
         phi = model.observability[:l, :n] @ v
-        vals.append(float(np.linalg.norm(phi) * np.linalg.norm(g)))
-    tot = sum(vals)
-    return [v / tot if tot > 0 else 0.0 for v in vals]
+        lam[j] = om.lam[k]
+        amp[j] = np.abs(phi) * np.linalg.norm(g)
+    return lam, amp
+
+
+def _contributions(model: SsiModel, clusters: tuple[PoleCluster, ...], cache: dict) -> list[float]:
+    """Each cluster's share of the correlation amplitude: |φ|·|g| of its representative pole."""
+    _, amp = _residues(model, clusters, cache)
+    vals = np.linalg.norm(amp, axis=1) if len(amp) else np.zeros(0)
+    tot = float(vals.sum())
+    return [float(v) / tot if tot > 0 else 0.0 for v in vals]
+
+
+def local_visibility(lam: np.ndarray, amp: np.ndarray) -> np.ndarray:
+    """Each mode's share of the modelled response spectrum at its own frequency, in the channel
+    where that share is largest (0 … 1).
+
+    The spectrum of a mode's term in the correlations is amp/|iω − λ| (+ its conjugate); a pole
+    whose term is buried under a neighbour's skirt at its own frequency is nothing the window's
+    response shows: a numerical or noise pole, or the fringe of a mode that moved.
+
+    Parameters
+    ----------
+    lam : (K,) complex continuous-time poles (rad/s), upper half-plane.
+    amp : (K, l) per-channel amplitudes of each pole's term (any unit).
+
+    Returns
+    -------
+    (K,) float
+    """
+    lam = np.asarray(lam, complex)
+    amp = np.asarray(amp, float)
+    if lam.size == 0:
+        return np.zeros(0)
+    w = np.abs(lam)  # undamped natural frequencies, rad/s
+    # M[j, k] = 1/|iω_k − λ_j| + 1/|iω_k − λ̄_j|: pole j's spectral weight at mode k's frequency
+    M = 1.0 / np.abs(1j * w[None, :] - lam[:, None]) + 1.0 / np.abs(1j * w[None, :] - np.conj(lam)[:, None])
+    S = M[:, :, None] * amp[:, None, :]  # (j, k, channel)
+    tot = S.sum(axis=0)
+    own = S[np.arange(lam.size), np.arange(lam.size)]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(tot > 0, own / tot, 0.0)
+    return share.max(axis=1)
 
 
 def _kurtosis_near(yb: np.ndarray, fs: float, f: float, T: float) -> float:
