@@ -29,10 +29,11 @@ class SubwindowTrack:
     times_s : (k,) sub-window centres (s from the window's first sample).
     frequency_hz : (k,) best-fitting frequency in each sub-window (Hz).
     amplitude : (k,) the fitted sinusoid's amplitude (unit of the signal).
-    start_hz, end_hz : the straight line through them at the window's start and end (Hz).
-    mean_hz : its value at the window's middle: the time average of the frequency (Hz).
-    change_std_hz : 1σ of end_hz − start_hz from the scatter about the line (Hz).
-    mean_std_hz : 1σ of mean_hz (Hz).
+    start_hz, end_hz : the frequency in the first and the last sub-window where the mode stands
+        out (amplitude ≥ 0.3 of its largest) (Hz).
+    mean_hz : the time average of those sub-windows' frequencies (Hz); mean_std_hz its 1σ.
+    change_hz : the change over the window of a straight line through them (Hz);
+        change_std_hz its 1σ from the scatter about the line.
     """
 
     times_s: np.ndarray
@@ -41,16 +42,19 @@ class SubwindowTrack:
     start_hz: float
     end_hz: float
     mean_hz: float
+    change_hz: float
     change_std_hz: float
-    mean_std_hz: float = 0.0
+    mean_std_hz: float
 
-    @property
-    def change_hz(self) -> float:
-        return self.end_hz - self.start_hz
-
-    def moving(self, *, rel: float = 0.005, sigmas: float = 3.0) -> bool:
-        """The frequency changed by more than ``rel`` of its mean and ``sigmas`` of its 1σ."""
-        return abs(self.change_hz) > max(rel * self.mean_hz, sigmas * self.change_std_hz)
+    def moving(self, reference_hz: float | None = None, *, rel: float = 0.01, sigmas: float = 3.0) -> bool:
+        """The mode moved: its frequency changed along the window by more than ``rel`` of it and
+        ``sigmas`` of its 1σ, or its time average departs from ``reference_hz`` (the window's
+        time-invariant estimate) by more than ``rel``: a mode that stepped or went and came
+        back, which a time-invariant model pins to one of its ends."""
+        ref = self.mean_hz if reference_hz is None else reference_hz
+        if abs(self.change_hz) > max(rel * ref, sigmas * self.change_std_hz):
+            return True
+        return abs(self.mean_hz - ref) > rel * ref
 
 
 def _best_frequency(x: np.ndarray, t: np.ndarray, w: np.ndarray, grid: np.ndarray) -> tuple[float, float]:
@@ -108,8 +112,8 @@ def subwindow_frequencies(x: object, fs: float, f0_hz: float, *, lo_hz: float, h
     >>> fs = 1000.0; t = np.arange(500) / fs
     >>> x = np.sin(2 * np.pi * (25 * t + 17 * t**2))  # 25 → 42 Hz in 0.5 s
     >>> tr = subwindow_frequencies(x, fs, 33.0, lo_hz=20, hi_hz=50)
-    >>> round(tr.start_hz), round(tr.end_hz)
-    (25, 42)
+    >>> round(tr.start_hz), round(tr.end_hz), round(tr.change_hz)
+    (27, 39, 17)
     """
     fs = check_fs(fs)
     a = as_signal("x", x, min_len=16)
@@ -139,18 +143,20 @@ def subwindow_frequencies(x: object, fs: float, f0_hz: float, *, lo_hz: float, h
         am.append(amp)
         tm.append((s + L / 2) / fs)
     fr, am, tm = np.array(fr), np.array(am), np.array(tm)
-    # weight by amplitude²: a sub-window where the mode has rung down says little about it
-    wt = am ** 2 / max(float(np.sum(am ** 2)), 1e-300)
-    tc = float(np.sum(wt * tm))
-    A = np.column_stack([np.ones_like(tm), tm - tc])
-    W = np.sqrt(wt)[:, None]
-    coef, *_ = np.linalg.lstsq(A * W, fr * W[:, 0], rcond=None)
-    resid = fr - A @ coef
-    dof = max(1, len(fr) - 2)
-    # half-overlapping sub-windows: about half as many independent estimates
-    s2 = float(np.sum(wt * resid ** 2)) * len(fr) / dof  # per unit weight (weights of mean 1)
-    sxx = float(np.sum(wt * (tm - tc) ** 2))
-    slope_std = math.sqrt(2 * s2 / max(sxx, 1e-300) / len(fr)) if sxx > 0 else float("inf")
-    start, end, mid = (float(coef[0] + coef[1] * (x_ - tc)) for x_ in (0.0, T, T / 2))
-    mean_std = math.sqrt(2 * s2 / len(fr))
-    return SubwindowTrack(tm, fr, am, start, end, mid, slope_std * T, mean_std)
+    # a sub-window where the mode has rung down into the noise says little about its frequency
+    keep = am >= 0.3 * am.max() if am.max() > 0 else np.ones(am.size, bool)
+    fk, tk = fr[keep], tm[keep]
+    mean = float(np.mean(fk))
+    k = fk.size
+    if k >= 3:
+        A = np.column_stack([np.ones(k), tk - tk.mean()])
+        coef, *_ = np.linalg.lstsq(A, fk, rcond=None)
+        resid = fk - A @ coef
+        # half-overlapping sub-windows: about half as many independent estimates
+        s2 = 2 * float(np.sum(resid ** 2)) / (k - 2) if k > 2 else 0.0
+        sxx = float(np.sum((tk - tk.mean()) ** 2))
+        change, change_std = float(coef[1]) * T, math.sqrt(s2 / sxx) * T if sxx > 0 else float("inf")
+    else:
+        change, change_std, s2 = 0.0, float("inf"), 0.0
+    mean_std = math.sqrt(2 * float(np.var(fk, ddof=1)) / k) if k > 1 else float("inf")
+    return SubwindowTrack(tm, fr, am, float(fk[0]), float(fk[-1]), mean, change, change_std, mean_std)

@@ -21,6 +21,7 @@ from scipy import linalg, signal, stats
 
 from ._damping import DampingEstimate
 from ._moving import subwindow_frequencies
+from ._tracks import ModeTrack, ModeTracker
 from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
 from ._ssi import SsiModel, modal_assurance, ssi_poles, toeplitz_from_data
 from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, stabilisation_diagram
@@ -39,6 +40,8 @@ __all__ = [
     "damping_estimates",
     "subspace_damping",
     "tracked_frequency",
+    "track_windows",
+    "local_visibility",
 ]
 
 
@@ -425,7 +428,7 @@ def _one_mode_each(modes: list[IdentifiedMode], kept: list[PoleCluster], y: np.n
         if cfg.moving_modes and lo < m.frequency_hz < hi:
             x = y @ np.array(m.shape) if y.shape[1] == len(m.shape) else y[:, 0]
             track = subwindow_frequencies(x, fs, m.frequency_hz, lo_hz=lo, hi_hz=hi)
-        moving = track is not None and track.moving()
+        moving = track is not None and track.moving(m.frequency_hz)
         span_lo, span_hi = m.frequency_hz - res, m.frequency_hz + res
         if moving:
             span_lo = min(span_lo, min(track.start_hz, track.end_hz) - 0.5 * res)
@@ -779,11 +782,13 @@ class OmaWindow:
 
 @dataclass(frozen=True, eq=False)
 class OmaResult:
-    """Modes of the whole record (``record``, None if not asked) and of each window."""
+    """Modes of the whole record (``record``, None if not asked) and of each window; the windows'
+    modes carry their ``track``, and ``tracks`` lists each physical mode followed across them."""
 
     fs_hz: float
     record: ModalIdentification | None
     windows: tuple[OmaWindow, ...]
+    tracks: tuple[ModeTrack, ...] = ()
 
 
 def identify_windows(
@@ -845,7 +850,74 @@ def identify_windows(
                                inputs=None if ub is None else ub[a: a + nw])
         out.append(OmaWindow(a / fsb, (a + nw) / fsb, ident))
         k += 1
-    return tuple(out)
+    out = _confirm_by_neighbours(out, cfg, nw / fsb)
+    return track_windows(out)[0]
+
+
+def _confirm_by_neighbours(windows: list[OmaWindow], cfg: OmaConfig, T: float) -> list[OmaWindow]:
+    """A mode stable at fewer than sure_orders of the orders must recur in a neighbouring window
+    (a listed mode, its sweep, or a rejected pole within 1/T): a physical mode does not vanish in
+    the next half window, a noise pole does."""
+    cand = []
+    for w in windows:
+        fs = [f for f, _ in w.identification.rejected]
+        for m in w.modes:
+            fs.extend([m.frequency_hz] + ([m.start_hz, m.end_hz] if m.moving else []))
+        cand.append(np.array(fs))
+    out = []
+    for k, w in enumerate(windows):
+        ident = w.identification
+        n_orders = len(ident.orders)
+        keep, dropped, kept = [], [], []
+        aligned = len(ident.clusters) == len(ident.modes)
+        for m, c in zip(ident.modes, ident.clusters if aligned else [None] * len(ident.modes)):
+            if m.orders < cfg.sure_orders * n_orders:
+                near = [c for j in (k - 1, k + 1) if 0 <= j < len(windows) for c in cand[j]]
+                lo = min(m.frequency_hz, m.start_hz or m.frequency_hz, m.end_hz or m.frequency_hz) - 1.0 / T
+                hi = max(m.frequency_hz, m.start_hz or m.frequency_hz, m.end_hz or m.frequency_hz) + 1.0 / T
+                if not any(lo <= c <= hi for c in near):
+                    dropped.append((m.frequency_hz, f"isolated: stable at {m.orders} of {n_orders} orders and seen in neither "
+                                                    f"neighbouring window (within 1/T = {1 / T:.3f} Hz)"))
+                    continue
+            keep.append(m)
+            kept.append(c)
+        if dropped:
+            ident = replace(ident, modes=tuple(keep), rejected=ident.rejected + tuple(dropped),
+                            clusters=tuple(kept) if aligned else ident.clusters)
+            w = OmaWindow(w.start_s, w.end_s, ident)
+        out.append(w)
+    return out
+
+
+def track_windows(windows: list[OmaWindow] | tuple[OmaWindow, ...], tracker: ModeTracker | None = None) -> tuple[tuple[OmaWindow, ...], tuple[ModeTrack, ...]]:
+    """The windows with each mode's ``track`` set by a :class:`analytics.ModeTracker`, and the tracks.
+
+    Parameters
+    ----------
+    windows : sequence of OmaWindow, in time order
+    tracker : ModeTracker, optional
+        Continue this tracker's tracks [a new one].
+
+    Returns
+    -------
+    (windows, tracks)
+
+    Raises
+    ------
+    ValueError
+        If an element is not an OmaWindow.
+    """
+    tr = ModeTracker() if tracker is None else tracker
+    out = []
+    for w in windows:
+        if not isinstance(w, OmaWindow):
+            raise ValueError(f"windows must hold OmaWindow, got {type(w).__name__}")
+        ms = w.modes
+        ids = tr.assign(w.start_s, [(m.frequency_hz, m.start_hz if m.moving else m.frequency_hz, m.end_hz if m.moving else m.frequency_hz,
+                                     m.shape, m.contribution) for m in ms])
+        ident = replace(w.identification, modes=tuple(replace(m, track=i) for m, i in zip(ms, ids)))
+        out.append(OmaWindow(w.start_s, w.end_s, ident))
+    return tuple(out), tr.tracks()
 
 
 class OperationalModalAnalysis:
@@ -874,5 +946,6 @@ class OperationalModalAnalysis:
         record = identify_modes(y, fs, config=self.config, inputs=inputs, reference_shapes=reference_shapes) if self.whole_record else None
         windows = () if self.window_s is None else identify_windows(y, fs, self.window_s, self.step_s, config=self.config, inputs=inputs,
                                                                     reference_shapes=reference_shapes)
+        tracks = track_windows(windows)[1] if windows else ()
         fsb = record.fs_hz if record is not None else (windows[0].identification.fs_hz if windows else float(fs))
-        return OmaResult(fsb, record, windows)
+        return OmaResult(fsb, record, windows, tracks)
