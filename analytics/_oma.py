@@ -68,7 +68,8 @@ class OmaConfig(BaseModel):
     harmonic_kurtosis: float = Field(2.0, gt=1.5, lt=3, description="band-passed kurtosis below this with ζ < harmonic_damping: a harmonic [2.0]")
     harmonic_damping: float = Field(0.002, ge=0, lt=1, description="see harmonic_kurtosis [0.002]")
     min_visibility: float = Field(0.8, ge=0, le=1, description="a mode must carry this share of the modelled response spectrum at its own frequency in some channel, else it is buried under a neighbour [0.8]")
-    resolution_cycles: float = Field(1.5, ge=0, le=10, description="poles of one shape closer than resolution_cycles/T to a stronger mode are that mode, unresolved by a window of T s [1.5]")
+    resolution_cycles: float = Field(2.0, ge=0, le=10, description="poles of one shape closer than resolution_cycles/T to a stronger mode are that mode, unresolved by a window of T s (the half-width of a Hann window's main lobe) [2]")
+    min_share: float = Field(0.01, ge=0, le=1, description="a mode carries at least this share of the response in some channel [0.01]")
     moving_modes: bool = Field(True, description="follow each mode through sub-windows; one that moves is listed once with its start and end frequency [True]")
 
     @model_validator(mode="after")
@@ -333,18 +334,32 @@ def identify_modes(
     lam_c, amp_c = _residues(model, clusters, orders_cache)
     tot_c = float(np.linalg.norm(amp_c, axis=1).sum()) if len(clusters) else 0.0
     contrib = [float(np.linalg.norm(a)) / tot_c if tot_c > 0 else 0.0 for a in amp_c]
-    visible = local_visibility(lam_c, amp_c)
+    # poles of one shape closer than the window resolves are one mode split, not neighbours
+    fr_c = np.abs(lam_c) / (2 * np.pi)
+    sh_c = np.array([model.poles.shapes[c.representative] for c in clusters]) if clusters else np.zeros((0, l))
+    together = (np.abs(fr_c[:, None] - fr_c[None, :]) < cfg.resolution_cycles / T)
+    if l > 1 and len(clusters):
+        together &= modal_assurance(sh_c, sh_c) >= 0.9
+    visible = local_visibility(lam_c, amp_c, T, together)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        chan_share = np.nan_to_num(amp_c / amp_c.sum(axis=0, keepdims=True)).max(axis=1) if len(clusters) else np.zeros(0)
     refs = None if reference_shapes is None else np.atleast_2d(np.asarray(reference_shapes, dtype=float))
     if refs is not None and refs.shape[1] != l:
         raise ValueError(f"reference_shapes has {refs.shape[1]} components, y has {l} channels")
     n_orders = len(orders)
-    for c, share, vis in zip(clusters, contrib, visible):
+    for c, share, vis, cshare in zip(clusters, contrib, visible, chan_share):
         f, z = c.frequency_hz, c.damping_ratio
+        if cshare < cfg.min_share:
+            rejected.append((f, f"negligible: {100 * cshare:.1f} % of the response in any channel, {100 * cfg.min_share:g} % needed"))
+            continue
         if c.orders < cfg.sure_orders * n_orders and share < cfg.min_contribution:
             rejected.append((f, f"noise: stable at {c.orders} of {n_orders} orders and {100 * share:.1f} % of the response"))
             continue
         if vis < cfg.min_visibility:
-            j = int(np.argmax(np.linalg.norm(amp_c, axis=1) / np.maximum(np.abs(np.abs(lam_c) - 2 * np.pi * f), 1e-9)))
+            sig = np.maximum(np.maximum(np.abs(lam_c.real), 1e-3 * np.abs(lam_c)), np.pi / T)
+            at_f = np.linalg.norm(amp_c, axis=1) * sig / (sig ** 2 + (2 * np.pi * f - np.abs(lam_c.imag)) ** 2)
+            at_f[clusters.index(c)] = -1.0
+            j = int(np.argmax(at_f))
             rejected.append((f, f"buried: {100 * vis:.0f} % of the modelled response at its frequency, under the mode at "
                                 f"{clusters[j].frequency_hz:.3f} Hz ({100 * contrib[j]:.0f} % of the response)"))
             continue
@@ -615,18 +630,25 @@ def _contributions(model: SsiModel, clusters: tuple[PoleCluster, ...], cache: di
     return [float(v) / tot if tot > 0 else 0.0 for v in vals]
 
 
-def local_visibility(lam: np.ndarray, amp: np.ndarray) -> np.ndarray:
+def local_visibility(lam: np.ndarray, amp: np.ndarray, window_s: float | None = None, together: np.ndarray | None = None) -> np.ndarray:
     """Each mode's share of the modelled response spectrum at its own frequency, in the channel
     where that share is largest (0 … 1).
 
-    The spectrum of a mode's term in the correlations is amp/|iω − λ| (+ its conjugate); a pole
-    whose term is buried under a neighbour's skirt at its own frequency is nothing the window's
+    A pole λ = −σ + iω_d whose term in a channel's correlations has amplitude a adds the
+    Lorentzian a·σ/(σ² + (ω − ω_d)²) (and its mirror at −ω_d) to that channel's spectrum; a pole
+    whose own peak is buried under a neighbour's at its own frequency is nothing the window's
     response shows: a numerical or noise pole, or the fringe of a mode that moved.
 
     Parameters
     ----------
     lam : (K,) complex continuous-time poles (rad/s), upper half-plane.
     amp : (K, l) per-channel amplitudes of each pole's term (any unit).
+    window_s : float, optional
+        Length T of the window (s): its response shows no peak narrower than its resolution,
+        so each pole is taken at least π/T rad/s wide (half-power half-width 1/(2T) Hz).
+    together : (K, K) bool, optional
+        Poles that are one mode (a mode split by the window into poles it cannot resolve):
+        their terms count as the mode's own.
 
     Returns
     -------
@@ -636,12 +658,20 @@ def local_visibility(lam: np.ndarray, amp: np.ndarray) -> np.ndarray:
     amp = np.asarray(amp, float)
     if lam.size == 0:
         return np.zeros(0)
-    w = np.abs(lam)  # undamped natural frequencies, rad/s
-    # M[j, k] = 1/|iω_k − λ_j| + 1/|iω_k − λ̄_j|: pole j's spectral weight at mode k's frequency
-    M = 1.0 / np.abs(1j * w[None, :] - lam[:, None]) + 1.0 / np.abs(1j * w[None, :] - np.conj(lam)[:, None])
-    S = M[:, :, None] * amp[:, None, :]  # (j, k, channel)
+    wd = np.abs(lam.imag)
+    # a growing pole (a short window's build-up) is taken at the width of a lightly damped one
+    sig = np.maximum(np.abs(lam.real), 1e-3 * np.abs(lam))
+    if window_s is not None:
+        sig = np.maximum(sig, np.pi / window_s)
+    w = wd[None, :]
+    M = sig[:, None] / (sig[:, None] ** 2 + (w - wd[:, None]) ** 2) + sig[:, None] / (sig[:, None] ** 2 + (w + wd[:, None]) ** 2)
+    S = M[:, :, None] * amp[:, None, :]  # (pole j, at mode k's frequency, channel)
     tot = S.sum(axis=0)
-    own = S[np.arange(lam.size), np.arange(lam.size)]
+    if together is None:
+        own = S[np.arange(lam.size), np.arange(lam.size)]
+    else:
+        g = np.asarray(together, bool) | np.eye(lam.size, dtype=bool)
+        own = np.einsum("jk,jkc->kc", g.astype(float), S)
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(tot > 0, own / tot, 0.0)
     return share.max(axis=1)
