@@ -27,14 +27,12 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DNV_RP_C203_CURVES", "EN1993_DETAIL_CATEGORIES", "SnCurve", "damage_equivalent_range", "miner_damage", "sn_curve"]
+from contract import DNV_RP_C203_CURVE_NAMES, EN1993_DETAIL_CATEGORIES, EN1993_SHEAR_CATEGORIES, check_curve_spec
+
+__all__ = ["DNV_RP_C203_CURVES", "DNV_RP_C203_CURVE_NAMES", "EN1993_DETAIL_CATEGORIES", "EN1993_SHEAR_CATEGORIES", "SnCurve", "damage_equivalent_range", "miner_damage", "sn_curve"]
 
 _MPA = 1e6
 
-#: EN 1993-1-9 Fig. 7.1 detail categories Δσ_C (MPa) for normal stress ranges.
-EN1993_DETAIL_CATEGORIES = (160, 140, 125, 112, 100, 90, 80, 71, 63, 56, 50, 45, 40, 36)
-#: EN 1993-1-9 Fig. 7.2 detail categories Δτ_C (MPa) for shear stress ranges.
-EN1993_SHEAR_CATEGORIES = (100, 80)
 
 #: DNV-RP-C203 (2016) Table 2-1 (air): curve → (m₁, log ā₁ for N ≤ 10⁷, m₂, log ā₂ for N > 10⁷).
 _DNV_AIR = {
@@ -53,6 +51,7 @@ _DNV_SEAWATER_CP = {
     "W1": (3.0, 10.861, 5.0, 14.101), "W2": (3.0, 10.707, 5.0, 13.845), "W3": (3.0, 10.570, 5.0, 13.617),
 }
 DNV_RP_C203_CURVES = {"air": (_DNV_AIR, 1e7), "seawater-cp": (_DNV_SEAWATER_CP, 1e6)}
+
 
 
 @dataclass(frozen=True)
@@ -152,37 +151,17 @@ def sn_curve(spec: str | dict[str, Any]) -> SnCurve:
     >>> round(float(c.cycles_to_failure(71e6)[0]))
     2000000
     """
+    check_curve_spec(spec)  # the contract's catalogue: one set of names for rig.json and here
     if isinstance(spec, dict):
-        if set(spec) != {"points"}:
-            raise ValueError(f"curve {spec!r}: a user curve is {{'points': [[N, stress_range_pa], ...]}}")
         return _user(spec["points"], "user")
-    if not isinstance(spec, str):
-        raise ValueError(f"curve {spec!r} must be a name like 'EN1993-1-9:71' or {{'points': ...}}")
     parts = spec.split(":")
     if parts[0] == "EN1993-1-9":
-        shear = len(parts) == 3 and parts[1] == "shear"
-        if len(parts) != (3 if shear else 2):
-            raise ValueError(f"curve {spec!r}: expected 'EN1993-1-9:<category>' or 'EN1993-1-9:shear:<category>'")
-        text = parts[-1]
-        categories = EN1993_SHEAR_CATEGORIES if shear else EN1993_DETAIL_CATEGORIES
-        try:
-            value = float(text[:-1] if text == "36*" and not shear else text)
-        except ValueError:
-            value = math.nan
-        if value not in categories:
-            raise ValueError(f"curve {spec!r}: unknown EN 1993-1-9 {'shear ' if shear else ''}detail category {text!r}; "
-                             f"known: {', '.join(map(str, categories))}{'' if shear else ', 36*'}")
-        return _en1993(value, spec, shear=shear)
+        shear = parts[1] == "shear"
+        return _en1993(float(parts[-1].rstrip("*")), spec, shear=shear)
     if parts[0] == "DNV-RP-C203":
-        if len(parts) != 3:
-            raise ValueError(f"curve {spec!r}: expected 'DNV-RP-C203:<curve>:air' or ':seawater-cp'")
-        if parts[2] not in DNV_RP_C203_CURVES:
-            raise ValueError(f"curve {spec!r}: unknown DNV-RP-C203 environment {parts[2]!r}; known: {', '.join(DNV_RP_C203_CURVES)}")
         table, n_knee = DNV_RP_C203_CURVES[parts[2]]
-        if parts[1] not in table:
-            raise ValueError(f"curve {spec!r}: unknown DNV-RP-C203 curve {parts[1]!r}; known: {', '.join(table)}")
         return _dnv(table[parts[1]], n_knee, spec)
-    raise ValueError(f"curve {spec!r}: unknown standard {parts[0]!r}; known: EN1993-1-9, DNV-RP-C203, or {{'points': ...}}")
+    raise AssertionError(f"check_curve_spec passed {spec!r}")
 
 
 def _positive(name: str, value: float) -> float:

@@ -78,8 +78,15 @@ from ._payloads import (
     row_layout,
 )
 from ._rig import (
+    DNV_RP_C203_CURVE_NAMES,
+    DNV_RP_C203_ENVIRONMENTS,
+    EN1993_DETAIL_CATEGORIES,
+    EN1993_SHEAR_CATEGORIES,
     STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT,
     Beam,
+    FatigueSettings,
+    HotSpot,
+    check_curve_spec,
     Orientation,
     PointMass,
     RigDescription,
@@ -96,7 +103,9 @@ from ._state import Peripheral, StateIndex, StateLayout
 __all__ = [
     "is_loopback",
     # rig.json
-    "Beam", "Orientation", "PointMass", "RigDescription", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
+    "Beam", "Orientation", "PointMass", "RigDescription",
+    "DNV_RP_C203_CURVE_NAMES", "DNV_RP_C203_ENVIRONMENTS", "EN1993_DETAIL_CATEGORIES", "EN1993_SHEAR_CATEGORIES",
+    "FatigueSettings", "HotSpot", "check_curve_spec", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
     "STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT", "Support", "load_rig", "parse_rig",
     # topics and payloads
     "BEARING_TOPIC", "ESTIMATE_TOPIC", "IMU_PLANAR_COLUMNS", "NOMINAL_PERIOD_NS", "PAYLOAD_FIELDS", "SCHEMAS",

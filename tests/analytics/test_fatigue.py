@@ -148,6 +148,15 @@ def test_dnv_curves_at_their_knees(name, n_knee, s_knee_mpa, m1):
         assert c.cycles_to_failure(30e6)[0] == pytest.approx(10 ** (15.606 - 5 * math.log10(30)), rel=1e-12)
 
 
+def test_dnv_tables_cover_the_contracts_names():
+    from analytics._sn_curves import DNV_RP_C203_CURVES
+    from contract import DNV_RP_C203_CURVE_NAMES, DNV_RP_C203_ENVIRONMENTS
+
+    assert set(DNV_RP_C203_CURVES) == set(DNV_RP_C203_ENVIRONMENTS)
+    for table, _n in DNV_RP_C203_CURVES.values():
+        assert set(table) == set(DNV_RP_C203_CURVE_NAMES)
+
+
 def test_user_curve():
     c = sn_curve({"points": [[1e4, 400e6], [1e7, 80e6], [1e9, 50e6]]})
     assert c.cycles_to_failure([400e6, 80e6, 50e6]).tolist() == pytest.approx([1e4, 1e7, 1e9], rel=1e-12)
