@@ -9,6 +9,9 @@ other package imports its layouts and documents from here instead of re-deriving
 from ._network import is_loopback
 from ._documents import (
     CURVATURE_CHART,
+    FATIGUE_CONDITIONS,
+    HotSpotLoadsDocument,
+    LoadsWindowDocument,
     SENSOR_STATES,
     AidingChannelDocument,
     AlarmCountsDocument,
@@ -116,6 +119,7 @@ __all__ = [
     "CURVATURE_CHART", "SENSOR_STATES", "AidingChannelDocument", "AlarmCountsDocument", "AlarmDocument",
     "AlarmEvent", "AlarmEventDocument", "AlarmLevel", "AlarmsDocument", "ArchiveStatusDocument", "BaselineModeDocument",
     "BaselineRequestDocument", "BaselineStatusDocument", "ChartDocument", "ChartKind", "ChartLevelsDocument",
+    "FATIGUE_CONDITIONS", "HotSpotLoadsDocument", "LoadsWindowDocument",
     "CurvatureDocument", "DegradedImuDocument", "ErrorDocument", "EstimateDocument", "EstimatorStatusDocument", "FlagDocument",
     "HealthDocument", "IngestErrorDocument", "IngestResultDocument", "LastEstimateDocument", "LiveEstimatesDocument", "Level", "LocationDocument", "ModeDocument",
     "ModelDocument", "NotificationStatusDocument", "PipelineStatusDocument", "RestCalibrationDocument", "SensorState",

@@ -23,11 +23,12 @@ import argparse
 import json
 import math
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from ._argtypes import number
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["BAND_FLOOR", "add_loads_parser", "loads_of_recording", "loads_of_table", "parse_stations"]
 
@@ -98,6 +99,8 @@ def _signal_doc(loads, *, to_stress: float, band=None) -> dict[str, Any]:
 
 
 def _time_span(times: np.ndarray, start: float) -> tuple[np.ndarray, float, float]:
+    import numpy as np
+
     keep = times >= start
     if not np.any(keep):
         raise LoadsError(f"nothing to count at or after {start} s (the record ends at {times[-1]:.3f} s)")
@@ -110,6 +113,8 @@ def gauge_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, expon
                in_sample: bool, half_cycles: str = "half"):
     """The band of the virtual stations from the gauges' (name, position, virtual, measured) strains;
     returns (DelBand or None, per-gauge discrepancies)."""
+    import numpy as np
+
     from analytics import DelBand, signal_loads
 
     if not gauges:
@@ -133,6 +138,8 @@ def gauge_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, expon
 def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[float, ...] | None, curve: Any, exponents: tuple[float, ...],
                        n_eq: float | None, half_cycles: str, start_s: float | None) -> dict[str, Any]:
     """The ``shm loads`` document of a contract recording (raw or estimate)."""
+    import numpy as np
+
     from analytics import bending_moment, signal_loads, virtual_strain
 
     from .estimation import deformation_record
@@ -244,6 +251,8 @@ def _gauges_used(rec, record, model_args: dict) -> tuple[str, ...]:
 def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: float | None, half_cycles: str,
                    quantity: str, youngs_modulus: float, start_s: float | None) -> dict[str, Any]:
     """The ``shm loads`` document of plain measured channels (strain m/m or stress Pa), counted directly."""
+    import numpy as np
+
     from analytics import signal_loads
 
     if quantity == "strain":
