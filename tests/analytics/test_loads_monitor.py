@@ -114,3 +114,17 @@ def test_bad_loads_input():
         LoadsConfig(exponents=(3.0, -5.0))
     with pytest.raises(ValueError, match="LoadsMonitor"):
         MonitoringEngine(ModalMonitor(EXPECTED, S2, ETA, fs=FS), loads="loads")
+
+
+def test_analyze_carries_the_loads_of_the_same_engine():
+    from analytics import analyze
+
+    b = _b(240.0)
+    t = np.arange(b.shape[0]) / FS
+    live = _engine().add(t, b)
+    result = analyze(t, b, S2, ETA, fs=FS, expected_hz=EXPECTED, time_origin_ns=ORIGIN_NS,
+                     loads=LoadsMonitor(_spots(), youngs_modulus=E, design_life_years=20.0))
+    doc = result.as_dict()
+    assert len(doc["loads"]) == len(result.windows) == len(live)
+    assert doc["loads"][-1]["hot_spots"][0]["consumed"] == pytest.approx(live[-1].loads.hot_spots[0].consumed, rel=1e-12)
+    assert "loads" not in analyze(t, b, S2, ETA, fs=FS, expected_hz=EXPECTED, time_origin_ns=ORIGIN_NS).as_dict()
