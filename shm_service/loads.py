@@ -331,10 +331,12 @@ def _print_table(doc: dict[str, Any]) -> None:
 
     def row(label: str, s: dict[str, Any]) -> str:
         dels = "  ".join(
-            f"DEL{e['m']:g} {1e6 * e['strain_range']:.3f} µε" + (f" [{1e6 * e['band'][0]:.3f}, {1e6 * e['band'][1]:.3f}]" if e["band"] else "")
+            f"DEL{e['m']:g} {1e6 * e['strain_range']:.3f} µε {e['stress_range_pa'] / 1e6:.3f} MPa"
+            + (f" [{1e6 * e['band'][0]:.3f}, {1e6 * e['band'][1]:.3f}] µε" if e["band"] else "")
             for e in s["del"])
         damage = "-" if s["damage"] is None else f"{s['damage']:.3e}"
-        return f"{label:>16} rms {1e6 * s['strain_rms']:9.3f} µε  max range {1e6 * s['strain_range_max']:9.3f} µε  {dels}  D {damage}  cycles {s['cycles']:g}"
+        return (f"{label:>22}  rms {1e6 * s['strain_rms']:9.3f} µε  max range {1e6 * s['strain_range_max']:9.3f} µε  {dels}  "
+                f"D {damage}  cycles {s['cycles']:g}")
 
     for s in doc["stations"]:
         print(row(f"{s['position_m']:.3f} m" + (f" {s['hot_spot']}" if s["hot_spot"] else ""), s))
