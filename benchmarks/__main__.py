@@ -6,7 +6,7 @@ import importlib
 import sys
 
 MODULES = ("bench_simulator", "bench_estimator", "bench_analytics", "bench_operational", "bench_oma", "bench_service",
-           "bench_fleet", "fault_campaign", "kill_campaign", "http_campaign")
+           "bench_fleet", "bench_loads", "fault_campaign", "kill_campaign", "http_campaign")
 
 
 def main() -> None:

@@ -751,10 +751,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_inspect)
 
     from .demo import add_demo_parser
+    from .loads import add_loads_parser  # shm loads (issue 21)
     from .service._cli import add_serve_parser  # shm serve (issue 6)
 
     add_serve_parser(sub)
     add_demo_parser(sub)
+    add_loads_parser(sub)
 
     p = sub.add_parser(
         "import",
