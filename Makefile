@@ -9,7 +9,8 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -c constraints.txt -e '.[test]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,docs]'
+	$(PY) -m shm_service.warmup  # compile the filter's kernels now: the first demo shows estimates at once
 	touch $(STAMP)
 
 # A bounded demo (30 simulated minutes at 4x real time: 7.5 min) of the service and its dashboard
