@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench docs clean
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +27,10 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m benchmarks
 
+# The documentation site into site/, offline; the reference and validation pages are generated (docs_reference.py).
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict
+
 # Everything the setup and the runs made: the venv, build files and var/ (the demo's and serve's data).
 clean:
-	rm -rf $(VENV) build *.egg-info var
+	rm -rf $(VENV) build *.egg-info var site
