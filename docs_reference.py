@@ -338,7 +338,7 @@ def _validation_page(name: str) -> str:
 def validation_index() -> str:
     from benchmarks._pages import RESULTS
 
-    out = ["# Validation", "",
+    out = ["# Validation: what was measured, when and where", "",
            "What the product's figures are, how each was measured and on what. Every page below is written by "
            "`make bench` (`python -m benchmarks`; one benchmark: `python -m benchmarks --only NAME`) into "
            "`benchmarks/results/`, stamped with the date, the commit, the machine (cores, load) and the command, "
@@ -378,7 +378,7 @@ PAGES = {
 # ---------------------------------------------------------------------------------------- the hook
 def _all_pages() -> dict[str, Any]:
     pages = dict(PAGES)
-    pages["validation/index.md"] = validation_index
+    pages["validation/summary.md"] = validation_index
     for name in _benchmarks():
         pages[f"validation/{name}.md"] = (lambda n=name: _validation_page(n))
     return pages
