@@ -565,7 +565,23 @@ def _key(loc: tuple[Any, ...]) -> str:
 
 
 def parse_rig(data: bytes | str | dict[str, Any], *, source: str = "rig.json") -> RigDescription:
-    """Validate a rig description given as JSON text/bytes or an already parsed mapping."""
+    """Validate a rig description given as JSON text/bytes or an already parsed mapping.
+
+    Examples
+    --------
+    >>> from contract import parse_rig
+    >>> rig = parse_rig('{"beam": {"length": 4.0, "width": 0.2, "thickness": 0.002, '
+    ...                 '"youngs_modulus": 2.0e11, "density": 7850.0}, "gravity": 9.81, '
+    ...                 '"reflector_distance": 0.5, "sensors": [{"name": "D", "kind": "imu", "position": 0.0}]}')
+    >>> rig.support, rig.orientation, rig.sensors[0].topic
+    ('pinned', 'hanging', '/imu/D')
+    >>> parse_rig({"beam": {"length": 4.0, "width": 0.2, "thickness": 0.002, "youngs_modulus": 2.0e11,
+    ...                     "density": 7850.0}, "gravity": 9.81, "reflector_distance": 0.5,
+    ...            "sensors": [{"name": "s1", "kind": "imu", "position": 5.0}]})
+    Traceback (most recent call last):
+    ...
+    contract._rig.RigError: rig.json: ... position=5.0 is outside the beam [0, 4.0]
+    """
     if isinstance(data, (bytes, str)):
         try:
             data = json.loads(data)

@@ -584,6 +584,11 @@ def _cmd_oma(args: argparse.Namespace) -> int:
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from .recording import format_inspection, inspect_recording
 
+    if args.print_rig:  # the recording's rig description (rig.json), to edit or to reuse with shm import --rig
+        from .recording import read_recording
+
+        print(read_recording(args.recording, rig=args.rig).rig.to_json())
+        return 0
     report = inspect_recording(args.recording, rig=args.rig)
     if args.json:
         _print_json(report)
@@ -748,6 +753,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording")
     p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--print-rig", action="store_true", help="print the recording's rig description (rig.json) and exit")
     p.set_defaults(func=_cmd_inspect)
 
     from .demo import add_demo_parser

@@ -80,6 +80,7 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
 def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
     from ._api import create_app
     from ._config import SettingsError, load_settings, render_toml
+    from ._progress import ProgressLog, compile_first
     from ._server import ApiServer
     from ._service import MonitoringService, RigPending, ServiceError
     from ._starting import ServiceSlot, StartingService
@@ -162,12 +163,15 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
     if service.dashboard is not None:
         print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
     started = time.monotonic()
-    service.start()
+    progress = ProgressLog(service)
+    if compile_first(service, stop):
+        service.start()
     code = 0
     try:
         while not stop.is_set():
             if service.wait(0.2) and not settings.source.keep_running:
                 break
+            progress.poll()
     finally:
         elapsed = time.monotonic() - started
         if not service.done:
