@@ -193,7 +193,8 @@ class ImmsModel:
         else:
             A, Y = units.shape(self.imu_eta), pair.shape(self.imu_eta)
         b = np.linalg.pinv(A) @ Y  # (Γ, 2): each mode as the IMUs read it
-        miss = -0.5 * self.rig.beam.thickness * (units.curvature(self.gauge_eta) @ b - pair.curvature(self.gauge_eta))
+        fibre = self.rig.beam.fibre_distance(self.gauge_eta)[:, None]  # c(η): h*/2 of the paper's sheet
+        miss = -fibre * (units.curvature(self.gauge_eta) @ b - pair.curvature(self.gauge_eta))
         return miss / b[0]
 
     @property
@@ -262,10 +263,11 @@ class ImmsModel:
         return self.units.shape(self.rig.beam.length)
 
     def strain_matrix(self) -> np.ndarray:
-        """Eq. (19): ε = −(h*/2) S'' [b, r], rows for the selected gauges (Γ + R columns)."""
+        """Eq. (19) with the section's fibre distance: ε = −c(η) S'' [b, r] (c = h*/2 for the paper's
+        sheet), rows for the selected gauges (Γ + R columns)."""
         if self.gauge_eta.size == 0:
             return np.zeros((0, self.modal.count))
-        return -0.5 * self.rig.beam.thickness * self.modal.curvature(self.gauge_eta)
+        return -self.rig.beam.fibre_distance(self.gauge_eta)[:, None] * self.modal.curvature(self.gauge_eta)
 
     def tip_deflection(self, x: np.ndarray) -> np.ndarray:
         """e = Δ(L) (m) of state(s) ``x`` (…, n), residual modes included."""

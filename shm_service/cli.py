@@ -534,9 +534,7 @@ def _cmd_oma(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
 
     def modes(ident) -> list[dict]:
-        return [{"frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "frequency_std_hz": m.frequency_std_hz,
-                 "damping_std": m.damping_std, "mpc": m.mpc, "shape": list(m.shape), "contribution": m.contribution,
-                 "orders": m.orders, "damping_method": m.damping_method} for m in ident.modes]
+        return [m.as_dict() for m in ident.modes]
 
     def io(ident) -> dict:
         if ident.excitation is None:
@@ -556,7 +554,10 @@ def _cmd_oma(args: argparse.Namespace) -> int:
         "modes": modes(rec),
         "rejected": [{"frequency_hz": f, "reason": why} for f, why in rec.rejected],
         **io(rec),
-        "windows": [{"start_s": w.start_s, "end_s": w.end_s, "modes": modes(w.identification), **io(w.identification)} for w in result.windows],
+        "windows": [{"start_s": w.start_s, "end_s": w.end_s, "modes": modes(w.identification),
+                     "rejected": [{"frequency_hz": f, "reason": why} for f, why in w.identification.rejected],
+                     **io(w.identification)} for w in result.windows],
+        "tracks": [t.as_dict() for t in result.tracks],
     }
     if args.json:
         _print_json(doc)
@@ -572,7 +573,10 @@ def _cmd_oma(args: argparse.Namespace) -> int:
     if result.windows:
         print(f"{len(result.windows)} windows:")
         for w in result.windows:
-            print(f"  {w.start_s:8.2f}-{w.end_s:8.2f} s: " + (", ".join(f"{m.frequency_hz:.3f} Hz ({100 * m.damping_ratio:.2f} %)" for m in w.modes) or "-"))
+            print(f"  {w.start_s:8.2f}-{w.end_s:8.2f} s: " + (", ".join(
+                f"#{m.track} {m.frequency_hz:.3f} Hz ({100 * m.damping_ratio:.2f} %)"
+                + (f" moving {m.start_hz:.2f} → {m.end_hz:.2f} Hz" if m.moving else "") for m in w.modes) or "-"))
+        print("tracks: " + ", ".join(f"#{t.track} {t.min_hz:.2f}–{t.max_hz:.2f} Hz ({t.windows} windows)" for t in result.tracks))
     return 0
 
 
@@ -580,6 +584,11 @@ def _cmd_oma(args: argparse.Namespace) -> int:
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from .recording import format_inspection, inspect_recording
 
+    if args.print_rig:  # the recording's rig description (rig.json), to edit or to reuse with shm import --rig
+        from .recording import read_recording
+
+        print(read_recording(args.recording, rig=args.rig).rig.to_json())
+        return 0
     report = inspect_recording(args.recording, rig=args.rig)
     if args.json:
         _print_json(report)
@@ -744,13 +753,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording")
     p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--print-rig", action="store_true", help="print the recording's rig description (rig.json) and exit")
     p.set_defaults(func=_cmd_inspect)
 
     from .demo import add_demo_parser
+    from .loads import add_loads_parser  # shm loads (issue 21)
     from .service._cli import add_serve_parser  # shm serve (issue 6)
 
     add_serve_parser(sub)
     add_demo_parser(sub)
+    add_loads_parser(sub)
 
     p = sub.add_parser(
         "import",

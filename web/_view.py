@@ -206,6 +206,7 @@ class ClientView:
             self._envelope = 0.0
             self._eta = np.linspace(0.0, feed.length, N_BEAM_POINTS)
             self._faces = ribbon_faces(N_BEAM_POINTS)
+            self._widths = feed.width_at(self._eta)  # to scale: a tube's diameter, a sheet's width
             self._shape_eta = np.asarray(feed.units.shape(self._eta), dtype=float)
             scene = _Tracked(self.client.scene, self._nodes)
             if self.dash.fleet:  # each browser its own structure: its rig and camera
@@ -275,7 +276,7 @@ class ClientView:
     def _build_scene(self, scene: Any) -> None:
         rest = BeamState(0.0, 0.0, 0.0, np.zeros(self.feed.gamma))
         up = self.up = up_sign(self.feed.standing)
-        verts = ribbon(centreline(rest, self.feed.units, self._eta), self.feed.width, standing=self.feed.standing)
+        verts = ribbon(centreline(rest, self.feed.units, self._eta), self._widths, standing=self.feed.standing)
         self.ghost = scene.add_mesh_simple(
             "/live/ghost", verts, self._faces, color=GHOST_COLOUR, opacity=0.28, side="double", cast_shadow=False
         )
@@ -657,7 +658,7 @@ class ClientView:
         es, rs = self.elastic_scale, self.rigid_scale
         standing, up = feed.standing, self.up
         line = centreline(state, feed.units, self._eta, elastic_scale=es, rigid_scale=rs)
-        self.beam.vertices = ribbon(line, feed.width, standing=standing)
+        self.beam.vertices = ribbon(line, self._widths, standing=standing)
         ghost_on = bool(self.show_ghost.value)
         self.ghost.visible = ghost_on
         if ghost_on:
@@ -665,7 +666,7 @@ class ClientView:
                 ghost = centreline(mean, feed.units, self._eta, elastic_scale=es, rigid_scale=rs)
             else:
                 ghost = centreline(BeamState(0.0, 0.0, 0.0, np.zeros(feed.gamma)), feed.units, self._eta)
-            self.ghost.vertices = ribbon(ghost, feed.width, standing=standing)
+            self.ghost.vertices = ribbon(ghost, self._widths, standing=standing)
         truth_on = est.truth_deflection is not None and bool(self.show_truth.value)
         self.truth.visible = truth_on
         if truth_on:
@@ -905,8 +906,11 @@ class ClientView:
             return f"<div style='font-size:13px'>{self._title()}<br>{waiting}</div>"
         live = "<span style='color:#b45309;font-weight:bold'>■ PAUSED</span>" if self.paused else "<span style='color:#15803d;font-weight:bold'>● LIVE</span>"
         est = snap.estimate if not self.paused or self._drawn_estimate is None else self._drawn_estimate[0]
+        # what the service is doing now (compiling, calibrating at rest, waiting for the first window, ...)
+        progress = None if snap.status is None else getattr(snap.status.service, "progress", None)
         if est is None:
-            motion = "waiting for estimates"
+            motion = html.escape(progress) if progress else "waiting for estimates"
+            progress = None
         else:
             s = est.state
             phi = "φ ≡ 0 (clamped)" if self.feed.layout.phi is None else f"φ = {1e3 * s.phi:+.2f} mrad"
@@ -936,7 +940,8 @@ class ClientView:
         error = f"<br><span style='color:#dc2626'>service: {html.escape(snap.status_error)}</span>" if snap.status_error else ""
         return (
             f"<div style='font-size:12.5px;line-height:1.45'>{self._title()} {live} {badge}<br>"
-            f"{motion}<br>{_rates(snap)} · {sensors}{error}</div>"
+            f"{motion}<br>{_rates(snap)} · {sensors}{error}"
+            f"{'' if not progress else '<br><i>' + html.escape(progress) + '</i>'}</div>"
         )
 
 

@@ -20,7 +20,7 @@ from ._excitation import DistributedLoad, Excitation, OperationalExcitation, mak
 from ._kinematics import points_motion
 from ._plant import Plant, build_plant, clamped_basis, integrate
 from ._settings import SimulationSettings
-from ._wind import fibre_distance_at, scaled_wind_load
+from ._wind import scaled_wind_load
 
 __all__ = ["SampleBlock", "VirtualRig", "SAMPLE_RATE_HZ", "SLOW_DIVIDER"]
 
@@ -65,7 +65,12 @@ def _perturbed_rig(nominal: RigDescription, settings: SimulationSettings, rng: n
     data = nominal.model_dump(mode="json")
     plant = settings.plant
     if not settings.ideal:
-        data["beam"]["youngs_modulus"] *= 1 + plant.stiffness_mismatch * rng.standard_normal()
+        stiffness = 1 + plant.stiffness_mismatch * rng.standard_normal()
+        if data["beam"].get("youngs_modulus") is not None:
+            data["beam"]["youngs_modulus"] *= stiffness
+        for station in data["beam"].get("sections") or ():
+            if station["shape"] == "table":  # a table's EI is not E times a geometry: scale it alike
+                station["bending_stiffness"] *= stiffness
         for mass in data["point_masses"]:
             factor = 1 + plant.mass_mismatch * rng.standard_normal()
             mass["mass"] *= factor
@@ -250,6 +255,8 @@ class VirtualRig:
         self._misalignment = scale * e.misalignment * rng.standard_normal(n_imu)
         self._tof_offset = scale * e.tof_offset * rng.standard_normal(len(self.tofs))
         self._strain_offset = scale * e.strain_offset * rng.standard_normal(len(self.gauges))
+        # c(η) of each gauge: half the sheet's thickness, half a tube's outer diameter, a table's value
+        self._fibre_distance = np.array([rig.beam.fibre_distance(g.position) for g in self.gauges], dtype=float)
 
     def truth_metadata(self) -> dict[str, str]:
         """The ``truth`` metadata record: the plant's exact modal figures and what was simulated."""
@@ -356,10 +363,9 @@ class VirtualRig:
             meas[imu.topic] = (t, np.hstack([accel, gyro]))
             delays[imu.topic] = e.imu_delay + e.delay_jitter * rng.random(n)
 
-        fibre = fibre_distance_at(rig, [g.position for g in self.gauges]) if self.gauges else np.zeros(0)
         for i, gauge in enumerate(self.gauges):
             curvature = fast.curvature[:, len(self.imus) + i]
-            strain = -fibre[i] * curvature + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
+            strain = -self._fibre_distance[i] * curvature + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
             meas[gauge.topic] = (t, strain[:, None])
             delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
 

@@ -29,22 +29,15 @@ DEFAULT_WIND_BASE_STRAIN = 5e-5
 
 
 def fibre_distance_at(rig: RigDescription, positions: np.ndarray | list[float]) -> np.ndarray:
-    """c(η) (m) at ``positions``: the beam's own ``fibre_distance`` where the rig description
-    provides it (sections), half the thickness of the uniform sheet otherwise."""
+    """c(η) (m) at ``positions``, from the rig description's sections (or its uniform sheet)."""
     positions = np.asarray(positions, dtype=float)
-    method = getattr(rig.beam, "fibre_distance", None)
-    if callable(method):
-        return np.asarray(method(positions), dtype=float).reshape(positions.shape)
-    return np.full(positions.shape, 0.5 * rig.beam.thickness)
+    return np.asarray(rig.beam.fibre_distance(positions), dtype=float).reshape(positions.shape)
 
 
 def bending_stiffness_at(rig: RigDescription, positions: np.ndarray | list[float]) -> np.ndarray:
     """EI(η) (N·m²) at ``positions`` at the reference temperature, from the rig description."""
     positions = np.asarray(positions, dtype=float)
-    method = getattr(rig.beam, "bending_stiffness", None)
-    if callable(method):
-        return np.asarray(method(positions), dtype=float).reshape(positions.shape)
-    return np.full(positions.shape, rig.beam.youngs_modulus * rig.beam.second_moment_of_area)
+    return np.asarray(rig.beam.bending_stiffness(positions), dtype=float).reshape(positions.shape)
 
 
 def support_moment_factor(length_m: float, correlation_m: float, points: int = 801) -> float:
