@@ -88,9 +88,11 @@ def observability_problem(units: UnitDeformations, selection: SensorSelection, *
         tofs = ", ".join(f"{n} at {p:g} m" for n, p in zip(selection.tofs, tof_eta)) or "none"
         gauges = ", ".join(f"{n} at {p:g} m" for n, p in zip(selection.gauges, gauge_eta)) or "none"
         aided = f" aiding b{','.join(map(str, selection.aided))}" if selection.gauges else ""
+        # Aiding more unit deformations helps only where there are as many rows as unit deformations.
+        reaid = ("aid them with the gauges (--aided), "
+                 if len(selection.gauges) + len(selection.tofs) >= gamma and len(selection.aided) < gamma else "")
         return (f"the sensors cannot observe {_unit_names(null, units)} of the Γ={gamma} unit deformations: no ToF and no "
                 f"aided strain gauge sees them (ToFs: {tofs}; strain gauges: {gauges}{aided}), so the peripheral IMUs' "
                 f"integrated rates would drift without bound; add {gamma - rank} strain gauge(s) or ToF(s) where these "
-                f"unit deformations bend or deflect, aid them with the gauges (--aided), or lower the unit deformations "
-                f"(--modes) to {rank}")
+                f"unit deformations bend or deflect, {reaid}or lower the unit deformations (--modes) to {rank}")
     return None
