@@ -50,6 +50,7 @@ __all__ = [
     "calibrate_at_rest",
     "estimate",
     "model_arrays",
+    "support_position_problem",
 ]
 
 
@@ -829,4 +830,24 @@ def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = Filter
     outputs.append(filt.flush())
     elapsed = time.perf_counter() - started
     out = FilterOutput.concatenate(outputs, model.state_size)
-    return EstimateResult(model, calibration, out.t, out.x, out.P_diag, out.var_e, filt.diagnostics(), elapsed)
+    diagnostics = filt.diagnostics()
+    problem = support_position_problem(meas, model)
+    if problem:
+        diagnostics["problems"] = [problem]
+    return EstimateResult(model, calibration, out.t, out.x, out.P_diag, out.var_e, diagnostics, elapsed)
+
+
+def support_position_problem(meas: Measurements, model: ImmsModel) -> str | None:
+    """Why the support's position d cannot be observed from ``meas``, or None.
+
+    d is held by the bearing sensor, by the ToFs (they measure from the reflector, Eq. 18) or, for
+    a support fixed to the ground (no bearing sensor in the rig), by d ≡ 0. A rig that declares a
+    bearing sensor whose samples are missing, without selected ToFs, has nothing but the D
+    accelerometer's double integral for d."""
+    if model.fixed_support or model.selection.tofs:
+        return None
+    if meas.bearing is not None and meas.bearing.times.size and np.isfinite(meas.bearing.values[:, 0]).any():
+        return None
+    return ("the support's position d is not observed: rig.json has a bearing sensor but the recording has no valid "
+            f"{BEARING_TOPIC} sample and no ToF is selected, so d is the D accelerometer's double integral and drifts; "
+            "if the support is fixed to the ground, remove the bearing sensor from rig.json (d ≡ 0)")

@@ -275,6 +275,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         print(f"{sel.peripheral}, Γ = {result.model.gamma}: IMUs {','.join(sel.imus)}; ToFs {','.join(sel.tofs) or '-'}; "
               f"gauges {','.join(sel.gauges) or '-'} (aiding b{','.join(map(str, sel.aided)) or '-'})")
         print(f"{summary['samples']} samples, {summary['rejected']} rejected, {summary['realtime_factor']}x real time")
+        for problem in result.diagnostics.get("problems", ()):
+            print(f"warning: {problem}")
         if "rmse" in summary:
             r = summary["rmse"]
             print(f"RMSE after the rest phase: phi {r['phi_deg']:.4f} deg, e {1000 * r['e_m']:.3f} mm, d {1000 * r['d_m']:.3f} mm, "
