@@ -128,6 +128,7 @@ def _simulation_settings(args: argparse.Namespace):
         return SimulationSettings(
             duration=args.duration,
             seed=args.seed,
+            plant_seed=args.plant_seed,
             excitation=args.excitation,
             layout=args.layout,
             support=args.support or "pinned",
@@ -148,7 +149,8 @@ def _simulation_settings(args: argparse.Namespace):
 
 # (settings field, option, the option's default) of ``shm simulate``: what a rig file's simulator settings yield to.
 _SIMULATE_OPTIONS = (
-    ("duration", "duration", 300.0), ("seed", "seed", 1), ("excitation", "excitation", "paper"), ("ideal", "ideal", False),
+    ("duration", "duration", 300.0), ("seed", "seed", 1), ("plant_seed", "plant_seed", None),
+    ("excitation", "excitation", "paper"), ("ideal", "ideal", False),
     ("damage", "damage", None), ("damage_at", "damage_at", None), ("temperature_swing", "temperature_swing", 0.0),
     ("temperature_mean", "temperature_mean", 20.0), ("plant", "friction", 0.0), ("wind_load_rms", "wind_load", None),
     ("wind_correlation", "wind_correlation", None),
@@ -637,6 +639,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=number(low=0, low_open=True, high=7 * 24 * 3600, unit="s"), default=300.0,
                    help="s, up to a week (default 300)")
     p.add_argument("--seed", type=number(int, low=0), default=1)
+    p.add_argument("--plant-seed", type=number(int, low=0), default=None, metavar="SEED",
+                   help="seed of the structure as built (E and masses a few per cent off the rig file; default --seed): "
+                        "a baseline and later recordings of the same structure share it")
     p.add_argument("--out", required=True, type=output_path, help="output .mcap (its directory must exist)")
     p.add_argument("--excitation", choices=("paper", "ambient", "decay", "operational"), default="paper",
                    help="paper: the paper's bearing moves and sine bursts; ambient: random loads, the bearing still; decay: "

@@ -138,6 +138,9 @@ def parse_damage(text: str) -> Damage:
 class SimulationSettings(_Closed):
     duration: float = Field(300.0, gt=0, le=7 * 24 * 3600, description="recording length, s")
     seed: int = Field(1, ge=0)
+    plant_seed: int | None = Field(
+        None, ge=0, description="seed of the structure as built (E and board masses drawn off the nominal); None: seed. "
+        "Recordings of one structure (a baseline, then monitoring) share it and differ in seed")
     excitation: Literal["paper", "ambient", "decay", "operational"] = "paper"
     layout: Literal["benchmark", "dense"] = "benchmark"
     support: Literal["pinned", "clamped"] = Field(

@@ -122,7 +122,10 @@ class VirtualRig:
         self.dt = 1.0 / SAMPLE_RATE_HZ
         self.n_samples = int(round(settings.duration * SAMPLE_RATE_HZ))
         seeds = np.random.SeedSequence(settings.seed).spawn(4)
-        self._rng_plant = np.random.default_rng(seeds[0])
+        # The structure as built (E and masses off the nominal) may come from another seed than the
+        # run: recordings of one structure on different days share ``plant_seed``.
+        plant_seeds = seeds if settings.plant_seed is None else np.random.SeedSequence(settings.plant_seed).spawn(4)
+        self._rng_plant = np.random.default_rng(plant_seeds[0])
         self._rng_excitation = np.random.default_rng(seeds[1])
         self._rng_sensors = np.random.default_rng(seeds[2])
         self._rng_ambient = np.random.default_rng(seeds[3])
