@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from test_dashboard_browser import CHROMIUM_ARGS, VIEWPORT, _visible, _wait, chromium  # noqa: F401 (fixture)
+from test_dashboard_browser import CHROMIUM_ARGS, VIEWPORT, _visible, _wait, chromium, serve_urls  # noqa: F401 (fixture)
 
 ROOT = Path(__file__).resolve().parents[2]
 #: the issue's bound on this 2-core machine when quiet: live estimates this soon after the dashboard's
@@ -55,14 +55,8 @@ def test_the_first_demo_shows_its_header_and_counts_estimates_within_30_s(chromi
             proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=stdout, stderr=subprocess.STDOUT, start_new_session=True,
                                     env={**os.environ, "PYTHONPATH": str(ROOT)})
         try:
-            def urls():
-                text = out.read_text()
-                if proc.poll() is not None:
-                    raise AssertionError(f"shm demo ended early ({proc.returncode}):\n{text[-3000:]}")
-                api, dash = re.search(r"API at (http://\S+?) ", text), re.search(r"dashboard at (http://\S+)", text)
-                return (api.group(1), dash.group(1)) if api and dash else None
-
-            api_url, dash_url = _wait(urls, 240, "shm demo to print its API and dashboard addresses", poll=0.05)
+            api_url, dash_url = _wait(lambda: serve_urls(proc, out, out, "shm demo"), 240,
+                                      "shm demo to print its API and dashboard addresses", poll=0.05)
             port_open = time.monotonic()
             load = _load_factor()
             with httpx.Client(base_url=api_url, timeout=10) as api:
