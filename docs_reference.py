@@ -193,6 +193,8 @@ def _schema_type(schema: dict[str, Any]) -> str:
         return f"[{name}](#{name.lower()})"
     if "anyOf" in schema:
         return " or ".join(_schema_type(s) for s in schema["anyOf"])
+    if "oneOf" in schema:
+        return "one of: " + ", ".join(s.get("title") or _schema_type(s) for s in schema["oneOf"])
     if "enum" in schema:
         return " \\| ".join(json.dumps(v) for v in schema["enum"])
     if "const" in schema:
@@ -266,10 +268,13 @@ def http_page() -> str:
         for ctype, content in body.items():
             schema = content.get("schema", {})
             out += [f"Request body ({ctype}): {_schema_type(schema)}", ""]
-            if "properties" in schema:
-                out += ["```json", json.dumps(schema, indent=1)[:4000], "```", ""]
             if path.endswith("/ingest"):
-                out += ["Each message's `payload` is typed by its topic: see [the ingest payloads](#ingest-payloads-by-topic).", ""]
+                items = schema["properties"]["messages"]["items"]
+                out += ["`{\"messages\": [...]}`, each message " + _schema_type(items) + ": `topic`, `log_time_ns` "
+                        "(and optionally `publish_time_ns`), and the `payload` its topic's schema types: see "
+                        "[the ingest payloads](#ingest-payloads-by-topic).", ""]
+            elif "properties" in schema:
+                out += ["```json", json.dumps(schema, indent=1)[:4000], "```", ""]
         out += ["| status | meaning | body |", "| --- | --- | --- |"]
         for code, resp in op.get("responses", {}).items():
             schemas = [c.get("schema", {}) for c in resp.get("content", {}).values()]

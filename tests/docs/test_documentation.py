@@ -99,6 +99,12 @@ def test_the_http_reference_lists_every_route_and_types_the_ingest_payloads():
             assert f"{method.upper()} `{path}`" in page, (method, path)
     for name in doc["components"]["schemas"]:
         assert f"### {name}" in page, name
+    # the OpenAPI document itself types each ingest message's payload by its topic
+    items = doc["paths"]["/api/ingest"]["post"]["requestBody"]["content"]["application/json"]["schema"]["properties"][
+        "messages"]["items"]
+    typed = {m["title"]: m["properties"]["payload"] for m in items["oneOf"]}
+    assert set(typed) == {"shm.Imu message", "shm.Distance message", "shm.Strain message", "shm.Temperature message"}
+    assert typed["shm.Imu message"]["required"] == ["accel", "gyro"]
     for title, schema in contract.SCHEMAS.items():
         assert f"### {title}" in page, title
         for field in schema["properties"]:
