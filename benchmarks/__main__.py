@@ -20,7 +20,7 @@ from pathlib import Path
 from ._pages import ROOT, command_line, stamp, write_result
 
 MODULES = ("bench_simulator", "bench_estimator", "bench_analytics", "bench_operational", "bench_oma", "bench_service",
-           "bench_fleet", "fault_campaign", "kill_campaign", "http_campaign")
+           "bench_fleet", "bench_loads", "fault_campaign", "kill_campaign", "http_campaign")
 
 
 def _title(name: str) -> str:
