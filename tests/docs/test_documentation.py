@@ -144,6 +144,12 @@ def test_the_readme_is_short_and_its_links_resolve():
         assert (ROOT / link).exists(), link
     for needed in ("make demo", "make test", "LICENSE", "CITATION.cff", "Kohl", "Wagner"):
         assert needed in text, needed
+    # the table of the commands has every command of the parser
+    from shm_service.cli import build_parser
+
+    for command, flag in _options(build_parser()):
+        if flag is None and command.count(" ") == 1:
+            assert f"| `{command}" in text, f"README's command table lacks {command}"
 
 
 #: The numerics' public entry points whose numpydoc Examples run here (keep them small and fast).
