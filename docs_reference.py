@@ -332,7 +332,15 @@ def _validation_page(name: str) -> str:
         return (f"# {name}\n\n!!! warning \"Not yet measured\"\n    Not yet measured by `make bench` on this commit "
                 f"(`{head}`). Run `make bench` (or `python -m benchmarks --only {name}`) to write this page.\n")
     text = path.read_text()
-    if head not in text:
+    import re
+    import subprocess
+
+    stamped = re.search(r"^\| commit \| ([0-9a-f]{7,40})", text, re.M)
+    same = False
+    if stamped:  # the same code: nothing but results and documentation changed since the stamped commit
+        same = subprocess.run(["git", "diff", "--quiet", stamped.group(1), "HEAD", "--", ".", ":(exclude)benchmarks/results",
+                               ":(exclude)docs", ":(exclude)*.md"], cwd=ROOT, capture_output=True).returncode == 0
+    if not same:
         title, _, rest = text.partition("\n")
         text = (f"{title}\n\n!!! note \"Measured on another commit\"\n    These figures were measured on the commit "
                 f"stamped below, not on this one (`{head}`); `python -m benchmarks --only {name}` measures them "

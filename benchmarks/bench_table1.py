@@ -1,6 +1,6 @@
 """The beam model against the paper's Table 1: the FE model's eigenfrequencies of the paper's rig
 (the calibrated 4 m sheet, pinned at D, hanging) next to the measured ones the paper lists, as
-``shm modes --json`` prints them, and the calibration's identifiability.
+``shm modes --json`` prints them.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_table1
 """
