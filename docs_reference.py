@@ -364,6 +364,7 @@ def validation_index() -> str:
     for name in _benchmarks():
         try:
             doc = (importlib.import_module(f"benchmarks.{name}").__doc__ or "").strip().split("\n\n")[0]
+            doc = doc.split(". ")[0].split(": ")[0].rstrip(".")  # its first clause
         except Exception as exc:  # a benchmark that cannot be imported is listed with why
             doc = f"(cannot import: {type(exc).__name__})"
         path = RESULTS / f"{name}.md"
