@@ -134,6 +134,16 @@ def test_a_validation_page_is_stamped_or_says_it_was_not_measured(tmp_path, monk
     assert "| [bench_oma](bench_oma.md) |" in index and meta["date"] in index
 
 
+def test_every_benchmark_has_a_validation_page_in_the_nav():
+    from benchmarks.__main__ import MODULES
+
+    nav = (ROOT / "mkdocs.yml").read_text()
+    overview = (ROOT / "docs" / "validation" / "index.md").read_text()
+    for name in MODULES:
+        assert f"validation/{name}.md" in nav, name
+        assert f"]({name}.md)" in overview, name
+
+
 def test_the_readme_is_short_and_its_links_resolve():
     text = (ROOT / "README.md").read_text()
     assert len(text.splitlines()) <= 200
