@@ -447,7 +447,15 @@ class RigDescription(_ContractModel):
         return (self.model_extra or {}).get(key, default)
 
     def to_json(self) -> str:
-        return json.dumps(self.model_dump(mode="json", exclude_defaults=False), indent=2)
+        data = self.model_dump(mode="json", exclude_defaults=False)
+        # Optional keys the contract says are "not given" (a sectioned beam's width and thickness, a
+        # table beam's material, a rig without ToFs' reflector) are left out rather than written as null.
+        for key in ("width", "thickness", "youngs_modulus", "density", "sections"):
+            if data["beam"].get(key, 0) is None:
+                del data["beam"][key]
+        if data.get("reflector_distance", 0) is None:
+            del data["reflector_distance"]
+        return json.dumps(data, indent=2)
 
 
 def _key(loc: tuple[Any, ...]) -> str:
