@@ -14,10 +14,17 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 __all__ = [
+    "DNV_RP_C203_CURVE_NAMES",
+    "DNV_RP_C203_ENVIRONMENTS",
+    "EN1993_DETAIL_CATEGORIES",
+    "EN1993_SHEAR_CATEGORIES",
     "Beam",
+    "check_curve_spec",
+    "FatigueSettings",
+    "HotSpot",
     "PointMass",
     "RectangleSection",
     "RigDescription",
@@ -39,6 +46,61 @@ _POSITIONED_KINDS = ("imu", "tof", "strain")
 
 #: Steel loses about 0.03 % of its Young's modulus per kelvin.
 STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT = -3.0e-4
+
+
+#: EN 1993-1-9 Fig. 7.1 detail categories Δσ_C (MPa), normal stress ("36*" is also accepted).
+EN1993_DETAIL_CATEGORIES = (160, 140, 125, 112, 100, 90, 80, 71, 63, 56, 50, 45, 40, 36)
+#: EN 1993-1-9 Fig. 7.2 detail categories Δτ_C (MPa), shear stress ("EN1993-1-9:shear:<Δτ_C>").
+EN1993_SHEAR_CATEGORIES = (100, 80)
+#: DNV-RP-C203 (2016) S–N curves of Tables 2-1 (air) and 2-2 (seawater with cathodic protection).
+DNV_RP_C203_CURVE_NAMES = ("B1", "B2", "C", "C1", "C2", "D", "E", "F", "F1", "F3", "G", "W1", "W2", "W3")
+DNV_RP_C203_ENVIRONMENTS = ("air", "seawater-cp")
+
+
+def check_curve_spec(spec: object) -> None:
+    """Raise ValueError naming the value unless ``spec`` names a known S–N curve (see INTERFACES/hot_spots):
+    "EN1993-1-9:<Δσ_C>", "EN1993-1-9:shear:<Δτ_C>", "DNV-RP-C203:<curve>:air|seawater-cp" or
+    {"points": [[N, Δσ_Pa], ...]} (N increasing, Δσ decreasing, all > 0, at least two)."""
+    if isinstance(spec, dict):
+        if set(spec) != {"points"}:
+            raise ValueError(f"curve {spec!r}: a user curve is {{'points': [[N, stress_range_pa], ...]}}")
+        try:
+            p = np.asarray(spec["points"], dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"curve points {spec['points']!r} must be [[N, stress_range_pa], ...]") from None
+        if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 2:
+            raise ValueError(f"curve points must be at least two [N, stress_range_pa] pairs, got shape {p.shape}")
+        if not np.all(np.isfinite(p)) or np.any(p <= 0):
+            raise ValueError(f"curve points must be finite and > 0, got {p.tolist()}")
+        if np.any(np.diff(p[:, 0]) <= 0) or np.any(np.diff(p[:, 1]) >= 0):
+            raise ValueError(f"curve points need N increasing and stress range decreasing, got {p.tolist()}")
+        return
+    if not isinstance(spec, str):
+        raise ValueError(f"curve {spec!r} must be a name like 'EN1993-1-9:71' or {{'points': ...}}")
+    parts = spec.split(":")
+    if parts[0] == "EN1993-1-9":
+        shear = len(parts) == 3 and parts[1] == "shear"
+        if len(parts) != (3 if shear else 2):
+            raise ValueError(f"curve {spec!r}: expected 'EN1993-1-9:<category>' or 'EN1993-1-9:shear:<category>'")
+        text = parts[-1]
+        categories = EN1993_SHEAR_CATEGORIES if shear else EN1993_DETAIL_CATEGORIES
+        try:
+            value = float(text[:-1] if text == "36*" and not shear else text)
+        except ValueError:
+            value = math.nan
+        if value not in categories:
+            raise ValueError(f"curve {spec!r}: unknown EN 1993-1-9 {'shear ' if shear else ''}detail category {text!r}; "
+                             f"known: {', '.join(map(str, categories))}{'' if shear else ', 36*'}")
+        return
+    if parts[0] == "DNV-RP-C203":
+        if len(parts) != 3:
+            raise ValueError(f"curve {spec!r}: expected 'DNV-RP-C203:<curve>:air' or ':seawater-cp'")
+        if parts[2] not in DNV_RP_C203_ENVIRONMENTS:
+            raise ValueError(f"curve {spec!r}: unknown DNV-RP-C203 environment {parts[2]!r}; known: {', '.join(DNV_RP_C203_ENVIRONMENTS)}")
+        if parts[1] not in DNV_RP_C203_CURVE_NAMES:
+            raise ValueError(f"curve {spec!r}: unknown DNV-RP-C203 curve {parts[1]!r}; known: {', '.join(DNV_RP_C203_CURVE_NAMES)}")
+        return
+    raise ValueError(f"curve {spec!r}: unknown standard {parts[0]!r}; known: EN1993-1-9, DNV-RP-C203, or {{'points': ...}}")
 
 
 class RigError(ValueError):
@@ -362,6 +424,29 @@ class Beam(_ContractModel):
         return out
 
 
+class HotSpot(_ContractModel):
+    """A named position with a fatigue detail: its S–N curve, stress concentration and partial factors."""
+
+    name: str = Field(min_length=1)
+    position: float
+    curve: str | dict[str, Any]
+    scf: float = Field(default=1.0, gt=0.0)
+    gamma_Ff: float = Field(default=1.0, gt=0.0)
+    gamma_Mf: float = Field(default=1.0, gt=0.0)
+
+    @field_validator("curve")
+    @classmethod
+    def _known_curve(cls, value: Any) -> Any:
+        check_curve_spec(value)
+        return value
+
+
+class FatigueSettings(_ContractModel):
+    """Rig-level fatigue settings: the design life the remaining life is judged against."""
+
+    design_life_years: float | None = Field(default=None, gt=0.0)
+
+
 class PointMass(_ContractModel):
     position: float = Field(ge=0.0)
     mass: float = Field(ge=0.0)
@@ -397,6 +482,8 @@ class RigDescription(_ContractModel):
     point_masses: tuple[PointMass, ...] = ()
     sensors: tuple[Sensor, ...]
     truth_stations: tuple[float, ...] = ()
+    hot_spots: tuple[HotSpot, ...] = ()
+    fatigue: FatigueSettings | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> "RigDescription":
@@ -434,7 +521,19 @@ class RigDescription(_ContractModel):
         for index, station in enumerate(self.truth_stations):
             if not (0.0 <= station <= length):
                 raise ValueError(f"truth_stations[{index}]={station} is outside the beam [0, {length}]")
+        names: set[str] = set()
+        for index, spot in enumerate(self.hot_spots):
+            if not (math.isfinite(spot.position) and 0.0 <= spot.position <= length):
+                raise ValueError(f"hot_spots[{index}] ({spot.name!r}): position={spot.position} is outside the beam [0, {length}]")
+            if spot.name in names:
+                raise ValueError(f"hot_spots[{index}]: name {spot.name!r} is not unique")
+            names.add(spot.name)
         return self
+
+    @property
+    def support_fixed_to_ground(self) -> bool:
+        """No ``bearing`` sensor: the support D is fixed to the ground (d ≡ 0), as a mast on its foundation."""
+        return not self.sensors_of("bearing")
 
     def sensors_of(self, kind: SensorKind) -> tuple[Sensor, ...]:
         return tuple(s for s in self.sensors if s.kind == kind)
@@ -474,7 +573,23 @@ def _key(loc: tuple[Any, ...]) -> str:
 
 
 def parse_rig(data: bytes | str | dict[str, Any], *, source: str = "rig.json") -> RigDescription:
-    """Validate a rig description given as JSON text/bytes or an already parsed mapping."""
+    """Validate a rig description given as JSON text/bytes or an already parsed mapping.
+
+    Examples
+    --------
+    >>> from contract import parse_rig
+    >>> rig = parse_rig('{"beam": {"length": 4.0, "width": 0.2, "thickness": 0.002, '
+    ...                 '"youngs_modulus": 2.0e11, "density": 7850.0}, "gravity": 9.81, '
+    ...                 '"reflector_distance": 0.5, "sensors": [{"name": "D", "kind": "imu", "position": 0.0}]}')
+    >>> rig.support, rig.orientation, rig.sensors[0].topic
+    ('pinned', 'hanging', '/imu/D')
+    >>> parse_rig({"beam": {"length": 4.0, "width": 0.2, "thickness": 0.002, "youngs_modulus": 2.0e11,
+    ...                     "density": 7850.0}, "gravity": 9.81, "reflector_distance": 0.5,
+    ...            "sensors": [{"name": "s1", "kind": "imu", "position": 5.0}]})
+    Traceback (most recent call last):
+    ...
+    contract._rig.RigError: rig.json: ... position=5.0 is outside the beam [0, 4.0]
+    """
     if isinstance(data, (bytes, str)):
         try:
             data = json.loads(data)

@@ -484,6 +484,21 @@ def natural_modes(model: BeamModel, count: int = 6) -> NaturalModes:
     The equilibrium is the straight beam, hanging (stretched by its weight) or standing
     (compressed by it). Shapes are mass-normalised (φᵀ M φ = 1) and signed so that the tip
     displacement is positive.
+
+    Examples
+    --------
+    A 1 m steel strip (50 × 5 mm) clamped at D, without gravity: the cantilever's closed form
+    f_k = (β_k L)² / (2π L²) · √(EI / ρA) gives 4.18, 26.18 and 73.31 Hz.
+
+    >>> import numpy as np
+    >>> from contract import parse_rig
+    >>> from estimator import assemble_beam, natural_modes
+    >>> rig = parse_rig({"beam": {"length": 1.0, "width": 0.05, "thickness": 0.005,
+    ...                           "youngs_modulus": 210e9, "density": 7850.0},
+    ...                  "gravity": 0.0, "reflector_distance": 0.5, "support": "clamped",
+    ...                  "sensors": [{"name": "D", "kind": "imu", "position": 0.0}]})
+    >>> np.round(natural_modes(assemble_beam(rig), 3).frequencies_hz, 2)
+    array([ 4.18, 26.18, 73.31])
     """
     free = model.free_dofs
     if not isinstance(count, (int, np.integer)) or not 1 <= count <= len(free):

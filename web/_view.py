@@ -906,8 +906,11 @@ class ClientView:
             return f"<div style='font-size:13px'>{self._title()}<br>{waiting}</div>"
         live = "<span style='color:#b45309;font-weight:bold'>■ PAUSED</span>" if self.paused else "<span style='color:#15803d;font-weight:bold'>● LIVE</span>"
         est = snap.estimate if not self.paused or self._drawn_estimate is None else self._drawn_estimate[0]
+        # what the service is doing now (compiling, calibrating at rest, waiting for the first window, ...)
+        progress = None if snap.status is None else getattr(snap.status.service, "progress", None)
         if est is None:
-            motion = "waiting for estimates"
+            motion = html.escape(progress) if progress else "waiting for estimates"
+            progress = None
         else:
             s = est.state
             phi = "φ ≡ 0 (clamped)" if self.feed.layout.phi is None else f"φ = {1e3 * s.phi:+.2f} mrad"
@@ -937,7 +940,8 @@ class ClientView:
         error = f"<br><span style='color:#dc2626'>service: {html.escape(snap.status_error)}</span>" if snap.status_error else ""
         return (
             f"<div style='font-size:12.5px;line-height:1.45'>{self._title()} {live} {badge}<br>"
-            f"{motion}<br>{_rates(snap)} · {sensors}{error}</div>"
+            f"{motion}<br>{_rates(snap)} · {sensors}{error}"
+            f"{'' if not progress else '<br><i>' + html.escape(progress) + '</i>'}</div>"
         )
 
 
