@@ -186,7 +186,8 @@ def _as_positions(positions: Any, length: float) -> tuple[np.ndarray, bool]:
         raise RigError(f"positions must be a scalar or a 1-D array of arc lengths, got shape {eta.shape}")
     if np.any(~np.isfinite(eta)) or np.any(eta < 0.0) or np.any(eta > length * (1 + 1e-12)):
         bad = eta[~np.isfinite(eta) | (eta < 0.0) | (eta > length * (1 + 1e-12))]
-        raise RigError(f"positions must lie on the beam [0, {length}] m, got {bad[:5].tolist()}")
+        raise RigError(f"position {bad[0]} is outside the beam [0, {length}] m (positions are arc lengths on it; "
+                       f"off the beam: {bad[:5].tolist()})")
     return np.clip(eta, 0.0, length), scalar
 
 
