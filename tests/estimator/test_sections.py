@@ -304,7 +304,7 @@ def test_strain_aiding_uses_the_fibre_distance_of_the_section():
     from estimator import build_model
 
     rig = _example_mast_with_bearing()
-    model = build_model(rig, modes=4, imus=4, tofs=0, gauges=3)
+    model = build_model(rig, modes=4, imus=4, tofs=0, gauges=4)
     eta = model.gauge_eta
     # Eq. (19) with c(η) = D(η)/2 of the tube at each gauge instead of h*/2
     outer = np.interp(eta, [0.0, 8.0, 20.0], [0.5, 0.38, 0.2])  # the example's taper (the step at 8 m is in t only)
