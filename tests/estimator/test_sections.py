@@ -359,3 +359,13 @@ def test_to_json_leaves_out_what_is_not_given_and_round_trips():
     sheet = parse_rig({"beam": {"length": 4.0, "width": 0.2, "thickness": 0.002, "youngs_modulus": E, "density": RHO},
                        "gravity": 9.81, "reflector_distance": 0.5, "sensors": []})
     assert "sections" not in json.loads(sheet.to_json())["beam"]
+
+
+def test_hot_spots_on_a_beam_of_tables_need_the_youngs_modulus_of_their_material():
+    data = {"beam": {"length": 2.0, "sections": [table(0.0, 10.0, 1.0, 0.01), table(2.0, 1.0, 0.5, 0.005)]},
+            "gravity": 9.81, "support": "clamped", "sensors": [],
+            "hot_spots": [{"name": "root", "position": 0.1, "curve": "EN1993-1-9:71"}]}
+    with pytest.raises(RigError, match="beam.youngs_modulus is required with hot_spots"):
+        parse_rig(data)
+    data["beam"]["youngs_modulus"] = 2.1e11
+    assert parse_rig(data).beam.youngs_modulus_at(None) == 2.1e11
