@@ -529,11 +529,6 @@ class RigDescription(_ContractModel):
             if spot.name in names:
                 raise ValueError(f"hot_spots[{index}]: name {spot.name!r} is not unique")
             names.add(spot.name)
-        if self.hot_spots and self.beam.youngs_modulus is None:
-            raise ValueError(
-                "beam.youngs_modulus is required with hot_spots: their stress is E·ε (a beam of table sections "
-                "gives the E of the material at its hot spots, e.g. a steel root flange)"
-            )
         return self
 
     @property
