@@ -6,12 +6,9 @@ Bottom layer: imports no other package of the project (numpy and pydantic only),
 other package imports its layouts and documents from here instead of re-deriving them.
 """
 
-from ._network import is_loopback
 from ._documents import (
     CURVATURE_CHART,
     FATIGUE_CONDITIONS,
-    HotSpotLoadsDocument,
-    LoadsWindowDocument,
     SENSOR_STATES,
     AidingChannelDocument,
     AlarmCountsDocument,
@@ -34,11 +31,13 @@ from ._documents import (
     EstimatorStatusDocument,
     FlagDocument,
     HealthDocument,
+    HotSpotLoadsDocument,
     IngestErrorDocument,
     IngestResultDocument,
     LastEstimateDocument,
-    LiveEstimatesDocument,
     Level,
+    LiveEstimatesDocument,
+    LoadsWindowDocument,
     LocationDocument,
     ModeDocument,
     ModelDocument,
@@ -52,9 +51,9 @@ from ._documents import (
     SpectrumDocument,
     StatusDocument,
     StorageStatusDocument,
+    StructuresDocument,
     StructureState,
     StructureSummaryDocument,
-    StructuresDocument,
     ThresholdsDocument,
     TrendRow,
     TrendsDocument,
@@ -64,6 +63,7 @@ from ._documents import (
     estimate_payloads,
 )
 from ._modes import ModeMap
+from ._network import is_loopback
 from ._payloads import (
     BEARING_TOPIC,
     ESTIMATE_TOPIC,
@@ -89,7 +89,6 @@ from ._rig import (
     Beam,
     FatigueSettings,
     HotSpot,
-    check_curve_spec,
     Orientation,
     PointMass,
     RigDescription,
@@ -98,6 +97,7 @@ from ._rig import (
     SensorKind,
     StiffnessSegment,
     Support,
+    check_curve_spec,
     load_rig,
     parse_rig,
 )

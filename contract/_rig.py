@@ -14,7 +14,14 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 __all__ = [
     "DNV_RP_C203_CURVE_NAMES",
@@ -22,7 +29,6 @@ __all__ = [
     "EN1993_DETAIL_CATEGORIES",
     "EN1993_SHEAR_CATEGORIES",
     "Beam",
-    "check_curve_spec",
     "FatigueSettings",
     "HotSpot",
     "PointMass",
@@ -30,6 +36,7 @@ __all__ = [
     "RigError",
     "Sensor",
     "StiffnessSegment",
+    "check_curve_spec",
     "load_rig",
     "parse_rig",
 ]

@@ -110,9 +110,9 @@ def _time_span(times: np.ndarray, start: float) -> tuple[np.ndarray, float, floa
 
 
 def gauge_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, exponents: tuple[float, ...], n_eq: float,
-               in_sample: bool, half_cycles: str = "half"):
+               in_sample: tuple[str, ...], half_cycles: str = "half"):
     """The band of the virtual stations from the gauges' (name, position, virtual, measured) strains;
-    returns (DelBand or None, per-gauge discrepancies)."""
+    ``in_sample`` names the gauges that aided the estimate. Returns (DelBand or None, per-gauge discrepancies)."""
     import numpy as np
 
     from analytics import DelBand, signal_loads
@@ -125,12 +125,13 @@ def gauge_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, expon
         g = signal_loads(measured, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain gauge {name}")
         rel = {m: (dv / dg - 1.0) if dg > 0 else 0.0 for (m, _, dv), (_, _, dg) in zip(v.dels, g.dels)}
         rms = float(np.sqrt(np.mean((virtual - measured) ** 2)) / max(g.rms, 1e-300))
-        rows.append({"name": name, "position_m": position, "del_discrepancy": [{"m": m, "relative": r} for m, r in rel.items()],
-                     "strain_rms_discrepancy": rms})
-        worst = max(worst, max(abs(r) for r in rel.values()))
-    a = max(BAND_FLOOR, (IN_SAMPLE_FACTOR if in_sample else 1.0) * worst)
+        aided = name in in_sample
+        rows.append({"name": name, "position_m": position, "aided_the_estimate": aided,
+                     "del_discrepancy": [{"m": m, "relative": r} for m, r in rel.items()], "strain_rms_discrepancy": rms})
+        worst = max(worst, (IN_SAMPLE_FACTOR if aided else 1.0) * max(abs(r) for r in rel.values()))
+    a = max(BAND_FLOOR, worst)
     method = (f"modal truncation seen at the strain gauges ({', '.join(r['name'] for r in rows)}): largest relative DEL "
-              f"discrepancy of the virtual against the measured strain{f' x{IN_SAMPLE_FACTOR:g} (the gauges aided the estimate)' if in_sample else ''}, "
+              f"discrepancy of the virtual against the measured strain, x{IN_SAMPLE_FACTOR:g} at a gauge that aided the estimate, "
               f"at least {BAND_FLOOR:.0%}; band [DEL/(1+a), DEL*(1+a)] with a = {a:.4f}")
     return DelBand(1.0 / (1.0 + a), 1.0 + a, method), rows
 
@@ -159,7 +160,7 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
 
     spots = {round(h.position, 9): h for h in rig.hot_spots}
     grid = stations if stations is not None else tuple(np.linspace(0.0, beam.length, 17)[1:-1])
-    positions = sorted(set(round(p, 9) for p in grid) | set(spots))
+    positions = sorted({round(p, 9) for p in grid} | set(spots))
     eta = np.asarray(positions, dtype=float)
     shapes = units.curvature(eta)
     strain = virtual_strain(b[keep], shapes, beam.fibre_distance(eta))
@@ -187,7 +188,7 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
                                  beam.fibre_distance([sensor.position]))[:, 0]
         gauges.append((sensor.name, float(sensor.position), virtual, measured))
     used = _gauges_used(rec, record, model_args)
-    band, gauge_rows = gauge_band(gauges, exponents=exponents, n_eq=n_eq_value, in_sample=bool(used), half_cycles=half_cycles)
+    band, gauge_rows = gauge_band(gauges, exponents=exponents, n_eq=n_eq_value, in_sample=used, half_cycles=half_cycles)
 
     default_detail = None if curve is None else _detail(curve)
     out_stations = []
@@ -236,16 +237,16 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
 
 
 def _gauges_used(rec, record, model_args: dict) -> tuple[str, ...]:
-    """The gauges the estimate was aided by (in-sample), from the estimator's metadata or the model."""
+    """The gauges the estimate was aided by (their discrepancy is in-sample), from the estimator's
+    metadata of an estimate recording or from the model the estimator ran with here."""
     if not record.estimated_here:
         try:
             return tuple(json.loads(rec.metadata["estimator"]["selection"]).get("gauges", ()))
         except (KeyError, TypeError, ValueError):
             return tuple(s.name for s in rec.rig.sensors_of("strain"))  # unknown: assume in-sample (wider band)
-    gauges = model_args.get("gauges", 4)
-    if isinstance(gauges, tuple):
-        return gauges
-    return tuple(s.name for s in rec.rig.sensors_of("strain"))[: int(gauges)]
+    from estimator import build_model
+
+    return tuple(build_model(rec.rig, **model_args).selection.gauges)
 
 
 def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: float | None, half_cycles: str,
@@ -255,11 +256,7 @@ def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: flo
 
     from analytics import signal_loads
 
-    if quantity == "strain":
-        to_stress = youngs_modulus
-    elif quantity == "stress":
-        to_stress = 1.0
-    else:
+    if quantity not in ("strain", "stress"):
         raise LoadsError(f"--quantity {quantity!r} must be strain or stress")
     n = table.data.shape[0]
     times = table.time - table.time[0] if table.time is not None else np.arange(n) / float(table.fs_hz)
