@@ -461,6 +461,9 @@ class ServiceStatusDocument(_Document):
     pipeline_error: str | None = Field(None, description="the error of the last batch, None once a batch succeeds again")
     pipeline_errors: Count = Field(0, description="batches that failed since the start")
     last_pipeline_error: str | None = None
+    progress: str | None = Field(
+        None, description="what the service is doing now, in words: compiling the filter (first run only), "
+        "calibrating at rest and the time left, waiting for the first analysis window, learning the baseline, monitoring")
 
 
 class SourceStatusDocument(_Document):
