@@ -137,8 +137,9 @@ def gauge_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, expon
 
 
 def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[float, ...] | None, curve: Any, exponents: tuple[float, ...],
-                       n_eq: float | None, half_cycles: str, start_s: float | None) -> dict[str, Any]:
-    """The ``shm loads`` document of a contract recording (raw or estimate)."""
+                       n_eq: float | None, half_cycles: str, start_s: float | None, window_s: float | None = None) -> dict[str, Any]:
+    """The ``shm loads`` document of a contract recording (raw or estimate); with ``window_s`` also
+    per window of that length (each counted on its own, its band from that window's gauges)."""
     import numpy as np
 
     from analytics import bending_moment, signal_loads, virtual_strain
@@ -174,7 +175,7 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     moment = bending_moment(kappa, beam.bending_stiffness(eta)) * factor[:, None]
 
     # the gauges: measured strain against the virtual strain at their positions
-    gauges = []
+    gauges, gauge_masks = [], []
     for sensor in rig.sensors_of("strain"):
         channel = rec.channels.get(sensor.topic)
         if channel is None or len(channel) < 2:
@@ -187,6 +188,7 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         virtual = virtual_strain(b[keep][inside], units.curvature(np.array([sensor.position])),
                                  beam.fibre_distance([sensor.position]))[:, 0]
         gauges.append((sensor.name, float(sensor.position), virtual, measured))
+        gauge_masks.append(inside)
     used = _gauges_used(rec, record, model_args)
     band, gauge_rows = gauge_band(gauges, exponents=exponents, n_eq=n_eq_value, in_sample=used, half_cycles=half_cycles)
 
@@ -233,7 +235,36 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         "stations": out_stations,
         "channels": channels,
         "root_bending_moment": root,
+        "windows": None if window_s is None else _windows(t, strain, gauges, gauge_masks, positions, window_s, exponents=exponents,
+                                                          half_cycles=half_cycles, used=used, origin=float(times[0])),
     }
+
+
+def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, exponents, half_cycles: str, used, origin: float) -> list[dict[str, Any]]:
+    """Per window of ``window_s`` (1 Hz equivalent): each station's strain DEL with the band of that window's gauges."""
+    import numpy as np
+
+    from analytics import signal_loads
+
+    out = []
+    edges = np.arange(t[0], t[-1] + 1e-9, window_s)
+    for a in edges:
+        sel = (t >= a) & (t < a + window_s)
+        if sel.sum() < 2 or (t[sel][-1] - t[sel][0]) < 0.5 * window_s:
+            continue
+        duration = float(sel.sum()) * float(np.median(np.diff(t)))
+        # each gauge's samples lie on t[mask]: its part of the window is sel[mask]
+        g = [(n, p, v[sel[mask]], m[sel[mask]]) for (n, p, v, m), mask in zip(gauges, gauge_masks) if sel[mask].sum() >= 2]
+        band, _rows = gauge_band(g, exponents=exponents, n_eq=duration, in_sample=used, half_cycles=half_cycles)
+        rows = []
+        for j, pos in enumerate(positions):
+            sl = signal_loads(strain[sel, j], exponents=exponents, n_eq=duration, half_cycles=half_cycles, name=f"strain at {pos} m")
+            rows.append({"position_m": pos, "del": [{"m": m, "n_eq": n, "strain_range": v,
+                                                      "band": None if band is None else [v * band.low, v * band.high]}
+                                                     for m, n, v in sl.dels]})
+        out.append({"start_s": float(a - origin), "duration_s": duration,
+                    "band_half_width": None if band is None else band.high - 1.0, "stations": rows})
+    return out
 
 
 def _gauges_used(rec, record, model_args: dict) -> tuple[str, ...]:
@@ -301,7 +332,7 @@ def _cmd_loads(args: argparse.Namespace) -> int:
                 if args.aided:
                     model_args["aided"] = tuple(int(a) for a in args.aided.split(","))
                 doc = loads_of_recording(rec, model_args=model_args, stations=stations, curve=curve, exponents=exponents,
-                                         n_eq=args.neq, half_cycles=args.half_cycles, start_s=args.start)
+                                         n_eq=args.neq, half_cycles=args.half_cycles, start_s=args.start, window_s=args.window)
         if doc is None:
             if args.stations:
                 raise LoadsError("--stations needs a contract recording (plain channels are counted where they were measured)")
@@ -360,6 +391,8 @@ def add_loads_parser(sub) -> None:
     p.add_argument("--exponents", default="3,5", metavar="m,...", help="Wöhler exponents of the DELs (default 3,5)")
     p.add_argument("--half-cycles", choices=("half", "full", "ignore"), default="half",
                    help="the residue's half cycles: half (ASTM E1049, default), full (conservative) or ignore")
+    p.add_argument("--window", type=number(low=0, low_open=True, unit="s"), default=None, metavar="S",
+                   help="also per window of S s (a contract recording): each station's DEL with its window's band")
     p.add_argument("--start", type=number(low=0, unit="s"), default=None, metavar="S",
                    help="count from S seconds into the record (default: the estimator's rest-phase end, else 0)")
     # shm estimate's options, for raw recordings

@@ -152,5 +152,11 @@ def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path
             assert est_del == pytest.approx(true_del, rel=0.1)
             low, high = s["del"][0]["band"]
             assert low < est_del < high and high / est_del - 1 <= 0.05  # the ideal paper excitation: a narrow band
+    # per window: each window counted on its own, with the band of its gauges
+    code, out, err = run(capsys, "loads", str(est), "--stations", "2.0", "--window", "5", "--json")
+    assert code == 0, err
+    windows = json.loads(out)["windows"]
+    assert len(windows) >= 2 and all(w["duration_s"] == pytest.approx(5.0) for w in windows)
+    assert all(w["band_half_width"] >= 0.02 and w["stations"][0]["del"][0]["band"] is not None for w in windows)
     code, _, err = run(capsys, "loads", str(est), "--stations", "4.5")
     assert code == 2 and "--stations: 4.5 is outside the beam [0, 4.0]" in err
