@@ -83,14 +83,27 @@ def _detail(curve: Any, scf: float = 1.0, gamma_ff: float = 1.0, gamma_mf: float
         raise LoadsError(str(exc)) from None
 
 
-def _signal_doc(loads, *, to_stress: float, band=None) -> dict[str, Any]:
-    """The per-station / per-channel JSON of the issue: strain in m/m, stress in Pa."""
+def _life(damage: float | None, duration_s: float, design_life_years: float | None) -> dict[str, Any]:
+    """The life the counted span's load would give if it went on: duration/D, or no damage below the cut-off."""
+    from analytics import SECONDS_PER_YEAR
+
+    if damage is None:
+        return {"life_at_this_load_years": None, "life_verdict": None}
+    if damage == 0.0:
+        return {"life_at_this_load_years": None, "life_verdict": "no_damage_below_cutoff"}
+    years = duration_s / damage / SECONDS_PER_YEAR
+    return {"life_at_this_load_years": years, "life_verdict": "finite",
+            "exhausts_design_life_early": None if design_life_years is None else bool(years < design_life_years)}
+
+
+def _signal_doc(loads, *, to_stress: float | None, band=None) -> dict[str, Any]:
+    """The per-station / per-channel JSON of the issue: strain in m/m, stress in Pa (None without E)."""
     pairs, width = loads.cycles_by_range()
     dels = []
     for m, n_eq, value in loads.dels:
-        entry = {"m": m, "n_eq": n_eq, "strain_range": value, "stress_range_pa": value * to_stress,
+        entry = {"m": m, "n_eq": n_eq, "strain_range": value, "stress_range_pa": None if to_stress is None else value * to_stress,
                  "band": None if band is None else [value * band.low, value * band.high]}
-        if band is not None:
+        if band is not None and to_stress is not None:
             entry["stress_band_pa"] = [value * band.low * to_stress, value * band.high * to_stress]
         dels.append(entry)
     return {"strain_rms": loads.rms, "strain_range_max": loads.range_max, "del": dels, "damage": loads.damage,
@@ -171,7 +184,8 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     if record.temperature is not None:
         temp = np.interp(t, *record.temperature)
         factor = 1.0 + beam.youngs_modulus_temperature_coefficient * (temp - beam.reference_temperature)
-    youngs = beam.youngs_modulus * factor
+    # stress is E·ε for rectangles and tubes; a beam of table sections only has no E: strain and moment only
+    youngs = None if beam.youngs_modulus is None else beam.youngs_modulus * factor
     moment = bending_moment(kappa, beam.bending_stiffness(eta)) * factor[:, None]
 
     # the gauges: measured strain against the virtual strain at their positions
@@ -193,31 +207,35 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     band, gauge_rows = gauge_band(gauges, exponents=exponents, n_eq=n_eq_value, in_sample=used, half_cycles=half_cycles)
 
     default_detail = None if curve is None else _detail(curve)
+    design = rig.fatigue.design_life_years if rig.fatigue is not None else None
     out_stations = []
     for j, pos in enumerate(positions):
         spot = spots.get(pos)
         detail = _detail(spot.curve, spot.scf, spot.gamma_Ff, spot.gamma_Mf) if spot is not None else default_detail
-        stress = strain[:, j] * youngs
-        sl = signal_loads(stress, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, detail=detail, band=band,
-                          name=f"stress at {pos} m")
         el = signal_loads(strain[:, j], exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name=f"strain at {pos} m")
         doc = _signal_doc(el, to_stress=beam.youngs_modulus, band=band)
-        # stress from its own count (E follows the temperature sample by sample)
-        for entry, (_, _, s_del) in zip(doc["del"], sl.dels):
-            entry["stress_range_pa"] = s_del
-            if band is not None:
-                entry["stress_band_pa"] = [s_del * band.low, s_del * band.high]
-        doc.update(damage=sl.damage, damage_band=None if sl.damage_band is None else list(sl.damage_band))
+        stress_rms = None
+        if youngs is not None:
+            # stress from its own count (E follows the temperature sample by sample)
+            sl = signal_loads(strain[:, j] * youngs, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, detail=detail,
+                              band=band, name=f"stress at {pos} m")
+            for entry, (_, _, s_del) in zip(doc["del"], sl.dels):
+                entry["stress_range_pa"] = s_del
+                if band is not None:
+                    entry["stress_band_pa"] = [s_del * band.low, s_del * band.high]
+            doc.update(damage=sl.damage, damage_band=None if sl.damage_band is None else list(sl.damage_band))
+            stress_rms = sl.rms
         out_stations.append({"position_m": pos, "hot_spot": None if spot is None else spot.name,
-                             "curve": None if detail is None else detail.curve.name, **doc,
-                             "stress_rms_pa": sl.rms, "bending_moment_rms_nm": float(np.sqrt(np.mean(moment[:, j] ** 2))),
+                             "curve": None if detail is None else detail.curve.name, **doc, **_life(doc["damage"], duration, design),
+                             "stress_rms_pa": stress_rms, "bending_moment_rms_nm": float(np.sqrt(np.mean(moment[:, j] ** 2))),
                              "bending_moment_range_max_nm": float(np.ptp(moment[:, j]))})
 
     channels = []
     for name, position, _virtual, measured in gauges:
         gl = signal_loads(measured, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name=f"strain gauge {name}",
-                          detail=default_detail, to_stress=beam.youngs_modulus)
-        channels.append({"name": name, "position_m": position, **_signal_doc(gl, to_stress=beam.youngs_modulus)})
+                          detail=default_detail if beam.youngs_modulus is not None else None, to_stress=beam.youngs_modulus or 1.0)
+        gdoc = _signal_doc(gl, to_stress=beam.youngs_modulus)
+        channels.append({"name": name, "position_m": position, **gdoc, **_life(gdoc["damage"], duration, design)})
 
     root = None
     if rig.support == "clamped":
@@ -300,7 +318,8 @@ def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: flo
         strain = x if quantity == "strain" else x / youngs_modulus
         sl = signal_loads(strain, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, detail=detail,
                           to_stress=youngs_modulus, name=f"channel {name}")
-        channels.append({"name": name, **_signal_doc(sl, to_stress=youngs_modulus)})
+        cdoc = _signal_doc(sl, to_stress=youngs_modulus)
+        channels.append({"name": name, **cdoc, **_life(cdoc["damage"], duration, None)})
     return {"start_s": span_start, "duration_s": duration, "source": f"measured {quantity} channels ({table.format})",
             "half_cycles": half_cycles, "youngs_modulus_pa": youngs_modulus, "stations": [], "channels": channels}
 
@@ -359,10 +378,15 @@ def _print_table(doc: dict[str, Any]) -> None:
 
     def row(label: str, s: dict[str, Any]) -> str:
         dels = "  ".join(
-            f"DEL{e['m']:g} {1e6 * e['strain_range']:.3f} µε {e['stress_range_pa'] / 1e6:.3f} MPa"
+            f"DEL{e['m']:g} {1e6 * e['strain_range']:.3f} µε"
+            + ("" if e["stress_range_pa"] is None else f" {e['stress_range_pa'] / 1e6:.3f} MPa")
             + (f" [{1e6 * e['band'][0]:.3f}, {1e6 * e['band'][1]:.3f}] µε" if e["band"] else "")
             for e in s["del"])
         damage = "-" if s["damage"] is None else f"{s['damage']:.3e}"
+        if s.get("life_verdict") == "finite":
+            damage += f" (life at this load {s['life_at_this_load_years']:.3g} years)"
+        elif s.get("life_verdict") == "no_damage_below_cutoff":
+            damage += " (below the cut-off: nothing consumed)"
         return (f"{label:>22}  rms {1e6 * s['strain_rms']:9.3f} µε  max range {1e6 * s['strain_range_max']:9.3f} µε  {dels}  "
                 f"D {damage}  cycles {s['cycles']:g}")
 
