@@ -6,95 +6,28 @@ from ._alarms import AlarmEvent, AlarmLogic
 from ._analyze import AnalysisResult, ModeSummary, analyze, learn_baseline
 from ._chart import EwmaChart, chart_level
 from ._config import AnalysisConfig
-from ._curvature import (
-    CurvatureChange,
-    beam_third,
-    curvature_change,
-    curvature_field,
-    curvature_shape,
-)
-from ._damping import (
-    DampingEstimate,
-    bandpass,
-    combine_estimates,
-    envelope_decay,
-    find_decay_segments,
-    log_decrement,
-    random_decrement,
-)
-from ._engine import EngineWindow, MonitoringEngine
-from ._fatigue import (
-    SECONDS_PER_YEAR,
-    FatigueDetail,
-    HotSpotFatigue,
-    LifeEstimate,
-    LoadsWindow,
-    remaining_life,
-)
+from ._curvature import CurvatureChange, beam_third, curvature_change, curvature_field, curvature_shape
+from ._damping import DampingEstimate, bandpass, combine_estimates, envelope_decay, find_decay_segments, log_decrement, random_decrement
 from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
-from ._loads import DelBand, SignalLoads, bending_moment, signal_loads, virtual_strain
-from ._loads_monitor import HotSpotSpec, LoadsConfig, LoadsMonitor
 from ._location import DamageLocation, locate_damage
-from ._monitor import (
-    Baseline,
-    BaselineError,
-    BaselineMode,
-    ModalMonitor,
-    ModeEstimate,
-    WindowResult,
-    fit_temperature_model,
-    support_acceleration,
-)
+from ._engine import EngineWindow, MonitoringEngine
+from ._fatigue import SECONDS_PER_YEAR, FatigueDetail, HotSpotFatigue, LifeEstimate, LoadsWindow, remaining_life
+from ._loads_monitor import HotSpotSpec, LoadsConfig, LoadsMonitor
+from ._loads import DelBand, SignalLoads, bending_moment, signal_loads, virtual_strain
+from ._rainflow import Cycles, HalfCyclePolicy, RainflowCounter, RainflowResidue, cycles_by_range, rainflow_cycles
+from ._sn_curves import DNV_RP_C203_CURVES, EN1993_DETAIL_CATEGORIES, SnCurve, damage_equivalent_range, miner_damage, sn_curve
+from ._monitor import Baseline, BaselineError, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model, support_acceleration
 from ._oma import (
-    IdentifiedMode,
-    ModalIdentification,
-    OmaConfig,
-    OmaResult,
-    OmaWindow,
-    OperationalModalAnalysis,
-    damping_estimates,
-    identify_modes,
-    identify_windows,
-    prepare_band,
-    subspace_damping,
-    tracked_frequency,
+    IdentifiedMode, ModalIdentification, OmaConfig, OmaResult, OmaWindow, OperationalModalAnalysis, damping_estimates, identify_modes,
+    identify_windows, prepare_band, subspace_damping, tracked_frequency,
 )
 from ._peaks import Peak, find_peaks, interpolate_peak
-from ._rainflow import (
-    Cycles,
-    HalfCyclePolicy,
-    RainflowCounter,
-    RainflowResidue,
-    cycles_by_range,
-    rainflow_cycles,
-)
-from ._sn_curves import (
-    DNV_RP_C203_CURVES,
-    EN1993_DETAIL_CATEGORIES,
-    SnCurve,
-    damage_equivalent_range,
-    miner_damage,
-    sn_curve,
-)
 from ._spectrum import Spectrum, amplitude_spectrum, averaged_spectrum, cross_spectra
 from ._ssi import (
-    PoleSet,
-    SsiModel,
-    block_toeplitz,
-    modal_assurance,
-    modal_phase_collinearity,
-    output_correlations,
-    segment_correlations,
-    ssi_cov,
-    ssi_poles,
-    toeplitz_from_data,
+    PoleSet, SsiModel, block_toeplitz, modal_assurance, modal_phase_collinearity, output_correlations, segment_correlations,
+    ssi_cov, ssi_poles, toeplitz_from_data,
 )
-from ._stabilisation import (
-    PoleCluster,
-    StabilisationDiagram,
-    cluster_poles,
-    stabilisation_diagram,
-)
+from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, stabilisation_diagram
 
 __all__ = [
     # the one engine: window loop, monitor, alarm path

@@ -6,9 +6,12 @@ Bottom layer: imports no other package of the project (numpy and pydantic only),
 other package imports its layouts and documents from here instead of re-deriving them.
 """
 
+from ._network import is_loopback
 from ._documents import (
     CURVATURE_CHART,
     FATIGUE_CONDITIONS,
+    HotSpotLoadsDocument,
+    LoadsWindowDocument,
     SENSOR_STATES,
     AidingChannelDocument,
     AlarmCountsDocument,
@@ -31,13 +34,11 @@ from ._documents import (
     EstimatorStatusDocument,
     FlagDocument,
     HealthDocument,
-    HotSpotLoadsDocument,
     IngestErrorDocument,
     IngestResultDocument,
     LastEstimateDocument,
-    Level,
     LiveEstimatesDocument,
-    LoadsWindowDocument,
+    Level,
     LocationDocument,
     ModeDocument,
     ModelDocument,
@@ -51,9 +52,9 @@ from ._documents import (
     SpectrumDocument,
     StatusDocument,
     StorageStatusDocument,
-    StructuresDocument,
     StructureState,
     StructureSummaryDocument,
+    StructuresDocument,
     ThresholdsDocument,
     TrendRow,
     TrendsDocument,
@@ -63,7 +64,6 @@ from ._documents import (
     estimate_payloads,
 )
 from ._modes import ModeMap
-from ._network import is_loopback
 from ._payloads import (
     BEARING_TOPIC,
     ESTIMATE_TOPIC,
@@ -89,6 +89,7 @@ from ._rig import (
     Beam,
     FatigueSettings,
     HotSpot,
+    check_curve_spec,
     Orientation,
     PointMass,
     RigDescription,
@@ -97,7 +98,6 @@ from ._rig import (
     SensorKind,
     StiffnessSegment,
     Support,
-    check_curve_spec,
     load_rig,
     parse_rig,
 )
