@@ -253,7 +253,7 @@ class MonitoringEngine:
         self.windows += 1
         loads, events = None, ()
         if self.loads is not None:
-            n_step = min(self.n, round(self.step_ns * self.fs / _NS))
+            n_step = min(self.n, int(round(self.step_ns * self.fs / _NS)))
             try:
                 loads = self.loads.process_window(float(times[0]), B[:n_step], self.fs, T)
                 events = tuple(self.loads.events)

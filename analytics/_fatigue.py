@@ -16,16 +16,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ._rainflow import (
-    Cycles,
-    HalfCyclePolicy,
-    RainflowCounter,
-    RainflowResidue,
-    _half_weight,
-)
+from ._rainflow import Cycles, HalfCyclePolicy, RainflowCounter, RainflowResidue, _half_weight
 from ._sn_curves import SnCurve, damage_equivalent_range, miner_damage
 
-__all__ = ["SECONDS_PER_YEAR", "FatigueDetail", "HotSpotFatigue", "LifeEstimate", "LoadsWindow", "remaining_life"]
+__all__ = ["FatigueDetail", "HotSpotFatigue", "LifeEstimate", "LoadsWindow", "remaining_life", "SECONDS_PER_YEAR"]
 
 SECONDS_PER_YEAR = 365.25 * 86400.0
 LifeVerdict = Literal["finite", "no_damage_below_cutoff", "exhausted", "no_data"]

@@ -12,14 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._fatigue import FatigueDetail
-from ._rainflow import (
-    Cycles,
-    HalfCyclePolicy,
-    _finite_samples,
-    _half_weight,
-    cycles_by_range,
-    rainflow_cycles,
-)
+from ._rainflow import Cycles, HalfCyclePolicy, _finite_samples, _half_weight, cycles_by_range, rainflow_cycles
 from ._sn_curves import damage_equivalent_range
 from ._validate import as_signal
 

@@ -22,12 +22,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from contract import (
-    ChartDocument,
-    HotSpotLoadsDocument,
-    LoadsWindowDocument,
-    chart_name,
-)
+from contract import ChartDocument, HotSpotLoadsDocument, LoadsWindowDocument, chart_name
 
 from ._alarms import AlarmEvent, AlarmLogic
 from ._fatigue import FatigueDetail, HotSpotFatigue
@@ -56,7 +51,7 @@ class LoadsConfig(BaseModel):
     clear_fraction: float = Field(0.8, gt=0.0, lt=1.0, description="clear below this fraction of the warning line")
 
     @model_validator(mode="after")
-    def _ordered(self) -> LoadsConfig:
+    def _ordered(self) -> "LoadsConfig":
         if any(not m > 0 for m in self.exponents):
             raise ValueError(f"exponents={self.exponents} must all be > 0")
         if self.del_alarm_ratio < self.del_warning_ratio:
@@ -116,7 +111,7 @@ class LoadsMonitor:
         self.events: list[AlarmEvent] = []
 
     @classmethod
-    def from_rig(cls, rig: Any, curvature_at: Any, *, config: LoadsConfig | None = None, state: dict[str, Any] | None = None) -> LoadsMonitor:
+    def from_rig(cls, rig: Any, curvature_at: Any, *, config: LoadsConfig | None = None, state: dict[str, Any] | None = None) -> "LoadsMonitor":
         """The monitor of a rig description's ``hot_spots`` (contract.RigDescription); ``curvature_at(η)`` gives the
         unit deformations' s'' at positions η (len(η), Γ) (``estimator.UnitDeformations.curvature``)."""
         from ._sn_curves import sn_curve

@@ -69,12 +69,12 @@ class Cycles:
     counts: np.ndarray
 
     @staticmethod
-    def empty() -> Cycles:
+    def empty() -> "Cycles":
         z = np.zeros(0)
         return Cycles(z, z.copy(), z.copy())
 
     @staticmethod
-    def concatenate(parts: list[Cycles] | tuple[Cycles, ...]) -> Cycles:
+    def concatenate(parts: "list[Cycles] | tuple[Cycles, ...]") -> "Cycles":
         if not parts:
             return Cycles.empty()
         return Cycles(np.concatenate([p.ranges for p in parts]), np.concatenate([p.means for p in parts]),
@@ -85,7 +85,7 @@ class Cycles:
         """Number of cycles (half cycles count as their weight)."""
         return float(np.sum(self.counts))
 
-    def scaled(self, factor: float) -> Cycles:
+    def scaled(self, factor: float) -> "Cycles":
         """Ranges and means times ``factor`` (strain → stress, stress concentration)."""
         return Cycles(self.ranges * abs(factor), self.means * factor, self.counts)
 
@@ -107,7 +107,7 @@ class RainflowResidue:
         return {"values": [float(v) for v in self.values], "samples": int(self.samples)}
 
     @staticmethod
-    def from_dict(data: dict[str, Any]) -> RainflowResidue:
+    def from_dict(data: dict[str, Any]) -> "RainflowResidue":
         try:
             values = tuple(float(v) for v in data["values"])
             samples = int(data["samples"])

@@ -27,12 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from contract import (
-    DNV_RP_C203_CURVE_NAMES,
-    EN1993_DETAIL_CATEGORIES,
-    EN1993_SHEAR_CATEGORIES,
-    check_curve_spec,
-)
+from contract import DNV_RP_C203_CURVE_NAMES, EN1993_DETAIL_CATEGORIES, EN1993_SHEAR_CATEGORIES, check_curve_spec
 
 __all__ = ["DNV_RP_C203_CURVES", "DNV_RP_C203_CURVE_NAMES", "EN1993_DETAIL_CATEGORIES", "EN1993_SHEAR_CATEGORIES", "SnCurve", "damage_equivalent_range", "miner_damage", "sn_curve"]
 

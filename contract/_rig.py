@@ -22,6 +22,7 @@ __all__ = [
     "EN1993_DETAIL_CATEGORIES",
     "EN1993_SHEAR_CATEGORIES",
     "Beam",
+    "check_curve_spec",
     "FatigueSettings",
     "HotSpot",
     "PointMass",
@@ -32,7 +33,6 @@ __all__ = [
     "StiffnessSegment",
     "TableSection",
     "TubeSection",
-    "check_curve_spec",
     "load_rig",
     "parse_rig",
 ]
