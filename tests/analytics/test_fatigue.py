@@ -12,18 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from analytics import (
-    SECONDS_PER_YEAR,
-    Cycles,
-    FatigueDetail,
-    HotSpotFatigue,
-    RainflowCounter,
-    RainflowResidue,
-    cycles_by_range,
-    damage_equivalent_range,
-    miner_damage,
-    rainflow_cycles,
-    remaining_life,
-    sn_curve,
+    SECONDS_PER_YEAR, Cycles, FatigueDetail, HotSpotFatigue, RainflowCounter, RainflowResidue, cycles_by_range,
+    damage_equivalent_range, miner_damage, rainflow_cycles, remaining_life, sn_curve,
 )
 
 ASTM = [-2, 1, -3, 5, -1, 3, -4, 4, -2]

@@ -9,14 +9,7 @@ import numpy as np
 import pytest
 
 from analytics import (
-    FatigueDetail,
-    HotSpotSpec,
-    LoadsConfig,
-    LoadsMonitor,
-    ModalMonitor,
-    MonitoringEngine,
-    rainflow_cycles,
-    sn_curve,
+    FatigueDetail, HotSpotSpec, LoadsConfig, LoadsMonitor, ModalMonitor, MonitoringEngine, rainflow_cycles, sn_curve,
 )
 from contract import ChartDocument, LoadsWindowDocument
 
@@ -56,8 +49,8 @@ def test_engine_counts_every_sample_once_and_matches_the_whole_record():
     windows = engine.add(t, b)
     assert engine.loads_errors == 0 and windows and all(isinstance(w.loads, LoadsWindowDocument) for w in windows)
     # the counted samples: each window's first step, contiguous from the first window's start
-    step = round(engine.step_s * FS)
-    first = round((windows[0].start_ns - ORIGIN_NS) / 1e9 * FS)
+    step = int(round(engine.step_s * FS))
+    first = int(round((windows[0].start_ns - ORIGIN_NS) / 1e9 * FS))
     counted = b[first:first + step * len(windows)]
     for spot in _spots():
         stress = -spot.fibre_distance_m * (counted @ spot.curvature_shape) * E

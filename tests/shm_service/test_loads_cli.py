@@ -7,15 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from analytics import (
-    FatigueDetail,
-    HotSpotFatigue,
-    bending_moment,
-    rainflow_cycles,
-    signal_loads,
-    sn_curve,
-    virtual_strain,
-)
+from analytics import FatigueDetail, HotSpotFatigue, bending_moment, rainflow_cycles, signal_loads, sn_curve, virtual_strain
 from shm_service.cli import main
 
 ASTM = [-2, 1, -3, 5, -1, 3, -4, 4, -2]
