@@ -248,7 +248,8 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         "start_s": span_start, "duration_s": duration, "source": "virtual strain from the estimate" + (
             " (estimated here)" if record.estimated_here else ""),
         "half_cycles": half_cycles,
-        "band_method": band.method if band is not None else "no strain gauge to see the modal truncation at: no band",
+        "band_method": band.method if band is not None else ("no strain gauge samples in the recording (an estimate written before it carried the gauges, or a rig "
+                                                                   "without gauges): the modal truncation cannot be seen, no band"),
         "gauges": gauge_rows,
         "stations": out_stations,
         "channels": channels,
