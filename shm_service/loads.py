@@ -321,8 +321,14 @@ def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: flo
                           to_stress=youngs_modulus, name=f"channel {name}")
         cdoc = _signal_doc(sl, to_stress=youngs_modulus)
         channels.append({"name": name, **cdoc, **_life(cdoc["damage"], duration, None)})
+    # a unit row that says the channel is not in the quantity's SI unit (volts, µε, MPa): say so, do not guess a scale
+    expected = {"strain": ("m/m", "strain", "-", "1", ""), "stress": ("pa", "n/m2", "n/m²")}[quantity]
+    warnings = [f"channel {name!r} is in {unit!r}, not {'m/m' if quantity == 'strain' else 'Pa'}: the figures are in that unit; "
+                "scale it first (shm import's channel map has scale and offset)"
+                for name, unit in zip(table.channels, table.units or ()) if unit is not None and unit.strip().lower() not in expected]
     return {"start_s": span_start, "duration_s": duration, "source": f"measured {quantity} channels ({table.format})",
-            "half_cycles": half_cycles, "youngs_modulus_pa": youngs_modulus, "stations": [], "channels": channels}
+            "half_cycles": half_cycles, "youngs_modulus_pa": youngs_modulus, "stations": [], "channels": channels,
+            "warnings": warnings}
 
 
 def _cmd_loads(args: argparse.Namespace) -> int:
@@ -376,6 +382,8 @@ def _print_table(doc: dict[str, Any]) -> None:
     print(f"{doc['source']}: {doc['duration_s']:.3f} s counted from {doc['start_s']:.3f} s; half cycles: {doc['half_cycles']}")
     if doc.get("band_method"):
         print(f"band: {doc['band_method']}")
+    for warning in doc.get("warnings") or ():
+        print(f"warning: {warning}")
 
     def row(label: str, s: dict[str, Any]) -> str:
         dels = "  ".join(

@@ -152,3 +152,15 @@ def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path
     assert all(w["band_half_width"] >= 0.02 and w["stations"][0]["del"][0]["band"] is not None for w in windows)
     code, _, err = run(capsys, "loads", str(est), "--stations", "4.5")
     assert code == 2 and "--stations: 4.5 is outside the beam [0, 4.0]" in err
+
+
+def test_channels_in_volts_are_counted_with_a_warning(capsys):
+    from pathlib import Path
+
+    path = next((Path(__file__).parents[1] / "data" / "dropbear" / "random-dwell").glob("*.txt"))
+    code, out, err = run(capsys, "loads", str(path), "--channels", "SG_300_a", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["warnings"] == ["channel 'SG_300_a' is in 'Voltage (unscaled)', not m/m: the figures are in that unit; "
+                               "scale it first (shm import's channel map has scale and offset)"]
+    assert doc["channels"][0]["cycles"] > 1000
