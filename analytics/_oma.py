@@ -291,6 +291,24 @@ def identify_modes(
     ------
     ValueError
         If y is not finite, too short for the band, or an argument is invalid.
+
+    Examples
+    --------
+    Two channels of a free decay of two modes (3 Hz at 1 %, 7 Hz at 2 % damping) with a little
+    seeded noise:
+
+    >>> import numpy as np
+    >>> from analytics import OmaConfig, identify_modes
+    >>> fs = 100.0
+    >>> t = np.arange(0.0, 20.0, 1 / fs)
+    >>> def decay(f, zeta):
+    ...     return np.exp(-zeta * 2 * np.pi * f * t) * np.cos(2 * np.pi * f * np.sqrt(1 - zeta**2) * t)
+    >>> y = np.column_stack([decay(3.0, 0.01) + 0.5 * decay(7.0, 0.02),
+    ...                      0.6 * decay(3.0, 0.01) - 0.8 * decay(7.0, 0.02)])
+    >>> y += 1e-4 * np.random.default_rng(1).standard_normal(y.shape)
+    >>> result = identify_modes(y, fs, config=OmaConfig(fmin_hz=1.0, fmax_hz=10.0))
+    >>> [(round(m.frequency_hz, 2), round(m.damping_ratio, 3)) for m in result.modes]
+    [(3.0, 0.01), (7.0, 0.02)]
     """
     cfg = OmaConfig() if config is None else config
     if not isinstance(cfg, OmaConfig):
