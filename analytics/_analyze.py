@@ -176,7 +176,9 @@ def _record_identification(B: np.ndarray, fs: float, spans: list[tuple[int, int]
     y = np.concatenate(parts)
     rows = int(min(max(math.ceil(fsb / (2 * max(cfg.fmin_hz, 1e-3))), 12), max(12, 240 // B.shape[1]), max(4, y.shape[0] // 10)))
     try:
-        return identify_modes(y, fsb, config=cfg.model_copy(update={"block_rows": rows}), band_ready=True), y
+        # the record's estimate is the mean over its trusted spans: a mode drifting with the
+        # temperature over the record is followed by the windows, not split here
+        return identify_modes(y, fsb, config=cfg.model_copy(update={"block_rows": rows, "moving_modes": False}), band_ready=True), y
     except (ValueError, np.linalg.LinAlgError):
         return None, None
 

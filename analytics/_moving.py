@@ -131,7 +131,8 @@ def subwindow_frequencies(x: object, fs: float, f0_hz: float, *, lo_hz: float, h
     if len(starts) < min_subwindows:
         return None
     hi_hz = min(hi_hz, 0.49 * fs)
-    res = max(1e-3 * f0_hz, 0.02 / (L / fs))
+    # the parabola refines between grid points: a few hundred points over the band are plenty
+    res = max(1e-3 * f0_hz, 0.02 / (L / fs), (hi_hz - lo_hz) / 400)
     grid = np.arange(lo_hz, hi_hz + res, res)
     t = np.arange(L) / fs
     w = np.hanning(L + 2)[1:-1]
