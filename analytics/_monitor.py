@@ -417,7 +417,10 @@ class ModalMonitor:
         lo = c.band_low_fraction * min(self.f0)
         hi = min(c.band_high_fraction * max(self.f0), 0.45 * self.fs)
         order = c.max_order or min(40, max(16, 4 * len(self.f0) + 4))
-        return OmaConfig(fmin_hz=lo, fmax_hz=hi, max_order=order)
+        # a mode's change within a monitoring window is followed across windows by the charts;
+        # the sub-window split (shm oma's short windows of a moving support) stays off here, where
+        # its 1 % departure test would trade a window's subspace estimate for a noisier one
+        return OmaConfig(fmin_hz=lo, fmax_hz=hi, max_order=order, moving_modes=False)
 
     def _chart(self, inflation: float) -> EwmaChart:
         warning, alarm = self.config.chart_levels("frequency")
