@@ -124,7 +124,7 @@ def subwindow_frequencies(x: object, fs: float, f0_hz: float, *, lo_hz: float, h
         raise ValueError(f"the band ({lo_hz=}, {hi_hz=}) must hold {f0_hz=}")
     n = a.size
     T = n / fs
-    L = int(round(max(cycles / f0_hz, T / 4) * fs))
+    L = round(max(cycles / f0_hz, T / 4) * fs)
     L = min(L, n)
     step = max(1, L // 2)
     starts = list(range(0, n - L + 1, step))

@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 from scipy import signal, stats
 
-from analytics import ModeTracker, OmaConfig, OperationalModalAnalysis, identify_modes, local_visibility, subwindow_frequencies
+from analytics import (
+    ModeTracker,
+    OmaConfig,
+    OperationalModalAnalysis,
+    identify_modes,
+    local_visibility,
+    subwindow_frequencies,
+)
 
 FS = 1000.0
 DATA = Path(__file__).resolve().parents[1] / "data" / "dropbear"
@@ -53,7 +60,7 @@ def test_a_mode_sweeping_25_to_42_hz_within_the_window_is_one_moving_mode():
     assert len(inband) == 1, [(m.frequency_hz, m.contribution) for m in ident.modes]
     m = inband[0]
     assert m.moving
-    assert m.start_hz < 30 < 37 < m.end_hz
+    assert m.start_hz < 30 and m.end_hz > 37
     assert 29 < m.frequency_hz < 38  # the time average of 25 → 42 Hz is 33.5 Hz
     kinds = {"moving", "buried", "unresolved", "noise", "negligible", "harmonic"}
     assert all(why.split(":")[0] in kinds for _, why in ident.rejected), ident.rejected
@@ -106,7 +113,7 @@ def test_tracker_keeps_ids_through_continuity_and_gaps():
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    (dict(gate_rel=0.0), "gate_rel"), (dict(mac_min=1.5), "mac_min"), (dict(max_gap=0), "max_gap"),
+    ({"gate_rel": 0.0}, "gate_rel"), ({"mac_min": 1.5}, "mac_min"), ({"max_gap": 0}, "max_gap"),
 ])
 def test_tracker_bad_input_names_the_value(kwargs, match):
     with pytest.raises(ValueError, match=match):
@@ -136,7 +143,7 @@ def _lowest(trial: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
     res = OperationalModalAnalysis(OmaConfig(fmin_hz=15, fmax_hz=80), window_s=0.5, step_s=0.25, whole_record=False).run(acc, fs)
     f, rms, pm, ps = [], [], [], []
     for w in res.windows:
-        a, b = int(round(w.start_s * fs)), int(round(w.end_s * fs))
+        a, b = round(w.start_s * fs), round(w.end_s * fs)
         f.append(min((m.frequency_hz for m in w.modes), default=np.nan))
         rms.append(acc[a:b].std())
         pm.append(pin[a:b].mean())
