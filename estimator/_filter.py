@@ -396,7 +396,7 @@ class RestCalibration:
         }
 
 
-def _rest_end(meas: Measurements, config: FilterConfig, model: "ImmsModel | None" = None) -> float:
+def _rest_end(meas: Measurements, config: FilterConfig, model: ImmsModel | None = None) -> float:
     """End of the initial rest: the first sign of motion at D (gyro, lateral accel) or the bearing.
 
     A support fixed to the ground (``model.fixed_support``) does not move when the structure

@@ -99,8 +99,8 @@ def test_mast_without_tofs_and_bearing_estimates_with_bounded_d_and_its_tip(mast
 def test_a_declared_bearing_without_samples_and_without_tofs_is_reported(mast_run):
     meas, _, _ = mast_run
     result = estimate(meas, build_model(_mast(bearing=True)))
-    assert result.diagnostics["problems"] == [
+    assert result.diagnostics["problems"] == [(
         "the support's position d is not observed: rig.json has a bearing sensor but the recording has no valid "
         "/bearing/displacement sample and no ToF is selected, so d is the D accelerometer's double integral and drifts; "
-        "if the support is fixed to the ground, remove the bearing sensor from rig.json (d ≡ 0)"]
+        "if the support is fixed to the ground, remove the bearing sensor from rig.json (d ≡ 0)")]
     assert "problems" not in estimate(meas, build_model(_mast())).diagnostics
