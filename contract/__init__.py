@@ -92,9 +92,12 @@ from ._rig import (
     parse_rig,
 )
 from ._state import Peripheral, StateIndex, StateLayout
+from ._ports import ServicePort, StructureModel, StructurePort
 
 __all__ = [
     "is_loopback",
+    # the runtime's ports (the HTTP routers and the dashboard are typed against them)
+    "ServicePort", "StructureModel", "StructurePort",
     # rig.json
     "Beam", "Orientation", "PointMass", "RigDescription", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
     "STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT", "Support", "load_rig", "parse_rig",

@@ -47,7 +47,6 @@ __all__ = [
     "build_events",
     "build_model",
     "calibrate_at_rest",
-    "estimate",
     "model_arrays",
 ]
 
@@ -375,7 +374,8 @@ def _rest_end(meas: Measurements, config: FilterConfig) -> float:
     quiet = t < start + min(2.0, config.rest_max_s)
     if quiet.sum() < 20:
         return start
-    end = limit
+    # no motion seen: the rest lasted to the end of the data at most (a calibration on its first seconds)
+    end = min(limit, float(t[-1]))
     for column in (1, 2):
         x = d_imu.values[:, column]
         ref = x[quiet]
@@ -757,20 +757,3 @@ class EstimateResult:
     def curvature(self, eta: np.ndarray | None = None) -> np.ndarray:
         """∂²Δ/∂η² (1/m) at ``eta`` (default: the truth stations), residual modes included."""
         return self.model.curvature(self.x, eta)
-
-
-def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = FilterConfig(), *, chunk_events: int = 500_000) -> EstimateResult:
-    """Calibrate on the rest phase and run the filter over all measurements."""
-    import time
-
-    calibration = calibrate_at_rest(meas, model, config)
-    events = build_events(meas, model)
-    filt = ImmsFilter(model, calibration, config, t0=meas.start)
-    outputs: list[FilterOutput] = []
-    started = time.perf_counter()
-    for lo in range(0, len(events), chunk_events):
-        outputs.append(filt.process(events.slice(lo, lo + chunk_events)))
-    outputs.append(filt.flush())
-    elapsed = time.perf_counter() - started
-    out = FilterOutput.concatenate(outputs, model.state_size)
-    return EstimateResult(model, calibration, out.t, out.x, out.P_diag, out.var_e, filt.diagnostics(), elapsed)

@@ -216,18 +216,15 @@ def _sensor_counts(rig, args: argparse.Namespace) -> dict[str, int | tuple[str, 
 
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
-    from estimator import estimate
-
-    from .estimation import measurements_from_recording, score_against_truth, truth_from_recording, write_estimates
+    from .estimation import estimate_recording, score_against_truth, truth_from_recording, write_estimates
     from .recording import read_recording
 
     rec = read_recording(args.recording, rig=args.rig)
     model = _model_from_args(rec.rig, args)
     try:
-        meas = measurements_from_recording(rec)
+        result = estimate_recording(rec, model)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    result = estimate(meas, model)
     if args.out:
         write_estimates(args.out, rec, result)
     summary = {
@@ -325,8 +322,13 @@ def _deformations_of(path: str, args: argparse.Namespace):
 
     rec = read_recording(path, rig=args.rig)
     model_args = dict(peripheral=args.peripheral, modes=args.modes, **_sensor_counts(rec.rig, args))
+    streaming = None
+    if getattr(args, "config", None):  # a raw file is estimated as the service with this configuration would
+        from .service._config import load_settings
+
+        streaming = load_settings(args.config).streaming_settings()
     try:
-        return rec, deformation_record(rec, model_args=model_args)
+        return rec, deformation_record(rec, model_args=model_args, settings=streaming)
     except ValueError as exc:
         raise CliError(str(exc)) from None
 

@@ -19,9 +19,9 @@ import math
 import re
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from datetime import datetime
-from typing import Any, Literal, Protocol
+from typing import Any, Literal
 
 from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
 from fastapi.responses import JSONResponse, PlainTextResponse, Response
@@ -35,6 +35,7 @@ from contract import (
     IngestResultDocument,
     LiveEstimatesDocument,
     RigDescription,
+    ServicePort,
     SpectrumDocument,
     StatusDocument,
     StructuresDocument,
@@ -51,21 +52,9 @@ from ._storage import StorageUnavailable
 __all__ = ["ApiService", "AuthLimiter", "HostCheck", "create_app"]
 
 
-class ApiService(Protocol):
-    """What the API needs from the service (``MonitoringService`` implements it)."""
-
-    token: str | None
-
-    def check_token(self, token: str | None) -> None: ...
-    def health(self) -> HealthDocument: ...
-    def status(self) -> StatusDocument: ...
-    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
-               limit: int = 100_000) -> list[TrendRow]: ...
-    def alarms(self, state: str | None = None) -> list[AlarmDocument]: ...
-    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument: ...
-    def request_baseline(self) -> BaselineRequestDocument: ...
-    def spectra(self) -> SpectrumDocument | None: ...
-    def ingest(self, document: Any) -> IngestResultDocument | None: ...
+#: what the API needs from the service: the runtime's port (``MonitoringService`` and the
+#: ``WorkerFleet`` implement it)
+ApiService = ServicePort
 
 
 _TREND_FIELDS = tuple(TrendRow.model_fields)
@@ -511,7 +500,7 @@ _UNKNOWN = {404: _error("no such structure (the message names it)"),
             409: _error("the structure failed to start (the message says why)")}
 
 
-def _fleet_routes(app: FastAPI, service: Any, authorize: Any) -> None:
+def _fleet_routes(app: FastAPI, service: ServicePort, authorize: Callable[[Request], None]) -> None:
     """The routes of a fleet (``[[structures]]``): each single-structure route per structure.
     Also served for a single structure (its id is its source id)."""
     from ._service import NotSingleStructure, StructureUnavailable
