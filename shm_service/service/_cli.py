@@ -98,6 +98,7 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
 def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
     from ._api import create_app
     from ._config import SettingsError, load_settings, render_toml
+    from ._progress import ProgressLog, compile_first
     from ._server import ApiServer
     from ._service import MonitoringService, RigPending, ServiceError
     from ._starting import ServiceSlot, StartingService
@@ -188,14 +189,17 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         if service.dashboard is not None:
             print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
     started = time.monotonic()
-    service.start()
-    _ready(args, state="serving", api=api.url, docs=f"{api.url}/docs",
-           dashboard=getattr(service.dashboard, "url", None) if service.dashboard is not None else None,
-           structures=[s_.id for s_ in settings.structures] if service.fleet else [service.source.id], db=str(settings.db))
+    progress = ProgressLog(service)
+    if compile_first(service, stop):
+        service.start()
+        _ready(args, state="serving", api=api.url, docs=f"{api.url}/docs",
+               dashboard=getattr(service.dashboard, "url", None) if service.dashboard is not None else None,
+               structures=[s_.id for s_ in settings.structures] if service.fleet else [service.source.id], db=str(settings.db))
     try:
         while not stop.is_set():
             if service.wait(0.2) and not settings.source.keep_running:
                 break
+            progress.poll()
     finally:
         elapsed = time.monotonic() - started
         if not service.done:
