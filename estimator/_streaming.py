@@ -223,11 +223,14 @@ class StreamingEstimator:
     # -- the filter over one chunk ------------------------------------------------------------------
 
     def _measurements(self, data: TopicSamples) -> Measurements:
-        imu, tof, strain, bearing = {}, {}, {}, None
+        imu: dict[str, SensorSeries] = {}
+        tof: dict[str, SensorSeries] = {}
+        strain: dict[str, SensorSeries] = {}
+        bearing: SensorSeries | None = None
         epoch = self.epoch_ns
         assert epoch is not None
         for topic, (t, v) in data.items():
-            kind, name = self.topics.get(topic, (None, None))
+            kind, name = self.topics.get(topic, ("", ""))
             ts = (t - epoch) * 1e-9
             if kind == "imu":
                 imu[name] = SensorSeries(ts, v[:, IMU_PLANAR_COLUMNS])
@@ -410,7 +413,7 @@ def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = Filter
     if "D" not in meas.imu:
         raise ValueError("measurements have no IMU 'D' (the IMU at the bearing)")
     settings = settings or StreamingSettings(filter=config)
-    by_name = {(s.kind, s.name): s.topic for s in model.rig.sensors}
+    by_name: dict[tuple[str, str], str] = {(s.kind, s.name): s.topic for s in model.rig.sensors}
     width = max(IMU_PLANAR_COLUMNS) + 1
     samples: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     topics: dict[str, tuple[str, str]] = {}

@@ -65,7 +65,7 @@ def measurements_from_recording(rec: Recording) -> Measurements:
         return SensorSeries((channel.log_time_ns - start) * _NS, channel.values[:, columns])
 
     imu, tof, strain, bearing = {}, {}, {}, None
-    for topic, channel in rec.channels.items():
+    for channel in rec.channels.values():
         if channel.kind == "imu":
             imu[channel.name] = series(channel, IMU_PLANAR_COLUMNS)
         elif channel.kind == "tof":

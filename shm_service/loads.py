@@ -255,11 +255,7 @@ def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: flo
 
     from analytics import signal_loads
 
-    if quantity == "strain":
-        to_stress = youngs_modulus
-    elif quantity == "stress":
-        to_stress = 1.0
-    else:
+    if quantity not in ("strain", "stress"):
         raise LoadsError(f"--quantity {quantity!r} must be strain or stress")
     n = table.data.shape[0]
     times = table.time - table.time[0] if table.time is not None else np.arange(n) / float(table.fs_hz)

@@ -29,7 +29,6 @@ import zstandard
 from contract import (
     NOMINAL_PERIOD_NS,
     PAYLOAD_FIELDS,
-    FieldSpec,
     Kind,
     RigDescription,
     RigError,

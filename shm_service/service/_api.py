@@ -306,7 +306,7 @@ def _parse_time(name: str, value: str | None) -> float | None:
         except ValueError:
             raise HTTPException(422, f"'{name}' must be UNIX seconds or an ISO 8601 time, got {value[:40]!r}") from None
         if dt.tzinfo is None:
-            raise HTTPException(422, f"'{name}' needs a time zone (e.g. 2026-01-01T00:00:00Z)")
+            raise HTTPException(422, f"'{name}' needs a time zone (e.g. 2026-01-01T00:00:00Z)") from None
         x = dt.timestamp()
     if not math.isfinite(x) or not -1e11 < x < 1e11:
         raise HTTPException(422, f"'{name}' = {value[:40]!r} is out of range")

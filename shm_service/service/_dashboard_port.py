@@ -127,7 +127,7 @@ def start_dashboard(service: ServicePort, settings: Any, structure: Any, token: 
     try:
         import web
 
-        Dashboard = getattr(web, "Dashboard")
+        Dashboard = web.Dashboard
     except (ImportError, AttributeError):
         log.warning("dashboard: web.Dashboard is not available; running without the dashboard")
         return None

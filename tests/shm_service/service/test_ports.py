@@ -27,7 +27,7 @@ def test_both_services_implement_every_method_of_the_port_with_its_parameters(cl
         assert method is not None, f"{cls.__name__} lacks {name}()"
         got = inspect.signature(method)
         assert list(got.parameters) == list(wanted.parameters), (cls.__name__, name, got, wanted)
-    assert isinstance(getattr(cls, "done"), property)
+    assert isinstance(cls.done, property)
 
 
 def test_a_running_service_of_one_structure_is_a_service_port(tmp_path):
