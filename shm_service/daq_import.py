@@ -555,7 +555,7 @@ def _write_merged(writer: RecordingWriter, streams: list[tuple[str, np.ndarray, 
 # -- the command -----------------------------------------------------------------------------------
 def cmd_import(args) -> int:
     """``shm import`` (the parser is in ``cli.py``, which stays light)."""
-    from .cli import CliError, _print_json
+    from ._commands import CliError, _print_json
 
     try:
         report = import_recording(args.data, args.rig, args.map, args.out)
