@@ -52,6 +52,7 @@ from ._alarms import alarm_changes, clear_changes
 from ._archive import Archive
 from ._sinks import SinkGuard
 from ._checks import CheckSettings, SampleChecks
+from ._merge import MergeSettings, MergeStage
 from ._plausibility import SourceClock, ValueLimits
 from ._storage import AlarmChange, Storage, WindowCommit, is_transient
 
@@ -113,50 +114,7 @@ def _one_blas_thread() -> None:
 # -- merge ------------------------------------------------------------------------------------
 
 
-class _Merger:
-    """Holds samples until every sensor has reported up to a time (or ``lateness`` passed),
-    then releases them in time order; a sample older than what was released is late (counted)."""
-
-    def __init__(self, lateness_s: float) -> None:
-        self.lateness_ns = int(lateness_s * _NS)
-        self.pending: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-        self.last: dict[str, int] = {}
-        self.released_to = -1  # everything < released_to was released
-        self.late: Counter = Counter()
-
-    def add(self, block: FollowBlock) -> None:
-        t, v = block.log_time_ns, block.values
-        if self.released_to >= 0 and len(t) and t[0] < self.released_to:
-            keep = t >= self.released_to
-            self.late[block.topic] += int(np.count_nonzero(~keep))
-            t, v = t[keep], v[keep]
-        if not len(t):
-            return
-        self.pending.setdefault(block.topic, []).append((t, v))
-        self.last[block.topic] = max(self.last.get(block.topic, -1), int(t[-1]))
-
-    def release(self, final: bool = False) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        if not self.last:
-            return {}
-        newest = max(self.last.values())
-        if final:
-            cutoff = newest + 1
-        else:
-            cutoff = max(newest - self.lateness_ns, min(self.last.values()) + 1)
-        if cutoff <= self.released_to:
-            return {}
-        out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        for topic, parts in self.pending.items():
-            if not parts:
-                continue
-            t = np.concatenate([p[0] for p in parts]) if len(parts) > 1 else parts[0][0]
-            v = np.concatenate([p[1] for p in parts]) if len(parts) > 1 else parts[0][1]
-            k = int(np.searchsorted(t, cutoff))
-            if k:
-                out[topic] = (t[:k], v[:k])
-            parts[:] = [(t[k:], v[k:])] if k < len(t) else []
-        self.released_to = cutoff
-        return out
+# the merge stage (``MergeStage``): its own module
 
 
 # -- estimator --------------------------------------------------------------------------------
@@ -392,7 +350,7 @@ class Pipeline:
             except (KeyError, TypeError, ValueError) as exc:
                 log.warning("stored calibration unusable (%s); calibrating again", exc)
         self.resumed = bool(stored)
-        self.merger = _Merger(lateness_s)
+        self.merger = MergeStage(MergeSettings(lateness_s=lateness_s))
         # the one estimator policy (estimate(), shm estimate, shm analyze run the same)
         self.estimator = StreamingEstimator(model, StreamingSettings(calibration_s=calibration_s, chunk_s=chunk_s), calibration)
         # one alarm path: the engine's (the service's [alarms] hysteresis is in it: ServiceSettings.engine_config)
