@@ -42,7 +42,7 @@ E2E = {
     "docs/test_documentation.py",
 }
 
-#: modules of slow physics checks
+#: modules of slow physics checks (those of more than ~5 s a test, measured with --durations)
 SLOW = {
     "estimator/test_imms.py",
     "estimator/test_clamped.py",
@@ -53,6 +53,14 @@ SLOW = {
     "estimator/test_input_weights.py",
     "estimator/test_calibration.py",
     "analytics/test_dropbear.py",
+    "analytics/test_curvature_chart_monitor.py",
+    "analytics/test_location_and_chain.py",
+    "analytics/test_frf.py",
+    "analytics/test_engine.py",
+    "analytics/test_ssi.py",
+    "analytics/test_loads_monitor.py",
+    "estimator/test_filterpy_reference.py",
+    "estimator/test_damage_signatures.py",
     "shm_service/test_study.py",
     "shm_service/test_other_tool.py",
     "shm_service/test_daq_import.py",
