@@ -36,12 +36,12 @@ def test_hot_spots_as_in_the_interface():
 @pytest.mark.parametrize("spot, message", [
     ({"position": 4.5}, r"hot_spots\[0\] \('s'\): position=4.5 is outside the beam \[0, 4.0\]"),
     ({"position": -0.1}, r"position=-0.1 is outside the beam"),
-    ({"curve": "EN1993-1-9:72"}, r"hot_spots.0.curve: .*unknown EN 1993-1-9 detail category '72'"),
-    ({"curve": "DNV-RP-C203:D:lake"}, r"hot_spots.0.curve: .*unknown DNV-RP-C203 environment 'lake'"),
-    ({"curve": {"points": [[1e6, 50e6]]}}, r"hot_spots.0.curve: .*at least two"),
-    ({"scf": 0}, r"hot_spots.0.scf: Input should be greater than 0"),
-    ({"gamma_Ff": -1.0}, r"hot_spots.0.gamma_Ff: Input should be greater than 0"),
-    ({"gamma_Mf": 0.0}, r"hot_spots.0.gamma_Mf: Input should be greater than 0"),
+    ({"curve": "EN1993-1-9:72"}, r"hot_spots\[0\]\.curve: .*unknown EN 1993-1-9 detail category '72'"),
+    ({"curve": "DNV-RP-C203:D:lake"}, r"hot_spots\[0\]\.curve: .*unknown DNV-RP-C203 environment 'lake'"),
+    ({"curve": {"points": [[1e6, 50e6]]}}, r"hot_spots\[0\]\.curve: .*at least two"),
+    ({"scf": 0}, r"hot_spots\[0\]\.scf: Input should be greater than 0"),
+    ({"gamma_Ff": -1.0}, r"hot_spots\[0\]\.gamma_Ff: Input should be greater than 0"),
+    ({"gamma_Mf": 0.0}, r"hot_spots\[0\]\.gamma_Mf: Input should be greater than 0"),
 ])
 def test_bad_hot_spots_name_the_key(spot, message):
     with pytest.raises(RigError, match=message):
@@ -63,5 +63,5 @@ def test_uniform_fibre_distance_and_bending_stiffness():
     assert beam.bending_stiffness(eta) == pytest.approx([ei] * 3, rel=1e-12)
     warm = beam.bending_stiffness(1.0, temperature_c=beam.reference_temperature + 10)
     assert warm == pytest.approx(ei * (1 + 10 * beam.youngs_modulus_temperature_coefficient), rel=1e-12)
-    with pytest.raises(RigError, match="position 5.0 is outside the beam"):
+    with pytest.raises(RigError, match=r"positions must lie on the beam \[0, 4.0\] m, got \[5.0\]"):
         beam.fibre_distance([1.0, 5.0])
