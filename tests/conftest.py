@@ -59,6 +59,7 @@ SLOW = {
     "analytics/test_engine.py",
     "analytics/test_ssi.py",
     "analytics/test_loads_monitor.py",
+    "analytics/test_modes_physical.py",
     "estimator/test_filterpy_reference.py",
     "estimator/test_damage_signatures.py",
     "shm_service/test_study.py",
@@ -68,6 +69,7 @@ SLOW = {
     "shm_service/test_modes_any_beam.py",
     "shm_service/test_simulate_rig.py",
     "shm_service/test_virtual_rig.py",
+    "shm_service/test_virtual_rig_sections.py",
     "shm_service/test_cli.py",
     "shm_service/test_oma_cli.py",
 }
