@@ -18,6 +18,7 @@ $(STAMP): pyproject.toml constraints.txt
 # what happens when; Ctrl-C stops it. Options: make demo DEMO_ARGS="--duration 1200 --speed max".
 DEMO_ARGS ?=
 demo: $(STAMP)
+	$(PY) -m shm_service.warmup  # at once when cached; after a pull that changed the kernels, compiles them first
 	$(VENV)/bin/shm demo $(DEMO_ARGS)
 
 # The lint and the types ([tool.ruff], [tool.mypy] in pyproject.toml: strict on contract, estimator, analytics).
