@@ -320,6 +320,14 @@ class StreamingEstimator:
 
     # -- what it reports ------------------------------------------------------------------------------
 
+    @property
+    def buffer_span(self) -> tuple[int, int] | None:
+        """(oldest, newest) stamp, ns, of the data gathered for the rest calibration so far (None:
+        nothing gathered, or calibrated)."""
+        if self.calibration is not None or self._first_ns is None or self._newest_ns is None:
+            return None
+        return (self._first_ns, self._newest_ns)
+
     def result_diagnostics(self) -> dict[str, Any]:
         """The filter's diagnostics (``ImmsFilter.diagnostics``) with the restarts: ``rejected``
         counts the refused updates of every filter of the run."""
