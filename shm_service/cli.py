@@ -488,23 +488,29 @@ def _cmd_oma(args: argparse.Namespace) -> int:
 
     from .tables import TableError, read_table, select_channels
 
+    from .oma_input import clean_for_identification
+
     try:
-        table = read_table(args.data, fs=args.fs)
+        table = read_table(args.data, fs=args.fs, nonfinite="keep")
         names = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
         if args.channels is not None and not names:
             raise CliError(f"--channels {args.channels!r} names no channel")
-        inputs = None
+        input_names = None
         if args.inputs:
-            inputs = select_channels(table, [c.strip() for c in args.inputs.split(",") if c.strip()]).data
+            input_names = list(select_channels(table, [c.strip() for c in args.inputs.split(",") if c.strip()]).channels)
             if names is None:  # the inputs are not outputs too
-                names = [c for c in table.channels if c not in args.inputs.split(",")]
-        table = select_channels(table, names)
+                names = [c for c in table.channels if c not in input_names]
+        output_names = list(select_channels(table, names).channels)
+        clean = clean_for_identification(table, output_names, input_names, outlier_factor=args.outlier_factor,
+                                         max_abs=args.max_abs, max_fill=args.max_fill)
+        table = select_channels(table, output_names)
+        inputs = clean.inputs
         config = OmaConfig(fmin_hz=args.fmin or 0.0, fmax_hz=args.fmax)
         window = args.window
         step = args.step if args.step is not None else window
         if step is not None and window is None:
             raise CliError("--step needs --window")
-        result = OperationalModalAnalysis(config, window_s=window, step_s=step).run(table.data, table.fs_hz, inputs=inputs)
+        result = OperationalModalAnalysis(config, window_s=window, step_s=step).run(clean.outputs, table.fs_hz, inputs=inputs)
     except ValidationError as exc:
         raise CliError(_pydantic_message(exc)) from None
     except (TableError, ValueError) as exc:
@@ -534,6 +540,8 @@ def _cmd_oma(args: argparse.Namespace) -> int:
         "rejected": [{"frequency_hz": f, "reason": why} for f, why in rec.rejected],
         **io(rec),
         "windows": [{"start_s": w.start_s, "end_s": w.end_s, "modes": modes(w.identification), **io(w.identification)} for w in result.windows],
+        **clean.as_dict(table.fs_hz),
+        "recording_problems": list(table.problems),
     }
     if args.json:
         _print_json(doc)
@@ -546,6 +554,8 @@ def _cmd_oma(args: argparse.Namespace) -> int:
               f"{m.mpc:5.2f} {m.contribution:6.2f}  " + " ".join(f"{v:+.2f}" for v in m.shape))
     for f, why in rec.rejected:
         print(f"  not a mode: {f:.4f} Hz ({why})")
+    for line in [*clean.format(table.fs_hz), *(f"problem: {p}" for p in table.problems)]:
+        print(line)
     if result.windows:
         print(f"{len(result.windows)} windows:")
         for w in result.windows:
@@ -705,6 +715,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also identify windows of S seconds")
     p.add_argument("--step", type=number(low=0, low_open=True, unit="s"), default=None, metavar="S",
                    help="window step, s (default: --window)")
+    p.add_argument("--max-abs", type=number(low=0, low_open=True), default=None, metavar="X",
+                   help="reject |value| > X (the file's units) as implausible")
+    p.add_argument("--outlier-factor", type=number(low=0), default=1000.0, metavar="F",
+                   help="reject |x - median| > F x the channel's 99th percentile of |x - median| as implausible (0: off) [1000]")
+    p.add_argument("--max-fill", type=int, default=4, metavar="N",
+                   help="fill runs of at most N rejected samples by linear interpolation; longer gaps: the longest valid span [4]")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_oma)
 
