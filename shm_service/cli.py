@@ -239,7 +239,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         "modes": result.model.gamma,
         "rest_end_s": round(float(result.calibration.rest_end), 3),
         "diagnostics": result.diagnostics,
-        "recording_problems": rec.report.problems,
+        **_recording_problems(rec),
     }
     truth = truth_from_recording(rec)
     if truth is not None:
@@ -256,6 +256,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             r = summary["rmse"]
             print(f"RMSE after the rest phase: phi {r['phi_deg']:.4f} deg, e {1000 * r['e_m']:.3f} mm, d {1000 * r['d_m']:.3f} mm, "
                   f"deflection {1000 * r['deflection_m']:.3f} mm, curvature {r['curvature_per_m']:.2e} 1/m")
+        for problem in summary["recording_problems"]:
+            print(f"problem: {problem}")
         if args.out:
             print(f"wrote {args.out}")
     return 0
@@ -331,6 +333,12 @@ def _deformations_of(path: str, args: argparse.Namespace):
         raise CliError(str(exc)) from None
 
 
+def _recording_problems(rec) -> dict:
+    """``recording_problems`` (a cut, damage, gaps, rejected messages) and ``truncated`` of a recording, as
+    ``shm inspect`` says them."""
+    return {"truncated": rec.report.truncated, "recording_problems": list(rec.report.problems)}
+
+
 def _cmd_analyze(args: argparse.Namespace) -> int:
     from analytics import BaselineError
 
@@ -348,8 +356,9 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     try:
         result = analyze_deformations(rec.rig, data, config=config, baseline=baseline, warmup_s=warmup, not_before_s=args.not_before)
     except ValueError as exc:
-        raise CliError(f"{args.recording}: {exc}") from None
-    output = result.as_dict()
+        cut = f" ({rec.report.problems[0]})" if rec.report.truncated and rec.report.problems else ""
+        raise CliError(f"{args.recording}: {exc}{cut}") from None
+    output = {**result.as_dict(), **_recording_problems(rec)}
     if data.truth_metadata and "eigenfrequencies_hz" in data.truth_metadata:
         exact = json.loads(data.truth_metadata["eigenfrequencies_hz"])
         zeta_key = next((k for k in ("modal_damping_ratios", "damping_ratios") if k in data.truth_metadata), None)
@@ -386,6 +395,8 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
             for m in bl["modes"]:
                 if not m["charted"]:
                     print(f"  mode {m['mode']} not charted: {m['reason']}")
+        for problem in output["recording_problems"]:
+            print(f"problem: {problem}")
         print(f"flags: {len(output['flags'])}")
         for flag in output["flags"]:
             print("  " + ", ".join(f"{k}={v}" for k, v in flag.items()))

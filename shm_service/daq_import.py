@@ -596,6 +596,8 @@ def import_recording(
         "rejected_nonfinite": json.dumps({t: r.rejected for t, r in report_topics.items()}),
         "rejected": json.dumps({t: {"samples": r.rejected, "reasons": r.reasons} for t, r in report_topics.items()}),
         "zero_filled": json.dumps({t: r.zero_filled for t, r in report_topics.items() if r.zero_filled}),
+        # the readers judge the recording's values by these (the map's [limits])
+        "limits": channel_map.limits.model_dump_json(),
     }}
 
     partial = out.with_name(out.name + ".part")

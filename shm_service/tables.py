@@ -527,7 +527,7 @@ def _read_mcap(path: Path, opts: _Options) -> Table:
     grid = t0 + np.arange(n) * (1e9 / rate)
     data = np.column_stack([np.interp(grid, c.log_time_ns.astype(float), c.values[:, j]) for _, _, c, j in chans])
     table = _finish(data, [n_ for n_, *_ in chans], [u for _, u, *_ in chans], replace(opts, fs=rate), path, "mcap")
-    return replace(table, start_s=(t0 - rec.start_ns) / 1e9)
+    return replace(table, start_s=(t0 - rec.start_ns) / 1e9, problems=tuple(rec.report.problems))
 
 
 _READERS = {
