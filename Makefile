@@ -4,12 +4,13 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench docs clean
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -c constraints.txt -e '.[test]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,docs]'
+	$(PY) -m shm_service.warmup  # compile the filter's kernels now: the first demo shows estimates at once
 	touch $(STAMP)
 
 # A bounded demo (30 simulated minutes at 4x real time: 7.5 min) of the service and its dashboard
@@ -26,6 +27,10 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m benchmarks
 
+# The documentation site into site/, offline; the reference and validation pages are generated (docs_reference.py).
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict
+
 # Everything the setup and the runs made: the venv, build files and var/ (the demo's and serve's data).
 clean:
-	rm -rf $(VENV) build *.egg-info var
+	rm -rf $(VENV) build *.egg-info var site

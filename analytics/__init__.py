@@ -11,6 +11,11 @@ from ._damping import DampingEstimate, bandpass, combine_estimates, envelope_dec
 from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
 from ._location import DamageLocation, locate_damage
 from ._engine import EngineWindow, MonitoringEngine
+from ._fatigue import SECONDS_PER_YEAR, FatigueDetail, HotSpotFatigue, LifeEstimate, LoadsWindow, remaining_life
+from ._loads_monitor import HotSpotSpec, LoadsConfig, LoadsMonitor
+from ._loads import DelBand, SignalLoads, bending_moment, signal_loads, virtual_strain
+from ._rainflow import Cycles, HalfCyclePolicy, RainflowCounter, RainflowResidue, cycles_by_range, rainflow_cycles
+from ._sn_curves import DNV_RP_C203_CURVES, EN1993_DETAIL_CATEGORIES, SnCurve, damage_equivalent_range, miner_damage, sn_curve
 from ._monitor import Baseline, BaselineError, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model, support_acceleration
 from ._oma import (
     IdentifiedMode, ModalIdentification, OmaConfig, OmaResult, OmaWindow, OperationalModalAnalysis, damping_estimates, identify_modes,
@@ -40,4 +45,9 @@ __all__ = [
     "classify_excitation", "cluster_poles", "damping_estimates", "frf_h1", "frf_modes", "identify_modes", "identify_windows", "modal_assurance",
     "modal_phase_collinearity", "output_correlations", "prepare_band", "segment_correlations", "ssi_cov", "ssi_poles",
     "stabilisation_diagram", "subspace_damping", "toeplitz_from_data", "tracked_frequency",
+    # loads and fatigue (issue 21): streaming rainflow, S–N curves, Miner damage, remaining life
+    "Cycles", "DNV_RP_C203_CURVES", "EN1993_DETAIL_CATEGORIES", "FatigueDetail", "HalfCyclePolicy", "HotSpotFatigue",
+    "LifeEstimate", "LoadsWindow", "RainflowCounter", "RainflowResidue", "SECONDS_PER_YEAR", "SnCurve", "cycles_by_range",
+    "damage_equivalent_range", "miner_damage", "rainflow_cycles", "remaining_life", "sn_curve",
+    "DelBand", "SignalLoads", "bending_moment", "signal_loads", "virtual_strain", "HotSpotSpec", "LoadsConfig", "LoadsMonitor",
 ]

@@ -48,11 +48,24 @@ class AlarmEvent:
     reason: str = ""
 
     def message(self) -> str:
+        if self.kind == "fatigue":
+            return self._fatigue_message()
         what = f"eigenfrequency of mode {self.mode}" if self.kind == "frequency" else "curvature index"
         score = "" if self.score_sigma is None else f" ({self.score_sigma:+.1f} σ)"
         if self.action == "clear":
             return f"{what}: {self.reason or 'back within the baseline'}{score}"
         return f"{what} deviates from the baseline{score}: {self.level}"
+
+
+    def _fatigue_message(self) -> str:
+        # score: the condition in units of its warning line (analytics._loads_monitor)
+        spot, _, condition = self.chart.removeprefix("fatigue:").rpartition(":")
+        what = {"rate": "damage rate would exhaust the design life early", "del": "DEL jumped against its baseline",
+                "consumed": "consumed life passed its level"}[condition]
+        score = "" if self.score_sigma is None else f" ({self.score_sigma:.2f} x the warning line)"
+        if self.action == "clear":
+            return f"hot spot {spot}: {self.reason or 'fatigue condition back below its warning line'}{score}"
+        return f"hot spot {spot}: {what}{score}: {self.level}"
 
 
 class AlarmLogic:

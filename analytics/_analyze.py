@@ -76,6 +76,7 @@ class AnalysisResult:
     baseline: Baseline | None
     skipped: dict | None = None
     config: AnalysisConfig | None = None
+    loads: tuple = ()  # per window (contract.LoadsWindowDocument, its fatigue AlarmEvents), with hot spots
 
     def as_dict(self) -> dict:
         """JSON-safe {"modes": [...], "windows": [...], "flags": [...], "baseline": {...}} (None instead of NaN)."""
@@ -86,8 +87,13 @@ class AnalysisResult:
                   "modes": [{"mode": m.mode, "unit": m.unit + 1, "f_ref_hz": m.f_ref_hz, "temperature_ref_c": m.temperature_ref_c,
                              "slope_per_k": m.slope_per_k, "sigma_rel": m.sigma_rel, "windows": m.windows,
                              "charted": m.mode not in problems, "reason": problems.get(m.mode)} for m in self.baseline.modes]}
-        return {"modes": [m.as_dict() for m in self.modes], "windows": [w.as_dict() for w in self.windows],
-                "flags": [dict(f) for f in self.flags], "baseline": bl, "skipped_windows": dict(self.skipped or {})}
+        out = {"modes": [m.as_dict() for m in self.modes], "windows": [w.as_dict() for w in self.windows],
+               "flags": [dict(f) for f in self.flags], "baseline": bl, "skipped_windows": dict(self.skipped or {})}
+        if self.loads:
+            out["loads"] = [{**doc.model_dump(mode="json"), "alarm_events": [{"action": e.action, "chart": e.chart, "level": e.level,
+                                                                               "at_s": e.at_s, "message": e.message()} for e in events]}
+                            for doc, events in self.loads]
+        return out
 
 
 def _above_floor(y: np.ndarray, s: int, e: int, fs: float, trim: float) -> int:
@@ -302,7 +308,7 @@ def _prepare(times_s, b, temperature, bearing, fs):
 
 
 def _run(times_s, b, curvature_shapes, stations_eta, *, fs, temperature, bearing, expected_hz, baseline, config, beam_length,
-         signatures, time_origin_ns, not_before_s, learn):
+         signatures, time_origin_ns, not_before_s, learn, loads=None):
     cfg = config or AnalysisConfig()
     if not isinstance(cfg, AnalysisConfig):
         raise ValueError(f"config must be an AnalysisConfig, got {type(cfg).__name__}")
@@ -320,9 +326,12 @@ def _run(times_s, b, curvature_shapes, stations_eta, *, fs, temperature, bearing
                        signatures=signatures, learn=learn)
     origin = int(time_origin_ns)
     not_before = None if not_before_s is None else origin + int(round(float(not_before_s) * _NS))
-    engine = MonitoringEngine(mon, origin_ns=origin, time_zero_ns=origin, not_before_ns=not_before)
-    windows = tuple(w.result for w in engine.add(t, B, support=d, temperature=temp))
-    return cfg, fs, B, t, d, mon, engine, windows
+    engine = MonitoringEngine(mon, origin_ns=origin, time_zero_ns=origin, not_before_ns=not_before, loads=loads)
+    engine_windows = engine.add(t, B, support=d, temperature=temp)
+    windows = tuple(w.result for w in engine_windows)
+    # the hot spots' loads per window and their alarm events (issue 21), when the engine has loads
+    loads_windows = tuple((w.loads, w.loads_events) for w in engine_windows if w.loads is not None)
+    return cfg, fs, B, t, d, mon, engine, windows, loads_windows
 
 
 def analyze(
@@ -341,6 +350,7 @@ def analyze(
     signatures: object | None = None,
     time_origin_ns: int = 0,
     not_before_s: float | None = None,
+    loads: object | None = None,
 ) -> AnalysisResult:
     """Modal analytics of a record: the engine's windows (:class:`analytics.MonitoringEngine`, the
     same as ``shm serve``'s) and the record's modes.
@@ -362,6 +372,7 @@ def analyze(
     time_origin_ns : data time (ns, UNIX for a contract recording) of times_s = 0: windows are
         aligned to multiples of the step in data time and reported in s after it.
     not_before_s : windows starting earlier (s after the origin) are not analysed (the filter converging).
+    loads : LoadsMonitor or None: the hot spots' loads and fatigue, per window (issue 21).
 
     Returns
     -------
@@ -373,17 +384,17 @@ def analyze(
         For inputs of the wrong shape, non-finite values, a window longer than the record, or a
         malformed baseline, naming the value.
     """
-    cfg, fs, B, t, d, mon, engine, windows = _run(
+    cfg, fs, B, t, d, mon, engine, windows, loads_windows = _run(
         times_s, b, curvature_shapes, stations_eta, fs=fs, temperature=temperature, bearing=bearing, expected_hz=expected_hz,
         baseline=baseline, config=config, beam_length=beam_length, signatures=signatures, time_origin_ns=time_origin_ns,
-        not_before_s=not_before_s, learn="period")
+        not_before_s=not_before_s, learn="period", loads=loads)
     flags: dict = {}
     for w in windows:
         for f in w.flags:
             flags[(f["kind"], f["mode"], f["since_s"])] = f
     summaries = _summaries(mon, windows, B, t, d, fs, cfg, 0.0)
     return AnalysisResult(summaries, windows, tuple(flags.values()), mon.baseline,
-                          {"incomplete": engine.skipped_incomplete, "warmup": engine.skipped_warmup}, cfg)
+                          {"incomplete": engine.skipped_incomplete, "warmup": engine.skipped_warmup}, cfg, loads_windows)
 
 
 def learn_baseline(
@@ -420,7 +431,7 @@ def learn_baseline(
     ValueError
         For bad inputs, as :func:`analyze`.
     """
-    cfg, fs, B, t, d, mon, engine, windows = _run(
+    cfg, fs, B, t, d, mon, engine, windows, _loads = _run(
         times_s, b, curvature_shapes, stations_eta, fs=fs, temperature=temperature, bearing=bearing, expected_hz=expected_hz,
         baseline=None, config=config, beam_length=beam_length, signatures=signatures, time_origin_ns=time_origin_ns,
         not_before_s=not_before_s, learn="record")

@@ -69,6 +69,17 @@ def log_decrement(x: object, fs: float, *, min_cycles: float = 3.0) -> DampingEs
 
     Positive peaks are located (parabolic sub-sample refinement), ln(peak) is fitted linearly
     against time: slope −σ; ζ = σ/√(σ² + ω_d²). σ's standard error gives the uncertainty.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from analytics import log_decrement
+    >>> fs, f, zeta = 200.0, 3.0, 0.02
+    >>> t = np.arange(0.0, 30.0, 1 / fs)
+    >>> x = np.exp(-zeta * 2 * np.pi * f * t) * np.cos(2 * np.pi * f * np.sqrt(1 - zeta**2) * t)
+    >>> est = log_decrement(x, fs)
+    >>> round(est.damping_ratio, 4), round(est.frequency_hz, 2)
+    (0.02, 3.0)
     """
     fs = check_fs(fs)
     a = as_signal("x", x, min_len=16, ndim=(1,))

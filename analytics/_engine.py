@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._loads_monitor import LoadsMonitor
 from ._monitor import ModalMonitor, WindowResult
 from ._validate import as_signal
 
@@ -37,6 +38,8 @@ class EngineWindow:
     start_ns: int
     b: np.ndarray
     support: np.ndarray | None
+    loads: object | None = None  # contract.LoadsWindowDocument of the hot spots, when the engine has loads
+    loads_events: tuple = ()  # the fatigue charts' AlarmEvents of this window
 
 
 class _Series:
@@ -97,6 +100,9 @@ class MonitoringEngine:
         step at or after the first sample.
     min_coverage : float
         A window needs samples over this fraction of its length, else it is skipped (counted).
+    loads : LoadsMonitor, optional
+        The hot spots' loads and fatigue: each window's first step of samples (every sample once)
+        is counted; a failure there is counted (``loads_errors``) and never stops the modal path.
 
     Raises
     ------
@@ -106,7 +112,7 @@ class MonitoringEngine:
     """
 
     def __init__(self, monitor: ModalMonitor, *, origin_ns: int = 0, time_zero_ns: int = 0, not_before_ns: int | None = None,
-                 next_start_ns: int | None = None, min_coverage: float = 0.8) -> None:
+                 next_start_ns: int | None = None, min_coverage: float = 0.8, loads: LoadsMonitor | None = None) -> None:
         if not isinstance(monitor, ModalMonitor):
             raise ValueError(f"monitor must be a ModalMonitor, got {type(monitor).__name__}")
         if not 0 < min_coverage <= 1:
@@ -125,6 +131,10 @@ class MonitoringEngine:
         self.not_before_ns = None if not_before_ns is None else int(not_before_ns)
         self.next_start_ns = None if next_start_ns is None else int(next_start_ns)
         self.min_coverage = float(min_coverage)
+        if loads is not None and not isinstance(loads, LoadsMonitor):
+            raise ValueError(f"loads must be a LoadsMonitor, got {type(loads).__name__}")
+        self.loads = loads
+        self.loads_errors = 0
         self.b = _Series()
         self.temperature = _Series()
         self.windows = 0
@@ -241,7 +251,15 @@ class MonitoringEngine:
             self.skipped_incomplete += 1
             return None
         self.windows += 1
-        return EngineWindow(res, start_ns, B, d)
+        loads, events = None, ()
+        if self.loads is not None:
+            n_step = min(self.n, int(round(self.step_ns * self.fs / _NS)))
+            try:
+                loads = self.loads.process_window(float(times[0]), B[:n_step], self.fs, T)
+                events = tuple(self.loads.events)
+            except ValueError:
+                self.loads_errors += 1
+        return EngineWindow(res, start_ns, B, d, loads, events)
 
     # -- persistence ---------------------------------------------------------------------------
     def reset(self, monitor: ModalMonitor) -> None:

@@ -84,6 +84,17 @@ def amplitude_spectrum(x: object, fs: float, *, pad_factor: int = 4, window: str
 
     The mean is removed (``detrend``), the record is windowed, zero padded to pad_factor·N and
     scaled by 2/Σw so that a sinusoid of amplitude A (signal unit) shows a peak of A.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from analytics import amplitude_spectrum, find_peaks
+    >>> fs = 100.0                                   # Hz
+    >>> t = np.arange(0.0, 20.0, 1 / fs)             # 20 s
+    >>> x = 0.5 * np.sin(2 * np.pi * 2.0 * t)        # 0.5 units at 2 Hz
+    >>> peak = find_peaks(amplitude_spectrum(x, fs), fmin=0.5)[0]
+    >>> round(peak.frequency_hz, 3), round(peak.amplitude, 3)   # amplitude-correct
+    (2.0, 0.5)
     """
     fs = check_fs(fs)
     pad = _check_pad(pad_factor)

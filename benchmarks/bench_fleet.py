@@ -299,16 +299,17 @@ def _run_fleet(tmp: str, ids: list[str], workers: int, speed: float, seconds: fl
 
     cfg = Path(tmp) / "fleet.toml"
     cfg.write_text(_fleet_toml(ids, block_s, max(3600.0, 2 * speed * seconds)), encoding="utf-8")
-    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(cfg), "--speed", str(speed), "--no-archive",
-           "--port", "0", "--db", f"{tmp}/shm.sqlite", "--workers", str(workers), "--json"]
-    cmd += ["--dashboard-port", "0"] if dashboard else ["--no-dashboard"]
+    from shm_service.service import ServeStartError, start_serve
+
+    args = ["--config", str(cfg), "--speed", str(speed), "--no-archive", "--port", "0", "--db", f"{tmp}/shm.sqlite",
+            "--workers", str(workers), "--json"]
+    args += ["--dashboard-port", "0"] if dashboard else ["--no-dashboard"]
     log = open(Path(tmp) / "serve.log", "w")
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
-    line = proc.stdout.readline()
-    if "API at " not in line:
-        proc.wait(30)
-        raise RuntimeError(f"shm serve did not start: {(Path(tmp) / 'serve.log').read_text()[-2000:]}")
-    url = line.split("API at ")[1].split()[0]
+    try:
+        serve = start_serve(args, stdout=subprocess.DEVNULL, stderr=log, timeout=600, ready_file=Path(tmp) / "ready.json")
+    except ServeStartError as exc:
+        raise RuntimeError(f"shm serve did not start ({exc}): {(Path(tmp) / 'serve.log').read_text()[-2000:]}") from None
+    proc, url = serve.process, serve.url
     front = psutil.Process(proc.pid)
     load = _load()
     started = time.monotonic()

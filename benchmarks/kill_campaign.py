@@ -17,7 +17,6 @@ import argparse
 import json
 import os
 import random
-import re
 import signal
 import sqlite3
 import subprocess
@@ -94,21 +93,13 @@ def _start(tmp: Path, recording: Path, webhook: str) -> tuple[subprocess.Popen, 
 
     toml = tmp / "serve.toml"
     toml.write_text(tomli_w.dumps(FAST))
-    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(toml), "--source", f"replay:{recording}",
-           "--speed", "max", "--no-dashboard", "--port", "0", "--db", str(tmp / "shm.sqlite"), "--webhook", webhook,
-           "--keep-running", "--json"]
-    proc = subprocess.Popen(cmd, cwd=tmp, env={**os.environ, "PYTHONPATH": str(ROOT)}, stdout=subprocess.PIPE,
-                            stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline().decode()
-        m = re.search(r"API at (http://\S+?)[;\s]", line)
-        if m:
-            return proc, m.group(1)
-        if proc.poll() is not None:
-            break
-    proc.kill()
-    raise RuntimeError("shm serve did not start")
+    from shm_service.service import start_serve
+
+    args = ["--config", str(toml), "--source", f"replay:{recording}", "--speed", "max", "--no-dashboard", "--port", "0",
+            "--db", str(tmp / "shm.sqlite"), "--webhook", webhook, "--keep-running", "--json"]
+    serve = start_serve(args, cwd=tmp, env={**os.environ, "PYTHONPATH": str(ROOT)}, stdout=subprocess.DEVNULL,
+                        stderr=subprocess.DEVNULL, timeout=120, ready_file=tmp / "ready.json")
+    return serve.process, serve.url
 
 
 def campaign(kills: int = 20, *, seed: int = 7, max_delay_s: float = 15.0, workdir: Path | None = None) -> dict[str, Any]:
@@ -136,7 +127,6 @@ def campaign(kills: int = 20, *, seed: int = 7, max_delay_s: float = 15.0, workd
             time.sleep(instant)
             proc.send_signal(signal.SIGKILL)
             proc.wait(30)
-            proc.stdout.close()
             integrity.append(_integrity(db))
             now = _snapshot(db)
             if previous is not None:
@@ -154,7 +144,6 @@ def campaign(kills: int = 20, *, seed: int = 7, max_delay_s: float = 15.0, workd
                 time.sleep(0.5)
         proc.send_signal(signal.SIGTERM)
         proc.wait(60)
-        proc.stdout.close()
         integrity.append(_integrity(db))
         final = _snapshot(db)
         if previous is not None:

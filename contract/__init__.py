@@ -9,6 +9,9 @@ other package imports its layouts and documents from here instead of re-deriving
 from ._network import is_loopback
 from ._documents import (
     CURVATURE_CHART,
+    FATIGUE_CONDITIONS,
+    HotSpotLoadsDocument,
+    LoadsWindowDocument,
     SENSOR_STATES,
     AidingChannelDocument,
     AlarmCountsDocument,
@@ -78,8 +81,15 @@ from ._payloads import (
     row_layout,
 )
 from ._rig import (
+    DNV_RP_C203_CURVE_NAMES,
+    DNV_RP_C203_ENVIRONMENTS,
+    EN1993_DETAIL_CATEGORIES,
+    EN1993_SHEAR_CATEGORIES,
     STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT,
     Beam,
+    FatigueSettings,
+    HotSpot,
+    check_curve_spec,
     Orientation,
     PointMass,
     RigDescription,
@@ -96,7 +106,9 @@ from ._state import Peripheral, StateIndex, StateLayout
 __all__ = [
     "is_loopback",
     # rig.json
-    "Beam", "Orientation", "PointMass", "RigDescription", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
+    "Beam", "Orientation", "PointMass", "RigDescription",
+    "DNV_RP_C203_CURVE_NAMES", "DNV_RP_C203_ENVIRONMENTS", "EN1993_DETAIL_CATEGORIES", "EN1993_SHEAR_CATEGORIES",
+    "FatigueSettings", "HotSpot", "check_curve_spec", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
     "STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT", "Support", "load_rig", "parse_rig",
     # topics and payloads
     "BEARING_TOPIC", "ESTIMATE_TOPIC", "IMU_PLANAR_COLUMNS", "NOMINAL_PERIOD_NS", "PAYLOAD_FIELDS", "SCHEMAS",
@@ -107,6 +119,7 @@ __all__ = [
     "CURVATURE_CHART", "SENSOR_STATES", "AidingChannelDocument", "AlarmCountsDocument", "AlarmDocument",
     "AlarmEvent", "AlarmEventDocument", "AlarmLevel", "AlarmsDocument", "ArchiveStatusDocument", "BaselineModeDocument",
     "BaselineRequestDocument", "BaselineStatusDocument", "ChartDocument", "ChartKind", "ChartLevelsDocument",
+    "FATIGUE_CONDITIONS", "HotSpotLoadsDocument", "LoadsWindowDocument",
     "CurvatureDocument", "DegradedImuDocument", "ErrorDocument", "EstimateDocument", "EstimatorStatusDocument", "FlagDocument",
     "HealthDocument", "IngestErrorDocument", "IngestResultDocument", "LastEstimateDocument", "LiveEstimatesDocument", "Level", "LocationDocument", "ModeDocument",
     "ModelDocument", "NotificationStatusDocument", "PipelineStatusDocument", "RestCalibrationDocument", "SensorState",

@@ -42,6 +42,9 @@ __all__ = [
     "DegradedImuDocument",
     "EstimateDocument",
     "ErrorDocument",
+    "FATIGUE_CONDITIONS",
+    "HotSpotLoadsDocument",
+    "LoadsWindowDocument",
     "EstimatorStatusDocument",
     "FlagDocument",
     "HealthDocument",
@@ -74,7 +77,10 @@ __all__ = [
 
 Level = Literal["ok", "warning", "alarm"]
 AlarmLevel = Literal["warning", "alarm"]
-ChartKind = Literal["frequency", "curvature"]
+ChartKind = Literal["frequency", "curvature", "fatigue"]
+#: Conditions of a hot spot's fatigue charts (issue 21): the damage rate against the design life,
+#: the DEL against its baseline, the consumed life.
+FATIGUE_CONDITIONS: Final[tuple[str, ...]] = ("rate", "del", "consumed")
 WindowKind = Literal["forced", "free_decay", "ambient", "quiet"]
 SensorState = Literal["ok", "degraded", "rejected"]
 #: What a sensor can be: delivering ("ok"), silent or left out of the solution ("degraded"),
@@ -85,8 +91,9 @@ SENSOR_STATES: Final[tuple[str, ...]] = ("ok", "degraded", "rejected")
 CURVATURE_CHART: Final = "curvature"
 
 
-def chart_name(kind: ChartKind, mode: int | None = None) -> str:
-    """The stored name of a control chart: ``mode3`` for mode 3's frequency, ``curvature``."""
+def chart_name(kind: ChartKind, mode: int | None = None, *, hot_spot: str | None = None, condition: str | None = None) -> str:
+    """The stored name of a control chart: ``mode3`` for mode 3's frequency, ``curvature``, and
+    ``fatigue:<hot spot>:<condition>`` for a hot spot's fatigue condition (rate, del, consumed)."""
     if kind == "frequency":
         if isinstance(mode, bool) or not isinstance(mode, (int, np.integer)) or mode < 1:
             raise ValueError(f"a frequency chart needs a 1-based integer mode, got {mode=}")
@@ -95,7 +102,19 @@ def chart_name(kind: ChartKind, mode: int | None = None) -> str:
         if mode is not None:
             raise ValueError(f"the curvature chart has no mode, got {mode=}")
         return CURVATURE_CHART
-    raise ValueError(f"{kind=} must be 'frequency' or 'curvature'")
+    if kind == "fatigue":
+        if mode is not None or not hot_spot or condition not in FATIGUE_CONDITIONS:
+            raise ValueError(f"a fatigue chart needs a hot spot and a condition in {FATIGUE_CONDITIONS}, no mode; got "
+                             f"{mode=}, {hot_spot=}, {condition=}")
+        return f"fatigue:{hot_spot}:{condition}"
+    raise ValueError(f"{kind=} must be 'frequency', 'curvature' or 'fatigue'")
+
+
+def _expected_chart(name: str, kind: ChartKind, mode: int | None) -> str:
+    if kind == "fatigue":
+        spot, _, condition = name.removeprefix("fatigue:").rpartition(":")
+        return chart_name(kind, mode, hot_spot=spot or None, condition=condition)
+    return chart_name(kind, mode)
 
 
 def _finite_or_none(value: Any) -> Any:
@@ -219,7 +238,7 @@ class ChartDocument(_Document):
 
     @model_validator(mode="after")
     def _named(self) -> "ChartDocument":
-        expected = chart_name(self.kind, self.mode)
+        expected = _expected_chart(self.name, self.kind, self.mode)
         if self.name != expected:
             raise ValueError(f"chart name {self.name!r} does not match kind={self.kind!r}, mode={self.mode!r} ({expected!r})")
         return self
@@ -372,7 +391,7 @@ class AlarmDocument(_Document):
 
     @model_validator(mode="after")
     def _named(self) -> "AlarmDocument":
-        expected = chart_name(self.kind, self.mode)
+        expected = _expected_chart(self.chart, self.kind, self.mode)
         if self.chart != expected:
             raise ValueError(f"alarm chart {self.chart!r} does not match kind={self.kind!r}, mode={self.mode!r} ({expected!r})")
         return self
@@ -442,6 +461,9 @@ class ServiceStatusDocument(_Document):
     pipeline_error: str | None = Field(None, description="the error of the last batch, None once a batch succeeds again")
     pipeline_errors: Count = Field(0, description="batches that failed since the start")
     last_pipeline_error: str | None = None
+    progress: str | None = Field(
+        None, description="what the service is doing now, in words: compiling the filter (first run only), "
+        "calibrating at rest and the time left, waiting for the first analysis window, learning the baseline, monitoring")
 
 
 class SourceStatusDocument(_Document):
@@ -687,3 +709,38 @@ class IngestResultDocument(_Document):
     rejected: Count
     rejected_by_reason: dict[str, Count]
     errors: list[IngestErrorDocument]
+
+
+# -- loads and fatigue (issue 21) ------------------------------------------------------------
+
+
+class HotSpotLoadsDocument(_Document):
+    """One hot spot in one analysis window: the window's loads and the hot spot's life so far.
+
+    Stresses are nominal (before the SCF) in Pa; damage is Miner's sum with the SCF and partial factors.
+    """
+
+    name: str
+    position_m: Finite
+    curve: str
+    del_pa: dict[str, Num] = Field(description="damage-equivalent stress range of the window per Wöhler exponent m ('3', '5'), Pa")
+    n_eq: Finite = Field(description="equivalent cycles of the DELs")
+    max_range_pa: Num
+    damage_increment: Num = Field(description="Miner damage of the cycles the window closed")
+    consumed: Num = Field(description="consumed life D so far (closed cycles plus the open residue as half cycles)")
+    rate_per_year: Num = None
+    rate_band_per_year: list[Num] | None = None
+    remaining_years: Num = Field(None, description="(1 − D)/rate; None when nothing is consumed (below the cut-off) or no rate yet")
+    remaining_band_years: list[Num] | None = None
+    verdict: Literal["finite", "no_damage_below_cutoff", "exhausted", "no_data"]
+    design_life_years: Num = None
+
+
+class LoadsWindowDocument(_Document):
+    """The loads of one analysis window over the hot spots (``MonitoringEngine`` with loads)."""
+
+    start_s: Finite
+    duration_s: Finite
+    temperature_c: Num = None
+    hot_spots: list[HotSpotLoadsDocument]
+    charts: list[ChartDocument] = Field(default_factory=list, description="the hot spots' fatigue charts judged in this window")

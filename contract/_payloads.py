@@ -174,7 +174,18 @@ _FIXED_TOPICS: Final[dict[str, TopicInfo]] = {
 
 
 def classify_topic(topic: str) -> TopicInfo | None:
-    """The contract's meaning of ``topic``, or ``None`` for a topic the contract does not know."""
+    """The contract's meaning of ``topic``, or ``None`` for a topic the contract does not know.
+
+    Examples
+    --------
+    >>> from contract import classify_topic
+    >>> classify_topic("/imu/s1")
+    TopicInfo(kind='imu', name='s1', title='shm.Imu')
+    >>> classify_topic("/bearing/displacement").title
+    'shm.Distance'
+    >>> classify_topic("/camera/front") is None
+    True
+    """
     fixed = _FIXED_TOPICS.get(topic)
     if fixed is not None:
         return fixed

@@ -11,17 +11,28 @@ import json
 import math
 import tomllib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 __all__ = [
+    "DNV_RP_C203_CURVE_NAMES",
+    "DNV_RP_C203_ENVIRONMENTS",
+    "EN1993_DETAIL_CATEGORIES",
+    "EN1993_SHEAR_CATEGORIES",
     "Beam",
+    "check_curve_spec",
+    "FatigueSettings",
+    "HotSpot",
     "PointMass",
+    "RectangleSection",
     "RigDescription",
     "RigError",
     "Sensor",
     "StiffnessSegment",
+    "TableSection",
+    "TubeSection",
     "load_rig",
     "parse_rig",
 ]
@@ -35,6 +46,61 @@ _POSITIONED_KINDS = ("imu", "tof", "strain")
 
 #: Steel loses about 0.03 % of its Young's modulus per kelvin.
 STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT = -3.0e-4
+
+
+#: EN 1993-1-9 Fig. 7.1 detail categories Δσ_C (MPa), normal stress ("36*" is also accepted).
+EN1993_DETAIL_CATEGORIES = (160, 140, 125, 112, 100, 90, 80, 71, 63, 56, 50, 45, 40, 36)
+#: EN 1993-1-9 Fig. 7.2 detail categories Δτ_C (MPa), shear stress ("EN1993-1-9:shear:<Δτ_C>").
+EN1993_SHEAR_CATEGORIES = (100, 80)
+#: DNV-RP-C203 (2016) S–N curves of Tables 2-1 (air) and 2-2 (seawater with cathodic protection).
+DNV_RP_C203_CURVE_NAMES = ("B1", "B2", "C", "C1", "C2", "D", "E", "F", "F1", "F3", "G", "W1", "W2", "W3")
+DNV_RP_C203_ENVIRONMENTS = ("air", "seawater-cp")
+
+
+def check_curve_spec(spec: object) -> None:
+    """Raise ValueError naming the value unless ``spec`` names a known S–N curve (see INTERFACES/hot_spots):
+    "EN1993-1-9:<Δσ_C>", "EN1993-1-9:shear:<Δτ_C>", "DNV-RP-C203:<curve>:air|seawater-cp" or
+    {"points": [[N, Δσ_Pa], ...]} (N increasing, Δσ decreasing, all > 0, at least two)."""
+    if isinstance(spec, dict):
+        if set(spec) != {"points"}:
+            raise ValueError(f"curve {spec!r}: a user curve is {{'points': [[N, stress_range_pa], ...]}}")
+        try:
+            p = np.asarray(spec["points"], dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"curve points {spec['points']!r} must be [[N, stress_range_pa], ...]") from None
+        if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 2:
+            raise ValueError(f"curve points must be at least two [N, stress_range_pa] pairs, got shape {p.shape}")
+        if not np.all(np.isfinite(p)) or np.any(p <= 0):
+            raise ValueError(f"curve points must be finite and > 0, got {p.tolist()}")
+        if np.any(np.diff(p[:, 0]) <= 0) or np.any(np.diff(p[:, 1]) >= 0):
+            raise ValueError(f"curve points need N increasing and stress range decreasing, got {p.tolist()}")
+        return
+    if not isinstance(spec, str):
+        raise ValueError(f"curve {spec!r} must be a name like 'EN1993-1-9:71' or {{'points': ...}}")
+    parts = spec.split(":")
+    if parts[0] == "EN1993-1-9":
+        shear = len(parts) == 3 and parts[1] == "shear"
+        if len(parts) != (3 if shear else 2):
+            raise ValueError(f"curve {spec!r}: expected 'EN1993-1-9:<category>' or 'EN1993-1-9:shear:<category>'")
+        text = parts[-1]
+        categories = EN1993_SHEAR_CATEGORIES if shear else EN1993_DETAIL_CATEGORIES
+        try:
+            value = float(text[:-1] if text == "36*" and not shear else text)
+        except ValueError:
+            value = math.nan
+        if value not in categories:
+            raise ValueError(f"curve {spec!r}: unknown EN 1993-1-9 {'shear ' if shear else ''}detail category {text!r}; "
+                             f"known: {', '.join(map(str, categories))}{'' if shear else ', 36*'}")
+        return
+    if parts[0] == "DNV-RP-C203":
+        if len(parts) != 3:
+            raise ValueError(f"curve {spec!r}: expected 'DNV-RP-C203:<curve>:air' or ':seawater-cp'")
+        if parts[2] not in DNV_RP_C203_ENVIRONMENTS:
+            raise ValueError(f"curve {spec!r}: unknown DNV-RP-C203 environment {parts[2]!r}; known: {', '.join(DNV_RP_C203_ENVIRONMENTS)}")
+        if parts[1] not in DNV_RP_C203_CURVE_NAMES:
+            raise ValueError(f"curve {spec!r}: unknown DNV-RP-C203 curve {parts[1]!r}; known: {', '.join(DNV_RP_C203_CURVE_NAMES)}")
+        return
+    raise ValueError(f"curve {spec!r}: unknown standard {parts[0]!r}; known: EN1993-1-9, DNV-RP-C203, or {{'points': ...}}")
 
 
 class RigError(ValueError):
@@ -64,43 +130,321 @@ class StiffnessSegment(_ContractModel):
         return self
 
 
+class RectangleSection(_ContractModel):
+    """A solid rectangle at ``position`` (m from D), bending across its ``thickness`` (m)."""
+
+    position: float = Field(ge=0.0, allow_inf_nan=False)
+    shape: Literal["rectangle"]
+    width: float = Field(gt=0.0, allow_inf_nan=False)
+    thickness: float = Field(gt=0.0, allow_inf_nan=False)
+
+
+class TubeSection(_ContractModel):
+    """A circular hollow section at ``position`` (m from D): ``outer_diameter`` and ``wall_thickness`` (m)."""
+
+    position: float = Field(ge=0.0, allow_inf_nan=False)
+    shape: Literal["tube"]
+    outer_diameter: float = Field(gt=0.0, allow_inf_nan=False)
+    wall_thickness: float = Field(gt=0.0, allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _wall_fits(self) -> TubeSection:
+        if self.wall_thickness > 0.5 * self.outer_diameter:
+            raise ValueError(
+                f"wall_thickness={self.wall_thickness} m exceeds half the outer_diameter={self.outer_diameter} m"
+            )
+        return self
+
+
+class TableSection(_ContractModel):
+    """Any other section by its properties at the reference temperature: EI (N·m²), μ (kg/m), c (m)."""
+
+    position: float = Field(ge=0.0, allow_inf_nan=False)
+    shape: Literal["table"]
+    bending_stiffness: float = Field(gt=0.0, allow_inf_nan=False)
+    mass_per_length: float = Field(gt=0.0, allow_inf_nan=False)
+    fibre_distance: float = Field(gt=0.0, allow_inf_nan=False)
+
+
+Section = Annotated[RectangleSection | TubeSection | TableSection, Field(discriminator="shape")]
+
+#: The dimensions of each shape that vary linearly along a taper.
+_SECTION_DIMENSIONS = {
+    "rectangle": ("width", "thickness"),
+    "tube": ("outer_diameter", "wall_thickness"),
+    "table": ("bending_stiffness", "mass_per_length", "fibre_distance"),
+}
+
+
+def _as_positions(positions: Any, length: float) -> tuple[np.ndarray, bool]:
+    scalar = np.ndim(positions) == 0
+    try:
+        eta = np.atleast_1d(np.asarray(positions, dtype=float))
+    except (TypeError, ValueError) as exc:
+        raise RigError(f"positions={positions!r} must be arc lengths in m (numbers): {exc}") from None
+    if eta.ndim != 1:
+        raise RigError(f"positions must be a scalar or a 1-D array of arc lengths, got shape {eta.shape}")
+    if np.any(~np.isfinite(eta)) or np.any(eta < 0.0) or np.any(eta > length * (1 + 1e-12)):
+        bad = eta[~np.isfinite(eta) | (eta < 0.0) | (eta > length * (1 + 1e-12))]
+        raise RigError(f"positions must lie on the beam [0, {length}] m, got {bad[:5].tolist()}")
+    return np.clip(eta, 0.0, length), scalar
+
+
 class Beam(_ContractModel):
-    length: float = Field(gt=0.0)
-    width: float = Field(gt=0.0)
-    thickness: float = Field(gt=0.0)
-    youngs_modulus: float = Field(gt=0.0)
-    density: float = Field(gt=0.0)
+    """The beam: length, material and cross-section along it.
+
+    Without ``sections`` the beam is the uniform rectangle ``width`` × ``thickness`` (m) of the
+    paper's sheet; with ``sections`` (stations of ``rectangle``, ``tube`` or ``table`` shape,
+    ordered by position from 0 to ``length``, linear tapers between neighbours, a step where two
+    stations share a position) its properties vary along it. ``youngs_modulus`` (Pa) and
+    ``density`` (kg/m³) apply to rectangles and tubes; a beam of table sections only may omit them.
+    """
+
+    length: float = Field(gt=0.0, allow_inf_nan=False)
+    width: float | None = Field(default=None, gt=0.0, allow_inf_nan=False)
+    thickness: float | None = Field(default=None, gt=0.0, allow_inf_nan=False)
+    youngs_modulus: float | None = Field(default=None, gt=0.0, allow_inf_nan=False)
+    density: float | None = Field(default=None, gt=0.0, allow_inf_nan=False)
     youngs_modulus_temperature_coefficient: float = STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT
     reference_temperature: float = 20.0
     stiffness_segments: tuple[StiffnessSegment, ...] = ()
+    sections: tuple[Section, ...] | None = None
+
+    @model_validator(mode="after")
+    def _sections_consistent(self) -> Beam:
+        if self.sections is None:
+            for key in ("width", "thickness", "youngs_modulus", "density"):
+                if getattr(self, key) is None:
+                    raise ValueError(f"beam.{key} is required (a uniform rectangle) unless beam.sections is given")
+            return self
+        for key in ("width", "thickness"):
+            if getattr(self, key) is not None:
+                raise ValueError(
+                    f"beam.{key} is not allowed together with beam.sections: the sections give the cross-section"
+                )
+        stations = self.sections
+        if len(stations) < 2:
+            raise ValueError(f"beam.sections needs at least two stations (at 0 and at length), got {len(stations)}")
+        if stations[0].position != 0.0:
+            raise ValueError(f"beam.sections[0].position={stations[0].position} must be 0 (the first station is at D)")
+        if not math.isclose(stations[-1].position, self.length, rel_tol=1e-12, abs_tol=0.0):
+            raise ValueError(
+                f"beam.sections[{len(stations) - 1}].position={stations[-1].position} must equal "
+                f"beam.length={self.length} (the last station is at the tip)"
+            )
+        for index in range(1, len(stations)):
+            before, here = stations[index - 1], stations[index]
+            if here.position < before.position:
+                raise ValueError(
+                    f"beam.sections[{index}].position={here.position} is before beam.sections[{index - 1}].position="
+                    f"{before.position}: stations are ordered by position"
+                )
+            if index >= 2 and here.position == before.position == stations[index - 2].position:
+                raise ValueError(
+                    f"beam.sections[{index}].position={here.position}: three stations at one position "
+                    "(a step is exactly two)"
+                )
+            if here.position > before.position and here.shape != before.shape:
+                raise ValueError(
+                    f"beam.sections[{index}].shape={here.shape!r} differs from beam.sections[{index - 1}].shape="
+                    f"{before.shape!r}: both ends of a taper have the same shape (a change of shape is a step, "
+                    "two stations at one position)"
+                )
+        shapes = {station.shape for station in stations}
+        for key in ("youngs_modulus", "density"):
+            if getattr(self, key) is None and shapes & {"rectangle", "tube"}:
+                raise ValueError(f"beam.{key} is required: it applies to the rectangle and tube sections")
+        return self
+
+    # -- the uniform rectangle -----------------------------------------------------------
+    def _uniform(self, what: str) -> None:
+        if self.sections is not None:
+            raise RigError(
+                f"beam.{what} is a property of the uniform rectangle; this beam varies along beam.sections: "
+                f"use the properties at positions (Beam.bending_stiffness, Beam.mass_per_length_at, Beam.fibre_distance)"
+            )
+
+    @property
+    def uniform(self) -> bool:
+        """True for the uniform rectangle (no ``sections``)."""
+        return self.sections is None
 
     @property
     def area(self) -> float:
+        self._uniform("area")
         return self.width * self.thickness
 
     @property
     def second_moment_of_area(self) -> float:
         """I of the rectangular section for bending across the thickness (m^4)."""
+        self._uniform("second_moment_of_area")
         return self.width * self.thickness**3 / 12.0
 
     @property
     def mass_per_length(self) -> float:
+        self._uniform("mass_per_length")
         return self.density * self.area
 
     @property
     def mass(self) -> float:
-        return self.mass_per_length * self.length
+        """The beam's own mass (kg), integrated over the sections."""
+        if self.sections is None:
+            return self.mass_per_length * self.length
+        return float(np.sum(self._segment_integrals(0)))
 
-    def youngs_modulus_at(self, temperature_c: float | None) -> float:
-        """E (Pa) at ``temperature_c`` (°C); ``None`` means the reference temperature."""
+    # -- temperature ----------------------------------------------------------------------
+    def stiffness_factor_at(self, temperature_c: float | None) -> float:
+        """E(T)/E(T_ref): the factor on every bending stiffness at ``temperature_c`` (°C; ``None``: reference)."""
         if temperature_c is None:
-            return self.youngs_modulus
+            return 1.0
+        if isinstance(temperature_c, bool) or not isinstance(temperature_c, (int, float, np.floating, np.integer)):
+            raise RigError(f"{temperature_c=} must be a number (°C) or None")
         if not math.isfinite(temperature_c):
             raise RigError(f"{temperature_c=} must be finite")
         factor = 1.0 + self.youngs_modulus_temperature_coefficient * (temperature_c - self.reference_temperature)
         if factor <= 0.0:
             raise RigError(f"{temperature_c=} gives a non-positive Young's modulus")
-        return self.youngs_modulus * factor
+        return factor
+
+    def youngs_modulus_at(self, temperature_c: float | None) -> float:
+        """E (Pa) at ``temperature_c`` (°C); ``None`` means the reference temperature."""
+        if self.youngs_modulus is None:
+            raise RigError("beam.youngs_modulus is not given (a beam of table sections): it has no E")
+        if temperature_c is None:
+            return self.youngs_modulus
+        return self.youngs_modulus * self.stiffness_factor_at(temperature_c)
+
+    # -- properties along the beam ----------------------------------------------------------
+    @property
+    def station_positions(self) -> np.ndarray:
+        """Positions (m) of the section stations (empty for the uniform rectangle)."""
+        if self.sections is None:
+            return np.zeros(0)
+        return np.array([station.position for station in self.sections], dtype=float)
+
+    def _properties(self, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(EI at the reference temperature, μ, c) at arc lengths ``eta`` already on the beam."""
+        if self.sections is None:
+            ones = np.ones_like(eta)
+            return (self.youngs_modulus * self.second_moment_of_area * ones, self.mass_per_length * ones,
+                    0.5 * self.thickness * ones)
+        stations = self.sections
+        positions = self.station_positions
+        last = len(stations) - 1
+        # The last station at or before η: at a step, the one listed later (the section beyond it).
+        start = np.clip(np.searchsorted(positions, eta, side="right") - 1, 0, last)
+        stiffness, mass, fibre = np.empty_like(eta), np.empty_like(eta), np.empty_like(eta)
+        for j in np.unique(start):
+            at = start == j
+            a = stations[j]
+            b = stations[min(j + 1, last)]
+            span = b.position - a.position
+            t = np.zeros(int(at.sum())) if j == last or span <= 0 else (eta[at] - a.position) / span
+            dims = {key: getattr(a, key) + t * (getattr(b, key) - getattr(a, key)) for key in _SECTION_DIMENSIONS[a.shape]}
+            if a.shape == "rectangle":
+                w, h = dims["width"], dims["thickness"]
+                stiffness[at] = self.youngs_modulus * w * h**3 / 12.0
+                mass[at] = self.density * w * h
+                fibre[at] = 0.5 * h
+            elif a.shape == "tube":
+                outer = dims["outer_diameter"]
+                inner = outer - 2.0 * dims["wall_thickness"]
+                stiffness[at] = self.youngs_modulus * np.pi / 64.0 * (outer**4 - inner**4)
+                mass[at] = self.density * np.pi / 4.0 * (outer**2 - inner**2)
+                fibre[at] = 0.5 * outer
+            elif a.shape == "table":
+                stiffness[at] = dims["bending_stiffness"]
+                mass[at] = dims["mass_per_length"]
+                fibre[at] = dims["fibre_distance"]
+            else:
+                raise RigError(f"beam.sections[{j}].shape={a.shape!r} must be 'rectangle', 'tube' or 'table'")
+        return stiffness, mass, fibre
+
+    def bending_stiffness(self, positions: Any, temperature_c: float | None = None) -> np.ndarray | float:
+        """EI(η, T) in N·m² at arc lengths ``positions`` (m), nominal (without ``stiffness_segments``).
+
+        Parameters
+        ----------
+        positions : float or array-like (n,), arc lengths on the beam [0, length] m.
+        temperature_c : °C, or ``None`` for the reference temperature; E(T) through the beam's
+            temperature coefficient (tables follow it too).
+
+        Returns
+        -------
+        float or ndarray (n,). At a step the section beyond it.
+
+        Raises
+        ------
+        RigError
+            A position off the beam or not finite; a temperature that is not finite.
+        """
+        eta, scalar = _as_positions(positions, self.length)
+        values = self._properties(eta)[0] * self.stiffness_factor_at(temperature_c)
+        return float(values[0]) if scalar else values
+
+    def mass_per_length_at(self, positions: Any) -> np.ndarray | float:
+        """μ(η) = ρA in kg/m at arc lengths ``positions`` (m); at a step the section beyond it.
+
+        Raises
+        ------
+        RigError
+            A position off the beam or not finite.
+        """
+        eta, scalar = _as_positions(positions, self.length)
+        values = self._properties(eta)[1]
+        return float(values[0]) if scalar else values
+
+    def fibre_distance(self, positions: Any) -> np.ndarray | float:
+        """c(η) in m at arc lengths ``positions`` (m): half the thickness of a rectangle, half the outer
+        diameter of a tube, the table's ``fibre_distance``; at a step the section beyond it.
+
+        Bending strain on the +ζ face is ε = −c(η)·∂²Δ/∂η².
+
+        Raises
+        ------
+        RigError
+            A position off the beam or not finite.
+        """
+        eta, scalar = _as_positions(positions, self.length)
+        values = self._properties(eta)[2]
+        return float(values[0]) if scalar else values
+
+    def _segment_integrals(self, moment: int) -> np.ndarray:
+        """∫ μ(η) η^moment dη over each stretch between neighbouring stations (exact: μ is a polynomial of degree ≤ 2)."""
+        xi, weights = np.polynomial.legendre.leggauss(4)
+        positions = self.station_positions
+        out = np.zeros(max(len(positions) - 1, 0))
+        for j in range(len(out)):
+            a, b = positions[j], positions[j + 1]
+            if b <= a:
+                continue
+            x = 0.5 * (a + b) + 0.5 * (b - a) * xi
+            mu = self._properties(x)[1]
+            out[j] = 0.5 * (b - a) * float(np.sum(weights * mu * x**moment))
+        return out
+
+
+class HotSpot(_ContractModel):
+    """A named position with a fatigue detail: its S–N curve, stress concentration and partial factors."""
+
+    name: str = Field(min_length=1)
+    position: float
+    curve: str | dict[str, Any]
+    scf: float = Field(default=1.0, gt=0.0)
+    gamma_Ff: float = Field(default=1.0, gt=0.0)
+    gamma_Mf: float = Field(default=1.0, gt=0.0)
+
+    @field_validator("curve")
+    @classmethod
+    def _known_curve(cls, value: Any) -> Any:
+        check_curve_spec(value)
+        return value
+
+
+class FatigueSettings(_ContractModel):
+    """Rig-level fatigue settings: the design life the remaining life is judged against."""
+
+    design_life_years: float | None = Field(default=None, gt=0.0)
 
 
 class PointMass(_ContractModel):
@@ -132,12 +476,14 @@ class RigDescription(_ContractModel):
 
     beam: Beam
     gravity: float = Field(ge=0.0)
-    reflector_distance: float
+    reflector_distance: float | None = None
     support: Support = "pinned"
     orientation: Orientation = "hanging"
     point_masses: tuple[PointMass, ...] = ()
     sensors: tuple[Sensor, ...]
     truth_stations: tuple[float, ...] = ()
+    hot_spots: tuple[HotSpot, ...] = ()
+    fatigue: FatigueSettings | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> "RigDescription":
@@ -147,6 +493,11 @@ class RigDescription(_ContractModel):
                 "support='pinned' with orientation='standing' is an inverted pendulum, unstable at any length: "
                 "a standing beam needs support='clamped'"
             )
+        if self.reflector_distance is None and self.sensors_of("tof"):
+            names = ", ".join(s.name for s in self.sensors_of("tof"))
+            raise ValueError(f"reflector_distance is required: the rig has ToF sensors ({names}) that measure to the reflector plane")
+        if self.reflector_distance is not None and not math.isfinite(self.reflector_distance):
+            raise ValueError(f"reflector_distance={self.reflector_distance} must be finite")
         seen: set[tuple[str, str]] = set()
         for index, sensor in enumerate(self.sensors):
             key = (sensor.kind, sensor.name)
@@ -170,7 +521,19 @@ class RigDescription(_ContractModel):
         for index, station in enumerate(self.truth_stations):
             if not (0.0 <= station <= length):
                 raise ValueError(f"truth_stations[{index}]={station} is outside the beam [0, {length}]")
+        names: set[str] = set()
+        for index, spot in enumerate(self.hot_spots):
+            if not (math.isfinite(spot.position) and 0.0 <= spot.position <= length):
+                raise ValueError(f"hot_spots[{index}] ({spot.name!r}): position={spot.position} is outside the beam [0, {length}]")
+            if spot.name in names:
+                raise ValueError(f"hot_spots[{index}]: name {spot.name!r} is not unique")
+            names.add(spot.name)
         return self
+
+    @property
+    def support_fixed_to_ground(self) -> bool:
+        """No ``bearing`` sensor: the support D is fixed to the ground (d ≡ 0), as a mast on its foundation."""
+        return not self.sensors_of("bearing")
 
     def sensors_of(self, kind: SensorKind) -> tuple[Sensor, ...]:
         return tuple(s for s in self.sensors if s.kind == kind)
@@ -186,8 +549,39 @@ class RigDescription(_ContractModel):
         return json.dumps(self.model_dump(mode="json", exclude_defaults=False), indent=2)
 
 
+def _key(loc: tuple[Any, ...]) -> str:
+    """A pydantic error location as the key in rig.json: ``beam.sections[3].outer_diameter``."""
+    key = ""
+    previous: Any = None
+    for part in loc:
+        if isinstance(part, int):
+            key += f"[{part}]"
+        elif isinstance(previous, int) and part in _SECTION_DIMENSIONS and key.startswith("beam.sections"):
+            pass  # the shape tag of a section (pydantic's union branch), not a key of rig.json
+        else:
+            key += f".{part}" if key else str(part)
+        previous = part
+    return key or "<root>"
+
+
 def parse_rig(data: bytes | str | dict[str, Any], *, source: str = "rig.json") -> RigDescription:
-    """Validate a rig description given as JSON text/bytes or an already parsed mapping."""
+    """Validate a rig description given as JSON text/bytes or an already parsed mapping.
+
+    Examples
+    --------
+    >>> from contract import parse_rig
+    >>> rig = parse_rig('{"beam": {"length": 4.0, "width": 0.2, "thickness": 0.002, '
+    ...                 '"youngs_modulus": 2.0e11, "density": 7850.0}, "gravity": 9.81, '
+    ...                 '"reflector_distance": 0.5, "sensors": [{"name": "D", "kind": "imu", "position": 0.0}]}')
+    >>> rig.support, rig.orientation, rig.sensors[0].topic
+    ('pinned', 'hanging', '/imu/D')
+    >>> parse_rig({"beam": {"length": 4.0, "width": 0.2, "thickness": 0.002, "youngs_modulus": 2.0e11,
+    ...                     "density": 7850.0}, "gravity": 9.81, "reflector_distance": 0.5,
+    ...            "sensors": [{"name": "s1", "kind": "imu", "position": 5.0}]})
+    Traceback (most recent call last):
+    ...
+    contract._rig.RigError: rig.json: ... position=5.0 is outside the beam [0, 4.0]
+    """
     if isinstance(data, (bytes, str)):
         try:
             data = json.loads(data)
@@ -198,9 +592,7 @@ def parse_rig(data: bytes | str | dict[str, Any], *, source: str = "rig.json") -
     try:
         return RigDescription.model_validate(data)
     except ValidationError as exc:
-        problems = "; ".join(
-            f"{'.'.join(str(p) for p in err['loc']) or '<root>'}: {err['msg']}" for err in exc.errors()
-        )
+        problems = "; ".join(f"{_key(err['loc'])}: {err['msg']}" for err in exc.errors())
         raise RigError(f"{source}: {problems}") from None
 
 

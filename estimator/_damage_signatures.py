@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from ._beam import NodalShapes, assemble_beam, natural_modes
+from ._beam import NodalShapes, assemble_beam, element_bending_stiffness, natural_modes
 from contract import RigDescription
 from ._unit_deformations import unit_deformations
 
@@ -172,7 +172,15 @@ def damage_signatures(
     S2 = units.curvature(st)
     f0 = healthy.frequencies_hz[:n_modes].copy()
     k0 = _shapes(phi[:, :n_modes], nodes, unit_of, grid, S_pinv, S2)
-    EI = model.youngs_modulus * rig.beam.second_moment_of_area
+    if rig.beam.uniform:
+        EI = model.youngs_modulus * rig.beam.second_moment_of_area
+
+        def element_bending(e: int) -> np.ndarray:
+            return EI * _element_bending(lengths[e])
+    else:
+
+        def element_bending(e: int) -> np.ndarray:
+            return element_bending_stiffness(rig.beam, nodes[e], nodes[e + 1], model.temperature_c)
     mids = 0.5 * (nodes[:-1] + nodes[1:])
     lengths = np.diff(nodes)
     existing = np.ones(mids.size)
@@ -194,7 +202,7 @@ def damage_signatures(
             if kind == "stiffness":
                 sel = np.flatnonzero((mids >= c - half) & (mids <= c + half))
                 for e in sel:
-                    dK[2 * e : 2 * e + 4, 2 * e : 2 * e + 4] += (stiffness_factor - 1.0) * EI * existing[e] * _element_bending(lengths[e])
+                    dK[2 * e : 2 * e + 4, 2 * e : 2 * e + 4] += (stiffness_factor - 1.0) * existing[e] * element_bending(e)
                 idx = np.unique(np.concatenate([np.arange(2 * e, 2 * e + 4) for e in sel]))
                 s = float(stiffness_factor)
             else:

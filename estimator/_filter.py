@@ -31,6 +31,7 @@ from ._imms import (
     run_events,
     tip_variance,
 )
+from ._observability import observability_problem
 from ._selection import SensorSelection, select_sensors
 from ._unit_deformations import UnitDeformations, unit_deformations, with_residual_modes
 
@@ -92,6 +93,10 @@ class FilterConfig(BaseModel):
         1.5e-6, ge=0, description="strain model error (higher modes, FE against plant), m/m; the combimode's share "
         "is modelled on its own (combimode_error_scale)")
     bearing_std: float = Field(1e-4, gt=0, description="floor of the bearing sensor's noise, m")
+    fixed_support_std: float = Field(
+        1e-4, gt=0, description="a support fixed to the ground (no bearing sensor): the d = 0 pseudo-measurement at "
+        "every sample of the IMU at D, m (a foundation moves by micrometres; this bounds what the D accelerometer's "
+        "bias wander would integrate to)")
     pseudo_h_std: float = Field(1e-4, gt=0, description="h = 0 pseudo-measurement, m")
     pseudo_h_rate_std: float = Field(1e-3, gt=0, description="ḣ = 0 pseudo-measurement, m/s")
     initial_std: float = Field(1e-3, gt=0, description="initial standard deviation of every state (at rest)")
@@ -188,7 +193,8 @@ class ImmsModel:
         else:
             A, Y = units.shape(self.imu_eta), pair.shape(self.imu_eta)
         b = np.linalg.pinv(A) @ Y  # (Γ, 2): each mode as the IMUs read it
-        miss = -0.5 * self.rig.beam.thickness * (units.curvature(self.gauge_eta) @ b - pair.curvature(self.gauge_eta))
+        fibre = self.rig.beam.fibre_distance(self.gauge_eta)[:, None]  # c(η): h*/2 of the paper's sheet
+        miss = -fibre * (units.curvature(self.gauge_eta) @ b - pair.curvature(self.gauge_eta))
         return miss / b[0]
 
     @property
@@ -243,19 +249,25 @@ class ImmsModel:
         return list(self.state_layout.names)
 
     @property
+    def fixed_support(self) -> bool:
+        """No bearing sensor: D is fixed to the ground (d ≡ 0), told to the filter as a pseudo-measurement."""
+        return self.rig.support_fixed_to_ground
+
+    @property
     def aiding_channels(self) -> list[str]:
         return ([f"/tof/{n}" for n in self.selection.tofs] + [f"/strain/{n}" for n in self.selection.gauges]
-                + [BEARING_TOPIC, "pseudo:h", "pseudo:h_rate"])
+                + ["pseudo:d" if self.fixed_support else BEARING_TOPIC, "pseudo:h", "pseudo:h_rate"])
 
     def tip_row(self) -> np.ndarray:
         """s_χ(L) of the Γ unit deformations: e = b · tip_row() without residual modes."""
         return self.units.shape(self.rig.beam.length)
 
     def strain_matrix(self) -> np.ndarray:
-        """Eq. (19): ε = −(h*/2) S'' [b, r], rows for the selected gauges (Γ + R columns)."""
+        """Eq. (19) with the section's fibre distance: ε = −c(η) S'' [b, r] (c = h*/2 for the paper's
+        sheet), rows for the selected gauges (Γ + R columns)."""
         if self.gauge_eta.size == 0:
             return np.zeros((0, self.modal.count))
-        return -0.5 * self.rig.beam.thickness * self.modal.curvature(self.gauge_eta)
+        return -self.rig.beam.fibre_distance(self.gauge_eta)[:, None] * self.modal.curvature(self.gauge_eta)
 
     def tip_deflection(self, x: np.ndarray) -> np.ndarray:
         """e = Δ(L) (m) of state(s) ``x`` (…, n), residual modes included."""
@@ -283,6 +295,7 @@ def build_model(
     aided=None,
     temperature_c: float | None = None,
     residual_modes: int | None = None,
+    check_observable: bool = True,
 ) -> ImmsModel:
     """Unit deformations (Γ = ``modes``) of the rig's FE model and the selected sensors (EfI for counts).
 
@@ -299,6 +312,13 @@ def build_model(
     as b1..bΓ many times over (for the benchmark layout −7.7 and −99 times its tip deflection). A
     pinned beam's modes beyond Γ + 1 alias about once; its body frame turns, which the residual
     model (a support that only translates) does not describe, so a pinned model carries none.
+
+    Works with the sensors the rig has: without ToFs there is no ToF aiding (and no reflector);
+    without a ``bearing`` sensor the support is fixed to the ground and the filter is told d = 0.
+    ``check_observable`` (default True) refuses, with a ValueError naming what is missing, a
+    selection whose peripheral IMUs cannot tell the Γ unit deformations apart or whose aiding (ToFs,
+    aided gauges) does not see all of them (``observability_problem``); False builds such a model
+    anyway (to inspect its layout, not to estimate with it).
     """
     if rig.support not in ("pinned", "clamped"):
         raise ValueError(f"support={rig.support!r} must be 'pinned' or 'clamped'")
@@ -324,13 +344,20 @@ def build_model(
     # The two body-frame modes the combimode merges, each on its own (for its model error).
     pair = unit_deformations(beam, 2, combimode=False) if units.modes and units.modes[0] == (1, 2) else None
     by_name = {(s.kind, s.name): s for s in rig.sensors}
+    imu_eta = np.array([by_name["imu", n].position for n in selection.imus], dtype=float)
+    tof_eta = np.array([by_name["tof", n].position for n in selection.tofs], dtype=float)
+    gauge_eta = np.array([by_name["strain", n].position for n in selection.gauges], dtype=float)
+    if check_observable:
+        problem = observability_problem(units, selection, imu_eta=imu_eta, tof_eta=tof_eta, gauge_eta=gauge_eta)
+        if problem:
+            raise ValueError(f"this rig cannot be estimated with Γ={units.count}: {problem}")
     return ImmsModel(
         rig=rig,
         units=units,
         selection=selection,
-        imu_eta=np.array([by_name["imu", n].position for n in selection.imus], dtype=float),
-        tof_eta=np.array([by_name["tof", n].position for n in selection.tofs], dtype=float),
-        gauge_eta=np.array([by_name["strain", n].position for n in selection.gauges], dtype=float),
+        imu_eta=imu_eta,
+        tof_eta=tof_eta,
+        gauge_eta=gauge_eta,
         stations=np.asarray(rig.truth_stations, dtype=float),
         modal_units=modal_units,
         residual_participation=participation,
@@ -366,8 +393,12 @@ class RestCalibration:
         }
 
 
-def _rest_end(meas: Measurements, config: FilterConfig) -> float:
-    """End of the initial rest: the first sign of motion at D (gyro, lateral accel) or the bearing."""
+def _rest_end(meas: Measurements, config: FilterConfig, model: "ImmsModel | None" = None) -> float:
+    """End of the initial rest: the first sign of motion at D (gyro, lateral accel) or the bearing.
+
+    A support fixed to the ground (``model.fixed_support``) does not move when the structure
+    starts to: there the selected peripheral IMUs and strain gauges tell the motion too (the wind
+    moves a mast's top long before its foundation)."""
     d_imu = meas.imu["D"]
     t = d_imu.times
     start = t[0]
@@ -376,14 +407,24 @@ def _rest_end(meas: Measurements, config: FilterConfig) -> float:
     if quiet.sum() < 20:
         return start
     end = limit
-    for column in (1, 2):
-        x = d_imu.values[:, column]
-        ref = x[quiet]
+    watched: list[tuple[SensorSeries, int, float]] = [(d_imu, 1, 0.05), (d_imu, 2, 0.01)]
+    if model is not None and model.fixed_support:
+        for name in model.selection.imus:
+            if name in meas.imu:
+                watched += [(meas.imu[name], 1, 0.05), (meas.imu[name], 2, 0.01)]
+        watched += [(meas.strain[name], 0, 2e-6) for name in model.selection.gauges if name in meas.strain]
+    for series, column, floor in watched:
+        ts = series.times
+        x = series.values[:, column]
+        ref = x[ts < start + min(2.0, config.rest_max_s)]
+        ref = ref[np.isfinite(ref)]
+        if ref.size < 20:
+            continue
         level, spread = np.median(ref), np.std(ref)
-        threshold = max(8.0 * spread, 0.01 if column == 2 else 0.05)
-        moving = np.nonzero((np.abs(x - level) > threshold) & (t < limit))[0]
+        threshold = max(8.0 * spread, floor)
+        moving = np.nonzero((np.abs(x - level) > threshold) & (ts < limit))[0]
         if moving.size:
-            end = min(end, t[moving[0]])
+            end = min(end, ts[moving[0]])
     if meas.bearing is not None and meas.bearing.times.size:
         b = meas.bearing
         ref = b.values[b.times < start + 2.0, 0]
@@ -406,7 +447,7 @@ def calibrate_at_rest(meas: Measurements, model: ImmsModel, config: FilterConfig
         raise ValueError("measurements have no IMU 'D' (the IMU at the bearing)")
     g_eta = model.gravity_eta
     start = meas.start
-    end = _rest_end(meas, config)
+    end = _rest_end(meas, config, model)
     rested = end - start >= config.rest_min_s
     # Specific force along the beam at rest (−g hanging, +g standing: x points from D along the
     # beam, up a mast), nothing across, no rate.
@@ -501,7 +542,15 @@ def build_events(meas: Measurements, model: ImmsModel) -> Events:
         add(meas.tof.get(name), EVENT_TOF, i, 1)
     for i, name in enumerate(model.selection.gauges):
         add(meas.strain.get(name), EVENT_STRAIN, i, 1)
-    add(meas.bearing, EVENT_BEARING, 0, 1)
+    if model.fixed_support:
+        # d ≡ 0: the support is fixed to the ground. The filter keeps d, ḋ as states (one state layout
+        # for every rig; the IMU at D still measures the foundation's vibration, which drives the
+        # modes) and is told d = 0 with every D sample, as a bearing sensor would tell it d.
+        d_series = meas.imu.get("D")
+        if d_series is not None and d_series.times.size:
+            add(SensorSeries(d_series.times, np.zeros((d_series.times.size, 1))), EVENT_BEARING, 0, 1)
+    else:
+        add(meas.bearing, EVENT_BEARING, 0, 1)
     if not parts:
         return Events.empty()
     t = np.concatenate([p[0] for p in parts])
@@ -543,15 +592,22 @@ def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterC
     m, c, cfg = model, calibration, config
     units = m.modal  # b and the residual modes: the kernels' modal block
     noise_D = c.noise_D
-    bearing_std = max(cfg.bearing_std, c.bearing_std if np.isfinite(c.bearing_std) else 0.0)
+    if m.fixed_support:
+        bearing_std = cfg.fixed_support_std
+    else:
+        bearing_std = max(cfg.bearing_std, c.bearing_std if np.isfinite(c.bearing_std) else 0.0)
+    reflector = m.rig.reflector_distance
     params = FilterParams(
-        gravity_eta=float(m.gravity_eta), reflector_distance=float(m.rig.reflector_distance), gate=cfg.gate,
+        gravity_eta=float(m.gravity_eta), reflector_distance=float("nan") if reflector is None else float(reflector),
+        gate=cfg.gate,
         stale_after=cfg.stale_after_s, sigma_f_d_x=float(noise_D[0]), sigma_f_d_y=float(noise_D[1]),
         sigma_omega_d=float(noise_D[2]), q_b=cfg.q_b,
         q_v=cfg.q_v if cfg.q_v is not None else (1e-6 if m.selection.gauges else 1e-3), q_beta=cfg.q_beta,
         q_rigid=cfg.q_rigid, bearing_var=bearing_std**2, pseudo_h_var=cfg.pseudo_h_std**2,
         pseudo_h_rate_var=cfg.pseudo_h_rate_std**2, max_step=cfg.max_step_s, q_null=cfg.q_null,
         q_beta_peripheral=cfg.q_beta_peripheral, q_residual=cfg.q_residual,
+        # A pseudo-measurement states a fact of the rig: the gate never refuses it.
+        bearing_gate=1e300 if m.fixed_support else cfg.gate,
     )
     gamma = units.count
     empty = np.zeros((0, gamma))

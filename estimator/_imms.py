@@ -97,6 +97,7 @@ class FilterParams(NamedTuple):
     q_null: float
     q_beta_peripheral: float
     q_residual: float  # random walk of the residual modes' rates (model error of their dynamics), 1/s³
+    bearing_gate: float  # gate of the bearing channel: ``gate`` for a sensor, 1e300 for the fixed support's d = 0
 
 
 class ModelArrays(NamedTuple):
@@ -825,7 +826,8 @@ def run_events(ev, m, st, out, counters):
                 continue
             H[:] = 0.0
             H[ix.d] = 1.0
-            _aid(x, P, z - x[ix.d], H, p.bearing_var, p.gate, ubuf, i_bear, accepted, rejected, nis_sum, last_innovation)
+            _aid(x, P, z - x[ix.d], H, p.bearing_var, p.bearing_gate, ubuf, i_bear, accepted, rejected, nis_sum,
+                 last_innovation)
             # The bearing runs on a rail: h = 0 and ḣ = 0 as pseudo-measurements.
             H[:] = 0.0
             H[ix.h] = 1.0

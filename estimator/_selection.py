@@ -141,6 +141,7 @@ def select_sensors(
     if len(chosen_imus) < gamma:
         raise ValueError(
             f"Γ={gamma} unit deformations need at least {gamma} peripheral IMUs ({peripheral}), "
-            f"got {len(chosen_imus)} (the rig has {len(peripheral_imus)})"
+            f"got {len(chosen_imus)} (the rig has {len(peripheral_imus)}): add {gamma - len(chosen_imus)} peripheral "
+            f"IMU(s) or lower the unit deformations (--modes) to {len(chosen_imus)}"
         )
     return SensorSelection(peripheral, chosen_imus, chosen_tofs, chosen_gauges, tuple(sorted(aided_units)))

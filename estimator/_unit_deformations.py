@@ -120,6 +120,26 @@ def unit_deformations(
     ------
     ValueError
         ``count`` out of range, or too few eigenmodes given.
+
+    Examples
+    --------
+    The clamped strip of ``natural_modes``' example: its first two unit deformations are its first
+    two bending modes (no combimode on a clamp), scaled to a tip deflection of 1.
+
+    >>> import numpy as np
+    >>> from contract import parse_rig
+    >>> from estimator import assemble_beam, unit_deformations
+    >>> rig = parse_rig({"beam": {"length": 1.0, "width": 0.05, "thickness": 0.005,
+    ...                           "youngs_modulus": 210e9, "density": 7850.0},
+    ...                  "gravity": 0.0, "reflector_distance": 0.5, "support": "clamped",
+    ...                  "sensors": [{"name": "D", "kind": "imu", "position": 0.0}]})
+    >>> units = unit_deformations(assemble_beam(rig), 2)
+    >>> units.modes
+    ((1,), (2,))
+    >>> np.round(units.shape(np.array([0.0, 0.5, 1.0])), 3)   # rows: η = 0, 0.5, 1 m
+    array([[ 0.   ,  0.   ],
+           [ 0.34 , -0.714],
+           [ 1.   ,  1.   ]])
     """
     if not isinstance(count, (int, np.integer)) or not 1 <= count <= MAX_UNIT_DEFORMATIONS:
         raise ValueError(f"{count=} must be an integer in [1, {MAX_UNIT_DEFORMATIONS}]")

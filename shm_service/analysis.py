@@ -76,7 +76,12 @@ def analyze_deformations(rig, data: DeformationRecord, *, config: AnalysisConfig
     Windows starting before ``not_before_s`` (s after the recording's first message; default the
     rest phase's end plus ``warmup_s``, when the record knows it) are not analysed, as in ``shm serve``."""
     kw = _kwargs(rig, data, config, warmup_s, not_before_s, signatures)
-    return analyze(data.times, data.b, data.units.curvature(data.stations), data.stations, baseline=baseline, **kw)
+    loads = None
+    if rig.hot_spots:  # the hot spots' loads and fatigue in the same engine (issue 21)
+        from analytics import LoadsMonitor
+
+        loads = LoadsMonitor.from_rig(rig, data.units.curvature)
+    return analyze(data.times, data.b, data.units.curvature(data.stations), data.stations, baseline=baseline, loads=loads, **kw)
 
 
 def baseline_from_deformations(rig, data: DeformationRecord, *, config: AnalysisConfig | None = None,

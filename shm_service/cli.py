@@ -139,9 +139,20 @@ def _simulation_settings(args: argparse.Namespace):
             temperature_swing=args.temperature_swing,
             temperature_mean=args.temperature_mean,
             plant={"friction_torque": args.friction},
+            wind_load_rms=args.wind_load,
+            wind_correlation=args.wind_correlation,
         )
     except (ValidationError, ValueError) as exc:
         raise CliError(str(exc).splitlines()[0] if not isinstance(exc, ValidationError) else _pydantic_message(exc)) from None
+
+
+# (settings field, option, the option's default) of ``shm simulate``: what a rig file's simulator settings yield to.
+_SIMULATE_OPTIONS = (
+    ("duration", "duration", 300.0), ("seed", "seed", 1), ("excitation", "excitation", "paper"), ("ideal", "ideal", False),
+    ("damage", "damage", None), ("damage_at", "damage_at", None), ("temperature_swing", "temperature_swing", 0.0),
+    ("temperature_mean", "temperature_mean", 20.0), ("plant", "friction", 0.0), ("wind_load_rms", "wind_load", None),
+    ("wind_correlation", "wind_correlation", None),
+)
 
 
 def _pydantic_message(exc) -> str:
@@ -149,10 +160,22 @@ def _pydantic_message(exc) -> str:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from .virtual_rig import simulate
+    from pydantic import ValidationError
+
+    from .virtual_rig import settings_for_rig, simulate
 
     settings = _simulation_settings(args)
-    summary = simulate(settings, Path(args.out))
+    rig = None
+    if args.rig:
+        rig = _rig_from_args(args)
+        # The rig file's ``simulator`` settings, then what the command line sets (options left at
+        # their defaults do not override the file).
+        given = {field for field, option, default in _SIMULATE_OPTIONS if getattr(args, option) != default}
+        try:
+            settings = settings_for_rig(rig, settings, given)
+        except (ValidationError, ValueError) as exc:
+            raise CliError(f"{args.rig}: simulator: " + (_pydantic_message(exc) if isinstance(exc, ValidationError) else str(exc))) from None
+    summary = simulate(settings, Path(args.out), rig=rig)
     if args.json:
         _print_json(summary.as_dict())
     else:
@@ -497,9 +520,8 @@ def _cmd_oma(args: argparse.Namespace) -> int:
 
     from analytics import OmaConfig, OperationalModalAnalysis
 
-    from .tables import TableError, read_table, select_channels
-
     from .oma_input import clean_for_identification
+    from .tables import TableError, read_table, select_channels
 
     try:
         table = read_table(args.data, fs=args.fs, nonfinite="keep")
@@ -528,9 +550,7 @@ def _cmd_oma(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
 
     def modes(ident) -> list[dict]:
-        return [{"frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "frequency_std_hz": m.frequency_std_hz,
-                 "damping_std": m.damping_std, "mpc": m.mpc, "shape": list(m.shape), "contribution": m.contribution,
-                 "orders": m.orders, "damping_method": m.damping_method} for m in ident.modes]
+        return [m.as_dict() for m in ident.modes]
 
     def io(ident) -> dict:
         if ident.excitation is None:
@@ -550,7 +570,10 @@ def _cmd_oma(args: argparse.Namespace) -> int:
         "modes": modes(rec),
         "rejected": [{"frequency_hz": f, "reason": why} for f, why in rec.rejected],
         **io(rec),
-        "windows": [{"start_s": w.start_s, "end_s": w.end_s, "modes": modes(w.identification), **io(w.identification)} for w in result.windows],
+        "windows": [{"start_s": w.start_s, "end_s": w.end_s, "modes": modes(w.identification),
+                     "rejected": [{"frequency_hz": f, "reason": why} for f, why in w.identification.rejected],
+                     **io(w.identification)} for w in result.windows],
+        "tracks": [t.as_dict() for t in result.tracks],
         **clean.as_dict(table.fs_hz),
         "recording_problems": list(table.problems),
     }
@@ -570,7 +593,10 @@ def _cmd_oma(args: argparse.Namespace) -> int:
     if result.windows:
         print(f"{len(result.windows)} windows:")
         for w in result.windows:
-            print(f"  {w.start_s:8.2f}-{w.end_s:8.2f} s: " + (", ".join(f"{m.frequency_hz:.3f} Hz ({100 * m.damping_ratio:.2f} %)" for m in w.modes) or "-"))
+            print(f"  {w.start_s:8.2f}-{w.end_s:8.2f} s: " + (", ".join(
+                f"#{m.track} {m.frequency_hz:.3f} Hz ({100 * m.damping_ratio:.2f} %)"
+                + (f" moving {m.start_hz:.2f} → {m.end_hz:.2f} Hz" if m.moving else "") for m in w.modes) or "-"))
+        print("tracks: " + ", ".join(f"#{t.track} {t.min_hz:.2f}–{t.max_hz:.2f} Hz ({t.windows} windows)" for t in result.tracks))
     return 0
 
 
@@ -578,6 +604,11 @@ def _cmd_oma(args: argparse.Namespace) -> int:
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from .recording import format_inspection, inspect_recording
 
+    if args.print_rig:  # the recording's rig description (rig.json), to edit or to reuse with shm import --rig
+        from .recording import read_recording
+
+        print(read_recording(args.recording, rig=args.rig).rig.to_json())
+        return 0
     report = inspect_recording(args.recording, rig=args.rig)
     if args.json:
         _print_json(report)
@@ -630,7 +661,16 @@ def build_parser() -> argparse.ArgumentParser:
                         "plucks and free decays; operational: the support moving randomly (3 mm RMS, broadband) and a "
                         "spatially correlated random load along the beam")
     p.add_argument("--layout", choices=("benchmark", "dense"), default="benchmark")
-    _add_configuration_arguments(p, rig_file=False)
+    p.add_argument("--rig", help="simulate this rig description (.json or .toml) instead of a --layout: any beam, with the "
+                                 "sensors it has (no bearing sensor: the support is fixed to the ground); its 'simulator' "
+                                 "key may hold settings, which the options given here override")
+    _add_configuration_arguments(p, rig_file=True)
+    p.add_argument("--wind-load", type=number(low=0, high=1e6, unit="N/m"), default=None, metavar="N/m",
+                   help="RMS of the ambient (wind) load along the beam for the ambient and operational excitations, "
+                        "N/m (default: 0.05 for the built-in sheet; for a --rig the load whose quasi-static RMS strain "
+                        "at the support is 50 µε, about 10 MPa on steel)")
+    p.add_argument("--wind-correlation", type=number(low=0, low_open=True, high=1e4, unit="m"), default=None, metavar="M",
+                   help="correlation length of the wind load along the beam, m (default 1; a quarter of a --rig beam)")
     p.add_argument("--ideal", action="store_true", help="plant = nominal rig (no mismatch, friction, scale/misalignment)")
     p.add_argument("--damage", action="append", metavar="SPEC", help="mass:KG@POS or stiffness:FACTOR@A-B (repeatable)")
     p.add_argument("--damage-at", type=number(low=0, unit="s"), default=None, metavar="SECONDS",
@@ -739,13 +779,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording")
     p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--print-rig", action="store_true", help="print the recording's rig description (rig.json) and exit")
     p.set_defaults(func=_cmd_inspect)
 
     from .demo import add_demo_parser
+    from .loads import add_loads_parser  # shm loads (issue 21)
     from .service._cli import add_serve_parser  # shm serve (issue 6)
 
     add_serve_parser(sub)
     add_demo_parser(sub)
+    add_loads_parser(sub)
 
     p = sub.add_parser(
         "import",

@@ -57,6 +57,9 @@ def add_demo_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--no-dashboard", action="store_true", help="no dashboard (API only)")
     p.add_argument("--keep-running", action="store_true", help="keep the API and dashboard up after the scenario ends")
     p.add_argument("--config", metavar="FILE", help="a shm serve TOML file for everything else (the options above win)")
+    from .service._cli import add_process_arguments
+
+    add_process_arguments(p)
     p.set_defaults(func=run_demo)
     return p
 
@@ -269,6 +272,7 @@ def run_demo(args: argparse.Namespace) -> int:
         config=str(config), print_config=False, source=None, speed=None, keep_running=None, data_dir=None, db=None,
         host=None, port=None, dashboard_port=None, no_dashboard=None, token_file=None, rig=None, source_id=None,
         webhook=None, recordings=None, no_archive=None, json=False,
+        ready_file=getattr(args, "ready_file", None), parent_pid=getattr(args, "parent_pid", None),
     )
     try:
         code = run_serve(serve_args)

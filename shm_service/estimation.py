@@ -143,8 +143,8 @@ def estimate_payloads(result: EstimateResult) -> list[bytes]:
 
 
 def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metadata: dict[str, str] | None = None) -> int:
-    """Write the estimates (with rig.json, the truth metadata and the temperature and bearing
-    channels of the source) into a new recording; returns the number of estimate messages."""
+    """Write the estimates (with rig.json, the truth metadata and the temperature, bearing and strain
+    gauge channels of the source) into a new recording; returns the number of estimate messages."""
     import json
 
     from .recording import ESTIMATE_TOPIC, RecordingWriter
@@ -159,11 +159,13 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
     }
     stamps = rec.start_ns + np.round(result.t * 1e9).astype(np.int64)
     with RecordingWriter(path, rec.rig, metadata=metadata) as writer:
-        for topic in (TEMPERATURE_TOPIC, BEARING_TOPIC):
+        # the strain gauges too: `shm loads` of an estimate sees the modal truncation at them
+        gauge_topics = tuple(s.topic for s in rec.rig.sensors_of("strain"))
+        for topic in (TEMPERATURE_TOPIC, BEARING_TOPIC, *gauge_topics):
             channel = rec.channels.get(topic)
             if channel is None:
                 continue
-            key = "celsius" if topic == TEMPERATURE_TOPIC else "distance"
+            key = "celsius" if topic == TEMPERATURE_TOPIC else "distance" if topic == BEARING_TOPIC else "strain"
             for lt, pt, value in zip(channel.log_time_ns.tolist(), channel.publish_time_ns.tolist(), channel.values[:, 0].tolist()):
                 writer.write(topic, lt, {key: value}, pt)
         for stamp, payload in zip(stamps.tolist(), estimate_payloads(result)):

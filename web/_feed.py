@@ -42,6 +42,26 @@ MEAN_TAU_S = 60.0  # time constant of the running-mean ghost
 MAX_PENDING = 600
 
 
+def _section_width(station: Any) -> float:
+    """The across-beam size (m) drawn for a station: a tube's outer diameter, a rectangle's width,
+    twice a table's fibre distance."""
+    if station.shape == "tube":
+        return float(station.outer_diameter)
+    if station.shape == "rectangle":
+        return float(station.width)
+    if station.shape == "table":
+        return 2.0 * float(station.fibre_distance)
+    raise ValueError(f"section shape {station.shape!r} must be 'rectangle', 'tube' or 'table'")
+
+
+def _widest_section(beam: Any) -> float:
+    """The largest across-beam size (m) of the stations of ``beam.sections``."""
+    sizes = [_section_width(station) for station in beam.sections or ()]
+    if not sizes:
+        raise ValueError("the rig's beam has neither a width nor sections")
+    return float(max(sizes))
+
+
 @dataclass(frozen=True)
 class Estimate:
     t_s: float
@@ -171,10 +191,13 @@ class StructureFeed:
         if mode_map.gamma != gamma:
             raise ValueError(f"units.modes names the modes of {mode_map.gamma} unit deformations, units.count is {gamma}")
         self.length = float(rig.beam.length)
-        self.width = float(rig.beam.width)
+        # drawn width: the sheet's width, or the widest section of a beam described by sections
+        # (a tube's outer diameter, a rectangle's width, twice a table's fibre distance)
+        self.width = float(rig.beam.width) if rig.beam.width is not None else _widest_section(rig.beam)
         if not (self.length > 0 and self.width > 0):
             raise ValueError(f"rig beam length and width must be > 0, got {self.length}, {self.width}")
-        self.reflector_distance = float(rig.reflector_distance)
+        # A rig without ToFs has no reflector (None): nothing is drawn for it.
+        self.reflector_distance = None if rig.reflector_distance is None else float(rig.reflector_distance)
         # How the beam is held and drawn: a pin or a clamp at D; hanging below it or standing up.
         support, orientation = getattr(rig, "support", "pinned"), getattr(rig, "orientation", "hanging")
         if support not in ("pinned", "clamped"):
@@ -205,6 +228,22 @@ class StructureFeed:
         self._newest_t = -math.inf
 
     # ------------------------------------------------------------------ pushes
+
+    def width_at(self, eta: np.ndarray) -> np.ndarray:
+        """The drawn width (m) at arc lengths ``eta``: the sheet's width, or the section's size across
+        the beam varying linearly along each taper (the section beyond a step at the step)."""
+        eta = np.atleast_1d(np.asarray(eta, dtype=float))
+        sections = self.rig.beam.sections
+        if not sections:
+            return np.full(eta.shape, self.width)
+        positions = np.array([s.position for s in sections], dtype=float)
+        sizes = np.array([_section_width(s) for s in sections], dtype=float)
+        last = len(sections) - 1
+        j = np.clip(np.searchsorted(positions, eta, side="right") - 1, 0, last)
+        k = np.minimum(j + 1, last)
+        span = positions[k] - positions[j]
+        t = np.where(span > 0, (eta - positions[j]) / np.where(span > 0, span, 1.0), 0.0)
+        return sizes[j] + np.clip(t, 0.0, 1.0) * (sizes[k] - sizes[j])
     def push_estimate(self, t_s: float, x: np.ndarray, sensor_states: dict[str, str],
                       truth_deflection: np.ndarray | None = None) -> None:
         """The newest state estimate. Raises ValueError on malformed input."""

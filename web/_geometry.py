@@ -165,10 +165,17 @@ def ribbon_faces(n: int) -> np.ndarray:
     return np.concatenate([np.stack([a, c, b], axis=1), np.stack([b, c, d], axis=1)]).astype(np.uint32)
 
 
-def ribbon(plane: np.ndarray, width: float, *, standing: bool = False) -> np.ndarray:
-    """Vertices (2N, 3) of the sheet: each centre-line point at y = −w/2 and y = +w/2 (world)."""
-    if not np.isfinite(width) or width <= 0:
-        raise ValueError(f"width={width!r} must be finite and > 0")
+def ribbon(plane: np.ndarray, width: float | np.ndarray, *, standing: bool = False) -> np.ndarray:
+    """Vertices (2N, 3) of the sheet: each centre-line point at y = −w/2 and y = +w/2 (world).
+
+    ``width`` (m) is one figure, or one per centre-line point (a taper: a tube's diameter, a
+    blade's depth along it).
+    """
+    w = np.asarray(width, dtype=float)
+    n = np.shape(plane)[0]
+    if w.ndim > 1 or (w.ndim == 1 and w.size != n) or not np.all(np.isfinite(w)) or np.any(w <= 0):
+        raise ValueError(f"width={width!r} must be finite and > 0, one figure or one per point ({n})")
+    width = w if w.ndim == 0 else w.astype(np.float32)
     centre = to_world(plane, standing=standing)
     verts = np.repeat(centre, 2, axis=0)
     verts[0::2, 1] = -0.5 * width

@@ -82,7 +82,8 @@ def camera_of(feed: "StructureFeed") -> tuple[tuple[float, float, float], tuple[
     """(position, look-at) of a front view of the beam's plane (ζ to the right, z up: −η hanging,
     +η standing), slightly from the side; the look-at point sits right of the beam so the beam is
     not hidden behind the GUI panel."""
-    L, refl, up = feed.length, feed.reflector_distance, up_sign(feed.standing)
+    L, up = feed.length, up_sign(feed.standing)
+    refl = 0.0 if feed.reflector_distance is None else feed.reflector_distance
     look_x = 0.55 + 0.6 * refl
     return (look_x + 0.9, -0.95 * L, up * 0.40 * L), (look_x, 0.0, up * 0.5 * L)
 
@@ -90,7 +91,8 @@ def camera_of(feed: "StructureFeed") -> tuple[tuple[float, float, float], tuple[
 def add_rig(scene: Any, feed: "StructureFeed") -> None:
     """The rig's static parts: the rail the support runs on (above D for a hanging beam, below a
     standing mast), the reflector, a grid in the beam's plane and the plumb line."""
-    L, refl = feed.length, feed.reflector_distance
+    L, has_reflector = feed.length, feed.reflector_distance is not None
+    refl = feed.reflector_distance if has_reflector else 0.0  # no ToFs: no reflector to draw
     up = up_sign(feed.standing)  # world z per unit η: the beam hangs down or stands up from D
     rail_lo, rail_hi = min(-0.6, refl - 1.2), refl + 0.05
     scene.add_box(
@@ -98,12 +100,13 @@ def add_rig(scene: Any, feed: "StructureFeed") -> None:
         position=(0.5 * (rail_lo + rail_hi), 0.0, -up * 0.09), cast_shadow=False,
     )
     scene.add_label("/rig/rail_label", "bearing rail", position=(rail_lo, 0.0, -up * 0.16), font_screen_scale=0.8)
-    scene.add_box(
-        "/rig/reflector", color=(150, 175, 205), dimensions=(0.01, 0.9, L + 0.4),
-        position=(refl + 0.005, 0.0, up * 0.5 * L), opacity=0.35, side="double", cast_shadow=False,
-    )
-    scene.add_label("/rig/reflector_label", f"reflector ζ = {refl:g} m", position=(refl, 0.45, -up * 0.1),
-                    font_screen_scale=0.8)
+    if has_reflector:
+        scene.add_box(
+            "/rig/reflector", color=(150, 175, 205), dimensions=(0.01, 0.9, L + 0.4),
+            position=(refl + 0.005, 0.0, up * 0.5 * L), opacity=0.35, side="double", cast_shadow=False,
+        )
+        scene.add_label("/rig/reflector_label", f"reflector ζ = {refl:g} m", position=(refl, 0.45, -up * 0.1),
+                        font_screen_scale=0.8)
     scene.add_grid(
         "/rig/grid", width=max(2.0, 2 * refl + 1.5), height=L + 1.0, plane="xz",
         cell_size=0.1, section_size=0.5, position=(0.5 * refl, 0.45, up * 0.5 * L), shadow_opacity=0.0,
@@ -203,6 +206,7 @@ class ClientView:
             self._envelope = 0.0
             self._eta = np.linspace(0.0, feed.length, N_BEAM_POINTS)
             self._faces = ribbon_faces(N_BEAM_POINTS)
+            self._widths = feed.width_at(self._eta)  # to scale: a tube's diameter, a sheet's width
             self._shape_eta = np.asarray(feed.units.shape(self._eta), dtype=float)
             scene = _Tracked(self.client.scene, self._nodes)
             if self.dash.fleet:  # each browser its own structure: its rig and camera
@@ -272,7 +276,7 @@ class ClientView:
     def _build_scene(self, scene: Any) -> None:
         rest = BeamState(0.0, 0.0, 0.0, np.zeros(self.feed.gamma))
         up = self.up = up_sign(self.feed.standing)
-        verts = ribbon(centreline(rest, self.feed.units, self._eta), self.feed.width, standing=self.feed.standing)
+        verts = ribbon(centreline(rest, self.feed.units, self._eta), self._widths, standing=self.feed.standing)
         self.ghost = scene.add_mesh_simple(
             "/live/ghost", verts, self._faces, color=GHOST_COLOUR, opacity=0.28, side="double", cast_shadow=False
         )
@@ -654,7 +658,7 @@ class ClientView:
         es, rs = self.elastic_scale, self.rigid_scale
         standing, up = feed.standing, self.up
         line = centreline(state, feed.units, self._eta, elastic_scale=es, rigid_scale=rs)
-        self.beam.vertices = ribbon(line, feed.width, standing=standing)
+        self.beam.vertices = ribbon(line, self._widths, standing=standing)
         ghost_on = bool(self.show_ghost.value)
         self.ghost.visible = ghost_on
         if ghost_on:
@@ -662,7 +666,7 @@ class ClientView:
                 ghost = centreline(mean, feed.units, self._eta, elastic_scale=es, rigid_scale=rs)
             else:
                 ghost = centreline(BeamState(0.0, 0.0, 0.0, np.zeros(feed.gamma)), feed.units, self._eta)
-            self.ghost.vertices = ribbon(ghost, feed.width, standing=standing)
+            self.ghost.vertices = ribbon(ghost, self._widths, standing=standing)
         truth_on = est.truth_deflection is not None and bool(self.show_truth.value)
         self.truth.visible = truth_on
         if truth_on:
@@ -902,8 +906,11 @@ class ClientView:
             return f"<div style='font-size:13px'>{self._title()}<br>{waiting}</div>"
         live = "<span style='color:#b45309;font-weight:bold'>■ PAUSED</span>" if self.paused else "<span style='color:#15803d;font-weight:bold'>● LIVE</span>"
         est = snap.estimate if not self.paused or self._drawn_estimate is None else self._drawn_estimate[0]
+        # what the service is doing now (compiling, calibrating at rest, waiting for the first window, ...)
+        progress = None if snap.status is None else getattr(snap.status.service, "progress", None)
         if est is None:
-            motion = "waiting for estimates"
+            motion = html.escape(progress) if progress else "waiting for estimates"
+            progress = None
         else:
             s = est.state
             phi = "φ ≡ 0 (clamped)" if self.feed.layout.phi is None else f"φ = {1e3 * s.phi:+.2f} mrad"
@@ -933,7 +940,8 @@ class ClientView:
         error = f"<br><span style='color:#dc2626'>service: {html.escape(snap.status_error)}</span>" if snap.status_error else ""
         return (
             f"<div style='font-size:12.5px;line-height:1.45'>{self._title()} {live} {badge}<br>"
-            f"{motion}<br>{_rates(snap)} · {sensors}{error}</div>"
+            f"{motion}<br>{_rates(snap)} · {sensors}{error}"
+            f"{'' if not progress else '<br><i>' + html.escape(progress) + '</i>'}</div>"
         )
 
 

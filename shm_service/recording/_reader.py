@@ -219,6 +219,8 @@ class _ChannelReader:
         self.sizes: list[int | None] = [
             stations if f.size == "stations" else None if f.size == "free" else f.size for f in self.fields
         ]
+        # A number, not a vector: a rig without truth stations makes a vector of size 0 too (an empty list).
+        self.scalar: list[bool] = [f.size == 0 for f in self.fields]
         # pending pieces: (buffer, log times, publish times, payload starts, payload stops)
         self.pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self.pending = 0
@@ -278,7 +280,8 @@ class _ChannelReader:
     def _template_codes(self) -> np.ndarray | None:
         """The payload skeleton of this schema once every vector size is known."""
         if self._template is None and None not in self.sizes:
-            example = orjson.dumps({f.name: 0 if size == 0 else [0] * size for f, size in zip(self.fields, self.sizes)})
+            example = orjson.dumps({f.name: 0 if scalar else [0] * size
+                                    for f, size, scalar in zip(self.fields, self.sizes, self.scalar)})
             self._width = example.count(b"0")
             from ._fastdecode import template_codes
 
@@ -325,7 +328,7 @@ class _ChannelReader:
                 size = sizes[index]
                 if size is None and column.ndim == 2:
                     size = sizes[index] = column.shape[1]
-                if column.shape != ((count,) if size == 0 else (count, size)):
+                if column.shape != ((count,) if self.scalar[index] else (count, size)):
                     return None
                 columns.append(column.reshape(count, -1))
         except (orjson.JSONDecodeError, KeyError, TypeError, ValueError, IndexError):
@@ -355,7 +358,7 @@ class _ChannelReader:
                 continue
             rows.append(row)
             keep[index] = True
-        width = sum(1 if s == 0 else (s or 0) for s in self.sizes)
+        width = sum(1 if scalar else (s or 0) for s, scalar in zip(self.sizes, self.scalar))
         return np.array(rows, dtype=np.float64).reshape(len(rows), width), keep
 
     def _row(self, payload: Any) -> list[float]:
@@ -367,7 +370,7 @@ class _ChannelReader:
                 raise _Malformed(f"missing key {spec.name!r}")
             value = payload[spec.name]
             size = self.sizes[index]
-            if size == 0:
+            if self.scalar[index]:
                 row.append(_number(spec.name, value))
                 continue
             if not isinstance(value, list):
@@ -382,8 +385,8 @@ class _ChannelReader:
 
     def field_names(self) -> tuple[str, ...]:
         names: list[str] = []
-        for spec, size in zip(self.fields, self.sizes):
-            names.extend([spec.name] if size == 0 else [f"{spec.name}[{i}]" for i in range(size or 0)])
+        for spec, size, scalar in zip(self.fields, self.sizes, self.scalar):
+            names.extend([spec.name] if scalar else [f"{spec.name}[{i}]" for i in range(size or 0)])
         return tuple(names)
 
     def finish(self, width: int, limits: ValueLimits) -> Channel:

@@ -8,12 +8,15 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["DashboardService", "SENSOR_STATES"]
+__all__ = ["DashboardService", "SENSOR_STATES", "ServeProcess", "ServeStartError", "read_ready", "start_serve"]
+
+_HOMES = {"DashboardService": "_dashboard_port", "SENSOR_STATES": "_dashboard_port", "ServeProcess": "_launch",
+          "ServeStartError": "_launch", "start_serve": "_launch", "read_ready": "_processes"}
 
 
 def __getattr__(name: str) -> Any:
-    if name in __all__:
-        from . import _dashboard_port
+    if name in _HOMES:
+        import importlib
 
-        return getattr(_dashboard_port, name)
+        return getattr(importlib.import_module(f".{_HOMES[name]}", __name__), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -24,6 +24,8 @@ def _what(kind: ChartKind, mode: int | None) -> str:
         return f"eigenfrequency of mode {mode}"
     if kind == "curvature":
         return "curvature index"
+    if kind == "fatigue":
+        return "fatigue of a hot spot"
     raise ValueError(f"unknown chart kind {kind!r}")
 
 

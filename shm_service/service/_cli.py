@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import signal
 import sys
 import threading
@@ -41,8 +42,25 @@ def add_serve_parser(sub: Any) -> argparse.ArgumentParser:
                    help="worker processes hosting the [[structures]] (default: one per core, at most one per structure; "
                    "1: all in this process)")
     p.add_argument("--worker-of", metavar="I/N", help=argparse.SUPPRESS)  # internal: a worker process of a fleet
+    add_process_arguments(p)
     p.set_defaults(func=run_serve)
     return p
+
+
+def add_process_arguments(p: argparse.ArgumentParser) -> None:
+    """The options by which a program that starts ``shm serve`` learns it is ready and ends it with itself."""
+    p.add_argument("--ready-file", metavar="FILE",
+                   help="write a JSON document (api, docs, dashboard, pid, state) here once the API answers")
+    p.add_argument("--parent-pid", type=number(int, low=1), metavar="PID",
+                   help="end (gracefully, then hard) when process PID, the one that started this, ends")
+
+
+def _ready(args: argparse.Namespace, **document: Any) -> None:
+    path = getattr(args, "ready_file", None)
+    if path:
+        from ._processes import write_ready
+
+        write_ready(path, document)
 
 
 def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
@@ -105,6 +123,7 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
 def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
     from ._api import create_app
     from ._config import SettingsError, load_settings, render_toml
+    from ._progress import ProgressLog, compile_first
     from ._server import ApiServer
     from ._service import MonitoringService, RigPending, ServiceError
     from ._starting import ServiceSlot, StartingService
@@ -132,6 +151,10 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
         except ValueError as exc:
             print(f"shm serve: error: --worker-of {worker_of!r}: {exc}", file=sys.stderr)
             return 2
+        from ._processes import hold_worker_lock
+
+        # held for this process's life: a later front knows this worker still runs on the database
+        worker_lock = hold_worker_lock(settings.db)  # noqa: F841
     deliver = worker_of is None  # worker processes leave the notifications to the front process
     stop = threading.Event()
 
@@ -141,6 +164,7 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, on_signal)
         signal.signal(signal.SIGTERM, on_signal)
+    _watch_parent(args)
     s = settings.server
     api = None
     try:
@@ -164,7 +188,9 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
             service.stop()
         return 2
     if service is None:
-        print(f"shm serve: API at {api.url}; {slot.waiting_for}", flush=True)
+        if worker_of is None:
+            print(f"shm serve: API at {api.url}; {slot.waiting_for}", flush=True)
+        _ready(args, state="waiting", api=api.url, docs=f"{api.url}/docs", dashboard=None, waiting_for=slot.waiting_for)
         log.info("%s", slot.waiting_for)
         while service is None:
             if stop.wait(settings.source.follow_poll_s):
@@ -181,18 +207,24 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
         slot.current = service
     what = (f"{len(service.structures)} structures" if service.fleet
             else f"source {settings.source.spec} as '{service.source.id}'")
-    print(f"shm serve: API at {api.url} (docs {api.url}/docs); {what}; "
-          f"data in {settings.data_dir} (db {settings.db}, recordings "
-          f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
-    if service.dashboard is not None:
-        print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
+    if worker_of is None:  # a worker's front says where things are
+        print(f"shm serve: API at {api.url} (docs {api.url}/docs); {what}; "
+              f"data in {settings.data_dir} (db {settings.db}, recordings "
+              f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
+        if service.dashboard is not None:
+            print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
     started = time.monotonic()
-    service.start()
-    code = 0
+    progress = ProgressLog(service)
+    if compile_first(service, stop):
+        service.start()
+        _ready(args, state="serving", api=api.url, docs=f"{api.url}/docs",
+               dashboard=getattr(service.dashboard, "url", None) if service.dashboard is not None else None,
+               structures=[s_.id for s_ in settings.structures] if service.fleet else [service.source.id], db=str(settings.db))
     try:
         while not stop.is_set():
             if service.wait(0.2) and not settings.source.keep_running:
                 break
+            progress.poll()
     finally:
         elapsed = time.monotonic() - started
         if not service.done:
@@ -203,8 +235,16 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
             status = service.status()
         service.stop(drain_s=5.0 if service.done else 1.0)
         api.stop()
-    if service.fleet:
-        return _print_fleet(fleet, as_json=args.json)
+    try:
+        return _print_fleet(fleet, as_json=args.json) if service.fleet else _print_summary(status, elapsed, args)
+    except BrokenPipeError:
+        # the reader of this output (a fleet's front) ended first: the summary has no one to go to
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+
+
+def _print_summary(status: Any, elapsed: float, args: argparse.Namespace) -> int:
+    code = 0
     p = status.pipeline
     src = status.sources[0]
     # A batch that failed was skipped: the run is not clean even if later batches succeeded.
@@ -227,6 +267,14 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
               f"{summary['windows']} windows, {summary['trend_rows']} trend rows in {summary['wall_s']} s "
               f"({summary['realtime_factor']}x real time)", flush=True)
     return code
+
+
+def _watch_parent(args: argparse.Namespace) -> None:
+    parent = getattr(args, "parent_pid", None)
+    if parent is not None:
+        from ._processes import end_with_parent
+
+        end_with_parent(parent)
 
 
 def _fleet_summary(service: Any, elapsed: float) -> dict[str, Any]:
@@ -282,11 +330,15 @@ def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, 
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, lambda *a: stop.set())
         signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    _watch_parent(args)
     started = time.monotonic()
     try:
         front.start()
         if front.dashboard is not None:
             print(f"shm serve: dashboard at {getattr(front.dashboard, 'url', '?')}", flush=True)
+        _ready(args, state="serving", api=api.url, docs=f"{api.url}/docs",
+               dashboard=getattr(front.dashboard, "url", None) if front.dashboard is not None else None,
+               structures=list(front.order), db=str(settings.db), workers=[w.process.pid for w in front.workers])
         while not stop.is_set():
             if front.wait(0.2) and not settings.source.keep_running:
                 break

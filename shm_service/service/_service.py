@@ -45,6 +45,7 @@ from ..recording import RecordingError
 from ._archive import Archive
 from ._config import ServiceSettings, SettingsError, resolve_token
 from ._dashboard_port import StructureModel, start_dashboard
+from ._progress import describe_progress
 from ._live import LiveRing
 from ._metrics import fleet_metrics
 from ._notify import Notifier, notify_targets
@@ -734,7 +735,8 @@ class MonitoringService(_StoredRows):
                 version=VERSION, started_at=self.started_at, uptime_s=round(time.time() - self.started_at, 1),
                 paused=self.paused, done=structure.done if self.fleet else self.done,
                 pipeline_error=structure.pipeline_error, pipeline_errors=structure.pipeline_errors,
-                last_pipeline_error=structure.last_pipeline_error),
+                last_pipeline_error=structure.last_pipeline_error,
+                progress=self._progress(structure, p)),
             sources=[SourceStatusDocument(**src)],
             pipeline=p,
             degraded_sensors=sorted(t for t, s in states.items() if s != "ok"),
@@ -756,6 +758,14 @@ class MonitoringService(_StoredRows):
             thresholds=structure.thresholds,
             model=structure.model_document,
         )
+
+    def _progress(self, structure: Structure, p: Any) -> str | None:
+        """What ``structure`` is doing now (``_progress``); never breaks the status."""
+        try:
+            return describe_progress(structure, p, getattr(self, "compiling_since", None))
+        except Exception as exc:
+            log.debug("progress of %s: %s", structure.id, exc)
+            return None
 
     def structures_document(self) -> StructuresDocument:
         """``GET /api/structures``: every structure's state, lag, windows and active alarms."""

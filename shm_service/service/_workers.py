@@ -12,7 +12,6 @@ import logging
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Mapping
@@ -38,7 +37,9 @@ from ._config import ServiceSettings, render_toml, resolve_token
 from ._dashboard_port import StructureModel, start_dashboard
 from ._metrics import fleet_metrics, merge_expositions
 from ._ingest import IngestError
+from ._launch import ServeProcess, ServeStartError, start_serve
 from ._notify import Notifier, notify_targets
+from ._processes import StaleWorkers, record_workers, stop_stale_workers
 from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable, _ModelCache, _StoredRows
 from ._storage import Storage
 
@@ -52,17 +53,6 @@ def part_of(settings: ServiceSettings, index: int, count: int) -> ServiceSetting
     if not (0 <= index < count):
         raise ValueError(f"worker {index=} must lie within 0..{count - 1}")
     return settings.model_copy(update={"structures": settings.structures[index::count]})
-
-
-def _api_line(process: subprocess.Popen) -> str | None:
-    """The worker's "API at URL" line (None: it ended before printing one). What it prints before
-    (the dashboard's banner of worker 0) is passed on to stderr, not taken for a failed start."""
-    for line in process.stdout or ():
-        if "API at " in line:
-            return line
-        if line.strip():
-            print(line.rstrip(), file=sys.stderr, flush=True)
-    return None
 
 
 class _Worker:
@@ -116,36 +106,47 @@ class WorkerFleet(_StoredRows):
         directory = Path(self.settings.data_dir or ".")
         directory.mkdir(parents=True, exist_ok=True)
         config = directory / "fleet-workers.toml"
+        # an earlier front's workers (it was killed and they did not notice yet) leave the database first
+        try:
+            ended = stop_stale_workers(self.settings.db, str(config))
+        except StaleWorkers as exc:
+            raise ServiceError(str(exc)) from None
+        if ended:
+            log.warning("ended %d workers of an earlier front on %s (pids %s)", len(ended), self.settings.db, ended)
         config.write_text(render_toml(self.settings), encoding="utf-8")
         self._starting = True
-        launched = []
+        launched: list[tuple[int, list[str], ServeProcess]] = []
         try:
             # all at once (the database exists already): they import and build in parallel
             for i in range(n):
                 ids = self.order[i::n]
                 if not ids:
                     continue
-                cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(config), "--worker-of", f"{i}/{n}",
-                       "--host", "127.0.0.1", "--port", "0"]
-                cmd.append("--no-dashboard")  # the front's dashboard reads each structure from its worker
+                args = ["--config", str(config), "--worker-of", f"{i}/{n}", "--host", "127.0.0.1", "--port", "0",
+                        "--no-dashboard"]  # the front's dashboard reads each structure from its worker
                 if self._json:
-                    cmd.append("--json")
-                launched.append((i, ids, subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=self._environ)))
-            for i, ids, process in launched:
-                line = _api_line(process)
-                if line is None:
-                    code = process.wait(60)
-                    raise ServiceError(f"worker process {i} of {n} did not start (exit code {code}; its log is above)")
-                worker = _Worker(i, process, line.split("API at ")[1].split()[0], ids)
-                threading.Thread(target=self._drain, args=(worker,), name=f"worker-{i}-out", daemon=True).start()
+                    args.append("--json")
+                launched.append((i, ids, start_serve(args, env=self._environ, stdout=subprocess.PIPE,
+                                                     ready_file=directory / f"fleet-worker-{i}.ready.json", timeout=None)))
+            record_workers(self.settings.db, [started.pid for _, _, started in launched])
+            pending = [(_Worker(i, started.process, "", ids), started) for i, ids, started in launched]
+            for worker, _ in pending:
+                threading.Thread(target=self._drain, args=(worker,), name=f"worker-{worker.index}-out", daemon=True).start()
+            for worker, started in pending:
+                try:
+                    worker.url = started.wait_ready(timeout=600.0)["api"]
+                except ServeStartError as exc:
+                    code = started.process.wait(60)
+                    raise ServiceError(f"worker process {worker.index} of {n} did not start (exit code {code}; its log "
+                                       f"is above): {exc}") from None
                 self.workers.append(worker)
-                for sid in ids:
+                for sid in worker.ids:
                     self.owner[sid] = worker
-                log.info("worker %d of %d (pid %d): %d structures at %s", i, n, process.pid, len(ids), worker.url)
+                log.info("worker %d of %d (pid %d): %d structures at %s", worker.index, n, started.pid, len(worker.ids),
+                         worker.url)
         except BaseException:
-            for _, _, process in launched:
-                if process.poll() is None:
-                    process.kill()
+            for _, _, started in launched:
+                started.kill()
             raise
         finally:
             self._starting = False

@@ -185,7 +185,7 @@ def build_plant(
         clamped=clamped,
         mass=M,
         inverse_mass=inverse,
-        bending=bending / (model.youngs_modulus / beam.youngs_modulus),
+        bending=bending / beam.stiffness_factor_at(model.temperature_c),
         tension=tension,
         centrifugal=centrifugal,
         first_moment=first_moment,

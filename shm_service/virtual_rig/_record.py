@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import orjson
 
+from estimator import RigDescription
+
 from ..recording import RecordingWriter
 from ..recording._writer import encode_payloads_json
 from ._settings import SimulationSettings
@@ -94,10 +96,12 @@ def write_block(writer: RecordingWriter, block: SampleBlock, start_time_ns: int)
     return dict(zip(topics, counts))
 
 
-def simulate(settings: SimulationSettings, out: str | Path, *, block_seconds: float = 60.0) -> SimulationSummary:
-    """Simulate ``settings`` and write the recording to ``out`` (rig.json and truth included)."""
+def simulate(settings: SimulationSettings, out: str | Path, *, block_seconds: float = 60.0,
+             rig: RigDescription | None = None) -> SimulationSummary:
+    """Simulate ``settings`` and write the recording to ``out`` (rig.json and truth included);
+    ``rig``: a rig description to simulate instead of the settings' layout."""
     started = time.perf_counter()
-    rig = VirtualRig(settings)
+    rig = VirtualRig(settings, rig)
     metadata = rig.truth_metadata()
     totals: dict[str, int] = {}
     with RecordingWriter(out, rig.nominal_rig, metadata={"truth": metadata}) as writer:

@@ -9,7 +9,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from estimator import PointMass, StiffnessSegment
 
-__all__ = ["Damage", "OperationalSettings", "PlantSettings", "SensorErrors", "SimulationSettings", "parse_damage"]
+__all__ = ["Damage", "OperationalSettings", "PlantSettings", "SensorErrors", "SimulationSettings", "parse_damage",
+           "settings_for_rig"]
 
 
 class _Closed(BaseModel):
@@ -151,6 +152,16 @@ class SimulationSettings(_Closed):
     temperature_mean: float = Field(20.0, description="°C")
     temperature_swing: float = Field(0.0, ge=0, description="peak-to-peak temperature swing over the run, K")
     rest: float = Field(60.0, ge=0, description="initial rest phase, s")
+    wind_load_rms: float | None = Field(
+        None, ge=0, description="RMS of the ambient (wind) load along the beam, N/m, for the ambient and operational "
+        "excitations; None: operational.load_rms for the built-in sheet, scaled to the structure for a rig file "
+        "(the load whose quasi-static RMS strain at the support is wind_base_strain)")
+    wind_base_strain: float = Field(
+        5e-5, gt=0, le=1e-2, description="quasi-static RMS bending strain at the support of the scaled wind load of a rig "
+        "file, m/m [5e-5: 10.5 MPa on steel; resonance adds to it]")
+    wind_correlation: float | None = Field(
+        None, gt=0, description="correlation length of the wind load along the beam, m; None: operational.load_correlation "
+        "for the built-in sheet, a quarter of the beam (at least 1 m) for a rig file")
     start_time_ns: int = Field(1_767_225_600_000_000_000, ge=0, description="log_time of the first sample (2026-01-01 UTC)")
     plant: PlantSettings = PlantSettings()
     errors: SensorErrors = SensorErrors()
@@ -170,3 +181,35 @@ class SimulationSettings(_Closed):
         if isinstance(value, (list, tuple)):
             return tuple(parse_damage(v) if isinstance(v, str) else v for v in value)
         return value
+
+
+#: Keys of a layout's settings that a rig file describes itself (its beam, support and orientation).
+_RIG_OWNED = ("support", "orientation", "length", "layout")
+
+
+def settings_for_rig(rig, command_line: SimulationSettings, given: set[str] | frozenset[str] = frozenset()) -> SimulationSettings:
+    """The settings of simulating the rig file ``rig``: its ``simulator`` key (any field of
+    :class:`SimulationSettings` but the rig's own support, orientation, length and layout), then the
+    ``given`` fields of ``command_line`` (options the user set), with support and orientation the rig's.
+
+    Raises
+    ------
+    ValueError
+        When ``simulator`` is not an object or names an unknown setting (pydantic's
+        ``ValidationError``, naming the key).
+    """
+    file = rig.extra("simulator") or {}
+    if not isinstance(file, dict):
+        raise ValueError(f"the rig's 'simulator' key must be an object of settings, got {type(file).__name__}")
+    data = {k: v for k, v in file.items() if k not in _RIG_OWNED}
+    cli = command_line.model_dump(mode="json")
+    for name in given:
+        if name == "plant":  # the command line sets only the friction of the plant's settings
+            data["plant"] = {**(data.get("plant") or {}), "friction_torque": command_line.plant.friction_torque}
+        elif name in cli:
+            data[name] = cli[name]
+        else:
+            raise ValueError(f"unknown simulation setting {name!r}")
+    data["support"] = rig.support
+    data["orientation"] = rig.orientation
+    return SimulationSettings.model_validate(data)

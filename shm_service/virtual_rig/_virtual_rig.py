@@ -20,6 +20,7 @@ from ._excitation import DistributedLoad, Excitation, OperationalExcitation, mak
 from ._kinematics import points_motion
 from ._plant import Plant, build_plant, clamped_basis, integrate
 from ._settings import SimulationSettings
+from ._wind import scaled_wind_load
 
 __all__ = ["SampleBlock", "VirtualRig", "SAMPLE_RATE_HZ", "SLOW_DIVIDER"]
 
@@ -64,11 +65,32 @@ def _perturbed_rig(nominal: RigDescription, settings: SimulationSettings, rng: n
     data = nominal.model_dump(mode="json")
     plant = settings.plant
     if not settings.ideal:
-        data["beam"]["youngs_modulus"] *= 1 + plant.stiffness_mismatch * rng.standard_normal()
+        stiffness = 1 + plant.stiffness_mismatch * rng.standard_normal()
+        if data["beam"].get("youngs_modulus") is not None:
+            data["beam"]["youngs_modulus"] *= stiffness
+        for station in data["beam"].get("sections") or ():
+            if station["shape"] == "table":  # a table's EI is not E times a geometry: scale it alike
+                station["bending_stiffness"] *= stiffness
         for mass in data["point_masses"]:
             factor = 1 + plant.mass_mismatch * rng.standard_normal()
             mass["mass"] *= factor
             mass["rotary_inertia"] *= factor
+    return parse_rig(data)
+
+
+def default_truth_stations(length_m: float) -> list[float]:
+    """Eight stations at L/8, 2L/8, …, L (m): where a rig without ``truth_stations`` gets its truth."""
+    return [round(length_m * k / 8, 9) for k in range(1, 9)]
+
+
+def _described_rig(rig: RigDescription, settings: SimulationSettings) -> RigDescription:
+    """A rig file as the recording describes it: its own keys, the simulator's settings under
+    ``simulator`` (what was simulated), and truth stations scaled to the beam where it names none
+    (the truth's deflection and curvature need stations; readers refuse empty ones)."""
+    data = rig.model_dump(mode="json")
+    if not data.get("truth_stations"):
+        data["truth_stations"] = default_truth_stations(rig.beam.length)
+    data["simulator"] = settings.model_dump(mode="json", exclude={"support", "orientation", "length", "layout"})
     return parse_rig(data)
 
 
@@ -104,10 +126,15 @@ class VirtualRig:
         self._rng_excitation = np.random.default_rng(seeds[1])
         self._rng_sensors = np.random.default_rng(seeds[2])
         self._rng_ambient = np.random.default_rng(seeds[3])
-        self.nominal_rig = nominal_rig or build_rig(
+        #: A rig given as a description (``shm simulate --rig``) rather than the built-in sheet's layout:
+        #: its wind load and truth stations are scaled to the beam.
+        self.custom_rig = nominal_rig is not None
+        self.nominal_rig = _described_rig(nominal_rig, settings) if nominal_rig is not None else build_rig(
             settings.layout, length=settings.length, support=settings.support, orientation=settings.orientation,
             simulator=settings.model_dump(mode="json"),
         )
+        #: No bearing sensor: the support is fixed to the ground (d ≡ 0, the contract's fixed foundation).
+        self.fixed_support = self.nominal_rig.support_fixed_to_ground
         for damage in settings.damage:
             for x in damage.nodes:
                 if not 0 <= x <= self.nominal_rig.beam.length:
@@ -140,11 +167,13 @@ class VirtualRig:
         )
         nominal_freqs = natural_modes(nominal_model, 6).frequencies_hz
         op = settings.operational
+        self.wind_correlation_m, self.wind_load_rms = self._wind_load()
         self.excitation: Excitation = make_excitation(
             settings.excitation, settings.duration, self._rng_excitation,
             eigenfrequencies_hz=nominal_freqs, rest_s=settings.rest, ambient_force_std=settings.plant.ambient_force,
-            operational=OperationalExcitation(op.support_rms, tuple(op.support_band), op.load_rms, op.load_correlation,
-                                              tuple(op.load_band), op.ramp),
+            # A fixed support does not move: the operational excitation is then the wind load alone.
+            operational=OperationalExcitation(0.0 if self.fixed_support else op.support_rms, tuple(op.support_band),
+                                              self.wind_load_rms, self.wind_correlation_m, tuple(op.load_band), op.ramp),
         )
         # Ambient loads act on the lateral DOF of every node beyond D (below it hanging, above it standing).
         n_nodes = len(basis.nodes)
@@ -154,15 +183,41 @@ class VirtualRig:
         T = np.column_stack([rigid, basis.dofs])
         self._load_map = T[2::2].T  # (n, nodes-1): generalized force per nodal load
         self._distributed_load = None
-        if self.excitation.operational is not None:
-            o = self.excitation.operational
+        # The wind load: the operational excitation's, and the ambient one's for a rig file (the
+        # built-in sheet's ambient excitation keeps its random nodal forces).
+        wind = self.excitation.operational is not None or (self.custom_rig and settings.excitation == "ambient")
+        if wind:
             self._distributed_load = DistributedLoad(
-                self._rng_ambient, np.asarray(basis.nodes[1:], dtype=float), rms_n_per_m=o.load_rms_n_per_m,
-                correlation_m=o.load_correlation_m, band_hz=o.load_band_hz, sample_rate_hz=SAMPLE_RATE_HZ,
-                start_s=self.excitation.rest_s, ramp_s=o.ramp_s)
+                self._rng_ambient, np.asarray(basis.nodes[1:], dtype=float), rms_n_per_m=self.wind_load_rms,
+                correlation_m=self.wind_correlation_m, band_hz=tuple(op.load_band), sample_rate_hz=SAMPLE_RATE_HZ,
+                start_s=self.excitation.rest_s, ramp_s=op.ramp)
         self._sensor_setup()
         self._state = (np.zeros(self.plants[0].size), np.zeros(self.plants[0].size))
         self._next_sample = 0
+
+    def _wind_load(self) -> tuple[float, float]:
+        """(correlation length m, RMS N/m) of the wind load: as set, the operational settings' for the
+        built-in sheet, scaled to the structure for a rig file (``_wind.scaled_wind_load``)."""
+        s, op = self.settings, self.settings.operational
+        if s.wind_correlation is not None:
+            correlation = s.wind_correlation
+        elif self.custom_rig:
+            correlation = max(1.0, 0.25 * self.nominal_rig.beam.length)
+        else:
+            correlation = op.load_correlation
+        if s.wind_load_rms is not None:
+            return correlation, s.wind_load_rms
+        if self.custom_rig:
+            return correlation, scaled_wind_load(self.nominal_rig, correlation, s.wind_base_strain)
+        return correlation, op.load_rms
+
+    def support_motion(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """d, ḋ, d̈ of the support at ``t`` (s): the excitation's bearing motion, or zero for a support
+        fixed to the ground."""
+        if self.fixed_support:
+            t = np.asarray(t, dtype=float)
+            return np.zeros_like(t), np.zeros_like(t), np.zeros_like(t)
+        return self.excitation.bearing(t)
 
     def _refuse_buckling_over_the_temperature_range(self, models) -> None:
         """The critical load scales with E: a mast that stands at the reference temperature may
@@ -200,6 +255,8 @@ class VirtualRig:
         self._misalignment = scale * e.misalignment * rng.standard_normal(n_imu)
         self._tof_offset = scale * e.tof_offset * rng.standard_normal(len(self.tofs))
         self._strain_offset = scale * e.strain_offset * rng.standard_normal(len(self.gauges))
+        # c(η) of each gauge: half the sheet's thickness, half a tube's outer diameter, a table's value
+        self._fibre_distance = np.array([rig.beam.fibre_distance(g.position) for g in self.gauges], dtype=float)
 
     def truth_metadata(self) -> dict[str, str]:
         """The ``truth`` metadata record: the plant's exact modal figures and what was simulated."""
@@ -221,6 +278,10 @@ class VirtualRig:
         }
         if self.settings.excitation == "operational":
             meta["operational"] = self.settings.operational.model_dump_json()
+        meta["fixed_support"] = json.dumps(self.fixed_support)
+        if self._distributed_load is not None:
+            meta["wind_load"] = json.dumps({"rms_n_per_m": round(self.wind_load_rms, 9),
+                                            "correlation_m": round(self.wind_correlation_m, 6)})
         if self.damaged_rig is not None:
             meta["eigenfrequencies_after_damage_hz"] = json.dumps(self.plants[1].linear_frequencies_hz[:8].round(6).tolist())
             meta["damage_time_s"] = json.dumps((self.damage_sample or 0) / SAMPLE_RATE_HZ)
@@ -236,7 +297,7 @@ class VirtualRig:
         substeps = self.substeps
         n = k1 - k0
         fine_t = (k0 + np.arange(2 * substeps * n + 1) / (2 * substeps)) * self.dt
-        _, _, fine_acc = self.excitation.bearing(fine_t)
+        _, _, fine_acc = self.support_motion(fine_t)
         t = (k0 + np.arange(n)) * self.dt
         temperature = self.temperature(t)
         plant = self.plants[1] if (self.damage_sample is not None and k0 >= self.damage_sample) else self.plants[0]
@@ -248,6 +309,12 @@ class VirtualRig:
             force = loads @ self._load_map.T
         else:
             force = np.zeros((n, plant.size))
+        if self.fixed_support and self.settings.excitation in ("paper", "decay"):
+            # A fixed support cannot move: the paper's moves and sine bursts and the decay's plucks act
+            # as the load they would put on the beam, −μ d̈ along it (its modal participation is the
+            # moving support's), while D stays put.
+            _, _, schedule = self.excitation.bearing(t)
+            force = force - np.outer(schedule, np.concatenate([[plant.first_moment], plant.modal_first_moment]))
         y, yd, ydd, y_end, yd_end = integrate(
             plant, self._state[0], self._state[1], fine_acc, temperature, force,
             sample_period=self.dt, substeps=substeps,
@@ -273,7 +340,7 @@ class VirtualRig:
         n = k1 - k0
         index = k0 + np.arange(n)
         t = index * self.dt
-        d, _, d_acc = self.excitation.bearing(t)
+        d, _, d_acc = self.support_motion(t)
         rig = self.nominal_rig
         e = self.settings.errors
         rng = self._rng_sensors
@@ -296,10 +363,9 @@ class VirtualRig:
             meas[imu.topic] = (t, np.hstack([accel, gyro]))
             delays[imu.topic] = e.imu_delay + e.delay_jitter * rng.random(n)
 
-        half_thickness = 0.5 * rig.beam.thickness
         for i, gauge in enumerate(self.gauges):
             curvature = fast.curvature[:, len(self.imus) + i]
-            strain = -half_thickness * curvature + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
+            strain = -self._fibre_distance[i] * curvature + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
             meas[gauge.topic] = (t, strain[:, None])
             delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
 
@@ -315,7 +381,7 @@ class VirtualRig:
             h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
             y_slow = h00 * y[k] + h10 * self.dt * yd[k] + h01 * y[k1] + h11 * self.dt * yd[k1]
             t_slow = t_slow + s[:, 0] * self.dt
-            d_slow, _, d_acc_slow = self.excitation.bearing(t_slow)
+            d_slow, _, d_acc_slow = self.support_motion(t_slow)
         theta_slow = y_slow[:, 0]
         slow_motion = points_motion(self.basis, [s.position for s in self.tofs], y_slow, yd_slow, ydd_slow, d_slow,
                                     d_acc_slow, plant_g) if self.tofs else None

@@ -25,5 +25,5 @@ def simulate(duration=40.0, *, rest=10.0, seed=1, ideal=True, errors=None, rig=N
     imu = {t.split("/")[-1]: SensorSeries(v[0], v[1][:, IMU_PLANAR_COLUMNS]) for t, v in data.items() if t.startswith("/imu/")}
     tof = {t.split("/")[-1]: SensorSeries(*v) for t, v in data.items() if t.startswith("/tof/")}
     strain = {t.split("/")[-1]: SensorSeries(*v) for t, v in data.items() if t.startswith("/strain/")}
-    bearing = SensorSeries(*data["/bearing/displacement"])
+    bearing = SensorSeries(*data["/bearing/displacement"]) if "/bearing/displacement" in data else None  # none: fixed support
     return Measurements(imu=imu, tof=tof, strain=strain, bearing=bearing), truth, vr

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from contract import ModeDocument, WindowDocument
+from shm_service.service import ServeProcess, read_ready, start_serve
 from dashboard_feeder import TOKEN, DemoFeeder, FakeService, alarm, history_rows, simulated_estimates
 
 CHROMIUM = "/usr/bin/chromium"
@@ -303,14 +304,13 @@ def stop_process(proc: subprocess.Popen) -> None:
             proc.wait(10)
 
 
-def serve_urls(proc: subprocess.Popen, out: Path, log: Path, what: str = "shm serve") -> tuple[str, str] | None:
-    """The API and dashboard addresses ``what`` printed to ``out`` (None: not yet); its log's tail
-    when it ended before printing them."""
-    text = out.read_text()
-    if proc.poll() is not None:
-        raise AssertionError(f"{what} ended early ({proc.returncode}): {log.read_text()[-3000:]}")
-    api, dash = re.search(r"API at (http://\S+?) ", text), re.search(r"dashboard at (http://\S+)", text)
-    return (api.group(1), dash.group(1)) if api and dash else None
+def serve_urls(serve: ServeProcess, log: Path, what: str = "shm serve") -> tuple[str, str] | None:
+    """The API and dashboard addresses of ``serve``'s ready document (None: not yet); its log's tail
+    when it ended before it was ready."""
+    if serve.process.poll() is not None:
+        raise AssertionError(f"{what} ended early ({serve.process.returncode}): {log.read_text()[-3000:]}")
+    doc = read_ready(serve.ready_file)
+    return (doc["api"], doc["dashboard"]) if doc and doc.get("dashboard") else None
 
 
 def _wait(predicate, timeout: float, what: str, poll: float = 0.25):
@@ -341,7 +341,6 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, case)
     trends labelled like the spectra by the model's modes (no combimode for the clamp), an alarm
     acknowledged over the HTTP API shown as such."""
     import contextlib
-    import sys
 
     import httpx
     import tomli_w
@@ -361,14 +360,16 @@ def test_the_real_service_with_its_dashboard_for_gamma(chromium, tmp_path, case)
     })
     (tmp_path / "serve.toml").write_text(tomli_w.dumps(config))
     out, log = tmp_path / "serve.out", tmp_path / "serve.log"
-    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(tmp_path / "serve.toml"), "--source", "sim",
-           "--speed", "4", "--port", "0", "--token-file", str(tmp_path / "token")]
+    args = ["--config", str(tmp_path / "serve.toml"), "--source", "sim", "--speed", "4", "--port", "0",
+            "--token-file", str(tmp_path / "token")]
     root = Path(__file__).resolve().parents[2]
     with open(out, "w") as stdout, open(log, "w") as stderr:
-        proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=stdout, stderr=stderr, env={**os.environ, "PYTHONPATH": str(root)})
+        serve = start_serve(args, cwd=tmp_path, stdout=stdout, stderr=stderr, env={**os.environ, "PYTHONPATH": str(root)},
+                            timeout=None, ready_file=tmp_path / "ready.json")
+    proc = serve.process
     stack = contextlib.ExitStack()
     try:
-        api_url, dash_url = _wait(lambda: serve_urls(proc, out, log), 180, "shm serve to print its API and dashboard addresses")
+        api_url, dash_url = _wait(lambda: serve_urls(serve, log), 180, "shm serve to say where its API and dashboard are")
         api = stack.enter_context(httpx.Client(base_url=api_url, timeout=10))
         # The clamped mast: b_k is mode k (no combimode); the pendulum's b1 carries modes 1 and 2.
         gamma_text = "b3 · mode 3" if mast else "b5 · mode 6"

@@ -48,6 +48,12 @@ def test_ribbon_vertices_for_known_b_and_phi_are_exact():
         [3.0, -0.1, -3.0], [3.0, 0.1, -3.0],
     ]
     np.testing.assert_allclose(verts, expected, atol=1e-6)
+    # a taper: one width per centre-line point (a tube's diameter falling along a mast)
+    tapered = ribbon(line, np.array([0.4, 0.3, 0.2]))
+    np.testing.assert_allclose(tapered[:, 1], [-0.2, 0.2, -0.15, 0.15, -0.1, 0.1], atol=1e-7)
+    for bad in (np.array([0.4, 0.3]), np.array([0.4, -0.3, 0.2]), np.array([0.4, np.nan, 0.2]), 0.0):
+        with pytest.raises(ValueError, match="width"):
+            ribbon(line, bad)
     faces = ribbon_faces(3)
     assert faces.shape == (4, 3) and faces.dtype == np.uint32 and faces.max() == 5
     # Every face uses vertices of two neighbouring stations only.

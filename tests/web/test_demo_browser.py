@@ -9,13 +9,12 @@ import os
 import re
 import signal
 import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from shm_service.service import read_ready, start_serve
 from shm_service.virtual_rig import SimulationSettings
 from test_dashboard_browser import CHROMIUM_ARGS, VIEWPORT, _image, _visible, _wait, chromium  # noqa: F401 (fixture)
 
@@ -41,22 +40,22 @@ def test_the_shortened_demo_in_headless_chromium(chromium, tmp_path):  # noqa: F
 
     (tmp_path / "short.toml").write_text(SHORT)
     out = tmp_path / "demo.out"
-    cmd = [sys.executable, "-m", "shm_service.cli", "demo", "--dir", str(tmp_path / "demo"), "--config", str(tmp_path / "short.toml"),
-           "--duration", f"{DURATION_S:g}", "--damage-at", f"{DAMAGE_AT_S:g}", "--speed", "max", "--port", "0",
-           "--dashboard-port", "0", "--keep-running"]
+    args = ["--dir", str(tmp_path / "demo"), "--config", str(tmp_path / "short.toml"), "--duration", f"{DURATION_S:g}",
+            "--damage-at", f"{DAMAGE_AT_S:g}", "--speed", "max", "--port", "0", "--dashboard-port", "0", "--keep-running"]
     with open(out, "w") as stdout:
         # a process group of its own: Ctrl-C in a terminal goes to the whole foreground group
-        proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=stdout, stderr=subprocess.STDOUT, start_new_session=True,
-                                env={**os.environ, "PYTHONPATH": str(ROOT)})
+        demo = start_serve(args, command="demo", cwd=tmp_path, stdout=stdout, stderr=subprocess.STDOUT,
+                           start_new_session=True, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=None,
+                           ready_file=tmp_path / "ready.json")
+    proc = demo.process
     try:
         def urls():
-            text = out.read_text()
             if proc.poll() is not None:
-                raise AssertionError(f"shm demo ended early ({proc.returncode}):\n{text[-3000:]}")
-            api, dash = re.search(r"API at (http://\S+?) ", text), re.search(r"dashboard at (http://\S+)", text)
-            return (api.group(1), dash.group(1)) if api and dash else None
+                raise AssertionError(f"shm demo ended early ({proc.returncode}):\n{out.read_text()[-3000:]}")
+            doc = read_ready(demo.ready_file)
+            return (doc["api"], doc["dashboard"]) if doc and doc.get("dashboard") else None
 
-        api_url, dash_url = _wait(urls, 240, "shm demo to print its API and dashboard addresses")
+        api_url, dash_url = _wait(urls, 240, "shm demo to say where its API and dashboard are")
         banner = out.read_text()
         # the banner's timeline is this configuration's: baseline, damage, when its alarm is expected
         assert re.search(r"\n\s+190 s\s+the baseline is learnt from 120 s", banner), banner

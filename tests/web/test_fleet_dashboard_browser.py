@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import os
 import re
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -18,6 +16,7 @@ from pathlib import Path
 import httpx
 import pytest
 
+from shm_service.service import start_serve
 from test_dashboard_browser import (  # noqa: F401  (chromium: the fixture)
     CHROMIUM_ARGS, VIEWPORT, _image, _support_offset, _visible, _wait, chromium, serve_urls, stop_process,
 )
@@ -81,13 +80,14 @@ def fleet(tmp_path_factory):
     (tmp / "token").write_text(TOKEN + "\n")
     out, log = tmp / "serve.out", tmp / "serve.log"
     # speed 6: the simulation's 60 s rest (the estimator's calibration) passes in 10 s; 2 s blocks
-    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(tmp / "fleet.toml"), "--port", "0",
-           "--speed", "6", "--db", str(tmp / "shm.sqlite"), "--token-file", str(tmp / "token")]
+    args = ["--config", str(tmp / "fleet.toml"), "--port", "0", "--speed", "6", "--db", str(tmp / "shm.sqlite"),
+            "--token-file", str(tmp / "token")]
     with open(out, "w") as stdout, open(log, "w") as stderr:
-        proc = subprocess.Popen(cmd, cwd=tmp, stdout=stdout, stderr=stderr, env={**os.environ, "PYTHONPATH": str(ROOT)})
-
+        serve = start_serve(args, cwd=tmp, stdout=stdout, stderr=stderr, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            timeout=None, ready_file=tmp / "ready.json")
+    proc = serve.process
     try:
-        yield _wait(lambda: serve_urls(proc, out, log), 120, "shm serve to print its API and dashboard addresses")
+        yield _wait(lambda: serve_urls(serve, log), 120, "shm serve to say where its API and dashboard are")
     finally:
         stop_process(proc)
     text = log.read_text()

@@ -87,3 +87,18 @@ def test_a_fleets_dashboard_takes_no_rig_and_needs_the_fleets_port(feed_args):
         Dashboard(host="127.0.0.1", port=0, service=FakeService(), fleet=True)
     with pytest.raises(ValueError, match="rig, units, layout and stations are required"):
         Dashboard(host="127.0.0.1", port=0, service=FakeService())
+
+
+def test_a_feed_of_a_sectioned_mast_without_a_reflector():
+    # a beam from sections has no beam.width and a rig without ToFs no reflector_distance
+    from pathlib import Path
+
+    from contract import load_rig
+
+    rig = load_rig(Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json")
+    units = estimator.unit_deformations(estimator.assemble_beam(rig), 2)
+    feed = StructureFeed(rig=rig, units=units, layout=LAYOUT, stations=np.linspace(2.0, 20.0, 10))
+    assert feed.width == pytest.approx(0.5)  # the tube's diameter at the foundation
+    assert feed.reflector_distance is None and feed.standing and feed.clamped
+    # drawn to scale: the tube's diameter along the taper, the section beyond the 8 m joint's step
+    np.testing.assert_allclose(feed.width_at([0.0, 4.0, 8.0, 14.0, 20.0]), [0.5, 0.44, 0.38, 0.29, 0.2], rtol=1e-12)

@@ -14,6 +14,7 @@ import pytest
 from shm_service.service._api import create_app
 from shm_service.service._config import SettingsError, load_settings, render_toml
 from shm_service.service._server import ApiServer
+from shm_service.service import start_serve
 from shm_service.service._service import MonitoringService
 
 from svc_helpers import fast_overrides
@@ -274,7 +275,6 @@ def test_a_fleet_on_worker_processes_behind_one_api(tmp_path, short_recording):
     serves the stored rows itself; a structure's fault stays on it."""
     import json
     import subprocess
-    import sys
 
     config = tmp_path / "fleet.toml"
     config.write_text(
@@ -283,14 +283,15 @@ def test_a_fleet_on_worker_processes_behind_one_api(tmp_path, short_recording):
         f'[[structures]]\nid = "a"\nsource = "replay:{short_recording}"\n'
         '[[structures]]\nid = "b"\nsource = "ingest"\n'
         f'[[structures]]\nid = "c"\nsource = "replay:{tmp_path / "gone.mcap"}"\n', encoding="utf-8")
-    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(config), "--port", "0", "--speed", "max",
-           "--db", str(tmp_path / "shm.sqlite"), "--keep-running", "--json"]
+    args = ["--config", str(config), "--port", "0", "--speed", "max", "--db", str(tmp_path / "shm.sqlite"),
+            "--keep-running", "--json"]
     env = {**__import__("os").environ, "SHM_TOKEN": TOKEN}
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=env)
+    serve = start_serve(args, env=env, stdout=subprocess.PIPE, timeout=300, ready_file=tmp_path / "ready.json")
+    proc = serve.process
     try:
-        line = proc.stdout.readline()
-        assert "API at " in line and "2 worker processes" in line, line
-        url = line.split("API at ")[1].split()[0]
+        assert serve.ready["state"] == "serving" and serve.ready["structures"] == ["a", "b", "c"]
+        assert len(serve.ready["workers"]) == 2
+        url = serve.url
         with httpx.Client(base_url=url, timeout=60) as c:
             done = _wait(lambda: (lambda d: d if d["a"]["state"] == "finished" else None)(
                 {s["id"]: s for s in c.get("/api/structures").json()["structures"]}), 300, "structure a to finish")
@@ -331,7 +332,6 @@ def test_a_fleet_on_worker_processes_with_its_dashboard_on(tmp_path, short_recor
     taken for a failed start), the front serves every structure's state."""
     import os
     import subprocess
-    import sys
 
     config = tmp_path / "fleet.toml"
     config.write_text(
@@ -339,15 +339,13 @@ def test_a_fleet_on_worker_processes_with_its_dashboard_on(tmp_path, short_recor
         "baseline_min_windows = 3\n[dashboard]\nport = 0\n[archive]\nenabled = false\n"
         f'[[structures]]\nid = "a"\nsource = "replay:{short_recording}"\n'
         f'[[structures]]\nid = "b"\nsource = "replay:{short_recording}"\n', encoding="utf-8")
-    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(config), "--port", "0", "--speed", "max",
-           "--db", str(tmp_path / "shm.sqlite"), "--keep-running"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env={**os.environ, "SHM_TOKEN": TOKEN})
+    args = ["--config", str(config), "--port", "0", "--speed", "max", "--db", str(tmp_path / "shm.sqlite"), "--keep-running"]
+    serve = start_serve(args, env={**os.environ, "SHM_TOKEN": TOKEN}, stdout=subprocess.DEVNULL, timeout=300,
+                        ready_file=tmp_path / "ready.json")
     try:
-        line = proc.stdout.readline()
-        assert "API at " in line and "2 worker processes" in line, line
-        url = line.split("API at ")[1].split()[0]
-        dashboard = _wait(lambda: next((x for x in iter(proc.stdout.readline, "") if "dashboard at " in x), None), 120,
-                          "the dashboard's line")
+        assert len(serve.ready["workers"]) == 2 and serve.dashboard_url
+        url = serve.url
+        dashboard = "dashboard at " + serve.dashboard_url
         page = httpx.get(dashboard.split("dashboard at ")[1].split()[0], timeout=30)
         assert page.status_code == 200
         with httpx.Client(base_url=url, timeout=60) as c:
@@ -355,8 +353,51 @@ def test_a_fleet_on_worker_processes_with_its_dashboard_on(tmp_path, short_recor
                 {s["id"]: s for s in c.get("/api/structures").json()["structures"]}), 300, "both structures to finish")
             assert list(done) == ["a", "b"] and done["a"]["windows"] == done["b"]["windows"] > 0
     finally:
-        proc.send_signal(__import__("signal").SIGTERM)
-        proc.communicate(timeout=120)
+        serve.stop(timeout=120)
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie, ended but not yet reaped by its new parent, does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            stat = f.read()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+@pytest.mark.skipif(not __import__("os").path.isdir("/proc"), reason="reads /proc")
+def test_kill_9_of_the_front_ends_its_workers_and_a_new_front_starts_clean(tmp_path):
+    """A supervisor's SIGKILL of the front (the OOM killer does the same): within 10 s no worker of
+    it runs; a front started again on the database finds none and starts its own."""
+    import os
+    import signal
+    import subprocess
+
+    config = tmp_path / "fleet.toml"
+    config.write_text(
+        "workers = 2\n[dashboard]\nenabled = false\n[archive]\nenabled = false\n"
+        '[[structures]]\nid = "a"\nsource = "sim"\n[[structures]]\nid = "b"\nsource = "sim"\n', encoding="utf-8")
+    args = ["--config", str(config), "--port", "0", "--db", str(tmp_path / "shm.sqlite"), "--data-dir", str(tmp_path)]
+    serve = start_serve(args, env={**os.environ, "SHM_TOKEN": TOKEN}, stdout=subprocess.DEVNULL, timeout=300,
+                        ready_file=tmp_path / "ready.json")
+    workers = serve.ready["workers"]
+    assert len(workers) == 2 and all(_alive(pid) for pid in workers)
+    os.kill(serve.pid, signal.SIGKILL)
+    serve.process.wait(10)
+    killed = time.monotonic()
+    while any(_alive(pid) for pid in workers) and time.monotonic() - killed < 10.0:
+        time.sleep(0.1)
+    assert not any(_alive(pid) for pid in workers), [pid for pid in workers if _alive(pid)]
+    again = start_serve(args, env={**os.environ, "SHM_TOKEN": TOKEN}, stdout=subprocess.DEVNULL, timeout=300,
+                        ready_file=tmp_path / "ready.json")
+    try:
+        assert set(again.ready["workers"]).isdisjoint(workers)
+        with httpx.Client(base_url=again.url, timeout=30) as c:
+            states = {s["id"]: s["state"] for s in c.get("/api/structures").json()["structures"]}
+            assert states == {"a": "running", "b": "running"}, states
+    finally:
+        assert again.stop(timeout=120) in (0, 1)
 
 
 def test_paced_structures_start_one_after_the_other_over_a_window_step():

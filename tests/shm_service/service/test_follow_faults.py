@@ -7,7 +7,6 @@ from __future__ import annotations
 import os
 import re
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -16,6 +15,7 @@ import pytest
 
 from shm_service.recording import RecordingFollower, RecordingWriter
 from shm_service.rig_layouts import default_rig
+from shm_service.service import ServeStartError, start_serve
 
 from svc_helpers import fast_overrides
 
@@ -107,18 +107,15 @@ def _serve(tmp_path: Path, path: Path) -> tuple[subprocess.Popen, str]:
         f'[analytics]\nwindow_s = {a["window_s"]}\noverlap = {a["overlap"]}\nbaseline_s = {a["baseline_s"]}\n'
         f'baseline_min_windows = {a["baseline_min_windows"]}\n'
         f'[estimator]\ncalibration_s = {e["calibration_s"]}\nwarmup_s = {e["warmup_s"]}\nchunk_s = {e["chunk_s"]}\n')
-    cmd = [sys.executable, "-m", "shm_service.cli", "serve", "--config", str(toml), "--source", f"follow:{path}"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "SHM_TOKEN": "test-token-123"})
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline().decode()
-        m = re.search(r"API at (http://\S+?)[;\s]", line)
-        if m:
-            return proc, m.group(1)
-        if proc.poll() is not None:
-            break
-    proc.kill()
-    pytest.fail(f"shm serve did not start: {proc.stderr.read().decode()[-2000:]}")
+    serve = start_serve(["--config", str(toml), "--source", f"follow:{path}"], stdout=subprocess.DEVNULL,
+                        stderr=subprocess.PIPE, env={**os.environ, "SHM_TOKEN": "test-token-123"}, timeout=None,
+                        ready_file=tmp_path / "ready.json")
+    try:
+        serve.wait_ready(60)
+    except ServeStartError as exc:
+        serve.kill()
+        pytest.fail(f"shm serve did not start ({exc}): {serve.process.stderr.read()[-2000:]}")
+    return serve.process, serve.url
 
 
 def _wait(predicate, timeout: float = 60.0):
@@ -167,5 +164,4 @@ def test_serve_follow_of_a_missing_file_serves_the_api_and_starts_when_it_appear
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(10)
-        proc.stdout.close()
         proc.stderr.close()

@@ -1,0 +1,118 @@
+"""Virtual strain, stress and bending moment along the beam from the deformation variables, and the
+loads summary of one signal (rainflow, DELs, Miner damage) — the paper's Section 6 outlook.
+
+ε(η, t) = −c(η)·κ(η, t) with κ = Σ_χ b_χ s''_χ(η) (the contract's sign: the +ζ face), σ = E(T)·ε,
+M = EI(η, T)·κ. Pure numerics: arrays in, arrays and frozen results out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._fatigue import FatigueDetail
+from ._rainflow import Cycles, HalfCyclePolicy, _finite_samples, _half_weight, cycles_by_range, rainflow_cycles
+from ._sn_curves import damage_equivalent_range
+from ._validate import as_signal
+
+__all__ = ["DelBand", "SignalLoads", "bending_moment", "signal_loads", "virtual_strain"]
+
+
+def virtual_strain(b: object, curvature_shapes: object, fibre_distance: object) -> np.ndarray:
+    """ε(η, t) = −c(η) Σ b_χ(t) s''_χ(η).
+
+    Parameters
+    ----------
+    b : (N, Γ) deformation variables (m). curvature_shapes : (S, Γ) s''_χ at the stations (1/m per
+    unit b). fibre_distance : (S,) c at the stations (m, > 0).
+
+    Returns
+    -------
+    (N, S) bending strain (m/m) on the +ζ face.
+
+    Examples
+    --------
+    >>> virtual_strain([[1.0, 2.0]], [[1e-3, 0.0], [0.0, 1e-3]], [0.005, 0.005]).tolist()
+    [[-5e-06, -1e-05]]
+    """
+    B = as_signal("b", b, min_len=1, ndim=(2,))
+    S = as_signal("curvature_shapes", curvature_shapes, min_len=1, ndim=(2,))
+    if S.shape[1] != B.shape[1]:
+        raise ValueError(f"curvature_shapes has {S.shape[1]} columns, b has {B.shape[1]} unit deformations")
+    kappa = B @ S.T
+    c = as_signal("fibre_distance", fibre_distance, min_len=1, ndim=(1,))
+    if c.size != kappa.shape[1]:
+        raise ValueError(f"fibre_distance has {c.size} stations, curvature_shapes {kappa.shape[1]}")
+    if np.any(c <= 0):
+        raise ValueError(f"fibre_distance must be > 0, got {c[c <= 0][0]}")
+    return -kappa * c
+
+
+def bending_moment(curvature: object, bending_stiffness: object) -> np.ndarray:
+    """M = EI·κ (N·m): curvature (N, S) 1/m, bending_stiffness (S,) or (N, S) N·m² (> 0)."""
+    k = as_signal("curvature", curvature, min_len=1, ndim=(2,))
+    ei = np.asarray(bending_stiffness, dtype=float)
+    if not np.all(np.isfinite(ei)) or np.any(ei <= 0):
+        raise ValueError("bending_stiffness must be finite and > 0")
+    return k * ei
+
+
+@dataclass(frozen=True)
+class DelBand:
+    """Relative band of a virtual signal's DEL: the true DEL lies in [DEL·low, DEL·high] (low ≤ 1 ≤ high)."""
+
+    low: float
+    high: float
+    method: str
+
+
+@dataclass(frozen=True)
+class SignalLoads:
+    """Loads of one signal over its counted span.
+
+    rms, range_max : of the signal (its unit). dels : ((m, n_eq, DEL), ...). cycles : Cycles.
+    damage : Miner's D of the scaled signal (None without a detail). damage_band : (low, high) D with the
+    ranges scaled by the band's ends (None without a band or detail).
+    """
+
+    rms: float
+    range_max: float
+    dels: tuple[tuple[float, float, float], ...]
+    cycles: Cycles
+    damage: float | None
+    damage_band: tuple[float, float] | None
+
+    def cycles_by_range(self) -> tuple[list[list[float]], float | None]:
+        return cycles_by_range(self.cycles)
+
+
+def signal_loads(x: object, *, exponents: tuple[float, ...] = (3.0, 5.0), n_eq: float, half_cycles: HalfCyclePolicy = "half",
+                 detail: FatigueDetail | None = None, to_stress: float = 1.0, band: DelBand | None = None,
+                 name: str = "signal") -> SignalLoads:
+    """Rainflow count of a whole signal (ASTM E1049-85), its DELs and Miner damage.
+
+    Parameters
+    ----------
+    x : (N,) finite signal (strain m/m or stress Pa). exponents : Wöhler exponents (> 0).
+    n_eq : equivalent cycles of the DELs (> 0). detail : S–N curve and factors for the damage;
+    ``to_stress`` converts the signal's ranges to stress ranges (Pa) for it (E for strain, 1 for stress).
+    band : relative DEL band; the damage band is the damage with ranges scaled by its ends.
+
+    Raises
+    ------
+    ValueError : a non-finite sample (named), a non-positive exponent or n_eq.
+    """
+    _half_weight(half_cycles)
+    v = _finite_samples(name, x)  # names the first non-finite sample
+    if v.size == 0:
+        raise ValueError(f"{name} has no samples")
+    cycles = rainflow_cycles(v, half_cycles=half_cycles)
+    dels = tuple((float(m), float(n_eq), damage_equivalent_range(cycles.ranges, cycles.counts, m, n_eq)) for m in exponents)
+    damage = damage_band = None
+    if detail is not None:
+        stress = cycles.scaled(to_stress)
+        damage = detail.damage(stress)
+        if band is not None:
+            damage_band = (detail.damage(stress, band.low), detail.damage(stress, band.high))
+    return SignalLoads(float(np.sqrt(np.mean(v**2))), float(np.ptp(v)), dels, cycles, damage, damage_band)

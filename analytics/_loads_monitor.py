@@ -1,0 +1,181 @@
+"""Loads per analysis window and hot spot, inside the one engine (:class:`analytics.MonitoringEngine`).
+
+Each window's new samples (its first step: the windows overlap, the count must see every
+sample once) become the hot spots' nominal stress σ = E(T)·(−c κ); a :class:`HotSpotFatigue`
+per hot spot counts them in a stream, so a reprocessed archive accumulates the same damage as
+the live service did (windows are aligned in data time). Alarm conditions go through
+:class:`analytics.AlarmLogic` as charts of kind "fatigue", each scored in units of its warning
+line (1 = the warning line; the alarm line and the clear line are multiples of it):
+
+* ``rate``: the design-life usage at the trailing damage rate, rate × design life (warning 1:
+  the design life would be exhausted early; alarm 2: in half of it). Needs a design life.
+* ``del``: the window's DEL (m = the first exponent) against its baseline, the median of the first
+  ``baseline_windows`` windows: score (ratio − 1)/(del_warning_ratio − 1).
+* ``consumed``: D / consumed_warning (alarm at consumed_alarm / consumed_warning).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from contract import ChartDocument, HotSpotLoadsDocument, LoadsWindowDocument, chart_name
+
+from ._alarms import AlarmEvent, AlarmLogic
+from ._fatigue import FatigueDetail, HotSpotFatigue
+from ._rainflow import HalfCyclePolicy
+
+__all__ = ["HotSpotSpec", "LoadsConfig", "LoadsMonitor"]
+
+
+class LoadsConfig(BaseModel):
+    """Settings of the loads in the engine (closed: unknown keys are refused)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    exponents: tuple[float, ...] = Field((3.0, 5.0), min_length=1)
+    n_eq_per_s: float = Field(1.0, gt=0.0, description="equivalent cycles per second of the DELs (1 Hz equivalent)")
+    half_cycles: HalfCyclePolicy = "half"
+    trailing_windows: int = Field(360, ge=1, description="windows the damage rate is taken over")
+    baseline_windows: int = Field(30, ge=1, description="windows whose median DEL is the DEL baseline")
+    del_warning_ratio: float = Field(1.5, gt=1.0)
+    del_alarm_ratio: float = Field(2.0, gt=1.0)
+    consumed_warning: float = Field(0.5, gt=0.0)
+    consumed_alarm: float = Field(0.8, gt=0.0)
+    rate_alarm_usage: float = Field(2.0, gt=1.0, description="alarm when rate × design life exceeds this (warning at 1)")
+    raise_windows: int = Field(3, ge=1)
+    clear_windows: int = Field(3, ge=1)
+    clear_fraction: float = Field(0.8, gt=0.0, lt=1.0, description="clear below this fraction of the warning line")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "LoadsConfig":
+        if any(not m > 0 for m in self.exponents):
+            raise ValueError(f"exponents={self.exponents} must all be > 0")
+        if self.del_alarm_ratio < self.del_warning_ratio:
+            raise ValueError(f"del_alarm_ratio={self.del_alarm_ratio} is below del_warning_ratio={self.del_warning_ratio}")
+        if self.consumed_alarm < self.consumed_warning:
+            raise ValueError(f"consumed_alarm={self.consumed_alarm} is below consumed_warning={self.consumed_warning}")
+        return self
+
+
+@dataclass(frozen=True)
+class HotSpotSpec:
+    """A hot spot as the engine needs it: where, the detail, and the unit deformations' s'' there (Γ,) (1/m)."""
+
+    name: str
+    position_m: float
+    detail: FatigueDetail
+    curvature_shape: np.ndarray
+    fibre_distance_m: float
+
+
+class LoadsMonitor:
+    """Per-window loads of the hot spots (see the module docstring).
+
+    Parameters
+    ----------
+    hot_spots : the hot spots. youngs_modulus : E at the reference temperature (Pa).
+    temperature_coefficient : 1/K; reference_temperature : °C. design_life_years : or None.
+    config : LoadsConfig. state : from :meth:`state_dict`.
+    """
+
+    def __init__(self, hot_spots: list[HotSpotSpec], *, youngs_modulus: float, temperature_coefficient: float = 0.0,
+                 reference_temperature: float = 20.0, design_life_years: float | None = None, config: LoadsConfig | None = None,
+                 state: dict[str, Any] | None = None) -> None:
+        if not hot_spots:
+            raise ValueError("hot_spots is empty: the rig description names no hot spot")
+        names = [h.name for h in hot_spots]
+        if len(set(names)) != len(names):
+            raise ValueError(f"hot spot names {names} are not unique")
+        if not (np.isfinite(youngs_modulus) and youngs_modulus > 0):
+            raise ValueError(f"{youngs_modulus=} must be > 0")
+        if design_life_years is not None and not design_life_years > 0:
+            raise ValueError(f"{design_life_years=} must be > 0")
+        self.config = config or LoadsConfig()
+        self.hot_spots = list(hot_spots)
+        self.youngs_modulus = float(youngs_modulus)
+        self.temperature_coefficient = float(temperature_coefficient)
+        self.reference_temperature = float(reference_temperature)
+        self.design_life_years = design_life_years
+        state = state or {}
+        c = self.config
+        self.fatigue = {h.name: HotSpotFatigue(h.detail, exponents=c.exponents, n_eq_per_s=c.n_eq_per_s, half_cycles=c.half_cycles,
+                                               trailing_windows=c.trailing_windows, state=state.get("spots", {}).get(h.name))
+                        for h in self.hot_spots}
+        self.del_history: dict[str, list[float]] = {k: [float(v) for v in vals] for k, vals in state.get("del_history", {}).items()}
+        self.alarms = AlarmLogic(raise_windows=c.raise_windows, clear_windows=c.clear_windows, clear_sigma=c.clear_fraction,
+                                 state=state.get("alarms"))
+        self.events: list[AlarmEvent] = []
+
+    @classmethod
+    def from_rig(cls, rig: Any, curvature_at: Any, *, config: LoadsConfig | None = None, state: dict[str, Any] | None = None) -> "LoadsMonitor":
+        """The monitor of a rig description's ``hot_spots`` (contract.RigDescription); ``curvature_at(η)`` gives the
+        unit deformations' s'' at positions η (len(η), Γ) (``estimator.UnitDeformations.curvature``)."""
+        from ._sn_curves import sn_curve
+
+        beam = rig.beam
+        eta = np.array([h.position for h in rig.hot_spots], dtype=float)
+        if eta.size == 0:
+            raise ValueError("the rig description names no hot_spots")
+        shapes = np.asarray(curvature_at(eta), dtype=float)
+        c = beam.fibre_distance(eta)
+        spots = [HotSpotSpec(h.name, float(h.position), FatigueDetail(sn_curve(h.curve), h.scf, h.gamma_Ff, h.gamma_Mf), shapes[i],
+                             float(c[i])) for i, h in enumerate(rig.hot_spots)]
+        design = rig.fatigue.design_life_years if rig.fatigue is not None else None
+        return cls(spots, youngs_modulus=beam.youngs_modulus, temperature_coefficient=beam.youngs_modulus_temperature_coefficient,
+                   reference_temperature=beam.reference_temperature, design_life_years=design, config=config, state=state)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"spots": {k: f.state_dict() for k, f in self.fatigue.items()}, "del_history": dict(self.del_history),
+                "alarms": self.alarms.state_dict()}
+
+    def _chart(self, spot: str, condition: str, score: float | None, warning: float, alarm: float) -> ChartDocument:
+        level = "ok" if score is None or score < warning else ("alarm" if score >= alarm else "warning")
+        return ChartDocument(name=chart_name("fatigue", hot_spot=spot, condition=condition), kind="fatigue", level=level,
+                             score_sigma=score, warning_sigma=warning, alarm_sigma=alarm)
+
+    def process_window(self, start_s: float, b: object, fs: float, temperature_c: float | None) -> LoadsWindowDocument:
+        """Count one window's new samples b (n, Γ) at ``fs`` Hz (the part no earlier window counted)."""
+        B = np.asarray(b, dtype=float)
+        if B.ndim != 2 or B.shape[0] < 1:
+            raise ValueError(f"b must be (n, Γ) with n >= 1, got shape {B.shape}")
+        if not np.all(np.isfinite(B)):
+            raise ValueError("b contains NaN or inf")
+        duration = B.shape[0] / float(fs)
+        factor = 1.0
+        if temperature_c is not None:
+            factor = 1.0 + self.temperature_coefficient * (temperature_c - self.reference_temperature)
+        c = self.config
+        docs, charts = [], []
+        m0 = str(int(c.exponents[0])) if float(c.exponents[0]).is_integer() else str(c.exponents[0])
+        for h in self.hot_spots:
+            stress = -h.fibre_distance_m * (B @ h.curvature_shape) * self.youngs_modulus * factor
+            w = self.fatigue[h.name].push(stress, duration, start_s=start_s)
+            life = self.fatigue[h.name].life(self.design_life_years)
+            dels = {(str(int(m)) if float(m).is_integer() else str(m)): v for m, v in w.del_pa.items()}
+            docs.append(HotSpotLoadsDocument(
+                name=h.name, position_m=h.position_m, curve=h.detail.curve.name, del_pa=dels, n_eq=c.n_eq_per_s * duration,
+                max_range_pa=w.max_range_pa, damage_increment=w.damage_increment, consumed=w.consumed,
+                rate_per_year=life.rate_per_year, rate_band_per_year=None if life.rate_band_per_year is None else list(life.rate_band_per_year),
+                remaining_years=life.remaining_years,
+                remaining_band_years=None if life.remaining_band_years is None else list(life.remaining_band_years),
+                verdict=life.verdict, design_life_years=self.design_life_years))
+            # DEL against its baseline (the median of the first windows)
+            history = self.del_history.setdefault(h.name, [])
+            score_del = None
+            if len(history) >= c.baseline_windows:
+                base = float(np.median(history[: c.baseline_windows]))
+                if base > 0:
+                    score_del = (dels[m0] / base - 1.0) / (c.del_warning_ratio - 1.0)
+            else:
+                history.append(dels[m0])
+            charts.append(self._chart(h.name, "del", score_del, 1.0, (c.del_alarm_ratio - 1.0) / (c.del_warning_ratio - 1.0)))
+            charts.append(self._chart(h.name, "consumed", w.consumed / c.consumed_warning, 1.0, c.consumed_alarm / c.consumed_warning))
+            if self.design_life_years is not None:
+                usage = None if life.rate_per_year is None else life.rate_per_year * self.design_life_years
+                charts.append(self._chart(h.name, "rate", usage, 1.0, c.rate_alarm_usage))
+        self.events = self.alarms.update(charts, start_s + duration)
+        return LoadsWindowDocument(start_s=start_s, duration_s=duration, temperature_c=temperature_c, hot_spots=docs, charts=charts)

@@ -1,0 +1,404 @@
+"""The documentation's reference pages, generated from the code so they cannot drift.
+
+A MkDocs hook (``mkdocs.yml``: ``hooks: [docs_reference.py]``): at every build it adds these pages
+to the site, made from the objects the product itself uses:
+
+- ``reference/configuration.md``: every key of ``shm serve``'s TOML (``ServiceSettings`` and its
+  sections, pydantic models) with its type, default and meaning;
+- ``reference/cli.md``: every command and option of ``shm`` (``shm_service.cli.build_parser``);
+- ``reference/http-api.md``: every route of the HTTP API from its OpenAPI document (FastAPI's, as
+  ``/openapi.json`` serves it), with each schema's fields, and the ingest payload of each topic
+  typed from the recording contract's JSON schemas;
+- ``reference/rig.md``: every ``rig.json`` key (``contract.RigDescription`` and its parts) and the
+  recording contract's topics and payloads.
+
+``python docs_reference.py OUT_DIR`` writes the same pages as files (to read them without MkDocs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import typing
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+GENERATED = "!!! note \"Generated\"\n    This page is generated from the code at every build of the documentation ({what}); edit the code, not the page.\n\n"
+
+
+def _cell(text: Any) -> str:
+    s = "" if text is None else str(text)
+    return s.replace("|", "\\|").replace("\n", " ").strip()
+
+
+def _type_name(annotation: Any) -> str:
+    if annotation is None:
+        return "None"
+    origin = typing.get_origin(annotation)
+    if origin is typing.Literal:
+        return " \\| ".join(repr(a).replace("'", '"') for a in typing.get_args(annotation))
+    if origin is typing.Annotated:
+        return _type_name(typing.get_args(annotation)[0])
+    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+        return " \\| ".join(_type_name(a) for a in typing.get_args(annotation))
+    if origin in (tuple, list, dict):
+        args = typing.get_args(annotation)
+        inner = ", ".join(_type_name(a) for a in args if a is not Ellipsis)
+        return f"{origin.__name__}[{inner}]" if inner else origin.__name__
+    if annotation is type(None):
+        return "None"
+    return getattr(annotation, "__name__", str(annotation).replace("typing.", ""))
+
+
+def _default(field: Any) -> str:
+    from pydantic_core import PydanticUndefined
+
+    if field.default is PydanticUndefined:
+        if field.default_factory is not None:
+            try:
+                value = field.default_factory()
+            except TypeError:
+                return "(computed)"
+        else:
+            return "**required**"
+    else:
+        value = field.default
+    if hasattr(value, "model_dump"):
+        return "(section)"
+    try:
+        return f"`{json.dumps(value, default=str)}`"
+    except TypeError:
+        return f"`{value!r}`"
+
+
+def _submodel(annotation: Any) -> Any:
+    from pydantic import BaseModel
+
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in typing.get_args(annotation):
+        found = _submodel(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def _model_table(model: Any, prefix: str = "") -> tuple[list[str], list[tuple[str, Any]]]:
+    """Rows of ``model``'s scalar keys, and its sub-models (name, model) to document apart."""
+    rows, subs = [], []
+    for name, field in model.model_fields.items():
+        sub = _submodel(field.annotation)
+        if sub is not None and typing.get_origin(field.annotation) not in (tuple, list, dict):
+            subs.append((prefix + name, sub))
+            continue
+        if sub is not None:
+            subs.append((prefix + name + "[]", sub))
+        rows.append(f"| `{prefix}{name}` | {_type_name(field.annotation)} | {_default(field)} | {_cell(field.description)} |")
+    return rows, subs
+
+
+def _model_sections(model: Any, title: str, level: int = 2, seen: set | None = None) -> list[str]:
+    seen = set() if seen is None else seen
+    rows, subs = _model_table(model)
+    out = [f"{'#' * level} {title}", ""]
+    doc = (model.__doc__ or "").strip()
+    if doc and not doc.startswith("Usage docs"):
+        out += [doc.split("\n\n")[0].replace("\n", " "), ""]
+    if rows:
+        out += ["| key | type | default | meaning |", "| --- | --- | --- | --- |", *rows, ""]
+    for name, sub in subs:
+        if sub in seen:
+            continue
+        seen.add(sub)
+        out += _model_sections(sub, f"`{name}` ({sub.__name__})" if not name.startswith("[") else name, level + (level < 4), seen)
+    return out
+
+
+# ---------------------------------------------------------------------------------------- pages
+def configuration_page() -> str:
+    from shm_service.service._config import ServiceSettings
+
+    out = ["# Configuration reference", "", GENERATED.format(what="from `shm_service.service._config.ServiceSettings`"),
+           "`shm serve --config FILE` reads one TOML file; command-line flags override it; "
+           "`shm serve --print-config` prints the effective configuration with every key. A key that is not "
+           "listed here is an error (the configuration is closed), and each value is checked against its range "
+           "when the file is read. Sections are TOML tables (`[estimator]`); `[[structures]]` entries make a fleet.", ""]
+    rows, subs = _model_table(ServiceSettings)
+    out += ["## Top-level keys", "", "| key | type | default | meaning |", "| --- | --- | --- | --- |", *rows, ""]
+    seen: set = {ServiceSettings}
+    for name, sub in subs:
+        seen.add(sub)
+        table = f"[[{name[:-2]}]]" if name.endswith("[]") else f"[{name}]"
+        out += _model_sections(sub, f"`{table}`", 2, seen)
+    return "\n".join(out) + "\n"
+
+
+def _walk_parser(parser: argparse.ArgumentParser, name: str, level: int) -> list[str]:
+    out = [f"{'#' * min(level, 4)} `{name}`", ""]
+    if parser.description:
+        out += [parser.description, ""]
+    usage = parser.format_usage().replace("usage: ", "").strip()
+    out += ["```text", usage, "```", ""]
+    rows = []
+    subparsers = []
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            helps = {a.dest: a.help for a in action._choices_actions}
+            for sub_name, sub in action.choices.items():
+                subparsers.append((sub_name, sub, helps.get(sub_name)))
+            continue
+        if isinstance(action, argparse._HelpAction):
+            continue
+        flags = ", ".join(f"`{o}`" for o in action.option_strings) or f"`{action.dest}` (positional)"
+        if action.metavar and action.option_strings:
+            flags += f" {_cell(action.metavar)}"
+        choices = f" One of: {', '.join(f'`{c}`' for c in action.choices)}." if action.choices else ""
+        default = "" if action.default in (None, False, argparse.SUPPRESS) or action.option_strings == [] else f"`{action.default}`"
+        rows.append(f"| {flags} | {_cell(action.help)}{choices} | {default} |")
+    if rows:
+        out += ["| option | meaning | default |", "| --- | --- | --- |", *rows, ""]
+    for sub_name, sub, help_ in subparsers:
+        sub_out = _walk_parser(sub, f"{name} {sub_name}", level + 1)
+        if help_ and not sub.description:
+            sub_out.insert(2, help_ + "\n")
+        out += sub_out
+    return out
+
+
+def cli_page() -> str:
+    from shm_service.cli import build_parser
+
+    parser = build_parser()
+    out = ["# Command-line reference", "", GENERATED.format(what="from `shm_service.cli.build_parser`"),
+           "Every command answers `--help`, checks its arguments before it imports the numerics, and refuses a "
+           "value out of range naming the valid range (nothing is clamped).", ""]
+    commands = []
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            helps = {a.dest: a.help for a in action._choices_actions}
+            commands = [(n, helps.get(n, "")) for n in action.choices]
+    out += ["| command | what it does |", "| --- | --- |", *[f"| [`shm {n}`](#shm-{n}) | {_cell(h)} |" for n, h in commands], ""]
+    out += _walk_parser(parser, "shm", 2)[4:]  # the commands (the top level's usage is in the table)
+    return "\n".join(out) + "\n"
+
+
+def _schema_type(schema: dict[str, Any]) -> str:
+    if "$ref" in schema:
+        name = schema["$ref"].rsplit("/", 1)[-1]
+        return f"[{name}](#{name.lower()})"
+    if "anyOf" in schema:
+        return " or ".join(_schema_type(s) for s in schema["anyOf"])
+    if "enum" in schema:
+        return " \\| ".join(json.dumps(v) for v in schema["enum"])
+    if "const" in schema:
+        return json.dumps(schema["const"])
+    t = schema.get("type", "any")
+    if t == "array":
+        return f"array of {_schema_type(schema.get('items', {}))}"
+    if t == "object" and "additionalProperties" in schema and isinstance(schema["additionalProperties"], dict):
+        return f"object of {_schema_type(schema['additionalProperties'])}"
+    return str(t)
+
+
+def _payload_section() -> list[str]:
+    import contract
+
+    out = ["## Ingest payloads by topic", "",
+           "Each message of `POST /api/ingest` (and `/api/structures/{structure_id}/ingest`) carries the payload of "
+           "its topic as the recording contract defines it (the same JSON schema a recording's channel carries). "
+           "A payload that does not match is rejected and counted by reason, never stored.", "",
+           "| topic | payload |", "| --- | --- |"]
+    topics = {"shm.Imu": "`/imu/NAME` (`/imu/D` at the support)", "shm.Distance": "`/tof/NAME`, `/bearing/displacement`",
+              "shm.Strain": "`/strain/NAME`", "shm.Temperature": "`/env/temperature`",
+              "shm.TruthState": "`/truth/state` (simulation only)", "shm.EstimateState": "`/estimate/state` (written by the estimator)"}
+    for title in contract.SCHEMAS:
+        out.append(f"| {topics.get(title, '?')} | [{title}](#{title.replace('.', '').lower()}) |")
+    out.append("")
+    for title, schema in contract.SCHEMAS.items():
+        out += [f"### {title}", "", _cell(schema.get("description", "")), "",
+                "| field | type | meaning |", "| --- | --- | --- |"]
+        required = set(schema.get("required", ()))
+        for name, prop in schema.get("properties", {}).items():
+            t = _schema_type(prop)
+            if prop.get("minItems") is not None and prop.get("minItems") == prop.get("maxItems"):
+                t += f" ({prop['minItems']})"
+            out.append(f"| `{name}`{'' if name in required else ' (optional)'} | {t} | {_cell(prop.get('description', ''))} |")
+        out.append("")
+    return out
+
+
+def http_page() -> str:
+    from shm_service.service._api import create_app
+
+    doc = create_app(object()).openapi()
+    out = ["# HTTP API reference", "", GENERATED.format(what="from the service's OpenAPI document, as `/openapi.json` serves it"),
+           f"{doc['info'].get('title', '')} {doc['info'].get('version', '')}. The running service also serves this "
+           "document at `/openapi.json` and renders it at `/docs` and `/redoc` (offline: no CDN). On loopback the "
+           "read routes are open and ingest, acknowledge and baseline need the token; on any other address every "
+           "route needs it (header `Authorization: Bearer TOKEN`, or the HTTP Basic password).", "",
+           "| method | path | what |", "| --- | --- | --- |"]
+    ops = []
+    for path, methods in doc["paths"].items():
+        for method, op in methods.items():
+            ops.append((path, method, op))
+            anchor = f"{method}-{path}".lower().replace("/", "").replace("{", "").replace("}", "").replace("_", "")
+            out.append(f"| {method.upper()} | [`{path}`](#{anchor}) | {_cell(op.get('summary', ''))} |")
+    out.append("")
+    out += ["## Routes", ""]
+    for path, method, op in ops:
+        anchor = f"{method}-{path}".lower().replace("/", "").replace("{", "").replace("}", "").replace("_", "")
+        out += [f"### {method.upper()} `{path}` {{ #{anchor} }}", "", _cell(op.get("summary", "")), ""]
+        if op.get("description"):
+            out += [op["description"], ""]
+        params = op.get("parameters", [])
+        if params:
+            out += ["| parameter | in | type | required | meaning |", "| --- | --- | --- | --- | --- |"]
+            for p in params:
+                out.append(f"| `{p['name']}` | {p['in']} | {_schema_type(p.get('schema', {}))} | "
+                           f"{'yes' if p.get('required') else 'no'} | {_cell(p.get('description') or p.get('schema', {}).get('description', ''))} |")
+            out.append("")
+        body = op.get("requestBody", {}).get("content", {})
+        for ctype, content in body.items():
+            schema = content.get("schema", {})
+            out += [f"Request body ({ctype}): {_schema_type(schema)}", ""]
+            if "properties" in schema:
+                out += ["```json", json.dumps(schema, indent=1)[:4000], "```", ""]
+            if path.endswith("/ingest"):
+                out += ["Each message's `payload` is typed by its topic: see [the ingest payloads](#ingest-payloads-by-topic).", ""]
+        out += ["| status | meaning | body |", "| --- | --- | --- |"]
+        for code, resp in op.get("responses", {}).items():
+            schemas = [c.get("schema", {}) for c in resp.get("content", {}).values()]
+            out.append(f"| {code} | {_cell(resp.get('description', ''))} | {', '.join(_schema_type(s) for s in schemas)} |")
+        out.append("")
+    out += _payload_section()
+    out += ["## Schemas", ""]
+    for name, schema in doc.get("components", {}).get("schemas", {}).items():
+        out += [f"### {name}", ""]
+        if schema.get("description"):
+            out += [_cell(schema["description"]), ""]
+        props = schema.get("properties", {})
+        if props:
+            required = set(schema.get("required", ()))
+            out += ["| field | type | meaning |", "| --- | --- | --- |"]
+            for fname, prop in props.items():
+                out.append(f"| `{fname}`{'' if fname in required else ' (optional)'} | {_schema_type(prop)} | "
+                           f"{_cell(prop.get('description', ''))} |")
+            out.append("")
+    return "\n".join(out) + "\n"
+
+
+def rig_page() -> str:
+    import contract
+
+    out = ["# Recording contract and `rig.json`", "", GENERATED.format(what="from `contract.RigDescription` and `contract.SCHEMAS`"),
+           "A recording is an MCAP file whose channels carry the contract's topics and JSON payloads, with the "
+           "structure's description attached as `rig.json`. `shm import` writes such recordings from DAQ files, "
+           "`shm inspect FILE --print-rig` prints a recording's `rig.json`, and `shm serve --source ingest --rig "
+           "rig.json` takes the same payloads over HTTP. The full contract, with its signs and frames, is "
+           "`recording-format.md` of the project's specifications.", ""]
+    out += _model_sections(contract.RigDescription, "`rig.json` keys", 2)
+    out += ["## Topics and payloads", "", "| topic | schema | payload keys |", "| --- | --- | --- |"]
+    topics = {"shm.Imu": "`/imu/NAME`", "shm.Distance": "`/tof/NAME`, `/bearing/displacement`", "shm.Strain": "`/strain/NAME`",
+              "shm.Temperature": "`/env/temperature`", "shm.TruthState": "`/truth/state`", "shm.EstimateState": "`/estimate/state`"}
+    for title, schema in contract.SCHEMAS.items():
+        keys = ", ".join(f"`{k}`" for k in schema.get("properties", {}))
+        out.append(f"| {topics.get(title, '?')} | `{title}` | {keys} |")
+    out += ["", "The payloads' fields, types and units are listed with the [HTTP API's ingest payloads](http-api.md#ingest-payloads-by-topic).", ""]
+    return "\n".join(out) + "\n"
+
+
+def _benchmarks() -> tuple[str, ...]:
+    from benchmarks.__main__ import MODULES
+
+    return MODULES
+
+
+def _validation_page(name: str) -> str:
+    from benchmarks._pages import RESULTS, _git
+
+    path = RESULTS / f"{name}.md"
+    head = _git("rev-parse", "--short=12", "HEAD") or "unknown"
+    if not path.exists():
+        return (f"# {name}\n\n!!! warning \"Not yet measured\"\n    Not yet measured by `make bench` on this commit "
+                f"(`{head}`). Run `make bench` (or `python -m benchmarks --only {name}`) to write this page.\n")
+    text = path.read_text()
+    if head not in text:
+        title, _, rest = text.partition("\n")
+        text = (f"{title}\n\n!!! note \"Measured on another commit\"\n    These figures were measured on the commit "
+                f"stamped below, not on this one (`{head}`); `python -m benchmarks --only {name}` measures them "
+                f"again.\n{rest}")
+    return text
+
+
+def validation_index() -> str:
+    from benchmarks._pages import RESULTS
+
+    out = ["# Validation: what was measured, when and where", "",
+           "What the product's figures are, how each was measured and on what. Every page below is written by "
+           "`make bench` (`python -m benchmarks`; one benchmark: `python -m benchmarks --only NAME`) into "
+           "`benchmarks/results/`, stamped with the date, the commit, the machine (cores, load) and the command, "
+           "and made into a page at every documentation build. A benchmark not run on a commit says so; no figure "
+           "here was typed by hand. The development record in the CHANGELOG holds earlier measurements, each "
+           "with its own conditions.", "",
+           "| benchmark | what it measures | measured |", "| --- | --- | --- |"]
+    import importlib
+
+    for name in _benchmarks():
+        try:
+            doc = (importlib.import_module(f"benchmarks.{name}").__doc__ or "").strip().split("\n\n")[0]
+        except Exception as exc:  # a benchmark that cannot be imported is listed with why
+            doc = f"(cannot import: {type(exc).__name__})"
+        path = RESULTS / f"{name}.md"
+        when = "not yet measured"
+        if path.exists():
+            for line in path.read_text().splitlines():
+                if line.startswith("| date |"):
+                    when = line.split("|")[2].strip()
+                if line.startswith("| commit |"):
+                    when += ", commit " + line.split("|")[2].strip()
+                    break
+        out.append(f"| [{name}]({name}.md) | {_cell(doc)} | {when} |")
+    out += ["", "The paper's configuration study is on [its own page](study.md) (`shm study`)."]
+    return "\n".join(out) + "\n"
+
+
+PAGES = {
+    "reference/configuration.md": configuration_page,
+    "reference/cli.md": cli_page,
+    "reference/http-api.md": http_page,
+    "reference/rig.md": rig_page,
+}
+
+
+# ---------------------------------------------------------------------------------------- the hook
+def _all_pages() -> dict[str, Any]:
+    pages = dict(PAGES)
+    pages["validation/summary.md"] = validation_index
+    for name in _benchmarks():
+        pages[f"validation/{name}.md"] = (lambda n=name: _validation_page(n))
+    return pages
+
+
+def on_files(files: Any, config: Any) -> Any:
+    from mkdocs.structure.files import File
+
+    for uri, make in _all_pages().items():
+        existing = files.get_file_from_path(uri)
+        if existing is not None:
+            files.remove(existing)
+        files.append(File.generated(config, uri, content=make()))
+    return files
+
+
+if __name__ == "__main__":
+    target = Path(sys.argv[1] if len(sys.argv) > 1 else "site-reference")
+    for uri, make in _all_pages().items():
+        path = target / uri
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(make())
+        print(path)

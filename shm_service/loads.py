@@ -1,0 +1,377 @@
+"""``shm loads``: strain, stress, rainflow cycles, DELs and fatigue damage of a record (issue 21).
+
+DATA is either a contract recording — raw (the estimator runs first, with ``shm estimate``'s
+options) or an estimate — whose virtual strain ε(η, t) = −c(η)·Σ b s''(η) is counted at the
+stations (the rig's hot spots plus a grid, or ``--stations``), with the recording's strain gauges
+counted as measured channels; or plain measured strain or stress channels in any format
+``shm oma`` reads, counted directly.
+
+The band of a virtual station ("modal truncation seen at the strain gauges"): the strain at
+unmeasured points comes from the unit deformations and misses what the structure does outside
+their span. The gauges see it: at each gauge the DEL of the virtual strain (from b) is compared
+with the DEL of the measured strain. The largest relative discrepancy over the gauges, doubled
+when the gauges aided the estimate (the estimate was pulled towards them, so the discrepancy
+there understates the one between them), with a floor of 2 %, is the half-width a of every
+station's band, [DEL/(1 + a), DEL·(1 + a)]; the damage band is the damage of the counted cycles
+with their ranges scaled by those two factors. Without gauges no band can be given, and the
+output says so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ._argtypes import number
+
+if TYPE_CHECKING:
+    import numpy as np
+
+__all__ = ["BAND_FLOOR", "add_loads_parser", "loads_of_recording", "loads_of_table", "parse_stations"]
+
+#: Smallest half-width of a virtual station's DEL band (the estimate's own resolution).
+BAND_FLOOR = 0.02
+#: The gauges pulled the estimate towards themselves: their in-sample discrepancy is scaled by this.
+IN_SAMPLE_FACTOR = 2.0
+#: Young's modulus for plain strain channels without a rig (structural steel, Pa).
+STEEL_YOUNGS_MODULUS = 2.1e11
+
+
+class LoadsError(ValueError):
+    """Bad input to ``shm loads`` (names the value)."""
+
+
+def parse_stations(text: str, length: float) -> tuple[float, ...]:
+    """'0.5,1.0,2' → stations (m), each within [0, length]."""
+    values = []
+    for part in text.split(","):
+        part = part.strip()
+        if not part:
+            continue
+        try:
+            v = float(part)
+        except ValueError:
+            raise LoadsError(f"--stations: {part!r} is not a number (m)") from None
+        if not (math.isfinite(v) and 0.0 <= v <= length):
+            raise LoadsError(f"--stations: {part} is outside the beam [0, {length}]")
+        values.append(v)
+    if not values:
+        raise LoadsError(f"--stations {text!r} names no station")
+    return tuple(values)
+
+
+def _exponents(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(p) for p in text.split(",") if p.strip())
+    except ValueError:
+        raise LoadsError(f"--exponents {text!r} must list numbers, e.g. 3,5") from None
+    bad = [v for v in values if not (math.isfinite(v) and v > 0)]
+    if not values or bad:
+        raise LoadsError(f"--exponents {text!r}: Wöhler exponents must be > 0" + (f", got {bad[0]}" if bad else ""))
+    return values
+
+
+def _detail(curve: Any, scf: float = 1.0, gamma_ff: float = 1.0, gamma_mf: float = 1.0):
+    from analytics import FatigueDetail, sn_curve
+
+    try:
+        return FatigueDetail(sn_curve(curve), scf=scf, gamma_ff=gamma_ff, gamma_mf=gamma_mf)
+    except ValueError as exc:
+        raise LoadsError(str(exc)) from None
+
+
+def _signal_doc(loads, *, to_stress: float, band=None) -> dict[str, Any]:
+    """The per-station / per-channel JSON of the issue: strain in m/m, stress in Pa."""
+    pairs, width = loads.cycles_by_range()
+    dels = []
+    for m, n_eq, value in loads.dels:
+        entry = {"m": m, "n_eq": n_eq, "strain_range": value, "stress_range_pa": value * to_stress,
+                 "band": None if band is None else [value * band.low, value * band.high]}
+        if band is not None:
+            entry["stress_band_pa"] = [value * band.low * to_stress, value * band.high * to_stress]
+        dels.append(entry)
+    return {"strain_rms": loads.rms, "strain_range_max": loads.range_max, "del": dels, "damage": loads.damage,
+            "damage_band": None if loads.damage_band is None else list(loads.damage_band),
+            "cycles": loads.cycles.total, "cycles_by_range": pairs, "cycles_bin_width": width}
+
+
+def _time_span(times: np.ndarray, start: float) -> tuple[np.ndarray, float, float]:
+    import numpy as np
+
+    keep = times >= start
+    if not np.any(keep):
+        raise LoadsError(f"nothing to count at or after {start} s (the record ends at {times[-1]:.3f} s)")
+    t = times[keep]
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    return keep, float(t[0] - times[0]), float(t[-1] - t[0] + dt)
+
+
+def gauge_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, exponents: tuple[float, ...], n_eq: float,
+               in_sample: bool, half_cycles: str = "half"):
+    """The band of the virtual stations from the gauges' (name, position, virtual, measured) strains;
+    returns (DelBand or None, per-gauge discrepancies)."""
+    import numpy as np
+
+    from analytics import DelBand, signal_loads
+
+    if not gauges:
+        return None, []
+    worst, rows = 0.0, []
+    for name, position, virtual, measured in gauges:
+        v = signal_loads(virtual, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"virtual strain at {name}")
+        g = signal_loads(measured, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain gauge {name}")
+        rel = {m: (dv / dg - 1.0) if dg > 0 else 0.0 for (m, _, dv), (_, _, dg) in zip(v.dels, g.dels)}
+        rms = float(np.sqrt(np.mean((virtual - measured) ** 2)) / max(g.rms, 1e-300))
+        rows.append({"name": name, "position_m": position, "del_discrepancy": [{"m": m, "relative": r} for m, r in rel.items()],
+                     "strain_rms_discrepancy": rms})
+        worst = max(worst, max(abs(r) for r in rel.values()))
+    a = max(BAND_FLOOR, (IN_SAMPLE_FACTOR if in_sample else 1.0) * worst)
+    method = (f"modal truncation seen at the strain gauges ({', '.join(r['name'] for r in rows)}): largest relative DEL "
+              f"discrepancy of the virtual against the measured strain{f' x{IN_SAMPLE_FACTOR:g} (the gauges aided the estimate)' if in_sample else ''}, "
+              f"at least {BAND_FLOOR:.0%}; band [DEL/(1+a), DEL*(1+a)] with a = {a:.4f}")
+    return DelBand(1.0 / (1.0 + a), 1.0 + a, method), rows
+
+
+def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[float, ...] | None, curve: Any, exponents: tuple[float, ...],
+                       n_eq: float | None, half_cycles: str, start_s: float | None) -> dict[str, Any]:
+    """The ``shm loads`` document of a contract recording (raw or estimate)."""
+    import numpy as np
+
+    from analytics import bending_moment, signal_loads, virtual_strain
+
+    from .estimation import deformation_record
+
+    rig = rec.rig
+    beam = rig.beam
+    if record is None:
+        try:
+            record = deformation_record(rec, model_args=model_args)
+        except ValueError as exc:
+            raise LoadsError(str(exc)) from None
+    times, b, units = record.times, record.b, record.units
+    start = start_s if start_s is not None else (record.rest_end_s or 0.0)
+    keep, span_start, duration = _time_span(times, start)
+    t = times[keep]
+    n_eq_value = n_eq if n_eq is not None else duration  # 1 Hz equivalent
+
+    spots = {round(h.position, 9): h for h in rig.hot_spots}
+    grid = stations if stations is not None else tuple(np.linspace(0.0, beam.length, 17)[1:-1])
+    positions = sorted(set(round(p, 9) for p in grid) | set(spots))
+    eta = np.asarray(positions, dtype=float)
+    shapes = units.curvature(eta)
+    strain = virtual_strain(b[keep], shapes, beam.fibre_distance(eta))
+    kappa = b[keep] @ shapes.T
+    # E(T) and EI(T) follow the temperature through the beam's coefficient
+    factor = np.ones(t.size)
+    if record.temperature is not None:
+        temp = np.interp(t, *record.temperature)
+        factor = 1.0 + beam.youngs_modulus_temperature_coefficient * (temp - beam.reference_temperature)
+    youngs = beam.youngs_modulus * factor
+    moment = bending_moment(kappa, beam.bending_stiffness(eta)) * factor[:, None]
+
+    # the gauges: measured strain against the virtual strain at their positions
+    gauges = []
+    for sensor in rig.sensors_of("strain"):
+        channel = rec.channels.get(sensor.topic)
+        if channel is None or len(channel) < 2:
+            continue
+        tg = (channel.log_time_ns - rec.start_ns) * 1e-9
+        inside = (t >= tg[0]) & (t <= tg[-1])
+        if inside.sum() < 2:
+            continue
+        measured = np.interp(t[inside], tg, channel.values[:, 0])
+        virtual = virtual_strain(b[keep][inside], units.curvature(np.array([sensor.position])),
+                                 beam.fibre_distance([sensor.position]))[:, 0]
+        gauges.append((sensor.name, float(sensor.position), virtual, measured))
+    used = _gauges_used(rec, record, model_args)
+    band, gauge_rows = gauge_band(gauges, exponents=exponents, n_eq=n_eq_value, in_sample=bool(used), half_cycles=half_cycles)
+
+    default_detail = None if curve is None else _detail(curve)
+    out_stations = []
+    for j, pos in enumerate(positions):
+        spot = spots.get(pos)
+        detail = _detail(spot.curve, spot.scf, spot.gamma_Ff, spot.gamma_Mf) if spot is not None else default_detail
+        stress = strain[:, j] * youngs
+        sl = signal_loads(stress, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, detail=detail, band=band,
+                          name=f"stress at {pos} m")
+        el = signal_loads(strain[:, j], exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name=f"strain at {pos} m")
+        doc = _signal_doc(el, to_stress=beam.youngs_modulus, band=band)
+        # stress from its own count (E follows the temperature sample by sample)
+        for entry, (_, _, s_del) in zip(doc["del"], sl.dels):
+            entry["stress_range_pa"] = s_del
+            if band is not None:
+                entry["stress_band_pa"] = [s_del * band.low, s_del * band.high]
+        doc.update(damage=sl.damage, damage_band=None if sl.damage_band is None else list(sl.damage_band))
+        out_stations.append({"position_m": pos, "hot_spot": None if spot is None else spot.name,
+                             "curve": None if detail is None else detail.curve.name, **doc,
+                             "stress_rms_pa": sl.rms, "bending_moment_rms_nm": float(np.sqrt(np.mean(moment[:, j] ** 2))),
+                             "bending_moment_range_max_nm": float(np.ptp(moment[:, j]))})
+
+    channels = []
+    for name, position, _virtual, measured in gauges:
+        gl = signal_loads(measured, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name=f"strain gauge {name}",
+                          detail=default_detail, to_stress=beam.youngs_modulus)
+        channels.append({"name": name, "position_m": position, **_signal_doc(gl, to_stress=beam.youngs_modulus)})
+
+    root = None
+    if rig.support == "clamped":
+        k0 = b[keep] @ units.curvature(np.array([0.0])).T
+        m0 = bending_moment(k0, beam.bending_stiffness([0.0]))[:, 0] * factor
+        rl = signal_loads(m0, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name="root bending moment")
+        root = {"position_m": 0.0, "rms_nm": rl.rms, "range_max_nm": rl.range_max,
+                "del": [{"m": m, "n_eq": n, "moment_range_nm": v} for m, n, v in rl.dels]}
+    return {
+        "start_s": span_start, "duration_s": duration, "source": "virtual strain from the estimate" + (
+            " (estimated here)" if record.estimated_here else ""),
+        "half_cycles": half_cycles,
+        "band_method": band.method if band is not None else "no strain gauge to see the modal truncation at: no band",
+        "gauges": gauge_rows,
+        "stations": out_stations,
+        "channels": channels,
+        "root_bending_moment": root,
+    }
+
+
+def _gauges_used(rec, record, model_args: dict) -> tuple[str, ...]:
+    """The gauges the estimate was aided by (in-sample), from the estimator's metadata or the model."""
+    if not record.estimated_here:
+        try:
+            return tuple(json.loads(rec.metadata["estimator"]["selection"]).get("gauges", ()))
+        except (KeyError, TypeError, ValueError):
+            return tuple(s.name for s in rec.rig.sensors_of("strain"))  # unknown: assume in-sample (wider band)
+    gauges = model_args.get("gauges", 4)
+    if isinstance(gauges, tuple):
+        return gauges
+    return tuple(s.name for s in rec.rig.sensors_of("strain"))[: int(gauges)]
+
+
+def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: float | None, half_cycles: str,
+                   quantity: str, youngs_modulus: float, start_s: float | None) -> dict[str, Any]:
+    """The ``shm loads`` document of plain measured channels (strain m/m or stress Pa), counted directly."""
+    import numpy as np
+
+    from analytics import signal_loads
+
+    if quantity == "strain":
+        to_stress = youngs_modulus
+    elif quantity == "stress":
+        to_stress = 1.0
+    else:
+        raise LoadsError(f"--quantity {quantity!r} must be strain or stress")
+    n = table.data.shape[0]
+    times = table.time - table.time[0] if table.time is not None else np.arange(n) / float(table.fs_hz)
+    keep, span_start, duration = _time_span(np.asarray(times, dtype=float), start_s or 0.0)
+    n_eq_value = n_eq if n_eq is not None else duration
+    detail = None if curve is None else _detail(curve)
+    channels = []
+    for j, name in enumerate(table.channels):
+        x = table.data[keep, j]
+        strain = x if quantity == "strain" else x / youngs_modulus
+        sl = signal_loads(strain, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, detail=detail,
+                          to_stress=youngs_modulus, name=f"channel {name}")
+        channels.append({"name": name, **_signal_doc(sl, to_stress=youngs_modulus)})
+    return {"start_s": span_start, "duration_s": duration, "source": f"measured {quantity} channels ({table.format})",
+            "half_cycles": half_cycles, "youngs_modulus_pa": youngs_modulus, "stations": [], "channels": channels}
+
+
+def _cmd_loads(args: argparse.Namespace) -> int:
+    from .cli import CliError, _sensor_counts
+    from .tables import TableError, read_table, select_channels
+
+    try:
+        exponents = _exponents(args.exponents)
+        curve = None
+        if args.curve:
+            curve = json.loads(args.curve) if args.curve.lstrip().startswith("{") else args.curve
+            _detail(curve)
+        doc = None
+        if Path(args.data).suffix.lower() == ".mcap" and not args.channels:
+            from .recording import read_recording
+            from .recording._reader import RecordingError
+
+            try:
+                rec = read_recording(args.data, rig=args.rig)
+            except RecordingError as exc:
+                if "rig.json" not in str(exc):
+                    raise
+                rec = None  # a plain MCAP of channels: counted as a table
+            if rec is not None:
+                stations = parse_stations(args.stations, rec.rig.beam.length) if args.stations else None
+                model_args = dict(peripheral=args.peripheral, modes=args.modes, **_sensor_counts(rec.rig, args))
+                if args.aided:
+                    model_args["aided"] = tuple(int(a) for a in args.aided.split(","))
+                doc = loads_of_recording(rec, model_args=model_args, stations=stations, curve=curve, exponents=exponents,
+                                         n_eq=args.neq, half_cycles=args.half_cycles, start_s=args.start)
+        if doc is None:
+            if args.stations:
+                raise LoadsError("--stations needs a contract recording (plain channels are counted where they were measured)")
+            table = read_table(args.data, fs=args.fs)
+            names = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
+            table = select_channels(table, names)
+            doc = loads_of_table(table, curve=curve, exponents=exponents, n_eq=args.neq, half_cycles=args.half_cycles,
+                                 quantity=args.quantity, youngs_modulus=args.youngs_modulus, start_s=args.start)
+    except (LoadsError, TableError, json.JSONDecodeError) as exc:
+        raise CliError(str(exc)) from None
+    except ValueError as exc:  # a NaN sample, a bad curve: the message names it
+        raise CliError(str(exc)) from None
+    if args.json:
+        print(json.dumps(doc, indent=2, allow_nan=False))
+        return 0
+    _print_table(doc)
+    return 0
+
+
+def _print_table(doc: dict[str, Any]) -> None:
+    print(f"{doc['source']}: {doc['duration_s']:.3f} s counted from {doc['start_s']:.3f} s; half cycles: {doc['half_cycles']}")
+    if doc.get("band_method"):
+        print(f"band: {doc['band_method']}")
+
+    def row(label: str, s: dict[str, Any]) -> str:
+        dels = "  ".join(
+            f"DEL{e['m']:g} {1e6 * e['strain_range']:.3f} µε {e['stress_range_pa'] / 1e6:.3f} MPa"
+            + (f" [{1e6 * e['band'][0]:.3f}, {1e6 * e['band'][1]:.3f}] µε" if e["band"] else "")
+            for e in s["del"])
+        damage = "-" if s["damage"] is None else f"{s['damage']:.3e}"
+        return (f"{label:>22}  rms {1e6 * s['strain_rms']:9.3f} µε  max range {1e6 * s['strain_range_max']:9.3f} µε  {dels}  "
+                f"D {damage}  cycles {s['cycles']:g}")
+
+    for s in doc["stations"]:
+        print(row(f"{s['position_m']:.3f} m" + (f" {s['hot_spot']}" if s["hot_spot"] else ""), s))
+    for c in doc["channels"]:
+        print(row(str(c["name"]), c))
+
+
+def add_loads_parser(sub) -> None:
+    """Register ``shm loads`` (called by shm_service.cli.build_parser)."""
+    p = sub.add_parser("loads", help="strain, stress, rainflow cycles, DELs and fatigue damage: virtual strain at stations of a "
+                                     "contract recording, or measured channels in any format shm oma reads")
+    p.add_argument("data", help="a contract recording (raw or estimate .mcap) or measured channels (.npy/.npz, CSV/TSV/text, .mat, HDF5, .mcap)")
+    p.add_argument("--stations", default=None, metavar="η,...",
+                   help="stations, m from D (default: the rig's hot spots and 15 stations at L/16 steps)")
+    p.add_argument("--channels", default=None, help="measured channels to count, names or column indices: A,B,...")
+    p.add_argument("--fs", type=number(low=0, low_open=True, unit="Hz"), default=None, help="sample rate, Hz (without a time column)")
+    p.add_argument("--quantity", choices=("strain", "stress"), default="strain", help="what plain channels hold: strain (m/m) or stress (Pa)")
+    p.add_argument("--youngs-modulus", type=number(low=0, low_open=True, unit="Pa"), default=STEEL_YOUNGS_MODULUS, metavar="PA",
+                   help="E for plain channels, Pa (default 2.1e11, steel)")
+    p.add_argument("--curve", default=None, help="S-N curve for stations without a hot spot and for channels: EN1993-1-9:71, "
+                                                 "DNV-RP-C203:D:air, or JSON {\"points\": [[N, Pa], ...]} (default: no damage)")
+    p.add_argument("--neq", type=number(low=0, low_open=True), default=None, metavar="N",
+                   help="equivalent cycles of the DELs (default: 1 Hz equivalent, the counted duration in s)")
+    p.add_argument("--exponents", default="3,5", metavar="m,...", help="Wöhler exponents of the DELs (default 3,5)")
+    p.add_argument("--half-cycles", choices=("half", "full", "ignore"), default="half",
+                   help="the residue's half cycles: half (ASTM E1049, default), full (conservative) or ignore")
+    p.add_argument("--start", type=number(low=0, unit="s"), default=None, metavar="S",
+                   help="count from S seconds into the record (default: the estimator's rest-phase end, else 0)")
+    # shm estimate's options, for raw recordings
+    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
+    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
+    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
+    p.add_argument("--imus", default=None, help="peripheral IMUs: a count or names (as shm estimate)")
+    p.add_argument("--tofs", default=None, help="ToFs: a count or names (as shm estimate)")
+    p.add_argument("--gauges", default=None, help="strain gauges: a count or names (as shm estimate)")
+    p.add_argument("--aided", default=None, help="unit deformations aided by the gauges, e.g. 2,3,4 (Eq. 22)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_loads)

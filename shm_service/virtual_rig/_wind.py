@@ -1,0 +1,77 @@
+"""The ambient (wind) load of the virtual rig scaled to the structure, and the section figures
+it needs from any rig description.
+
+A random distributed load p(η, t) (N/m) acts along the beam (:class:`DistributedLoad`). For the
+built-in laboratory sheet its level is the operational settings' ``load_rms``; for a rig given
+as a file (``shm simulate --rig``) a fixed level in N/m would be a breeze for a 20 m mast and a
+storm for a 35 cm cantilever, so unless the user sets it (``wind_load_rms``, N/m RMS) the level
+is scaled to the structure: the load whose quasi-static bending strain at the support has the RMS
+``wind_base_strain`` (default 50 µε, 10.5 MPa on steel; the resonant response adds to it, so the
+peaks at a mast's base reach tens of MPa). With a spatial correlation (exponential kernel of
+length λ) the support moment of a load of RMS σ is M(0) = ∫₀ᴸ p(η) η dη with variance
+σ² ∫∫ η ξ e^{−|η−ξ|/λ} dη dξ, and the strain there is M(0) c(0) / EI(0): pure statics, valid for
+any section (the beam model's own EI and fibre distance, not a uniform sheet's).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from estimator import RigDescription
+
+__all__ = ["DEFAULT_WIND_BASE_STRAIN", "bending_stiffness_at", "fibre_distance_at", "scaled_wind_load",
+           "support_moment_factor"]
+
+#: Quasi-static RMS bending strain at the support that the scaled wind load gives (50 µε).
+DEFAULT_WIND_BASE_STRAIN = 5e-5
+
+
+def fibre_distance_at(rig: RigDescription, positions: np.ndarray | list[float]) -> np.ndarray:
+    """c(η) (m) at ``positions``, from the rig description's sections (or its uniform sheet)."""
+    positions = np.asarray(positions, dtype=float)
+    return np.asarray(rig.beam.fibre_distance(positions), dtype=float).reshape(positions.shape)
+
+
+def bending_stiffness_at(rig: RigDescription, positions: np.ndarray | list[float]) -> np.ndarray:
+    """EI(η) (N·m²) at ``positions`` at the reference temperature, from the rig description."""
+    positions = np.asarray(positions, dtype=float)
+    return np.asarray(rig.beam.bending_stiffness(positions), dtype=float).reshape(positions.shape)
+
+
+def support_moment_factor(length_m: float, correlation_m: float, points: int = 801) -> float:
+    """sqrt(∫₀ᴸ∫₀ᴸ η ξ e^{−|η−ξ|/λ} dη dξ) (m²): the RMS moment at the support per N/m RMS of a
+    load with correlation length λ (L²/2 for λ → ∞).
+
+    Examples
+    --------
+    >>> round(support_moment_factor(2.0, 1e9), 6)
+    2.0
+    """
+    if not (math.isfinite(length_m) and length_m > 0 and correlation_m > 0):
+        raise ValueError(f"{length_m=} and {correlation_m=} must be positive")
+    x = np.linspace(0.0, length_m, points)
+    w = np.full(points, x[1] - x[0])
+    w[[0, -1]] *= 0.5
+    kernel = np.exp(-np.abs(x[:, None] - x[None, :]) / correlation_m)
+    value = (w * x) @ kernel @ (w * x)
+    return float(math.sqrt(max(value, 0.0)))
+
+
+def scaled_wind_load(rig: RigDescription, correlation_m: float, base_strain: float = DEFAULT_WIND_BASE_STRAIN) -> float:
+    """The RMS load per metre (N/m) whose quasi-static RMS bending strain at the support is
+    ``base_strain``, for a load of correlation length ``correlation_m`` (m) on ``rig``'s beam.
+
+    Raises
+    ------
+    ValueError
+        For a non-positive strain or correlation length, or a section without stiffness at D.
+    """
+    if not base_strain > 0:
+        raise ValueError(f"{base_strain=} must be positive")
+    c0 = float(fibre_distance_at(rig, [0.0])[0])
+    ei0 = float(bending_stiffness_at(rig, [0.0])[0])
+    if not (c0 > 0 and ei0 > 0):
+        raise ValueError(f"the section at the support has fibre distance {c0} m and EI {ei0} N·m²: both must be positive")
+    return base_strain * ei0 / (c0 * support_moment_factor(rig.beam.length, correlation_m))

@@ -1,0 +1,148 @@
+"""`shm loads` (issue 21): measured channels counted directly, virtual strain of an estimate recording."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from analytics import FatigueDetail, bending_moment, HotSpotFatigue, rainflow_cycles, signal_loads, sn_curve, virtual_strain
+from shm_service.cli import main
+
+ASTM = [-2, 1, -3, 5, -1, 3, -4, 4, -2]
+
+
+def run(capsys, *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_astm_example_through_shm_loads_on_a_one_column_csv(capsys, tmp_path):
+    path = tmp_path / "astm.csv"
+    path.write_text("strain\n" + "\n".join(map(str, ASTM)) + "\n")
+    code, out, err = run(capsys, "loads", str(path), "--fs", "1", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["start_s"] == 0.0 and doc["duration_s"] == 9.0 and doc["stations"] == []
+    (channel,) = doc["channels"]
+    assert channel["name"] == "strain"
+    assert channel["cycles_by_range"] == [[3.0, 0.5], [4.0, 1.5], [6.0, 0.5], [8.0, 1.0], [9.0, 0.5]]
+    assert channel["cycles"] == 4.0 and channel["cycles_bin_width"] is None and channel["strain_range_max"] == 9.0
+    # DEL_3 = (Σ n S³ / N_eq)^(1/3) with N_eq = 9 s · 1 Hz, by hand
+    by_hand = ((0.5 * 27 + 1.5 * 64 + 0.5 * 216 + 1.0 * 512 + 0.5 * 729) / 9) ** (1 / 3)
+    del3 = next(d for d in channel["del"] if d["m"] == 3.0)
+    assert del3["strain_range"] == pytest.approx(by_hand, rel=1e-12) and del3["n_eq"] == 9.0
+    assert del3["stress_range_pa"] == pytest.approx(by_hand * 2.1e11, rel=1e-12)
+    # --neq and the half-cycle policy
+    code, out, _ = run(capsys, "loads", str(path), "--fs", "1", "--json", "--neq", "1e7", "--half-cycles", "full")
+    channel = json.loads(out)["channels"][0]
+    assert channel["cycles_by_range"] == [[3.0, 1.0], [4.0, 2.0], [6.0, 1.0], [8.0, 2.0], [9.0, 1.0]]
+    assert channel["del"][0]["n_eq"] == 1e7
+
+
+def test_stress_channels_give_damage_on_a_curve(capsys, tmp_path):
+    path = tmp_path / "stress.csv"
+    # one 71 MPa cycle and back: half cycles 71, 71 MPa = one cycle at Δσ_C: D = 1/2e6
+    path.write_text("sigma\n0\n71e6\n0\n")
+    code, out, err = run(capsys, "loads", str(path), "--fs", "10", "--quantity", "stress", "--curve", "EN1993-1-9:71", "--json")
+    assert code == 0, err
+    (channel,) = json.loads(out)["channels"]
+    assert channel["damage"] == pytest.approx(1 / 2e6, rel=1e-12)
+    code, out, _ = run(capsys, "loads", str(path), "--fs", "10", "--quantity", "stress", "--curve", "EN1993-1-9:71")
+    assert code == 0 and "sigma" in out
+
+
+@pytest.mark.parametrize("content, argv, message", [
+    ("strain\n0\nnan\n1\n", [], "channel 'strain' has 1 NaN or infinite value(s), the first at sample 1"),
+    ("strain\n0\n1\n", ["--curve", "EN1993-1-9:72"], "unknown EN 1993-1-9 detail category '72'"),
+    ("strain\n0\n1\n", ["--exponents", "3,0"], "Wöhler exponents must be > 0, got 0.0"),
+    ("strain\n0\n1\n", ["--stations", "1.0"], "--stations needs a contract recording"),
+    ("strain\n0\n1\n", ["--curve", '{"points": [[1e6, 5e7]]}'], "at least two"),
+])
+def test_bad_input_names_the_value(capsys, tmp_path, content, argv, message):
+    path = tmp_path / "x.csv"
+    path.write_text(content)
+    code, out, err = run(capsys, "loads", str(path), "--fs", "1", *argv)
+    assert code == 2 and out == ""
+    assert message in err
+
+
+def test_a_30_minute_record_whole_and_in_1_s_batches_gives_the_same_damage():
+    fs, rng = 100, np.random.default_rng(11)
+    n = 30 * 60 * fs
+    # a narrow-band stress process about 40 MPa RMS plus slow swell: ranges across both EN slopes and the cut-off
+    white = rng.normal(size=n)
+    stress = 40e6 * np.convolve(white, np.hanning(25) / np.sqrt(np.sum(np.hanning(25) ** 2)), mode="same")
+    stress += 20e6 * np.sin(2 * np.pi * 0.01 * np.arange(n) / fs)
+    detail = FatigueDetail(sn_curve("EN1993-1-9:71"), scf=1.2, gamma_ff=1.0, gamma_mf=1.35)
+    whole = signal_loads(stress, n_eq=n / fs, detail=detail)
+    spot = HotSpotFatigue(detail)
+    for k in range(0, n, fs):
+        spot.push(stress[k:k + fs], 1.0, start_s=k / fs)
+    assert whole.damage > 0
+    assert spot.consumed == pytest.approx(whole.damage, rel=1e-12, abs=0)
+    assert rainflow_cycles(stress).total == pytest.approx(whole.cycles.total)
+
+
+def test_virtual_strain_and_moment_by_hand():
+    b = np.array([[1e-3, -2e-3], [0.0, 1e-3]])
+    shapes = np.array([[2.0, 1.0], [0.5, -1.0]])  # s'' at two stations, 1/m per unit b
+    eps = virtual_strain(b, shapes, [0.005, 0.01])
+    # κ = b·s'': (0, 2.5e-3) and (1e-3, -1e-3) 1/m; ε = −c κ
+    np.testing.assert_allclose(eps, [[0.0, -2.5e-5], [-5e-6, 1e-5]], rtol=1e-12, atol=1e-20)
+    np.testing.assert_allclose(bending_moment(b @ shapes.T, [100.0, 200.0]), [[0.0, 0.5], [0.1, -0.2]], rtol=1e-12, atol=1e-18)
+    with pytest.raises(ValueError, match="bending_stiffness must be finite and > 0"):
+        bending_moment(b @ shapes.T, [100.0, -1.0])
+    with pytest.raises(ValueError, match="fibre_distance must be > 0"):
+        virtual_strain(b, shapes, [0.005, 0.0])
+    with pytest.raises(ValueError, match="3 columns"):
+        virtual_strain(b, np.ones((2, 3)), [0.005, 0.005])
+
+
+@pytest.fixture(scope="module")
+def estimate_file(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("loads")
+    raw, est = folder / "raw.mcap", folder / "est.mcap"
+    assert main(["simulate", "--duration", "80", "--seed", "5", "--ideal", "--out", str(raw)]) == 0
+    assert main(["estimate", str(raw), "--out", str(est)]) == 0
+    return raw, est
+
+
+def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path):
+    from shm_service.estimation import truth_from_recording
+    from shm_service.recording import read_recording
+
+    raw, est = estimate_file
+    rig = json.loads(read_recording(raw).rig.to_json())
+    rig["hot_spots"] = [{"name": "weld", "position": 1.1, "curve": "EN1993-1-9:71", "scf": 2.0, "gamma_Mf": 1.35}]
+    rig_path = tmp_path / "rig.json"
+    rig_path.write_text(json.dumps(rig))
+    capsys.readouterr()
+    code, out, err = run(capsys, "loads", str(est), "--rig", str(rig_path), "--stations", "1.0,2.0,3.0", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert [s["position_m"] for s in doc["stations"]] == [1.0, 1.1, 2.0, 3.0]
+    assert [s["hot_spot"] for s in doc["stations"]] == [None, "weld", None, None]
+    assert doc["stations"][1]["curve"] == "EN1993-1-9:71" and doc["stations"][1]["damage"] is not None
+    assert doc["stations"][0]["damage"] is None  # no --curve: no damage where there is no hot spot
+    assert "modal truncation seen at the strain gauges" in doc["band_method"]
+    assert [c["name"] for c in doc["channels"]] == ["g1", "g2", "g3", "g4"]
+    assert doc["start_s"] > 0 and doc["duration_s"] > 10  # from the rest phase's end
+    # against the truth's curvature over the same span: the estimate follows the strain
+    rec = read_recording(raw)
+    truth = truth_from_recording(rec)
+    span = (truth.t >= doc["start_s"]) & (truth.t <= doc["start_s"] + doc["duration_s"])
+    stations = list(rec.rig.truth_stations)
+    c = rec.rig.beam.thickness / 2
+    for s in doc["stations"]:
+        if s["position_m"] in stations:
+            true = -c * truth.curvature[span, stations.index(s["position_m"])]
+            true_del = signal_loads(true, n_eq=doc["duration_s"]).dels[0][2]
+            est_del = s["del"][0]["strain_range"]
+            assert est_del == pytest.approx(true_del, rel=0.1)
+            low, high = s["del"][0]["band"]
+            assert low < est_del < high and high / est_del - 1 <= 0.05  # the ideal paper excitation: a narrow band
+    code, _, err = run(capsys, "loads", str(est), "--stations", "4.5")
+    assert code == 2 and "--stations: 4.5 is outside the beam [0, 4.0]" in err
