@@ -769,7 +769,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-abs", type=number(low=0, low_open=True), default=None, metavar="X",
                    help="reject |value| > X (the file's units) as implausible")
     p.add_argument("--outlier-factor", type=number(low=0), default=1000.0, metavar="F",
-                   help="reject |x - median| > F x the channel's 99th percentile of |x - median| as implausible (0: off) [1000]")
+                   help="reject |x - median| > F x the channel's 90th percentile of |x - median| as implausible (0: off) [1000]")
     p.add_argument("--max-fill", type=int, default=4, metavar="N",
                    help="fill runs of at most N rejected samples by linear interpolation; longer gaps: the longest valid span [4]")
     p.add_argument("--json", action="store_true")

@@ -2,7 +2,7 @@
 
 A plain channel (a CSV column) has no sensor kind, so what is implausible is judged two ways:
 ``max_abs`` (a limit in the file's units, for every channel, when given) and the channel's own
-scale (:func:`shm_service.rejections.outliers`: ``|x - median| > outlier_factor · P99``; a DAQ's
+scale (:func:`shm_service.rejections.outliers`: ``|x - median| > outlier_factor · P90``; a DAQ's
 overflow code or a corrupted float, never a response).
 
 A spectrum, a correlation and a mode shape need every channel at every instant. The policy:
@@ -103,7 +103,7 @@ def clean_for_identification(table: Table, outputs: list[str], inputs: list[str]
         if outlier_factor:
             far = outliers(column, outlier_factor)
             rejections.add(name, "implausible", np.flatnonzero(far),
-                           limit=f"|x - median| <= {outlier_factor:g} x the 99th percentile of |x - median| (--outlier-factor)")
+                           limit=f"|x - median| <= {outlier_factor:g} x the 90th percentile of |x - median| (--outlier-factor)")
             column[far] = np.nan
     filled, count = fill_short_gaps(data, max_fill)
     interpolated = {name: int(n) for name, n in zip(names, count) if n}

@@ -145,11 +145,13 @@ class Rejections:
 
 
 def outliers(x: np.ndarray, factor: float) -> np.ndarray:
-    """Samples of one channel absurdly far from its own scale: ``|x - median| > factor · P99``,
-    with P99 the 99th percentile of ``|x - median|`` over the finite samples.
+    """Samples of one channel absurdly far from its own scale: ``|x - median| > factor · P90``,
+    with P90 the 90th percentile of ``|x - median|`` over the finite samples (so up to 10 % of
+    the samples may be corrupt without hiding the rest).
 
-    A random response exceeds its P99 by a factor 3 or so at its largest; a transient (an impact)
-    by a few tens. A DAQ's overflow code (1e30, 9.9e37) or a corrupted float is beyond any.
+    A random response exceeds its P90 by a factor 3 to 5 at its largest; a transient (an impact
+    in a record of mostly quiet tail) by a few hundred at most. A DAQ's overflow code (1e30,
+    9.9e37) or a corrupted float is beyond any.
 
     Parameters
     ----------
@@ -174,9 +176,9 @@ def outliers(x: np.ndarray, factor: float) -> np.ndarray:
         return out
     centre = float(np.median(x[good]))
     dev = np.abs(x[good] - centre)
-    scale = float(np.percentile(dev, 99))
+    scale = float(np.percentile(dev, 90))
     if scale == 0.0:
-        return out  # a channel constant at 99 % of its samples is left to the caller's limits
+        return out  # a channel constant at 90 % of its samples is left to the caller's limits
     with np.errstate(invalid="ignore"):
         out[good] = dev > factor * scale
     return out

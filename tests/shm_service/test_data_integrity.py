@@ -12,10 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tomli_w
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from shm_service.cli import main
+from shm_service.daq_faults import CELL_FAULTS, modal_response, write_faulted_csv
 from shm_service.daq_import import import_recording
 from shm_service.recording import read_recording
+from shm_service.oma_input import clean_for_identification
 from shm_service.rejections import Rejections, fill_short_gaps, longest_clean_span, outliers
 from shm_service.tables import TableError, read_table
 
@@ -125,21 +129,8 @@ def test_implausible_values_are_rejected_by_the_kind_limits_named_in_the_message
     assert report.topics["/imu/s6"].rejected == 0 and report.topics["/imu/s5"].rejected == 1
 
 
-def _modal_response(n: int, seed: int = 7) -> np.ndarray:
-    """Eight channels of a three-mode system under white noise (modes at 2.1, 5.3 and 9.7 Hz)."""
-    from scipy import signal
-
-    rng = np.random.default_rng(seed)
-    freqs, zetas = (2.1, 5.3, 9.7), (0.01, 0.015, 0.02)
-    x = np.linspace(0.1, 1.0, N_CH)
-    shapes = np.array([np.sin((2 * k + 1) * np.pi / 2 * x) for k in range(3)])
-    y = np.zeros((n, N_CH))
-    for f, z, phi in zip(freqs, zetas, shapes):
-        w = 2 * np.pi * f
-        sys = signal.cont2discrete(([w * w], [1, 2 * z * w, w * w]), 1 / FS)
-        q = signal.lfilter(sys[0].ravel(), sys[1], rng.normal(size=n))
-        y += np.outer(q, phi)
-    return y + 0.01 * rng.normal(size=y.shape) * y.std()
+def _modal_response(n: int) -> np.ndarray:
+    return modal_response(n, FS, N_CH)
 
 
 def _mac(a, b) -> float:
@@ -225,3 +216,52 @@ def test_a_one_row_file_says_so(tmp_path):
     (tmp_path / "one.csv").write_text("time,a\n0.0,1.0\n")
     with pytest.raises(TableError, match="1 data row"):
         read_table(tmp_path / "one.csv")
+
+
+# -- property: any mix of faults costs exactly the faulted samples ------------------------------
+_ROWS, _COLS = 300, 4
+
+
+@st.composite
+def _faults(draw):
+    cells = draw(st.dictionaries(st.tuples(st.integers(0, _ROWS - 1), st.integers(0, _COLS - 1)),
+                                 st.sampled_from(sorted(CELL_FAULTS)), max_size=8))
+    return {
+        "cells": cells,
+        "repeated_times": tuple(draw(st.lists(st.integers(1, _ROWS - 1), max_size=3))),
+        "backwards_times": tuple(draw(st.lists(st.integers(3, _ROWS - 1), max_size=3))),
+        "cut_last_row": draw(st.none() | st.integers(1, _COLS)),
+        "units_row": draw(st.booleans()),
+        "decimal_comma": draw(st.booleans()),
+    }
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(faults=_faults())
+def test_every_valid_sample_is_kept_and_every_rejection_counted(tmp_path, faults):
+    clean = np.random.default_rng(5).normal(size=(_ROWS, _COLS))
+    f = write_faulted_csv(tmp_path / "f.csv", clean, FS, **faults)
+    table = read_table(f.path, nonfinite="keep")
+    assert table.channels == tuple(f.names) and table.data.shape == clean.shape
+    expected = {}
+    for i in range(_ROWS):
+        for j in range(_COLS):
+            if i in f.rows:
+                reason = "time"
+            elif i == _ROWS - 1 and j in f.truncated:
+                reason = "truncated"
+            else:
+                reason = f.cells.get((i, j))
+            if reason is None:
+                assert table.data[i, j] == clean[i, j], (i, j)
+            elif reason == "implausible":
+                assert table.data[i, j] == 1e30
+            else:
+                assert np.isnan(table.data[i, j]), (i, j, reason)
+                expected[reason] = expected.get(reason, 0) + 1
+    assert table.rejections.by_reason() == expected
+    # shm oma's view: 1e30 is rejected as implausible, nothing else is
+    record = clean_for_identification(table, list(f.names))
+    implausible = sum(1 for (i, j), r in f.cells.items() if r == "implausible")
+    assert record.rejections.by_reason().get("implausible", 0) == implausible
+    assert record.rejections.total == sum(expected.values()) + implausible
