@@ -16,7 +16,8 @@ import time
 from ._pages import Tee, command_line, stamp, write_result
 
 MODULES = ("bench_simulator", "bench_estimator", "bench_analytics", "bench_operational", "bench_oma", "bench_service",
-           "bench_fleet", "bench_loads", "fault_campaign", "kill_campaign", "http_campaign")
+           "bench_fleet", "bench_loads", "fault_campaign", "kill_campaign", "http_campaign",
+           "daq_fault_campaign")
 
 
 def _title(module: object, name: str) -> str:

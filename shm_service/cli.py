@@ -353,13 +353,21 @@ def _deformations_of(path: str, args: argparse.Namespace):
     try:
         return rec, deformation_record(rec, model_args=model_args)
     except ValueError as exc:
-        raise CliError(str(exc)) from None
+        raise CliError(f"{exc}{_cut_note(rec)}") from None
 
 
 def _recording_problems(rec) -> dict:
     """``recording_problems`` (a cut, damage, gaps, rejected messages) and ``truncated`` of a recording, as
     ``shm inspect`` says them."""
     return {"truncated": rec.report.truncated, "recording_problems": list(rec.report.problems)}
+
+
+def _cut_note(rec) -> str:
+    """`` (the recording is cut off: ...)`` for a refused analysis of a cut recording, else ``""``."""
+    if not rec.report.truncated:
+        return ""
+    cut = next((p for p in rec.report.problems if "cut off" in p or "damaged" in p), "damaged")
+    return f" (the recording is cut off: {cut})"
 
 
 def _cmd_analyze(args: argparse.Namespace) -> int:
@@ -379,8 +387,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     try:
         result = analyze_deformations(rec.rig, data, config=config, baseline=baseline, warmup_s=warmup, not_before_s=args.not_before)
     except ValueError as exc:
-        cut = f" ({rec.report.problems[0]})" if rec.report.truncated and rec.report.problems else ""
-        raise CliError(f"{args.recording}: {exc}{cut}") from None
+        raise CliError(f"{args.recording}: {exc}{_cut_note(rec)}") from None
     output = {**result.as_dict(), **_recording_problems(rec)}
     if data.truth_metadata and "eigenfrequencies_hz" in data.truth_metadata:
         exact = json.loads(data.truth_metadata["eigenfrequencies_hz"])

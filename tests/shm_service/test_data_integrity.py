@@ -265,3 +265,22 @@ def test_every_valid_sample_is_kept_and_every_rejection_counted(tmp_path, faults
     implausible = sum(1 for (i, j), r in f.cells.items() if r == "implausible")
     assert record.rejections.by_reason().get("implausible", 0) == implausible
     assert record.rejections.total == sum(expected.values()) + implausible
+
+
+# -- cut recordings ------------------------------------------------------------------------------
+def test_a_cut_recording_keeps_its_metadata_and_every_command_says_it_is_cut(tmp_path, capsys):
+    d = _channels(2000)
+    csv = _write_csv(tmp_path / "daq.csv", d)
+    rig, channel_map = _import_files(tmp_path)
+    out = tmp_path / "o.mcap"
+    import_recording([csv], rig, channel_map, out)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(out.read_bytes()[: out.stat().st_size // 2])
+    rec = read_recording(cut)
+    assert rec.report.truncated and "import" in rec.metadata  # written at the start: the cut keeps it
+    assert json.loads(rec.metadata["import"]["limits"])["accel_m_s2"] == 2000.0
+    code, _, err = run(capsys, "analyze", cut)
+    assert code == 2 and "the recording is cut off: file is cut off at byte" in err
+    code, out_text, err = run(capsys, "oma", cut, "--json")
+    assert code == 0, err
+    assert any("file is cut off at byte" in p for p in json.loads(out_text)["recording_problems"])
