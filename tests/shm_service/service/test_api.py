@@ -41,7 +41,7 @@ def test_read_endpoints_and_validation(running):
         assert c.get("/healthz").json()["status"] == "ok"
         st = c.get("/api/status").json()
         assert st["sources"][0]["kind"] == "ingest" and "degraded_sensors" in st
-        assert c.get("/api/trends").json() == {"rows": [], "count": 0}
+        assert c.get("/api/trends").json() == {"rows": [], "count": 0, "truncated": False}
         csv = c.get("/api/trends", params={"format": "csv"})
         assert csv.headers["content-type"].startswith("text/csv") and csv.text.startswith("source,window_start_s")
         assert c.get("/api/trends", params={"from": "2026-01-01T00:00:00Z", "to": "1767312000"}).status_code == 200
