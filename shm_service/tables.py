@@ -121,7 +121,7 @@ def _rate_from_time(t: np.ndarray, where: str, name: str | None = None) -> tuple
     bad = (np.abs(dt - multiple * step) > _CLOCK_TOLERANCE * step) | (multiple < 1) | (multiple > span)
     if bad.any():
         k = int(np.argmax(bad))
-        raise TableError(f"{where}: {column} is not a uniform clock (step {dt[k]!r} s from sample {int(rows[k])} to "
+        raise TableError(f"{where}: {column} is not a uniform clock (step {float(dt[k])!r} s from sample {int(rows[k])} to "
                          f"{int(rows[k + 1])}, median {step!r} s)")
     return 1.0 / step, float(tv[0])
 
@@ -277,6 +277,21 @@ def _parse_rows(rows: list[list[str]], k: int) -> tuple[np.ndarray, np.ndarray]:
     return data, codes
 
 
+def _refuse_comma_decimals(lines: list[str], where: str) -> None:
+    """A comma-separated file whose numbers use decimal commas: each data row has twice the
+    header's fields (every value split in two). Refused with that said."""
+    filled = [ln for ln in lines if ln.strip()]
+    if len(filled) < 2:
+        return
+    header = filled[0].count(",") + 1
+    counts = np.bincount([ln.count(",") + 1 for ln in filled[-50:]])
+    data = int(np.argmax(counts))
+    if header > 1 and data == 2 * header and not _numeric(_split(filled[0], ",")):
+        raise TableError(f"{where}: the numbers seem to use decimal commas in a comma-separated file (the header names "
+                         f"{header} columns, the rows hold {data} fields): separate the columns with ';' or tabs, or write "
+                         "decimal points")
+
+
 def _read_text(path: Path, opts: _Options) -> Table:
     """A header row naming k columns (above it a preamble, below it a units row and padding), then
     the data rows. Every row after the first data row is a sample: a blank, non-numeric or missing
@@ -288,6 +303,7 @@ def _read_text(path: Path, opts: _Options) -> Table:
     if not any(ln.strip() for ln in lines):
         raise TableError(f"{where}: the file is empty")
     delim = _delimiter(lines)
+    _refuse_comma_decimals(lines, where)
     decimal_comma = False
     if delim != ",":
         sample = [f for ln in lines[-50:] for f in _split(ln, delim)]
@@ -402,6 +418,10 @@ def _from_arrays(arrays: dict[str, np.ndarray], opts: _Options, path: Path, fmt:
                     raise TableError(f"{where}: {what}; the file has the vectors {sorted(ones)}", channel=name)
             ones = {name: ones[name] for name in opts.channels}
         if not ones:
+            shapes = {k: tuple(v.shape) for k, v in series.items()}
+            if shapes:
+                raise TableError(f"{where}: holds no channel vectors: its numeric arrays {shapes} are not vectors; give one "
+                                 "samples × channels array, or one vector per channel")
             raise TableError(f"{where}: holds no numeric channel arrays (found {sorted(arrays)})")
         lengths = {k: v.size for k, v in ones.items()}
         if len(set(lengths.values())) != 1:

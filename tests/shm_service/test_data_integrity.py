@@ -284,3 +284,16 @@ def test_a_cut_recording_keeps_its_metadata_and_every_command_says_it_is_cut(tmp
     code, out_text, err = run(capsys, "oma", cut, "--json")
     assert code == 0, err
     assert any("file is cut off at byte" in p for p in json.loads(out_text)["recording_problems"])
+
+
+def test_messages_name_what_is_wrong(tmp_path):
+    np.savez(tmp_path / "two.npz", a=np.zeros((100, 2)), b=np.zeros((100, 3)), fs=100.0)
+    with pytest.raises(TableError, match=r"numeric arrays \{'a': \(100, 2\), 'b': \(100, 3\)\} are not vectors"):
+        read_table(tmp_path / "two.npz")
+    (tmp_path / "t.csv").write_text("time,a\n0,1\n0.01,2\n0.02,3\n0.5,5\n")
+    with pytest.raises(TableError, match=r"step 0.48 s from sample 2 to 3, median 0.01 s\)$") as info:
+        read_table(tmp_path / "t.csv")
+    assert "np.float64" not in str(info.value)
+    (tmp_path / "dc.csv").write_text("time,a\n0,0,1,5\n0,01,2,5\n")
+    with pytest.raises(TableError, match="decimal commas in a comma-separated file"):
+        read_table(tmp_path / "dc.csv")
