@@ -18,6 +18,7 @@ $(STAMP): pyproject.toml constraints.txt
 # what happens when; Ctrl-C stops it. Options: make demo DEMO_ARGS="--duration 1200 --speed max".
 DEMO_ARGS ?=
 demo: $(STAMP)
+	$(PY) -m shm_service.warmup  # at once when cached; after a pull that changed the kernels, compiles them first
 	$(VENV)/bin/shm demo $(DEMO_ARGS)
 
 # One worker per core, a test file per worker at a time (module fixtures such as the quick study run once).

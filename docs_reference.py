@@ -193,6 +193,8 @@ def _schema_type(schema: dict[str, Any]) -> str:
         return f"[{name}](#{name.lower()})"
     if "anyOf" in schema:
         return " or ".join(_schema_type(s) for s in schema["anyOf"])
+    if "oneOf" in schema:
+        return "one of: " + ", ".join(s.get("title") or _schema_type(s) for s in schema["oneOf"])
     if "enum" in schema:
         return " \\| ".join(json.dumps(v) for v in schema["enum"])
     if "const" in schema:
@@ -266,10 +268,13 @@ def http_page() -> str:
         for ctype, content in body.items():
             schema = content.get("schema", {})
             out += [f"Request body ({ctype}): {_schema_type(schema)}", ""]
-            if "properties" in schema:
-                out += ["```json", json.dumps(schema, indent=1)[:4000], "```", ""]
             if path.endswith("/ingest"):
-                out += ["Each message's `payload` is typed by its topic: see [the ingest payloads](#ingest-payloads-by-topic).", ""]
+                items = schema["properties"]["messages"]["items"]
+                out += ["`{\"messages\": [...]}`, each message " + _schema_type(items) + ": `topic`, `log_time_ns` "
+                        "(and optionally `publish_time_ns`), and the `payload` its topic's schema types: see "
+                        "[the ingest payloads](#ingest-payloads-by-topic).", ""]
+            elif "properties" in schema:
+                out += ["```json", json.dumps(schema, indent=1)[:4000], "```", ""]
         out += ["| status | meaning | body |", "| --- | --- | --- |"]
         for code, resp in op.get("responses", {}).items():
             schemas = [c.get("schema", {}) for c in resp.get("content", {}).values()]
@@ -327,7 +332,15 @@ def _validation_page(name: str) -> str:
         return (f"# {name}\n\n!!! warning \"Not yet measured\"\n    Not yet measured by `make bench` on this commit "
                 f"(`{head}`). Run `make bench` (or `python -m benchmarks --only {name}`) to write this page.\n")
     text = path.read_text()
-    if head not in text:
+    import re
+    import subprocess
+
+    stamped = re.search(r"^\| commit \| ([0-9a-f]{7,40})", text, re.M)
+    same = False
+    if stamped:  # the same code: nothing but results and documentation changed since the stamped commit
+        same = subprocess.run(["git", "diff", "--quiet", stamped.group(1), "HEAD", "--", ".", ":(exclude)benchmarks/results",
+                               ":(exclude)docs", ":(exclude)*.md"], cwd=ROOT, capture_output=True).returncode == 0
+    if not same:
         title, _, rest = text.partition("\n")
         text = (f"{title}\n\n!!! note \"Measured on another commit\"\n    These figures were measured on the commit "
                 f"stamped below, not on this one (`{head}`); `python -m benchmarks --only {name}` measures them "
@@ -351,6 +364,7 @@ def validation_index() -> str:
     for name in _benchmarks():
         try:
             doc = (importlib.import_module(f"benchmarks.{name}").__doc__ or "").strip().split("\n\n")[0]
+            doc = doc.split(". ")[0].split(": ")[0].rstrip(".")  # its first clause
         except Exception as exc:  # a benchmark that cannot be imported is listed with why
             doc = f"(cannot import: {type(exc).__name__})"
         path = RESULTS / f"{name}.md"

@@ -120,6 +120,9 @@ class LoadsMonitor:
         eta = np.array([h.position for h in rig.hot_spots], dtype=float)
         if eta.size == 0:
             raise ValueError("the rig description names no hot_spots")
+        if beam.youngs_modulus is None:
+            raise ValueError("beam.youngs_modulus is not given (a beam of table sections): the hot spots' stress is "
+                             "E·ε, give the E of the material at the hot spots (e.g. a steel root flange)")
         shapes = np.asarray(curvature_at(eta), dtype=float)
         c = beam.fibre_distance(eta)
         spots = [HotSpotSpec(h.name, float(h.position), FatigueDetail(sn_curve(h.curve), h.scf, h.gamma_Ff, h.gamma_Mf), shapes[i],

@@ -195,7 +195,8 @@ def cluster_poles(diagram: StabilisationDiagram, *, distance: float = 0.02, min_
         labels = np.ones(1, int)
     else:
         D = _distance(poles, idx)
-        D = (D + D.T) / 2
+        # 1 − MAC of two identical shapes can come out a rounding error below zero, which linkage refuses
+        D = np.maximum((D + D.T) / 2, 0.0)
         np.fill_diagonal(D, 0.0)
         labels = hierarchy.fcluster(hierarchy.linkage(squareform(D, checks=False), method="average"), t=distance, criterion="distance")
     out = []

@@ -8,14 +8,13 @@ then always one that a named command printed on a named commit and machine.
 from __future__ import annotations
 
 import datetime as _dt
-import io
 import os
 import platform
 import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["RESULTS", "Tee", "stamp", "write_result"]
+__all__ = ["RESULTS", "command_line", "stamp", "write_result"]
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -40,25 +39,6 @@ def stamp(command: str) -> dict[str, str]:
         "load": f"{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1/5/15 min) at the start",
         "command": command,
     }
-
-
-class Tee(io.TextIOBase):
-    """Prints as usual and keeps a copy."""
-
-    def __init__(self, stream) -> None:
-        self.stream = stream
-        self.buffer_ = io.StringIO()
-
-    def write(self, text: str) -> int:
-        self.stream.write(text)
-        self.buffer_.write(text)
-        return len(text)
-
-    def flush(self) -> None:
-        self.stream.flush()
-
-    def getvalue(self) -> str:
-        return self.buffer_.getvalue()
 
 
 def write_result(name: str, title: str, meta: dict[str, str], output: str, seconds: float) -> Path:

@@ -186,7 +186,8 @@ def _as_positions(positions: Any, length: float) -> tuple[np.ndarray, bool]:
         raise RigError(f"positions must be a scalar or a 1-D array of arc lengths, got shape {eta.shape}")
     if np.any(~np.isfinite(eta)) or np.any(eta < 0.0) or np.any(eta > length * (1 + 1e-12)):
         bad = eta[~np.isfinite(eta) | (eta < 0.0) | (eta > length * (1 + 1e-12))]
-        raise RigError(f"positions must lie on the beam [0, {length}] m, got {bad[:5].tolist()}")
+        raise RigError(f"position {bad[0]} is outside the beam [0, {length}] m (positions are arc lengths on it; "
+                       f"off the beam: {bad[:5].tolist()})")
     return np.clip(eta, 0.0, length), scalar
 
 
@@ -546,7 +547,15 @@ class RigDescription(_ContractModel):
         return (self.model_extra or {}).get(key, default)
 
     def to_json(self) -> str:
-        return json.dumps(self.model_dump(mode="json", exclude_defaults=False), indent=2)
+        data = self.model_dump(mode="json", exclude_defaults=False)
+        # Optional keys the contract says are "not given" (a sectioned beam's width and thickness, a
+        # table beam's material, a rig without ToFs' reflector) are left out rather than written as null.
+        for key in ("width", "thickness", "youngs_modulus", "density", "sections"):
+            if data["beam"].get(key, 0) is None:
+                del data["beam"][key]
+        if data.get("reflector_distance", 0) is None:
+            del data["reflector_distance"]
+        return json.dumps(data, indent=2)
 
 
 def _key(loc: tuple[Any, ...]) -> str:

@@ -22,6 +22,7 @@ import contextlib
 import fcntl
 import hashlib
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -107,6 +108,13 @@ def _lock() -> Iterator[None]:
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
+def _end_with_parent() -> None:
+    """In the child: the kernel ends it when the thread that started it ends (even by SIGKILL)."""
+    from .service._processes import _set_pdeathsig
+
+    _set_pdeathsig(signal.SIGKILL)
+
+
 class Cancelled(RuntimeError):
     """The compilation was cancelled (the caller is stopping)."""
 
@@ -115,7 +123,7 @@ def _run(args: list[str], cwd: Path, timeout_s: float, cancel: threading.Event |
     env = {**os.environ, CHILD_ENV: "1", "PYTHONPATH": os.pathsep.join(p for p in (str(_ROOT), os.environ.get("PYTHONPATH", "")) if p)}
     with open(cwd / "out.txt", "w+") as out:
         proc = subprocess.Popen([sys.executable, "-m", "shm_service.cli", *args], cwd=cwd, env=env, stdout=out,
-                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, preexec_fn=_end_with_parent,
                                 start_new_session=True)  # a terminal's Ctrl-C reaches it through cancel only
         deadline = time.monotonic() + timeout_s
         try:  # the child never outlives this process's wish to stop

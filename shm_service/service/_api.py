@@ -341,15 +341,29 @@ _AUTH_RESPONSES: dict[int | str, dict[str, Any]] = {
 _INVALID = {422: _error("a parameter is invalid")}
 
 
-#: The documented body of both ingest routes (validated by hand: see ``_ingest``).
+def _ingest_message(topic: dict[str, Any], title: str) -> dict[str, Any]:
+    """One ingest message of the sensor topics ``topic`` matches, its payload typed by the
+    recording contract's JSON schema ``title`` (the schema a recording's channel carries)."""
+    from contract import SCHEMAS
+
+    payload = {k: v for k, v in SCHEMAS[title].items() if k != "$schema"}
+    return {"type": "object", "title": f"{title} message", "required": ["topic", "log_time_ns", "payload"],
+            "properties": {"topic": {"type": "string", **topic},
+                           "log_time_ns": {"type": "integer", "minimum": 0},
+                           "publish_time_ns": {"type": "integer", "minimum": 0},
+                           "payload": payload}}
+
+
+#: The documented body of both ingest routes (validated by hand: see ``_ingest``): each message's
+#: payload typed by its topic, as the recording contract defines it.
 _INGEST_BODY: dict[str, Any] = {"requestBody": {"required": True, "content": {"application/json": {"schema": {
     "type": "object", "required": ["messages"], "additionalProperties": False,
-    "properties": {"messages": {"type": "array", "items": {
-        "type": "object", "required": ["topic", "log_time_ns", "payload"],
-        "properties": {"topic": {"type": "string", "examples": ["/imu/D"]},
-                       "log_time_ns": {"type": "integer", "minimum": 0},
-                       "publish_time_ns": {"type": "integer", "minimum": 0},
-                       "payload": {"type": "object"}}}}}}}}}}
+    "properties": {"messages": {"type": "array", "items": {"oneOf": [
+        _ingest_message({"pattern": "^/imu/[^/]+$", "examples": ["/imu/D"]}, "shm.Imu"),
+        _ingest_message({"pattern": "^(/tof/[^/]+|/bearing/displacement)$", "examples": ["/tof/s1"]}, "shm.Distance"),
+        _ingest_message({"pattern": "^/strain/[^/]+$", "examples": ["/strain/g1"]}, "shm.Strain"),
+        _ingest_message({"enum": ["/env/temperature"]}, "shm.Temperature"),
+    ]}}}}}}}}
 
 
 def _cut_headers(rows: list, truncated: bool) -> dict[str, str]:

@@ -164,3 +164,16 @@ def test_stabilisation_flags_and_clusters_by_hand():
 def test_bad_input_names_the_value(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_noise_free_free_decay_clusters_without_negative_distances():
+    # Identical shapes across orders give 1 − MAC a rounding error below zero; clustering must take it.
+    fs = 100.0
+    t = np.arange(0.0, 20.0, 1 / fs)
+
+    def decay(f, zeta):
+        return np.exp(-zeta * 2 * np.pi * f * t) * np.cos(2 * np.pi * f * np.sqrt(1 - zeta**2) * t)
+
+    y = np.column_stack([decay(3.0, 0.01) + 0.5 * decay(7.0, 0.02), 0.6 * decay(3.0, 0.01) - 0.8 * decay(7.0, 0.02)])
+    result = identify_modes(y, fs, config=OmaConfig(fmin_hz=1.0, fmax_hz=10.0))
+    assert [round(m.frequency_hz, 2) for m in result.modes] == [3.0, 7.0]

@@ -99,6 +99,12 @@ def test_the_http_reference_lists_every_route_and_types_the_ingest_payloads():
             assert f"{method.upper()} `{path}`" in page, (method, path)
     for name in doc["components"]["schemas"]:
         assert f"### {name}" in page, name
+    # the OpenAPI document itself types each ingest message's payload by its topic
+    items = doc["paths"]["/api/ingest"]["post"]["requestBody"]["content"]["application/json"]["schema"]["properties"][
+        "messages"]["items"]
+    typed = {m["title"]: m["properties"]["payload"] for m in items["oneOf"]}
+    assert set(typed) == {"shm.Imu message", "shm.Distance message", "shm.Strain message", "shm.Temperature message"}
+    assert typed["shm.Imu message"]["required"] == ["accel", "gyro"]
     for title, schema in contract.SCHEMAS.items():
         assert f"### {title}" in page, title
         for field in schema["properties"]:
@@ -128,6 +134,16 @@ def test_a_validation_page_is_stamped_or_says_it_was_not_measured(tmp_path, monk
     assert "| [bench_oma](bench_oma.md) |" in index and meta["date"] in index
 
 
+def test_every_benchmark_has_a_validation_page_in_the_nav():
+    from benchmarks.__main__ import MODULES
+
+    nav = (ROOT / "mkdocs.yml").read_text()
+    overview = (ROOT / "docs" / "validation" / "index.md").read_text()
+    for name in MODULES:
+        assert f"validation/{name}.md" in nav, name
+        assert f"]({name}.md)" in overview, name
+
+
 def test_the_readme_is_short_and_its_links_resolve():
     text = (ROOT / "README.md").read_text()
     assert len(text.splitlines()) <= 200
@@ -138,6 +154,12 @@ def test_the_readme_is_short_and_its_links_resolve():
         assert (ROOT / link).exists(), link
     for needed in ("make demo", "make test", "LICENSE", "CITATION.cff", "Kohl", "Wagner"):
         assert needed in text, needed
+    # the table of the commands has every command of the parser
+    from shm_service.cli import build_parser
+
+    for command, flag in _options(build_parser()):
+        if flag is None and command.count(" ") == 1:
+            assert f"| `{command}" in text, f"README's command table lacks {command}"
 
 
 #: The numerics' public entry points whose numpydoc Examples run here (keep them small and fast).

@@ -304,7 +304,7 @@ def test_strain_aiding_uses_the_fibre_distance_of_the_section():
     from estimator import build_model
 
     rig = _example_mast_with_bearing()
-    model = build_model(rig, modes=4, imus=4, tofs=0, gauges=3)
+    model = build_model(rig, modes=4, imus=4, tofs=0, gauges=4)
     eta = model.gauge_eta
     # Eq. (19) with c(η) = D(η)/2 of the tube at each gauge instead of h*/2
     outer = np.interp(eta, [0.0, 8.0, 20.0], [0.5, 0.38, 0.2])  # the example's taper (the step at 8 m is in t only)
@@ -345,3 +345,32 @@ def test_element_bending_stiffness_of_a_uniform_stretch_is_the_textbook_matrix()
     textbook = 50.0 / l**3 * np.array([[12, 6 * l, -12, 6 * l], [6 * l, 4 * l * l, -6 * l, 2 * l * l],
                                        [-12, -6 * l, 12, -6 * l], [6 * l, 2 * l * l, -6 * l, 4 * l * l]])
     np.testing.assert_allclose(element_bending_stiffness(beam, 0.5, 1.0), textbook, rtol=1e-13, atol=1e-11)
+
+
+def test_to_json_leaves_out_what_is_not_given_and_round_trips():
+    import json
+
+    rig = parse_rig({"beam": {"length": 2.0, "sections": [table(0.0, 10.0, 1.0, 0.01), table(2.0, 1.0, 0.5, 0.005)]},
+                     "gravity": 9.81, "support": "clamped", "sensors": []})
+    data = json.loads(rig.to_json())
+    assert not {"width", "thickness", "youngs_modulus", "density"} & set(data["beam"])
+    assert "reflector_distance" not in data
+    assert parse_rig(rig.to_json()) == rig
+    sheet = parse_rig({"beam": {"length": 4.0, "width": 0.2, "thickness": 0.002, "youngs_modulus": E, "density": RHO},
+                       "gravity": 9.81, "reflector_distance": 0.5, "sensors": []})
+    assert "sections" not in json.loads(sheet.to_json())["beam"]
+
+
+
+def test_the_loads_of_hot_spots_on_a_beam_of_tables_need_the_youngs_modulus_of_their_material():
+    from analytics import LoadsMonitor
+
+    data = {"beam": {"length": 2.0, "sections": [table(0.0, 10.0, 1.0, 0.01), table(2.0, 1.0, 0.5, 0.005)]},
+            "gravity": 9.81, "support": "clamped", "sensors": [],
+            "hot_spots": [{"name": "root", "position": 0.1, "curve": "EN1993-1-9:71"}]}
+    rig = parse_rig(data)  # the rig itself is valid: estimation and modes need no E
+    curvature = lambda eta: np.ones((len(eta), 2))
+    with pytest.raises(ValueError, match="beam.youngs_modulus is not given"):
+        LoadsMonitor.from_rig(rig, curvature)
+    data["beam"]["youngs_modulus"] = 2.1e11
+    assert LoadsMonitor.from_rig(parse_rig(data), curvature).youngs_modulus == 2.1e11

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 
+from shm_service.service import read_ready, start_serve
 from test_dashboard_browser import CHROMIUM_ARGS, VIEWPORT, _visible, _wait, chromium  # noqa: F401 (fixture)
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -45,24 +46,24 @@ def test_the_first_demo_shows_its_header_and_counts_estimates_within_30_s(chromi
     compile_kernels()  # what make did at install (at once when the stamp is current)
     assert kernels_ready()
     out = tmp_path / "demo.out"
-    cmd = [sys.executable, "-m", "shm_service.cli", "demo", "--dir", str(tmp_path / "demo"), "--duration", "600", "--no-damage",
-           "--port", "0", "--dashboard-port", "0"]
+    args = ["--dir", str(tmp_path / "demo"), "--duration", "600", "--no-damage", "--port", "0", "--dashboard-port", "0"]
     with sync_playwright() as p:
         # the browser is up before the service starts: the times below are the service's, not Chromium's start
         browser = p.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
         page = browser.new_page(viewport=VIEWPORT)
         with open(out, "w") as stdout:
-            proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=stdout, stderr=subprocess.STDOUT, start_new_session=True,
-                                    env={**os.environ, "PYTHONPATH": str(ROOT)})
+            demo = start_serve(args, command="demo", cwd=tmp_path, stdout=stdout, stderr=subprocess.STDOUT,
+                               start_new_session=True, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=None,
+                               ready_file=tmp_path / "ready.json")
+        proc = demo.process
         try:
             def urls():
-                text = out.read_text()
                 if proc.poll() is not None:
-                    raise AssertionError(f"shm demo ended early ({proc.returncode}):\n{text[-3000:]}")
-                api, dash = re.search(r"API at (http://\S+?) ", text), re.search(r"dashboard at (http://\S+)", text)
-                return (api.group(1), dash.group(1)) if api and dash else None
+                    raise AssertionError(f"shm demo ended early ({proc.returncode}):\n{out.read_text()[-3000:]}")
+                doc = read_ready(demo.ready_file)
+                return (doc["api"], doc["dashboard"]) if doc and doc.get("dashboard") else None
 
-            api_url, dash_url = _wait(urls, 240, "shm demo to print its API and dashboard addresses", poll=0.05)
+            api_url, dash_url = _wait(urls, 240, "shm demo to say where its API and dashboard are", poll=0.05)
             port_open = time.monotonic()
             load = _load_factor()
             with httpx.Client(base_url=api_url, timeout=10) as api:
