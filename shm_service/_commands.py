@@ -58,6 +58,20 @@ def _model_from_args(rig, args: argparse.Namespace):
         raise CliError(str(exc)) from None
 
 
+def _recording_problems(rec) -> dict:
+    """``recording_problems`` (a cut, damage, gaps, rejected messages) and ``truncated`` of a recording, as
+    ``shm inspect`` says them."""
+    return {"truncated": rec.report.truncated, "recording_problems": list(rec.report.problems)}
+
+
+def _cut_note(rec) -> str:
+    """`` (the recording is cut off: ...)`` for a refused analysis of a cut recording, else ``""``."""
+    if not rec.report.truncated:
+        return ""
+    cut = next((p for p in rec.report.problems if "cut off" in p or "damaged" in p), "damaged")
+    return f" (the recording is cut off: {cut})"
+
+
 def _sensor_counts(rig, args: argparse.Namespace) -> dict[str, int | tuple[str, ...]]:
     """--imus/--tofs/--gauges as the estimator takes them. A count the user gave must exist on the
     rig; the default (4 each) is capped to what the rig has, as the help says."""
@@ -102,4 +116,4 @@ def _deformations_of(path: str, args: argparse.Namespace):
     try:
         return rec, deformation_record(rec, model_args=model_args, settings=streaming)
     except ValueError as exc:
-        raise CliError(str(exc)) from None
+        raise CliError(f"{exc}{_cut_note(rec)}") from None

@@ -19,9 +19,11 @@ from ._commands import (  # noqa: F401  (the commands' shared parts; reprocess, 
     CliError,
     _analysis_settings,
     _count_or_names,
+    _cut_note,
     _deformations_of,
     _model_from_args,
     _print_json,
+    _recording_problems,
     _sensor_counts,
 )
 
@@ -212,7 +214,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         "modes": result.model.gamma,
         "rest_end_s": round(float(result.calibration.rest_end), 3),
         "diagnostics": result.diagnostics,
-        "recording_problems": rec.report.problems,
+        **_recording_problems(rec),
     }
     truth = truth_from_recording(rec)
     if truth is not None:
@@ -229,6 +231,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             r = summary["rmse"]
             print(f"RMSE after the rest phase: phi {r['phi_deg']:.4f} deg, e {1000 * r['e_m']:.3f} mm, d {1000 * r['d_m']:.3f} mm, "
                   f"deflection {1000 * r['deflection_m']:.3f} mm, curvature {r['curvature_per_m']:.2e} 1/m")
+        for problem in summary["recording_problems"]:
+            print(f"problem: {problem}")
         if args.out:
             print(f"wrote {args.out}")
     return 0
@@ -293,8 +297,8 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     try:
         result = analyze_deformations(rec.rig, data, config=config, baseline=baseline, warmup_s=warmup, not_before_s=args.not_before)
     except ValueError as exc:
-        raise CliError(f"{args.recording}: {exc}") from None
-    output = result.as_dict()
+        raise CliError(f"{args.recording}: {exc}{_cut_note(rec)}") from None
+    output = {**result.as_dict(), **_recording_problems(rec)}
     if data.truth_metadata and "eigenfrequencies_hz" in data.truth_metadata:
         exact = json.loads(data.truth_metadata["eigenfrequencies_hz"])
         zeta_key = next((k for k in ("modal_damping_ratios", "damping_ratios") if k in data.truth_metadata), None)
@@ -331,6 +335,8 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
             for m in bl["modes"]:
                 if not m["charted"]:
                     print(f"  mode {m['mode']} not charted: {m['reason']}")
+        for problem in output["recording_problems"]:
+            print(f"problem: {problem}")
         print(f"flags: {len(output['flags'])}")
         for flag in output["flags"]:
             print("  " + ", ".join(f"{k}={v}" for k, v in flag.items()))
@@ -431,25 +437,30 @@ def _cmd_oma(args: argparse.Namespace) -> int:
 
     from analytics import OmaConfig, OperationalModalAnalysis
 
+    from .oma_input import clean_for_identification
     from .tables import TableError, read_table, select_channels
 
     try:
-        table = read_table(args.data, fs=args.fs)
+        table = read_table(args.data, fs=args.fs, nonfinite="keep")
         names = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
         if args.channels is not None and not names:
             raise CliError(f"--channels {args.channels!r} names no channel")
-        inputs = None
+        input_names = None
         if args.inputs:
-            inputs = select_channels(table, [c.strip() for c in args.inputs.split(",") if c.strip()]).data
+            input_names = list(select_channels(table, [c.strip() for c in args.inputs.split(",") if c.strip()]).channels)
             if names is None:  # the inputs are not outputs too
-                names = [c for c in table.channels if c not in args.inputs.split(",")]
-        table = select_channels(table, names)
+                names = [c for c in table.channels if c not in input_names]
+        output_names = list(select_channels(table, names).channels)
+        clean = clean_for_identification(table, output_names, input_names, outlier_factor=args.outlier_factor,
+                                         max_abs=args.max_abs, max_fill=args.max_fill)
+        table = select_channels(table, output_names)
+        inputs = clean.inputs
         config = OmaConfig(fmin_hz=args.fmin or 0.0, fmax_hz=args.fmax)
         window = args.window
         step = args.step if args.step is not None else window
         if step is not None and window is None:
             raise CliError("--step needs --window")
-        result = OperationalModalAnalysis(config, window_s=window, step_s=step).run(table.data, table.fs_hz, inputs=inputs)
+        result = OperationalModalAnalysis(config, window_s=window, step_s=step).run(clean.outputs, table.fs_hz, inputs=inputs)
     except ValidationError as exc:
         raise CliError(_pydantic_message(exc)) from None
     except (TableError, ValueError) as exc:
@@ -480,6 +491,8 @@ def _cmd_oma(args: argparse.Namespace) -> int:
                      "rejected": [{"frequency_hz": f, "reason": why} for f, why in w.identification.rejected],
                      **io(w.identification)} for w in result.windows],
         "tracks": [t.as_dict() for t in result.tracks],
+        **clean.as_dict(table.fs_hz),
+        "recording_problems": list(table.problems),
     }
     if args.json:
         _print_json(doc)
@@ -492,6 +505,8 @@ def _cmd_oma(args: argparse.Namespace) -> int:
               f"{m.mpc:5.2f} {m.contribution:6.2f}  " + " ".join(f"{v:+.2f}" for v in m.shape))
     for f, why in rec.rejected:
         print(f"  not a mode: {f:.4f} Hz ({why})")
+    for line in [*clean.format(table.fs_hz), *(f"problem: {p}" for p in table.problems)]:
+        print(line)
     if result.windows:
         print(f"{len(result.windows)} windows:")
         for w in result.windows:
@@ -668,6 +683,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also identify windows of S seconds")
     p.add_argument("--step", type=number(low=0, low_open=True, unit="s"), default=None, metavar="S",
                    help="window step, s (default: --window)")
+    p.add_argument("--max-abs", type=number(low=0, low_open=True), default=None, metavar="X",
+                   help="reject |value| > X (the file's units) as implausible")
+    p.add_argument("--outlier-factor", type=number(low=0), default=1000.0, metavar="F",
+                   help="reject |x - median| > F x the channel's 90th percentile of |x - median| as implausible (0: off) [1000]")
+    p.add_argument("--max-fill", type=int, default=4, metavar="N",
+                   help="fill runs of at most N rejected samples by linear interpolation; longer gaps: the longest valid span [4]")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_oma)
 

@@ -355,6 +355,11 @@ _INGEST_BODY: dict[str, Any] = {"requestBody": {"required": True, "content": {"a
     ]}}}}}}}}
 
 
+def _cut_headers(rows: list, truncated: bool) -> dict[str, str]:
+    """``X-Count`` and ``X-Truncated`` of a CSV export (a CSV has no place for them)."""
+    return {"X-Count": str(len(rows)), "X-Truncated": "true" if truncated else "false"}
+
+
 def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: int = 64 * 1024,
                max_ingest_bytes: int = 8 * 1024 * 1024, host: str = "127.0.0.1", allowed_hosts: Iterable[str] = (),
                check_host: bool = True, auth_failures_per_minute: int = 10) -> FastAPI:
@@ -425,15 +430,17 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
         lo, hi = _parse_time("from", from_), _parse_time("to", to)
         if lo is not None and hi is not None and lo > hi:
             raise HTTPException(422, f"'from' ({lo}) is after 'to' ({hi})")
-        rows = service.trends(lo, hi, mode=mode, source=source, limit=limit)
+        # one row more than asked: whether the answer is cut (issue 26: an export says what it holds)
+        rows = service.trends(lo, hi, mode=mode, source=source, limit=limit + 1)
+        rows, truncated = rows[:limit], len(rows) > limit
         if format == "csv":
             buf = io.StringIO()
             writer = csv.DictWriter(buf, fieldnames=_TREND_FIELDS, extrasaction="ignore", lineterminator="\n")
             writer.writeheader()
             writer.writerows(row.model_dump() for row in rows)
             return Response(buf.getvalue(), media_type="text/csv",
-                            headers={"Content-Disposition": 'attachment; filename="trends.csv"'})
-        return TrendsDocument(rows=rows, count=len(rows))
+                            headers={"Content-Disposition": 'attachment; filename="trends.csv"', **_cut_headers(rows, truncated)})
+        return TrendsDocument(rows=rows, count=len(rows), truncated=truncated)
 
     @app.get("/api/alarms", summary="alarms, newest first", response_model=AlarmsDocument, responses={**_AUTH_RESPONSES, **_INVALID})
     def alarms(state: Literal["active", "cleared"] | None = Query(None, description="only alarms in this state")) -> AlarmsDocument:
@@ -555,15 +562,17 @@ def _fleet_routes(app: FastAPI, service: ServicePort, authorize: Callable[[Reque
         lo, hi = _parse_time("from", from_), _parse_time("to", to)
         if lo is not None and hi is not None and lo > hi:
             raise HTTPException(422, f"'from' ({lo}) is after 'to' ({hi})")
-        rows = call(service.structure_trends, structure_id, lo, hi, mode=mode, limit=limit)
+        rows = call(service.structure_trends, structure_id, lo, hi, mode=mode, limit=limit + 1)
+        rows, truncated = rows[:limit], len(rows) > limit
         if format == "csv":
             buf = io.StringIO()
             writer = csv.DictWriter(buf, fieldnames=_TREND_FIELDS, extrasaction="ignore", lineterminator="\n")
             writer.writeheader()
             writer.writerows(row.model_dump() for row in rows)
             return Response(buf.getvalue(), media_type="text/csv",
-                            headers={"Content-Disposition": f'attachment; filename="trends-{structure_id}.csv"'})
-        return TrendsDocument(rows=rows, count=len(rows))
+                            headers={"Content-Disposition": f'attachment; filename="trends-{structure_id}.csv"',
+                                     **_cut_headers(rows, truncated)})
+        return TrendsDocument(rows=rows, count=len(rows), truncated=truncated)
 
     @app.get("/api/structures/{structure_id}/alarms", summary="one structure's alarms, newest first",
              response_model=AlarmsDocument, responses={**_AUTH_RESPONSES, **_INVALID, **_UNKNOWN})

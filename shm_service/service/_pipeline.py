@@ -166,6 +166,14 @@ class WindowOutput:
     alarm_changes: list[AlarmChange]
 
 
+def _monitor_stations(model) -> np.ndarray:
+    """Where curvature is monitored: the rig's truth stations, else (``truth_stations: []``) 8 evenly
+    spaced stations (damage_signatures' default)."""
+    if len(model.stations):
+        return np.asarray(model.stations, dtype=float)
+    return np.linspace(0.0, model.rig.beam.length, 9)[1:]
+
+
 class _Analytics:
     """The one engine (``analytics.MonitoringEngine``, the same ``shm analyze`` runs) over the
     estimator's b(t) and support displacement d(t), and what the service makes of its windows:
@@ -194,7 +202,7 @@ class _Analytics:
         m = self.model
         if self.signatures is None:
             # FE-predicted damage signatures of the rig: where along the beam a flag points.
-            self.signatures = damage_signatures(m.rig, m.stations, gamma=m.gamma)
+            self.signatures = damage_signatures(m.rig, _monitor_stations(m), gamma=m.gamma)
         if state is not None:
             try:
                 monitor = ModalMonitor.from_state_dict(state)
@@ -211,7 +219,8 @@ class _Analytics:
             except ValueError as exc:
                 log.warning("stored baseline unusable (%s); learning a new one", exc)
         try:
-            return ModalMonitor(m.units.frequencies_hz, m.units.curvature(m.stations), m.stations, fs=FS, config=self.config,
+            stations = _monitor_stations(m)
+            return ModalMonitor(m.units.frequencies_hz, m.units.curvature(stations), stations, fs=FS, config=self.config,
                                 baseline=stored, beam_length=m.rig.beam.length, signatures=self.signatures)
         except ValueError as exc:  # a baseline of another model (modes)
             if stored is None:
