@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench docs clean
+.PHONY: demo test check lint types bench docs clean
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -21,8 +21,21 @@ demo: $(STAMP)
 	$(PY) -m shm_service.warmup  # at once when cached; after a pull that changed the kernels, compiles them first
 	$(VENV)/bin/shm demo $(DEMO_ARGS)
 
-# One worker per core, a test file per worker at a time (module fixtures such as the quick study run once).
-test: $(STAMP)
+# The lint and the types ([tool.ruff], [tool.mypy] in pyproject.toml: strict on contract, estimator, analytics).
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+
+types: $(STAMP)
+	$(VENV)/bin/mypy
+
+# The quick tier (under 2 minutes on 2 cores): lint, types and the unit tests; no browser, no service
+# processes, no long physics runs (the markers of tests/conftest.py).
+check: lint types
+	$(PY) -m pytest -q -n auto -m "not slow and not e2e and not browser"
+
+# Everything: lint, types and the whole suite. One worker per core, a test file per worker at a time
+# (module fixtures such as the quick study run once).
+test: lint types
 	$(PY) -m pytest -q -n auto --dist loadfile
 
 bench: $(STAMP)

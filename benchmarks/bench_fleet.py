@@ -159,15 +159,15 @@ def bench_lock_hold(busy_threads: int = 20, group: int = 19, seconds: float = 20
 
             def spin() -> None:
                 x = 0
-                while not stop.is_set():
+                while not stop.is_set():  # noqa: B023  (the threads end before the loop moves on)
                     x += 1
 
             def commits(i: int) -> None:
                 k = 0
-                while not stop.is_set():
+                while not stop.is_set():  # noqa: B023
                     rows = [TrendRow(source=f"s{i}", window_start_s=30.0 * k, window_end_s=30.0 * k + 60, mode=m, unit=m,
                                      kind="ambient", frequency_hz=1.0) for m in range(1, 6)]
-                    st.commit_window(WindowCommit(f"s{i}", 30.0 * k, 30.0 * k + 60, rows, {"monitor": "y" * 30000}, None))
+                    st.commit_window(WindowCommit(f"s{i}", 30.0 * k, 30.0 * k + 60, rows, {"monitor": "y" * 30000}, None))  # noqa: B023
                     k += 1
                     time.sleep(0.05)
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import tempfile
 import time
@@ -196,7 +195,7 @@ def evaluate(scenario: Scenario, observations: list[Observation], source: str) -
                 break
     recover = None
     after = [(i, o) for i, o in enumerate(observations) if o.t_s >= scenario.end_s]
-    for k, (i, o) in enumerate(after):
+    for k, (_, o) in enumerate(after):
         if all(_normal(q, scenario.topic, observations[j - 1].rejected) for j, q in after[k:]):
             recover = max(o.t_s - scenario.end_s, 0.0)
             break

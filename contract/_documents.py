@@ -319,8 +319,12 @@ class TrendRow(_Document):
 
 
 class TrendsDocument(_Document):
+    """Trend rows in window order; ``truncated``: more rows match than ``limit`` returned (ask again
+    with ``from`` at the last row's window start for the rest)."""
+
     rows: list[TrendRow]
     count: Count
+    truncated: bool = False
 
 
 class SpectrumDocument(_Document):

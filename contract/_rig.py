@@ -522,13 +522,13 @@ class RigDescription(_ContractModel):
         for index, station in enumerate(self.truth_stations):
             if not (0.0 <= station <= length):
                 raise ValueError(f"truth_stations[{index}]={station} is outside the beam [0, {length}]")
-        names: set[str] = set()
+        spot_names: set[str] = set()
         for index, spot in enumerate(self.hot_spots):
             if not (math.isfinite(spot.position) and 0.0 <= spot.position <= length):
                 raise ValueError(f"hot_spots[{index}] ({spot.name!r}): position={spot.position} is outside the beam [0, {length}]")
-            if spot.name in names:
+            if spot.name in spot_names:
                 raise ValueError(f"hot_spots[{index}]: name {spot.name!r} is not unique")
-            names.add(spot.name)
+            spot_names.add(spot.name)
         return self
 
     @property

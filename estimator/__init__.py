@@ -47,10 +47,18 @@ from ._filter import (
     build_events,
     build_model,
     calibrate_at_rest,
-    estimate,
 )
 from contract import Beam, PointMass, RigDescription, RigError, Sensor, StiffnessSegment, load_rig, parse_rig
 from ._selection import SensorSelection, default_aided, effective_independence, select_sensors
+from ._streaming import (
+    REFERENCE_IMU_TOPIC,
+    StreamingEstimator,
+    StreamingSettings,
+    TopicSamples,
+    estimate,
+    estimate_stream,
+    rig_topics,
+)
 from ._unit_deformations import MAX_UNIT_DEFORMATIONS, UnitDeformations, unit_deformations
 
 __all__ = [
@@ -78,6 +86,12 @@ __all__ = [
     "default_aided",
     "effective_independence",
     "estimate",
+    "estimate_stream",
+    "REFERENCE_IMU_TOPIC",
+    "StreamingEstimator",
+    "StreamingSettings",
+    "TopicSamples",
+    "rig_topics",
     "greenhill_length",
     "select_sensors",
     "GREENHILL_COEFFICIENT",

@@ -48,7 +48,6 @@ __all__ = [
     "build_events",
     "build_model",
     "calibrate_at_rest",
-    "estimate",
     "model_arrays",
     "support_position_problem",
 ]
@@ -409,7 +408,8 @@ def _rest_end(meas: Measurements, config: FilterConfig, model: ImmsModel | None 
     quiet = t < start + min(2.0, config.rest_max_s)
     if quiet.sum() < 20:
         return start
-    end = limit
+    # no motion seen: the rest lasted to the end of the data at most (a calibration on its first seconds)
+    end = min(limit, float(t[-1]))
     watched: list[tuple[SensorSeries, int, float]] = [(d_imu, 1, 0.05), (d_imu, 2, 0.01)]
     if model is not None and model.fixed_support:
         for name in model.selection.imus:
@@ -818,29 +818,9 @@ class EstimateResult:
         return self.model.curvature(self.x, eta)
 
 
-def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = FilterConfig(), *, chunk_events: int = 500_000) -> EstimateResult:
-    """Calibrate on the rest phase and run the filter over all measurements."""
-    import time
-
-    calibration = calibrate_at_rest(meas, model, config)
-    events = build_events(meas, model)
-    filt = ImmsFilter(model, calibration, config, t0=meas.start)
-    outputs: list[FilterOutput] = []
-    started = time.perf_counter()
-    for lo in range(0, len(events), chunk_events):
-        outputs.append(filt.process(events.slice(lo, lo + chunk_events)))
-    outputs.append(filt.flush())
-    elapsed = time.perf_counter() - started
-    out = FilterOutput.concatenate(outputs, model.state_size)
-    diagnostics = filt.diagnostics()
-    problem = support_position_problem(meas, model)
-    if problem:
-        diagnostics["problems"] = [problem]
-    return EstimateResult(model, calibration, out.t, out.x, out.P_diag, out.var_e, diagnostics, elapsed)
-
-
-def support_position_problem(meas: Measurements, model: ImmsModel) -> str | None:
-    """Why the support's position d cannot be observed from ``meas``, or None.
+def support_position_problem(bearing: SensorSeries | None, model: ImmsModel) -> str | None:
+    """Why the support's position d cannot be observed with the ``bearing`` samples (None: none),
+    or None.
 
     d is held by the bearing sensor, by the ToFs (they measure from the reflector, Eq. 18) or, for
     a support fixed to the ground (no bearing sensor in the rig), by d ≡ 0. A rig that declares a
@@ -848,7 +828,7 @@ def support_position_problem(meas: Measurements, model: ImmsModel) -> str | None
     accelerometer's double integral for d."""
     if model.fixed_support or model.selection.tofs:
         return None
-    if meas.bearing is not None and meas.bearing.times.size and np.isfinite(meas.bearing.values[:, 0]).any():
+    if bearing is not None and bearing.times.size and np.isfinite(bearing.values[:, 0]).any():
         return None
     return ("the support's position d is not observed: rig.json has a bearing sensor but the recording has no valid "
             f"{BEARING_TOPIC} sample and no ToF is selected, so d is the D accelerometer's double integral and drifts; "

@@ -145,7 +145,7 @@ def run_filterpy(events: Events, model: ImmsModel, calibration: RestCalibration,
                 y = events.values[group, 0] - arrays.strain_offset[rows] - arrays.strain_K[rows] @ ekf.x[layout.modal]
                 U = pair[rows] * ekf.x[layout.index.b]
                 R = np.diag(arrays.strain_var[rows]) + U @ U.T
-                ekf.update(y, lambda x: Hm, lambda x: np.zeros(len(group)), R=R)
+                ekf.update(y, lambda x: Hm, lambda x: np.zeros(len(group)), R=R)  # noqa: B023  (called at once)
         elif k == EVENT_BEARING:
             for index, z, R, gate in ((layout.d, v[0], params.bearing_var, params.gate), (layout.h, 0.0, params.pseudo_h_var, np.inf),
                                       (layout.h_rate, 0.0, params.pseudo_h_rate_var, np.inf)):

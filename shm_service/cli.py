@@ -14,16 +14,20 @@ from pathlib import Path
 from typing import Sequence
 
 from ._argtypes import number, output_path
+from ._commands import (  # noqa: F401  (the commands' shared parts; reprocess, loads and import call them)
+    DEFAULT_SENSOR_COUNT,
+    CliError,
+    _analysis_settings,
+    _count_or_names,
+    _cut_note,
+    _deformations_of,
+    _model_from_args,
+    _print_json,
+    _recording_problems,
+    _sensor_counts,
+)
 
 __all__ = ["main"]
-
-
-class CliError(Exception):
-    """A user error: printed as one line, exit code 2."""
-
-
-def _print_json(data: object) -> None:
-    print(json.dumps(data, indent=2, allow_nan=False))
 
 
 def _rig_from_args(args: argparse.Namespace):
@@ -191,68 +195,16 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 # -- shm estimate ------------------------------------------------------------------------
-DEFAULT_SENSOR_COUNT = 4
-
-
-def _count_or_names(text: str | None, default: int) -> int | tuple[str, ...]:
-    """'4' → 4; 's1,s3' → ('s1', 's3')."""
-    if text is None:
-        return default
-    text = text.strip()
-    if text.lstrip("+-").isdigit():
-        return int(text)
-    names = tuple(n.strip() for n in text.split(",") if n.strip())
-    if not names:
-        raise CliError(f"sensor list {text!r} is empty")
-    return names
-
-
-def _model_from_args(rig, args: argparse.Namespace):
-    from estimator import build_model
-
-    aided = None
-    if args.aided:
-        try:
-            aided = tuple(int(a) for a in args.aided.split(","))
-        except ValueError:
-            raise CliError(f"--aided {args.aided!r} must list unit deformations, e.g. 2,3,4") from None
-        bad = [a for a in aided if not 1 <= a <= args.modes]
-        if bad:
-            raise CliError(f"--aided {args.aided}: unit deformations {bad} are outside 1..{args.modes} (Γ = --modes)")
-    counts = _sensor_counts(rig, args)
-    try:
-        return build_model(rig, peripheral=args.peripheral, modes=args.modes, aided=aided, **counts)
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
-
-
-def _sensor_counts(rig, args: argparse.Namespace) -> dict[str, int | tuple[str, ...]]:
-    """--imus/--tofs/--gauges as the estimator takes them. A count the user gave must exist on the
-    rig; the default (4 each) is capped to what the rig has, as the help says."""
-    from .estimation import sensor_count_problem
-
-    counts = {kind: _count_or_names(getattr(args, kind), DEFAULT_SENSOR_COUNT) for kind in ("imus", "tofs", "gauges")}
-    for kind, wanted in counts.items():
-        if getattr(args, kind) is not None and isinstance(wanted, int):
-            problem = sensor_count_problem(rig, kind, wanted, modes=args.modes)
-            if problem:
-                raise CliError(f"--{kind} {wanted}: {problem} (or give names)")
-    return counts
-
-
 def _cmd_estimate(args: argparse.Namespace) -> int:
-    from estimator import estimate
-
-    from .estimation import measurements_from_recording, score_against_truth, truth_from_recording, write_estimates
+    from .estimation import estimate_recording, score_against_truth, truth_from_recording, write_estimates
     from .recording import read_recording
 
     rec = read_recording(args.recording, rig=args.rig)
     model = _model_from_args(rec.rig, args)
     try:
-        meas = measurements_from_recording(rec)
+        result = estimate_recording(rec, model)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    result = estimate(meas, model)
     if args.out:
         write_estimates(args.out, rec, result)
     summary = {
@@ -264,7 +216,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         "modes": result.model.gamma,
         "rest_end_s": round(float(result.calibration.rest_end), 3),
         "diagnostics": result.diagnostics,
-        "recording_problems": rec.report.problems,
+        **_recording_problems(rec),
     }
     truth = truth_from_recording(rec)
     if truth is not None:
@@ -283,6 +235,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             r = summary["rmse"]
             print(f"RMSE after the rest phase: phi {r['phi_deg']:.4f} deg, e {1000 * r['e_m']:.3f} mm, d {1000 * r['d_m']:.3f} mm, "
                   f"deflection {1000 * r['deflection_m']:.3f} mm, curvature {r['curvature_per_m']:.2e} 1/m")
+        for problem in summary["recording_problems"]:
+            print(f"problem: {problem}")
         if args.out:
             print(f"wrote {args.out}")
     return 0
@@ -330,34 +284,6 @@ def _cmd_study(args: argparse.Namespace) -> int:
 
 
 # -- shm analyze -------------------------------------------------------------------------
-def _analysis_settings(args: argparse.Namespace):
-    """(AnalysisConfig, warm-up s) of --config (a `shm serve` TOML: its analytics, alarm hysteresis
-    and estimator warm-up), else the defaults, which are serve's."""
-    from .analysis import DEFAULT_WARMUP_S
-
-    if not args.config:
-        return None, DEFAULT_WARMUP_S
-    from .service._config import SettingsError, load_settings
-
-    try:
-        settings = load_settings(args.config)
-    except SettingsError as exc:
-        raise CliError(f"--config {args.config}: {exc}") from None
-    return settings.engine_config(), settings.estimator.warmup_s
-
-
-def _deformations_of(path: str, args: argparse.Namespace):
-    from .estimation import deformation_record
-    from .recording import read_recording
-
-    rec = read_recording(path, rig=args.rig)
-    model_args = dict(peripheral=args.peripheral, modes=args.modes, **_sensor_counts(rec.rig, args))
-    try:
-        return rec, deformation_record(rec, model_args=model_args)
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
-
-
 def _cmd_analyze(args: argparse.Namespace) -> int:
     from analytics import BaselineError
 
@@ -375,8 +301,8 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     try:
         result = analyze_deformations(rec.rig, data, config=config, baseline=baseline, warmup_s=warmup, not_before_s=args.not_before)
     except ValueError as exc:
-        raise CliError(f"{args.recording}: {exc}") from None
-    output = result.as_dict()
+        raise CliError(f"{args.recording}: {exc}{_cut_note(rec)}") from None
+    output = {**result.as_dict(), **_recording_problems(rec)}
     if data.truth_metadata and "eigenfrequencies_hz" in data.truth_metadata:
         exact = json.loads(data.truth_metadata["eigenfrequencies_hz"])
         zeta_key = next((k for k in ("modal_damping_ratios", "damping_ratios") if k in data.truth_metadata), None)
@@ -413,6 +339,8 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
             for m in bl["modes"]:
                 if not m["charted"]:
                     print(f"  mode {m['mode']} not charted: {m['reason']}")
+        for problem in output["recording_problems"]:
+            print(f"problem: {problem}")
         print(f"flags: {len(output['flags'])}")
         for flag in output["flags"]:
             print("  " + ", ".join(f"{k}={v}" for k, v in flag.items()))
@@ -513,25 +441,30 @@ def _cmd_oma(args: argparse.Namespace) -> int:
 
     from analytics import OmaConfig, OperationalModalAnalysis
 
+    from .oma_input import clean_for_identification
     from .tables import TableError, read_table, select_channels
 
     try:
-        table = read_table(args.data, fs=args.fs)
+        table = read_table(args.data, fs=args.fs, nonfinite="keep")
         names = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
         if args.channels is not None and not names:
             raise CliError(f"--channels {args.channels!r} names no channel")
-        inputs = None
+        input_names = None
         if args.inputs:
-            inputs = select_channels(table, [c.strip() for c in args.inputs.split(",") if c.strip()]).data
+            input_names = list(select_channels(table, [c.strip() for c in args.inputs.split(",") if c.strip()]).channels)
             if names is None:  # the inputs are not outputs too
-                names = [c for c in table.channels if c not in args.inputs.split(",")]
-        table = select_channels(table, names)
+                names = [c for c in table.channels if c not in input_names]
+        output_names = list(select_channels(table, names).channels)
+        clean = clean_for_identification(table, output_names, input_names, outlier_factor=args.outlier_factor,
+                                         max_abs=args.max_abs, max_fill=args.max_fill)
+        table = select_channels(table, output_names)
+        inputs = clean.inputs
         config = OmaConfig(fmin_hz=args.fmin or 0.0, fmax_hz=args.fmax)
         window = args.window
         step = args.step if args.step is not None else window
         if step is not None and window is None:
             raise CliError("--step needs --window")
-        result = OperationalModalAnalysis(config, window_s=window, step_s=step).run(table.data, table.fs_hz, inputs=inputs)
+        result = OperationalModalAnalysis(config, window_s=window, step_s=step).run(clean.outputs, table.fs_hz, inputs=inputs)
     except ValidationError as exc:
         raise CliError(_pydantic_message(exc)) from None
     except (TableError, ValueError) as exc:
@@ -562,6 +495,8 @@ def _cmd_oma(args: argparse.Namespace) -> int:
                      "rejected": [{"frequency_hz": f, "reason": why} for f, why in w.identification.rejected],
                      **io(w.identification)} for w in result.windows],
         "tracks": [t.as_dict() for t in result.tracks],
+        **clean.as_dict(table.fs_hz),
+        "recording_problems": list(table.problems),
     }
     if args.json:
         _print_json(doc)
@@ -574,6 +509,8 @@ def _cmd_oma(args: argparse.Namespace) -> int:
               f"{m.mpc:5.2f} {m.contribution:6.2f}  " + " ".join(f"{v:+.2f}" for v in m.shape))
     for f, why in rec.rejected:
         print(f"  not a mode: {f:.4f} Hz ({why})")
+    for line in [*clean.format(table.fs_hz), *(f"problem: {p}" for p in table.problems)]:
+        print(line)
     if result.windows:
         print(f"{len(result.windows)} windows:")
         for w in result.windows:
@@ -753,6 +690,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also identify windows of S seconds")
     p.add_argument("--step", type=number(low=0, low_open=True, unit="s"), default=None, metavar="S",
                    help="window step, s (default: --window)")
+    p.add_argument("--max-abs", type=number(low=0, low_open=True), default=None, metavar="X",
+                   help="reject |value| > X (the file's units) as implausible")
+    p.add_argument("--outlier-factor", type=number(low=0), default=1000.0, metavar="F",
+                   help="reject |x - median| > F x the channel's 90th percentile of |x - median| as implausible (0: off) [1000]")
+    p.add_argument("--max-fill", type=int, default=4, metavar="N",
+                   help="fill runs of at most N rejected samples by linear interpolation; longer gaps: the longest valid span [4]")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_oma)
 

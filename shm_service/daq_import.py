@@ -37,6 +37,8 @@ from pydantic import AwareDatetime, BaseModel, ConfigDict, Field, ValidationErro
 from contract import RigDescription, load_rig
 
 from .recording import PAYLOAD_FIELDS, RecordingWriter, classify_topic
+from .rejections import REASONS, Rejections
+from .service._plausibility import ValueLimits
 from .tables import Table, TableError, read_table
 
 __all__ = [
@@ -129,10 +131,15 @@ class ColumnMap(_Closed):
 
 
 class ChannelMap(_Closed):
-    """``[clocks.NAME]`` time bases and ``[columns."COLUMN"]`` entries (see the module docstring)."""
+    """``[clocks.NAME]`` time bases, ``[columns."COLUMN"]`` entries (see the module docstring) and
+    ``[limits]``, the physical limits per sensor kind in SI (``shm serve``'s ``source.limits``:
+    ``accel_m_s2``, ``gyro_rad_s``, ``distance_min_m``/``distance_max_m``, ``strain``,
+    ``bearing_m``, ``temperature_min_c``/``temperature_max_c``); a value beyond them is rejected
+    as ``implausible``."""
 
     clocks: dict[str, ClockMap] = Field(min_length=1)
     columns: dict[str, ColumnMap] = Field(min_length=1)
+    limits: ValueLimits = ValueLimits()
 
     @model_validator(mode="after")
     def _clocks_known(self) -> ChannelMap:
@@ -193,6 +200,7 @@ class _Slot:
 @dataclass
 class _TopicPlan:
     topic: str
+    kind: str
     title: str
     clock: str
     layout: list[tuple[str, int]]  # payload fields and sizes (0: a number)
@@ -232,7 +240,7 @@ def _topic_plans(channel_map: ChannelMap, rig: RigDescription, source: str) -> d
                                f"give index = 0..{size - 1} (index={column.index})")
             offset, axis = offsets[column.field] + column.index, f"{column.field}_{_AXES[column.index]}"
         clock = channel_map.clock_of(key)
-        plan = plans.setdefault(column.topic, _TopicPlan(column.topic, info.title, clock, layout, position))
+        plan = plans.setdefault(column.topic, _TopicPlan(column.topic, info.kind, info.title, clock, layout, position))
         if plan.clock != clock:
             other = plan.slots[0].key
             raise MapError(f"{where}: {column.topic} takes column {other!r} on clock {plan.clock!r} and this one on "
@@ -281,9 +289,11 @@ def _resolve_files(channel_map: ChannelMap, data: Sequence[Path], source: str) -
 # -- the report ----------------------------------------------------------------------------------
 @dataclass
 class TopicImport:
-    """One topic written: ``messages`` written, ``rejected`` samples with a NaN or infinite value
-    (the first at file row ``first_rejected_row`` of ``first_rejected_column``), the columns it
-    took, the axes written as 0.0 (IMU fields no column fills)."""
+    """One topic written: ``messages`` written, ``rejected`` samples not written (the first at
+    sample ``first_rejected_row`` of ``first_rejected_column``; one bad column costs the topic
+    that sample), ``reasons`` their count by reason, ``by_column`` the rejected values per column
+    and reason with the first positions (``shm_service.rejections``), the columns it took, the
+    axes written as 0.0 (IMU fields no column fills)."""
 
     clock: str
     columns: list[str]
@@ -292,6 +302,8 @@ class TopicImport:
     first_rejected_row: int | None = None
     first_rejected_column: str | None = None
     zero_filled: list[str] = field(default_factory=list)
+    reasons: dict[str, int] = field(default_factory=dict)
+    by_column: dict[str, Any] = field(default_factory=dict)  # rejected values per column, by reason
 
 
 @dataclass
@@ -324,14 +336,23 @@ class ImportReport:
     def rejected(self) -> int:
         return sum(t.rejected for t in self.topics.values())
 
+    def rejected_by_reason(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for t in self.topics.values():
+            for reason, n in t.reasons.items():
+                out[reason] = out.get(reason, 0) + n
+        return out
+
     def as_dict(self) -> dict[str, Any]:
         return {"out": self.out, "messages": self.messages, "rejected": self.rejected,
+                "rejected_by_reason": self.rejected_by_reason(),
                 "topics": {k: asdict(v) for k, v in self.topics.items()},
                 "clocks": {k: asdict(v) for k, v in self.clocks.items()},
                 "unused_columns": self.unused_columns, "sensors_without_data": self.sensors_without_data}
 
     def format(self) -> str:
-        lines = [f"wrote {self.out}: {self.messages} messages, {self.rejected} samples rejected (NaN or infinite)"]
+        reasons = ", ".join(f"{n} {r}" for r, n in self.rejected_by_reason().items())
+        lines = [f"wrote {self.out}: {self.messages} messages, {self.rejected} samples rejected" + (f" ({reasons})" if reasons else "")]
         for name, c in self.clocks.items():
             lines.append(f"clock {name}: {c.file} ({c.format}), {c.samples} samples at {c.rate_hz:.6g} Hz, "
                          f"log_time {c.first_log_time_ns}..{c.last_log_time_ns} ns")
@@ -342,6 +363,12 @@ class ImportReport:
             if t.zero_filled:
                 text += f"; {', '.join(t.zero_filled)} written as 0.0 (not measured)"
             lines.append(text)
+            for column, entry in t.by_column.items():
+                why = ", ".join(f"{n} {r}" + (f" ({entry['limits'][r]})" if r in entry.get("limits", {}) else "")
+                                for r, n in entry["reasons"].items())
+                first = ", ".join((f"line {p['line']}" if "line" in p else f"sample {p['sample']}") + f" ({p['reason']})"
+                                  for p in entry["first"])
+                lines.append(f"    {column}: {entry['total']} rejected ({why}); first: {first}")
         for file, columns in self.unused_columns.items():
             lines.append(f"not imported from {file}: {', '.join(columns)}")
         if self.sensors_without_data:
@@ -358,17 +385,41 @@ def _log_times(clock: ClockMap, table: Table, where: str) -> np.ndarray:
         t = table.time
         assert t is not None
         # whole ns of the first time, then the steps from it: full ns resolution over long files
-        # whatever the column's epoch
-        first = start + int(round(float(t[0]) * 1e9))
-        relative = np.round((t - t[0]) * 1e9)
-        if first < 0 or first + relative[-1] > _MAX_NS:
+        # whatever the column's epoch; rows without a valid time (rejected) get 0, never written
+        valid = np.isfinite(t)
+        t0 = float(t[valid][0])
+        first = start + int(round(t0 * 1e9))
+        relative = np.where(valid, np.round((np.where(valid, t, t0) - t0) * 1e9), 0.0)
+        if first < 0 or first + relative.max() > _MAX_NS:
             raise MapError(f"{where}: the time column {clock.column!r} gives log times outside [0, 2**63) ns "
-                           f"(first {first} ns): set start or start_ns")
-        return first + relative.astype(np.int64)
+                           f"(start {start} ns plus the column's first value {t0!r} s = {first} ns): the column's values "
+                           "are added to start; set start or start_ns so that start plus the first value is at or after 1970")
+        return np.where(valid, first + relative.astype(np.int64), 0)
     step = 1e9 / clock.rate_hz
     if start + step * (n - 1) > _MAX_NS:
         raise MapError(f"{where}: the clock's log times pass 2**63 ns")
     return start + np.round(np.arange(n) * step).astype(np.int64)
+
+
+def _limit_of(kind: str, axis: str, limits: ValueLimits) -> tuple[float, float, str]:
+    """(low, high, text) of what a sensor of ``kind`` reads on ``axis`` (SI), from ``limits``."""
+    if axis.startswith("accel"):
+        a = limits.accel_m_s2
+        return -a, a, f"|{axis}| <= {a:g} m/s² (limits.accel_m_s2)"
+    if axis.startswith("gyro"):
+        g = limits.gyro_rad_s
+        return -g, g, f"|{axis}| <= {g:g} rad/s (limits.gyro_rad_s)"
+    if kind == "tof":
+        return limits.distance_min_m, limits.distance_max_m, (f"{limits.distance_min_m:g} <= distance <= {limits.distance_max_m:g} m "
+                                                              "(limits.distance_min_m, distance_max_m)")
+    if kind == "bearing":
+        return -limits.bearing_m, limits.bearing_m, f"|displacement| <= {limits.bearing_m:g} m (limits.bearing_m)"
+    if kind == "strain":
+        return -limits.strain, limits.strain, f"|strain| <= {limits.strain:g} (limits.strain)"
+    if kind == "temperature":
+        return limits.temperature_min_c, limits.temperature_max_c, (
+            f"{limits.temperature_min_c:g} <= celsius <= {limits.temperature_max_c:g} °C (limits.temperature_min_c, temperature_max_c)")
+    raise MapError(f"{kind=} {axis=}: no limit known for this sensor kind")
 
 
 def _payloads(plan: _TopicPlan, values: np.ndarray) -> list[bytes]:
@@ -461,7 +512,8 @@ def import_recording(
         tables[name] = table
         times[name] = _log_times(clock, table, where)
 
-    # values per topic: SI = scale · value + offset; unfilled IMU fields 0.0; non-finite rows rejected
+    # values per topic: SI = scale · value + offset; unfilled IMU fields 0.0; a sample is written
+    # when every column of its topic is valid (the table's rejections, then the kind's limits)
     report_topics: dict[str, TopicImport] = {}
     streams: list[tuple[str, np.ndarray, list[bytes]]] = []
     axes_written: dict[str, list[str]] = {}
@@ -470,17 +522,34 @@ def import_recording(
         n = table.data.shape[0]
         values = np.zeros((n, plan.width))
         bad = np.zeros(n, dtype=bool)
+        why = np.zeros(n, dtype=np.int8)  # the reason of a rejected sample: its first bad column's
         first: tuple[int, str] | None = None
+        rejections = Rejections()
+        rejections.line_of = table.rejections.line_of
         for slot in sorted(plan.slots, key=lambda s: s.offset):
             raw = table.data[:, table.channels.index(slot.column)]
             with np.errstate(over="ignore", invalid="ignore"):
                 values[:, slot.offset] = slot.scale * raw + slot.bias
-            nonfinite = ~np.isfinite(values[:, slot.offset])
-            if nonfinite.any():
-                row = int(np.argmax(nonfinite))
+            column_bad = ~np.isfinite(raw)
+            scaled_nonfinite = np.isfinite(raw) & ~np.isfinite(values[:, slot.offset])
+            rejections.merge(table.rejections.only(slot.column), {slot.column: slot.key})
+            if scaled_nonfinite.any():
+                rejections.add(slot.key, "nonfinite", np.flatnonzero(scaled_nonfinite))
+            low, high, text = _limit_of(plan.kind, slot.axis, channel_map.limits)
+            with np.errstate(invalid="ignore"):
+                beyond = np.isfinite(values[:, slot.offset]) & ((values[:, slot.offset] < low) | (values[:, slot.offset] > high))
+            if beyond.any():
+                rejections.add(slot.key, "implausible", np.flatnonzero(beyond), limit=text)
+            column_bad |= scaled_nonfinite | beyond
+            codes = table.codes[:, table.channels.index(slot.column)].copy() if table.codes is not None else np.zeros(n, np.int8)
+            codes[scaled_nonfinite] = REASONS.index("nonfinite") + 1
+            codes[beyond] = REASONS.index("implausible") + 1
+            why = np.where((why == 0) & column_bad, codes, why)
+            if column_bad.any():
+                row = int(np.argmax(column_bad))
                 if first is None or row < first[0]:
                     first = (row, slot.column)
-                bad |= nonfinite
+                bad |= column_bad
         info = TopicImport(plan.clock, [s.key for s in plan.slots])
         if plan.title == "shm.Imu":
             mapped = {s.axis for s in plan.slots}
@@ -490,6 +559,10 @@ def import_recording(
         keep = ~bad
         info.messages = int(keep.sum())
         info.rejected = int(bad.sum())
+        summary = rejections.as_dict()
+        counts = np.bincount(why[bad], minlength=len(REASONS) + 1)
+        info.reasons = {REASONS[c - 1]: int(counts[c]) for c in range(1, len(REASONS) + 1) if counts[c]}
+        info.by_column = summary["channels"]
         if first is not None:
             info.first_rejected_row, info.first_rejected_column = first
         report_topics[topic] = info
@@ -521,7 +594,10 @@ def import_recording(
         "formats": json.dumps({name: t.format for name, t in tables.items()}),
         "map": map_text if map_text is not None else json.dumps(channel_map.model_dump(mode="json")),
         "rejected_nonfinite": json.dumps({t: r.rejected for t, r in report_topics.items()}),
+        "rejected": json.dumps({t: {"samples": r.rejected, "reasons": r.reasons} for t, r in report_topics.items()}),
         "zero_filled": json.dumps({t: r.zero_filled for t, r in report_topics.items() if r.zero_filled}),
+        # the readers judge the recording's values by these (the map's [limits])
+        "limits": channel_map.limits.model_dump_json(),
     }}
 
     partial = out.with_name(out.name + ".part")
@@ -555,7 +631,7 @@ def _write_merged(writer: RecordingWriter, streams: list[tuple[str, np.ndarray, 
 # -- the command -----------------------------------------------------------------------------------
 def cmd_import(args) -> int:
     """``shm import`` (the parser is in ``cli.py``, which stays light)."""
-    from .cli import CliError, _print_json
+    from ._commands import CliError, _print_json
 
     try:
         report = import_recording(args.data, args.rig, args.map, args.out)

@@ -23,6 +23,7 @@ __all__ = [
     "TruthSeries",
     "deformation_record",
     "estimate_payloads",
+    "estimate_recording",
     "measurements_from_recording",
     "score_against_truth",
     "sensor_count_problem",
@@ -64,7 +65,7 @@ def measurements_from_recording(rec: Recording) -> Measurements:
         return SensorSeries((channel.log_time_ns - start) * _NS, channel.values[:, columns])
 
     imu, tof, strain, bearing = {}, {}, {}, None
-    for topic, channel in rec.channels.items():
+    for channel in rec.channels.values():
         if channel.kind == "imu":
             imu[channel.name] = series(channel, IMU_PLANAR_COLUMNS)
         elif channel.kind == "tof":
@@ -87,6 +88,30 @@ class TruthSeries:
     e: np.ndarray
     deflection: np.ndarray
     curvature: np.ndarray
+
+
+def estimate_recording(rec: Recording, model, settings=None) -> EstimateResult:
+    """Run the streaming estimator (``estimator.StreamingEstimator``, the service's policy) over a
+    raw recording, on the samples' own UNIX ns stamps as ``shm serve`` sees them: the same b(t)
+    as a replay of the file in the service. The result's ``t`` are s from the recording's start.
+
+    Raises
+    ------
+    ValueError
+        The recording has no samples of the reference IMU D.
+    """
+    from dataclasses import replace
+
+    from estimator import estimate_stream, rig_topics
+
+    topics = rig_topics(model)
+    samples = {topic: (ch.log_time_ns, ch.values) for topic, ch in rec.channels.items() if topic in topics and len(ch)}
+    result = estimate_stream(samples, model, settings, topics=topics)
+    if not samples:
+        return result
+    first = min(int(t[0]) for t, _ in samples.values())
+    epoch = first - first % 1_000_000_000  # as the service's estimator takes it
+    return replace(result, t=result.t + (epoch - int(rec.start_ns)) * _NS)
 
 
 def truth_from_recording(rec: Recording) -> TruthSeries | None:
@@ -196,12 +221,13 @@ class DeformationRecord:
     rest_end_s: float | None = None
 
 
-def deformation_record(rec: Recording, *, model_args: dict | None = None) -> DeformationRecord:
+def deformation_record(rec: Recording, *, model_args: dict | None = None, settings=None) -> DeformationRecord:
     """b(t) of a recording: from its ``/estimate/state`` if it has one, else by running the estimator.
 
-    ``model_args`` are passed to ``estimator.build_model`` when the estimator runs (and give Γ).
+    ``model_args`` are passed to ``estimator.build_model`` when the estimator runs (and give Γ);
+    ``settings`` (``estimator.StreamingSettings``) are its calibration, chunks and restart policy.
     """
-    from estimator import assemble_beam, build_model, estimate, unit_deformations
+    from estimator import assemble_beam, build_model, unit_deformations
 
     from .recording import ESTIMATE_TOPIC
 
@@ -225,7 +251,7 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None) -> Def
             rest_end = None
     else:
         model = build_model(rec.rig, **(model_args or {}))
-        result = estimate(measurements_from_recording(rec), model)
+        result = estimate_recording(rec, model, settings)
         times, b, units = result.t, result.b, model.units
         support = result.d
         estimated_here = True

@@ -332,7 +332,7 @@ def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: flo
 
 
 def _cmd_loads(args: argparse.Namespace) -> int:
-    from .cli import CliError, _sensor_counts
+    from ._commands import CliError, _sensor_counts
     from .tables import TableError, read_table, select_channels
 
     try:

@@ -63,13 +63,13 @@ class AnalysisOptions:
 
     def settings(self):
         """(AnalysisConfig or None for the defaults, warm-up s): those ``shm analyze`` uses."""
-        from .cli import _analysis_settings
+        from ._commands import _analysis_settings
 
         return _analysis_settings(self.namespace())
 
     def deformations(self, path: str):
         """(recording, DeformationRecord) of ``path``, the estimator run as ``shm analyze`` runs it."""
-        from .cli import _deformations_of
+        from ._commands import _deformations_of
 
         return _deformations_of(path, self.namespace())
 
@@ -249,7 +249,7 @@ def learn_baseline(paths: list[str], db: str | Path, structure: str, period: tup
     from analytics import learn_baseline as engine_baseline
     from estimator import build_model, damage_signatures
 
-    from .cli import _sensor_counts
+    from ._commands import _sensor_counts
     from .recording import read_recording
     from .service._storage import Storage
 

@@ -18,11 +18,13 @@ Bad input raises :class:`TableError` with a message that names the file, column 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+
+from .rejections import REASONS, Rejections
 
 __all__ = ["Table", "TableError", "read_table", "select_channels", "TIME_NAMES", "TIME_UNITS"]
 
@@ -58,6 +60,10 @@ class Table:
     time : (N,) the time column's values in s where the file has one (checked to be a uniform
         clock), else None.
     other_channels : the file's channels that were not asked for (``read_table(channels=...)``).
+    rejections : the samples rejected per channel and reason (blank, unparsable, nonfinite,
+        truncated, time); a rejected sample is NaN in ``data`` (and in ``time`` for ``time``).
+    problems : what a recording's reader reported (a cut, gaps), for ``.mcap``.
+    codes : (N, k) int8, each value's reason of rejection (0: kept, else ``REASONS[code - 1]``).
     """
 
     data: np.ndarray
@@ -69,6 +75,9 @@ class Table:
     format: str
     time: np.ndarray | None = None
     other_channels: tuple[str, ...] = ()
+    rejections: Rejections = field(default_factory=Rejections)
+    problems: tuple[str, ...] = ()
+    codes: np.ndarray | None = None
 
     @property
     def duration_s(self) -> float | None:
@@ -92,21 +101,49 @@ def _is_time(name: str) -> bool:
 
 
 def _rate_from_time(t: np.ndarray, where: str, name: str | None = None) -> tuple[float, float]:
+    """Sample rate and first time of a time column whose rejected rows are NaN.
+
+    A step between two valid rows may span the rows rejected between them (a missing or repeated
+    stamp): ``j`` steps with ``1 <= j <=`` the rows' distance. A longer step is a jump of the clock
+    (samples missing without rows) and refused, naming the rows."""
     column = "the time column" if name is None else f"the time column {name!r}"
-    if t.size < 2:
-        raise TableError(f"{where}: {column} has {t.size} value(s); a sample rate needs two")
-    bad = np.flatnonzero(~np.isfinite(t))
-    if bad.size:
-        raise TableError(f"{where}: {column} has {bad.size} NaN or infinite value(s), the first at sample {int(bad[0])}")
-    dt = np.diff(t)
-    step = float(np.median(dt))
+    rows = np.flatnonzero(np.isfinite(t))
+    if rows.size < 2:
+        raise TableError(f"{where}: {column} has {rows.size} valid value(s); a sample rate needs two")
+    tv = t[rows]
+    dt = np.diff(tv)
+    span = np.diff(rows)
+    single = dt[span == 1]
+    step = float(np.median(single if single.size else dt / span))
     if not np.isfinite(step) or step <= 0:
         raise TableError(f"{where}: {column} does not increase (median step {step!r} s)")
-    if np.max(np.abs(dt - step)) > _CLOCK_TOLERANCE * step:
-        k = int(np.argmax(np.abs(dt - step)))
-        raise TableError(f"{where}: {column} is not a uniform clock (step {dt[k]!r} s from sample {k} to {k + 1}, "
-                         f"median {step!r} s)")
-    return 1.0 / step, float(t[0])
+    multiple = np.rint(dt / step)
+    bad = (np.abs(dt - multiple * step) > _CLOCK_TOLERANCE * step) | (multiple < 1) | (multiple > span)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise TableError(f"{where}: {column} is not a uniform clock (step {float(dt[k])!r} s from sample {int(rows[k])} to "
+                         f"{int(rows[k + 1])}, median {step!r} s)")
+    return 1.0 / step, float(tv[0])
+
+
+def _reject_time_rows(time: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """Mark rows whose time is not a number, repeated or earlier than a previous valid row's as
+    ``time`` rejections of every channel; returns the time with those rows NaN."""
+    time = np.array(time, dtype=float, copy=True)
+    bad = ~np.isfinite(time)
+    valid = np.flatnonzero(~bad)
+    if valid.size:
+        tv = time[valid]
+        previous = np.maximum.accumulate(np.concatenate([[-np.inf], tv[:-1]]))
+        bad[valid[tv <= previous]] = True
+    time[bad] = np.nan
+    codes[bad, :] = _CODE["time"]
+    return time
+
+
+#: Reason codes of a cell (0: kept; ``REASONS[code - 1]``).
+_CODE = {reason: k + 1 for k, reason in enumerate(REASONS)}
+_REASON = {v: k for k, v in _CODE.items()}
 
 
 def _select(names: list[str], wanted: Sequence[str] | None, where: str, time_name: str | None = None) -> list[int]:
@@ -125,7 +162,11 @@ def _select(names: list[str], wanted: Sequence[str] | None, where: str, time_nam
 
 
 def _finish(data: np.ndarray, names: list[str], units: list[str] | None, opts: _Options, path: Path, fmt: str,
-            time: np.ndarray | None = None, time_name: str | None = None, other_channels: Sequence[str] = ()) -> Table:
+            time: np.ndarray | None = None, time_name: str | None = None, other_channels: Sequence[str] = (),
+            codes: np.ndarray | None = None, line_of: np.ndarray | None = None) -> Table:
+    """The table of the asked-for channels, its rejections counted. ``codes`` (N, k) gives each
+    cell's reason code (0 kept, ``_CODE``) where the reader knows one (text); NaN/∞ values and
+    rows without a valid time are added here."""
     where = str(path)
     fs = opts.fs
     start = 0.0
@@ -136,23 +177,32 @@ def _finish(data: np.ndarray, names: list[str], units: list[str] | None, opts: _
         seen.add(name)
     keep = _select(names, opts.channels, where, time_name)
     others = tuple(other_channels) + tuple(n for i, n in enumerate(names) if i not in keep)
-    data, names = data[:, keep], [names[i] for i in keep]
+    data, names = np.array(data[:, keep], dtype=float), [names[i] for i in keep]
+    codes = np.zeros(data.shape, dtype=np.int8) if codes is None else np.array(codes[:, keep], dtype=np.int8)
     units = None if units is None else [units[i] for i in keep]
     if time is not None:
-        time = np.asarray(time, dtype=float) * opts.time_scale
+        time = _reject_time_rows(np.asarray(time, dtype=float) * opts.time_scale, codes)
         rate, start = _rate_from_time(time, where, time_name)
         if fs is not None and abs(rate / fs - 1) > _CLOCK_TOLERANCE:
-            raise TableError(f"{where}: the given sample rate {fs} Hz (--fs) disagrees with the time column's {rate:.6g} Hz")
+            raise TableError(f"{where}: the given sample rate {fs} Hz disagrees with the time column's {rate:.6g} Hz")
         fs = rate if fs is None else fs
     if fs is not None and (not np.isfinite(fs) or fs <= 0):
         raise TableError(f"{fs=} must be a positive finite sample rate in Hz")
-    if not opts.keep_nonfinite:
-        for j, name in enumerate(names):
-            bad = np.flatnonzero(~np.isfinite(data[:, j]))
-            if bad.size:
-                raise TableError(f"{where}: channel {name!r} has {bad.size} NaN or infinite value(s), the first at sample {int(bad[0])}")
+    codes[(codes == 0) & ~np.isfinite(data)] = _CODE["nonfinite"]
+    data[codes != 0] = np.nan
+    rejections = Rejections()
+    rejections.line_of = line_of
+    for j, name in enumerate(names):
+        for code in np.unique(codes[:, j]).tolist():
+            if code:
+                rejections.add(name, _REASON[code], np.flatnonzero(codes[:, j] == code))
+    if not opts.keep_nonfinite and rejections.total:
+        name = rejections.channels()[0]
+        first = rejections.as_dict()["channels"][name]["first"][0]
+        raise TableError(f"{where}: channel {name!r} has {rejections.of(name)} rejected value(s) (NaN, infinite, blank or "
+                         f"not a number), the first at sample {first['sample']} ({first['reason']})")
     return Table(np.ascontiguousarray(data, dtype=float), tuple(names), None if units is None else tuple(units), fs, start,
-                 path, fmt, None if time is None else np.ascontiguousarray(time), others)
+                 path, fmt, None if time is None else np.ascontiguousarray(time), others, rejections, (), codes)
 
 
 # -- text ------------------------------------------------------------------------------------
@@ -168,77 +218,144 @@ def _numeric(fields: list[str]) -> bool:
 
 
 def _delimiter(lines: list[str]) -> str | None:
+    """The separator that appears equally often in at least 90 % of the last 50 non-empty lines
+    (a last line cut short differs); ';' before ',' (decimal commas with ';' separators)."""
     sample = [ln for ln in lines[-50:] if ln.strip()]
-    for d in ("\t", ",", ";"):
-        counts = {ln.count(d) for ln in sample}
-        if len(counts) == 1 and counts.pop() > 0:
+    for d in ("\t", ";", ","):
+        counts = np.bincount([ln.count(d) for ln in sample])
+        mode = int(np.argmax(counts))
+        if mode > 0 and counts[mode] >= 0.9 * len(sample):
             return d
     return None
 
 
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
+
+
+def _field_count(lines: list[str], delim: str | None) -> int:
+    """The field count of most of the last 200 non-empty lines (the data rows')."""
+    sample = [len(_split(ln, delim)) for ln in lines[-200:] if ln.strip()]
+    counts = np.bincount(sample)
+    return int(np.argmax(counts))
+
+
+def _numeric_share(fields: list[str]) -> float:
+    return sum(1 for f in fields if f and _NUM.match(f)) / max(len(fields), 1)
+
+
+def _parse_rows(rows: list[list[str]], k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Values (N, k) and reason codes of the data rows, cell by cell where a row does not parse whole."""
+    try:
+        if all(len(r) == k for r in rows):
+            data = np.array(rows, dtype=float)
+            return data, np.zeros(data.shape, dtype=np.int8)
+    except ValueError:
+        pass
+    data = np.full((len(rows), k), np.nan)
+    codes = np.zeros((len(rows), k), dtype=np.int8)
+    for i, r in enumerate(rows):
+        if len(r) == k:
+            try:
+                data[i] = np.array(r, dtype=float)
+                continue
+            except ValueError:
+                pass
+        if len(r) > k:
+            codes[i] = _CODE["unparsable"]
+            continue
+        for j in range(k):
+            if j >= len(r):
+                codes[i, j] = _CODE["truncated"]
+                continue
+            cell = r[j]
+            if not cell:
+                codes[i, j] = _CODE["blank"]
+            elif _NUM.match(cell):
+                data[i, j] = float(cell)
+            else:
+                codes[i, j] = _CODE["unparsable"]
+    return data, codes
+
+
+def _refuse_comma_decimals(lines: list[str], where: str) -> None:
+    """A comma-separated file whose numbers use decimal commas: each data row has twice the
+    header's fields (every value split in two). Refused with that said."""
+    filled = [ln for ln in lines if ln.strip()]
+    if len(filled) < 2:
+        return
+    header = filled[0].count(",") + 1
+    counts = np.bincount([ln.count(",") + 1 for ln in filled[-50:]])
+    data = int(np.argmax(counts))
+    if header > 1 and data == 2 * header and not _numeric(_split(filled[0], ",")):
+        raise TableError(f"{where}: the numbers seem to use decimal commas in a comma-separated file (the header names "
+                         f"{header} columns, the rows hold {data} fields): separate the columns with ';' or tabs, or write "
+                         "decimal points")
+
+
 def _read_text(path: Path, opts: _Options) -> Table:
+    """A header row naming k columns (above it a preamble, below it a units row and padding), then
+    the data rows. Every row after the first data row is a sample: a blank, non-numeric or missing
+    cell (a row cut short) is rejected in its column only; a row of no numbers at all (a repeated
+    header) in every column. Decimal commas are read where the separator is not a comma."""
     where = str(path)
     text = path.read_text(errors="replace")
     lines = text.splitlines()
     if not any(ln.strip() for ln in lines):
         raise TableError(f"{where}: the file is empty")
     delim = _delimiter(lines)
-    # the data block: the trailing run of numeric rows with one field count
-    end = len(lines)
-    while end > 0 and not lines[end - 1].strip():
-        end -= 1
-    k = None
-    start = end
-    while start > 0:
-        ln = lines[start - 1]
-        if not ln.strip():
-            break
-        fields = _split(ln, delim)
-        if delim is not None and fields and fields[-1] == "" and k is not None and len(fields) == k + 1:
-            fields = fields[:-1]  # a trailing delimiter
-        if not _numeric(fields) or (k is not None and len(fields) != k):
-            break
-        k = len(fields)
-        start -= 1
-    if k is None or end - start < 2:
-        raise TableError(f"{where}: found no block of numeric rows with the same number of columns at the end of the file")
-    # the header: the first line above the data with k fields, not all numeric, every field named
-    header_at = units_at = None
-    for j in range(start):
-        fields = _split(lines[j], delim)
-        if len(fields) == k and not _numeric(fields) and any(fields):
-            header_at = j
-            break
+    _refuse_comma_decimals(lines, where)
+    decimal_comma = False
+    if delim != ",":
+        sample = [f for ln in lines[-50:] for f in _split(ln, delim)]
+        if any(_DECIMAL_COMMA.match(f) for f in sample) and not any(re.match(r"^[+-]?\d+\.\d+", f) for f in sample):
+            decimal_comma = True
+            lines = [ln.replace(",", ".") for ln in lines]
+    k = _field_count(lines, delim)
+    split = [_split(ln, delim) for ln in lines]
+    for fields in split:  # a trailing delimiter
+        if delim is not None and len(fields) == k + 1 and fields[-1] == "":
+            fields.pop()
+    # the header: the first row of k fields, every one a name (no number)
+    header_at = next((j for j, f in enumerate(split) if len(f) == k and any(f) and _numeric_share(f) == 0), None)
     if header_at is None:
-        raise TableError(f"{where}: no header row names the {k} columns (a row of {k} names above the data)")
-    names = _split(lines[header_at], delim)
+        numeric = sum(1 for f in split if f and _numeric_share(f) > 0.5)
+        if numeric and delim == "," and any(_DECIMAL_COMMA.match(c) for f in split for c in f if c):
+            raise TableError(f"{where}: the numbers seem to use decimal commas in a comma-separated file: separate the "
+                             "columns with ';' or tabs, or write decimal points")
+        raise TableError(f"{where}: no header row names the {k} columns (a row of {k} names above the data; "
+                         f"{numeric} data row(s) found)")
+    names = split[header_at]
     empty = [i for i, n in enumerate(names) if not n]
     if empty:
         raise TableError(f"{where}: the header row (line {header_at + 1}) leaves column(s) {empty} without a name")
-    if _numeric(names) or all(_NUM.match(n) for n in names if n):
+    if all(_NUM.match(n) for n in names if n):
         raise TableError(f"{where}: the header row (line {header_at + 1}) holds numbers, not channel names")
-    for j in range(header_at + 1, start):
-        fields = _split(lines[j], delim)
-        if len(fields) == k and not _numeric(fields) and all(fields):
-            units_at = j
-            break
-    rows = lines[start:end]
-    try:
-        data = np.array([_split(r, delim)[:k] for r in rows], dtype=float)
-    except ValueError as exc:
-        raise TableError(f"{where}: a data row is not numeric ({exc})") from None
+    # the first data row: mostly numbers; before it a units row (k names) and padding
+    first = next((j for j in range(header_at + 1, len(split)) if split[j] and _numeric_share(split[j]) >= 0.5
+                  and len(split[j]) <= k), None)
+    if first is None:
+        raise TableError(f"{where}: no data row below the header row (line {header_at + 1})")
+    units_at = next((j for j in range(header_at + 1, first) if len(split[j]) == k and all(split[j])), None)
+    rows_at = [j for j in range(first, len(split)) if lines[j].strip()]
+    data, codes = _parse_rows([split[j] for j in rows_at], k)
+    line_of = np.asarray(rows_at, dtype=np.int64) + 1
     fmt = "labview" if header_at > 0 and units_at is not None else "text"
-    fmt = "labview" if header_at > 0 and units_at is not None else "text"
-    units = _split(lines[units_at], delim) if units_at is not None else None
+    units = split[units_at] if units_at is not None else None
     tcols = _time_columns(names, opts, where)
-    time = data[:, tcols[0]] if tcols else None
+    time = None
+    if tcols:
+        time = data[:, tcols[0]].copy()
+        time[codes[:, tcols[0]] != 0] = np.nan
     if time is None and opts.fs is None:
         raise TableError(f"{where}: no time column ({'/'.join(('Time', 'time', 't'))}) gives the sample rate: give --fs (the sample rate in Hz)")
+    if data.shape[0] < 2:
+        raise TableError(f"{where}: {data.shape[0]} data row(s): a record needs at least two samples")
     keep = [i for i in range(k) if i not in tcols]
     if not keep:
         raise TableError(f"{where}: the file holds only a time column")
-    return _finish(data[:, keep], [names[i] for i in keep], None if units is None else [units[i] for i in keep], opts, path, fmt,
-                   time, names[tcols[0]] if tcols else None)
+    table = _finish(data[:, keep], [names[i] for i in keep], None if units is None else [units[i] for i in keep], opts, path, fmt,
+                    time, names[tcols[0]] if tcols else None, codes=codes[:, keep], line_of=line_of)
+    return replace(table, problems=("decimal commas read as decimal points",)) if decimal_comma else table
 
 
 def _time_columns(names: Sequence[str], opts: _Options, where: str) -> list[int]:
@@ -301,6 +418,10 @@ def _from_arrays(arrays: dict[str, np.ndarray], opts: _Options, path: Path, fmt:
                     raise TableError(f"{where}: {what}; the file has the vectors {sorted(ones)}", channel=name)
             ones = {name: ones[name] for name in opts.channels}
         if not ones:
+            shapes = {k: tuple(v.shape) for k, v in series.items()}
+            if shapes:
+                raise TableError(f"{where}: holds no channel vectors: its numeric arrays {shapes} are not vectors; give one "
+                                 "samples × channels array, or one vector per channel")
             raise TableError(f"{where}: holds no numeric channel arrays (found {sorted(arrays)})")
         lengths = {k: v.size for k, v in ones.items()}
         if len(set(lengths.values())) != 1:
@@ -426,7 +547,7 @@ def _read_mcap(path: Path, opts: _Options) -> Table:
     grid = t0 + np.arange(n) * (1e9 / rate)
     data = np.column_stack([np.interp(grid, c.log_time_ns.astype(float), c.values[:, j]) for _, _, c, j in chans])
     table = _finish(data, [n_ for n_, *_ in chans], [u for _, u, *_ in chans], replace(opts, fs=rate), path, "mcap")
-    return replace(table, start_s=(t0 - rec.start_ns) / 1e9)
+    return replace(table, start_s=(t0 - rec.start_ns) / 1e9, problems=tuple(rec.report.problems))
 
 
 _READERS = {
@@ -510,4 +631,5 @@ def select_channels(table: Table, channels: Sequence[str] | None) -> Table:
         else:
             raise TableError(f"{table.path}: unknown channel {name!r}; the file has {list(table.channels)}")
     return replace(table, data=table.data[:, idx], channels=tuple(table.channels[i] for i in idx),
-                   units=None if table.units is None else tuple(table.units[i] for i in idx))
+                   units=None if table.units is None else tuple(table.units[i] for i in idx),
+                   codes=None if table.codes is None else table.codes[:, idx])

@@ -30,7 +30,16 @@ from typing import Any
 import numpy as np
 import viser
 
-from contract import SENSOR_STATES, AlarmDocument, SpectrumDocument, StateLayout, StatusDocument, WindowDocument, is_loopback
+from contract import (
+    SENSOR_STATES,
+    AlarmDocument,
+    ServicePort,
+    SpectrumDocument,
+    StateLayout,
+    StatusDocument,
+    WindowDocument,
+    is_loopback,
+)
 
 from ._data import windows_from_trend_rows
 from ._feed import Snapshot, StructureFeed, _Store  # noqa: F401  (_Store: the tests' rates)
@@ -61,7 +70,8 @@ class Dashboard:
         ``modes`` label trends and spectra).
     layout : ``contract.StateLayout`` of the estimator's state vector (how ``push_estimate`` reads x).
     stations : η (m) of the curvature-change index (and of ``truth_deflection``).
-    service : a ``DashboardService`` (status, trends, alarms, acknowledge, set_paused); duck typed.
+    service : the runtime's ``contract.ServicePort`` (one structure: status, trends, alarms,
+        acknowledge, set_paused are used).
         With ``fleet=True`` a ``FleetDashboardService`` (structures_document, structure_model,
         structure_status, structure_trends, structure_alarms, structure_spectra, live,
         acknowledge, set_paused), and no rig, units, layout or stations: each structure's come
@@ -78,7 +88,7 @@ class Dashboard:
         *,
         host: str,
         port: int,
-        service: Any,
+        service: ServicePort,
         rig: Any = None,
         units: Any = None,
         layout: StateLayout | None = None,

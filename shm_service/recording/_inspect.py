@@ -42,6 +42,7 @@ def inspect_recording(path: str | Path, *, rig: RigDescription | str | Path | No
             "rejected": {
                 "malformed": report.malformed,
                 "nonfinite": report.nonfinite,
+                "implausible": report.implausible,
                 "duplicate": report.duplicate,
                 "backwards": report.backwards,
             },

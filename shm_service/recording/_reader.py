@@ -29,7 +29,6 @@ import zstandard
 from contract import (
     NOMINAL_PERIOD_NS,
     PAYLOAD_FIELDS,
-    FieldSpec,
     Kind,
     RigDescription,
     RigError,
@@ -39,6 +38,7 @@ from contract import (
     parse_rig,
 )
 
+from ..service._plausibility import ValueLimits, all_plausible, implausible_values
 from ._writer import MAGIC, RIG_ATTACHMENT
 
 __all__ = ["Channel", "ReadReport", "Recording", "RecordingError", "TopicReport", "read_recording"]
@@ -47,6 +47,10 @@ __all__ = ["Channel", "ReadReport", "Recording", "RecordingError", "TopicReport"
 SILENT_AFTER_NS: Final = 1_000_000_000
 #: A time step longer than this many nominal periods is a gap.
 GAP_FACTOR: Final = 1.5
+
+#: What a sensor of each kind can read (``shm serve``'s default ``source.limits``): beyond is implausible.
+_LIMITS: Final = ValueLimits()
+_SENSOR_KINDS: Final = frozenset({"imu", "tof", "strain", "bearing", "temperature"})
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
 _OP_ATTACHMENT, _OP_METADATA, _OP_DATA_END = 9, 12, 15
@@ -75,6 +79,7 @@ class TopicReport:
     accepted: int = 0
     malformed: int = 0
     nonfinite: int = 0
+    implausible: int = 0
     duplicate: int = 0
     backwards: int = 0
     gaps: int = 0
@@ -83,7 +88,7 @@ class TopicReport:
 
     @property
     def rejected(self) -> int:
-        return self.malformed + self.nonfinite + self.duplicate + self.backwards
+        return self.malformed + self.nonfinite + self.implausible + self.duplicate + self.backwards
 
 
 @dataclass
@@ -224,6 +229,7 @@ class _ChannelReader:
         self.report = TopicReport(topic, info.title)
         self.first_malformed: tuple[int, str] | None = None
         self.first_nonfinite: int | None = None
+        self.first_implausible: int | None = None
         self.raw_min: int | None = None
         self.raw_max: int | None = None
         self._template: np.ndarray | None = None
@@ -382,7 +388,7 @@ class _ChannelReader:
             names.extend([spec.name] if scalar else [f"{spec.name}[{i}]" for i in range(size or 0)])
         return tuple(names)
 
-    def finish(self, width: int) -> Channel:
+    def finish(self, width: int, limits: ValueLimits) -> Channel:
         """The channel of accepted samples: time checks (duplicates, backwards) and gap counts."""
         report = self.report
         if self.blocks:
@@ -392,6 +398,12 @@ class _ChannelReader:
         else:
             times = publish = np.empty(0, dtype=np.int64)
             values = np.empty((0, width))
+        if len(times) and self.info.kind in _SENSOR_KINDS and not all_plausible(self.info.kind, values, limits):
+            # a value no sensor of this kind can read (a DAQ's overflow code, a corrupted float)
+            beyond = implausible_values(self.info.kind, values, limits)
+            report.implausible = int(np.count_nonzero(beyond))
+            self.first_implausible = int(times[np.argmax(beyond)])
+            times, publish, values = times[~beyond], publish[~beyond], values[~beyond]
         if len(times):
             previous = np.empty_like(times)
             previous[0] = np.iinfo(np.int64).min
@@ -727,7 +739,7 @@ class _Reader:
                     spans.append((reader.raw_min, reader.raw_max))
                 continue
             width = sum(1 if s == 0 else (s or 0) for s in reader.sizes)
-            channel = channels[topic] = reader.finish(width)
+            channel = channels[topic] = reader.finish(width, self._limits())
             report.topics[topic] = reader.report
             if len(channel):
                 spans.append((int(channel.log_time_ns[0]), int(channel.log_time_ns[-1])))
@@ -744,10 +756,25 @@ class _Reader:
             )
         for topic, channel in channels.items():
             self._describe_topic(self.readers[topic], channel, start, end)
+        # an estimate file holds the estimator's output, not the rig's sensors: none is missing
+        estimates_only = any(r.info.kind == "estimate" for r in self.readers.values()) and not any(
+            r.info.kind not in ("estimate", "truth") for r in self.readers.values())
         for sensor in rig.sensors:
+            if estimates_only:
+                break
             if sensor.topic not in self.readers and (self.topics is None or sensor.topic in self.topics):
                 report.problems.append(f"rig.json lists {sensor.kind} {sensor.name!r} but the recording has no {sensor.topic}")
         return Recording(self.path, rig, channels, self.metadata, tuple(self.attachments), report, start, end)
+
+    def _limits(self) -> ValueLimits:
+        """The recording's own limits (``shm import`` writes its map's in the ``import`` metadata), else the defaults."""
+        text = self.metadata.get("import", {}).get("limits")
+        if text is None:
+            return _LIMITS
+        try:
+            return ValueLimits.model_validate_json(text)
+        except ValueError:
+            return _LIMITS
 
     def _describe_topic(self, reader: _ChannelReader, channel: Channel, start: int, end: int) -> None:
         r, problems, topic = reader.report, self.report.problems, channel.topic
@@ -758,6 +785,11 @@ class _Reader:
             problems.append(
                 f"{topic}: {r.nonfinite} message(s) with NaN or infinite values skipped "
                 f"(first at log_time {reader.first_nonfinite} ns)"
+            )
+        if reader.first_implausible is not None:
+            problems.append(
+                f"{topic}: {r.implausible} message(s) with values beyond what a {channel.kind} sensor reads skipped "
+                f"(first at log_time {reader.first_implausible} ns; limits: {self._limits().model_dump()})"
             )
         if r.duplicate:
             problems.append(f"{topic}: {r.duplicate} message(s) with a repeated time stamp skipped")

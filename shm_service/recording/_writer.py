@@ -91,7 +91,8 @@ class RecordingWriter:
         """Open ``path`` and write the header and the ``rig.json`` attachment.
 
         ``rig`` is a parsed description, its JSON text (written unchanged after validation) or
-        a mapping. ``metadata`` records are written at ``close()``. ``compression`` is
+        a mapping. ``metadata`` records are written here, after the attachment (a file cut off
+        later keeps them). ``compression`` is
         ``"zstd"``, ``"lz4"`` or ``"none"``; ``chunk_size`` is the uncompressed chunk size in
         bytes after which a chunk is written.
         """
@@ -142,6 +143,10 @@ class RecordingWriter:
                     media_type="application/json",
                 )
             )
+            # the metadata at the start, with the rig: a file cut off mid-write keeps what its
+            # analysis needs (an estimate file's end of the rest phase, an import's rejections)
+            for name, data in self._pending_metadata.items():
+                self.add_metadata(name, data)
         except BaseException:
             self._out.close()
             raise
@@ -265,13 +270,11 @@ class RecordingWriter:
         self._out.flush()
 
     def close(self) -> None:
-        """Write the last chunk, the constructor's metadata, the summary and the footer."""
+        """Write the last chunk, the summary and the footer."""
         if self._closed:
             return
         try:
             self._finish_chunk()
-            for name, data in self._pending_metadata.items():
-                self.add_metadata(name, data)
             self._write_record(DataEnd(data_section_crc=0))
             self._write_summary()
         finally:

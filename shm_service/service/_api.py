@@ -19,9 +19,9 @@ import math
 import re
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from datetime import datetime
-from typing import Any, Literal, Protocol
+from typing import Any, Literal
 
 from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
 from fastapi.responses import JSONResponse, PlainTextResponse, Response
@@ -35,6 +35,7 @@ from contract import (
     IngestResultDocument,
     LiveEstimatesDocument,
     RigDescription,
+    ServicePort,
     SpectrumDocument,
     StatusDocument,
     StructuresDocument,
@@ -51,21 +52,9 @@ from ._storage import StorageUnavailable
 __all__ = ["ApiService", "AuthLimiter", "HostCheck", "create_app"]
 
 
-class ApiService(Protocol):
-    """What the API needs from the service (``MonitoringService`` implements it)."""
-
-    token: str | None
-
-    def check_token(self, token: str | None) -> None: ...
-    def health(self) -> HealthDocument: ...
-    def status(self) -> StatusDocument: ...
-    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
-               limit: int = 100_000) -> list[TrendRow]: ...
-    def alarms(self, state: str | None = None) -> list[AlarmDocument]: ...
-    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument: ...
-    def request_baseline(self) -> BaselineRequestDocument: ...
-    def spectra(self) -> SpectrumDocument | None: ...
-    def ingest(self, document: Any) -> IngestResultDocument | None: ...
+#: what the API needs from the service: the runtime's port (``MonitoringService`` and the
+#: ``WorkerFleet`` implement it)
+ApiService = ServicePort
 
 
 _TREND_FIELDS = tuple(TrendRow.model_fields)
@@ -317,7 +306,7 @@ def _parse_time(name: str, value: str | None) -> float | None:
         except ValueError:
             raise HTTPException(422, f"'{name}' must be UNIX seconds or an ISO 8601 time, got {value[:40]!r}") from None
         if dt.tzinfo is None:
-            raise HTTPException(422, f"'{name}' needs a time zone (e.g. 2026-01-01T00:00:00Z)")
+            raise HTTPException(422, f"'{name}' needs a time zone (e.g. 2026-01-01T00:00:00Z)") from None
         x = dt.timestamp()
     if not math.isfinite(x) or not -1e11 < x < 1e11:
         raise HTTPException(422, f"'{name}' = {value[:40]!r} is out of range")
@@ -364,6 +353,11 @@ _INGEST_BODY: dict[str, Any] = {"requestBody": {"required": True, "content": {"a
         _ingest_message({"pattern": "^/strain/[^/]+$", "examples": ["/strain/g1"]}, "shm.Strain"),
         _ingest_message({"enum": ["/env/temperature"]}, "shm.Temperature"),
     ]}}}}}}}}
+
+
+def _cut_headers(rows: list, truncated: bool) -> dict[str, str]:
+    """``X-Count`` and ``X-Truncated`` of a CSV export (a CSV has no place for them)."""
+    return {"X-Count": str(len(rows)), "X-Truncated": "true" if truncated else "false"}
 
 
 def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: int = 64 * 1024,
@@ -436,15 +430,17 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
         lo, hi = _parse_time("from", from_), _parse_time("to", to)
         if lo is not None and hi is not None and lo > hi:
             raise HTTPException(422, f"'from' ({lo}) is after 'to' ({hi})")
-        rows = service.trends(lo, hi, mode=mode, source=source, limit=limit)
+        # one row more than asked: whether the answer is cut (issue 26: an export says what it holds)
+        rows = service.trends(lo, hi, mode=mode, source=source, limit=limit + 1)
+        rows, truncated = rows[:limit], len(rows) > limit
         if format == "csv":
             buf = io.StringIO()
             writer = csv.DictWriter(buf, fieldnames=_TREND_FIELDS, extrasaction="ignore", lineterminator="\n")
             writer.writeheader()
             writer.writerows(row.model_dump() for row in rows)
             return Response(buf.getvalue(), media_type="text/csv",
-                            headers={"Content-Disposition": 'attachment; filename="trends.csv"'})
-        return TrendsDocument(rows=rows, count=len(rows))
+                            headers={"Content-Disposition": 'attachment; filename="trends.csv"', **_cut_headers(rows, truncated)})
+        return TrendsDocument(rows=rows, count=len(rows), truncated=truncated)
 
     @app.get("/api/alarms", summary="alarms, newest first", response_model=AlarmsDocument, responses={**_AUTH_RESPONSES, **_INVALID})
     def alarms(state: Literal["active", "cleared"] | None = Query(None, description="only alarms in this state")) -> AlarmsDocument:
@@ -525,7 +521,7 @@ _UNKNOWN = {404: _error("no such structure (the message names it)"),
             409: _error("the structure failed to start (the message says why)")}
 
 
-def _fleet_routes(app: FastAPI, service: Any, authorize: Any) -> None:
+def _fleet_routes(app: FastAPI, service: ServicePort, authorize: Callable[[Request], None]) -> None:
     """The routes of a fleet (``[[structures]]``): each single-structure route per structure.
     Also served for a single structure (its id is its source id)."""
     from ._service import NotSingleStructure, StructureUnavailable
@@ -566,15 +562,17 @@ def _fleet_routes(app: FastAPI, service: Any, authorize: Any) -> None:
         lo, hi = _parse_time("from", from_), _parse_time("to", to)
         if lo is not None and hi is not None and lo > hi:
             raise HTTPException(422, f"'from' ({lo}) is after 'to' ({hi})")
-        rows = call(service.structure_trends, structure_id, lo, hi, mode=mode, limit=limit)
+        rows = call(service.structure_trends, structure_id, lo, hi, mode=mode, limit=limit + 1)
+        rows, truncated = rows[:limit], len(rows) > limit
         if format == "csv":
             buf = io.StringIO()
             writer = csv.DictWriter(buf, fieldnames=_TREND_FIELDS, extrasaction="ignore", lineterminator="\n")
             writer.writeheader()
             writer.writerows(row.model_dump() for row in rows)
             return Response(buf.getvalue(), media_type="text/csv",
-                            headers={"Content-Disposition": f'attachment; filename="trends-{structure_id}.csv"'})
-        return TrendsDocument(rows=rows, count=len(rows))
+                            headers={"Content-Disposition": f'attachment; filename="trends-{structure_id}.csv"',
+                                     **_cut_headers(rows, truncated)})
+        return TrendsDocument(rows=rows, count=len(rows), truncated=truncated)
 
     @app.get("/api/structures/{structure_id}/alarms", summary="one structure's alarms, newest first",
              response_model=AlarmsDocument, responses={**_AUTH_RESPONSES, **_INVALID, **_UNKNOWN})

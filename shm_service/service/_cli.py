@@ -96,6 +96,31 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
+    """``shm serve`` under the database's lock (``_db_lock``: one service per database; a fleet's
+    workers run under their front process's)."""
+    from ._config import SettingsError, load_settings
+    from ._db_lock import DatabaseBusy, DatabaseLock
+
+    try:
+        settings = load_settings(args.config, overrides_from_args(args))
+    except SettingsError:
+        settings = None  # _run_serve says what is wrong
+    if settings is None or args.print_config or getattr(args, "worker_of", None) is not None:
+        return _run_serve(args, environ=environ)
+    try:
+        lock = DatabaseLock.acquire(settings.db)
+    except (DatabaseBusy, OSError) as exc:
+        print(f"shm serve: error: {exc}", file=sys.stderr)
+        return 3
+    if lock.took_over:
+        print(f"shm serve: {lock.took_over} ({lock.path})", file=sys.stderr, flush=True)
+    try:
+        return _run_serve(args, environ=environ)
+    finally:
+        lock.release()
+
+
+def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
     from ._api import create_app
     from ._config import SettingsError, load_settings, render_toml
     from ._progress import ProgressLog, compile_first

@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from analytics import AnalysisConfig
 from contract import is_loopback
+from estimator import StreamingSettings
 
 from ._plausibility import ValueLimits
 
@@ -441,6 +442,10 @@ class ServiceSettings(_Closed):
             return ServiceSettings.model_validate(data)
         except ValidationError as exc:
             raise ValueError(f"structure {structure.id!r}: {_message(exc)}") from None
+
+    def streaming_settings(self) -> StreamingSettings:
+        """The streaming estimator's settings (``shm analyze --config`` of a raw file runs the same)."""
+        return StreamingSettings(calibration_s=self.estimator.calibration_s, chunk_s=self.estimator.chunk_s)
 
     def engine_config(self) -> AnalysisConfig:
         """The analytics the engine runs: ``analytics`` with ``alarms.raise_windows``/``clear_windows``

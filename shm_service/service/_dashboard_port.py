@@ -34,19 +34,17 @@ model's unit deformations, whose ``modes`` label trends and spectra (``contract.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
-import numpy as np
 
 from contract import (
     SENSOR_STATES,
     AlarmDocument,
     LiveEstimatesDocument,
-    RigDescription,
+    ServicePort,
     SpectrumDocument,
-    StateLayout,
     StatusDocument,
+    StructureModel,
     StructuresDocument,
     TrendRow,
 )
@@ -54,19 +52,6 @@ from contract import (
 __all__ = ["DashboardService", "FleetDashboardService", "SENSOR_STATES", "StructureModel", "start_dashboard"]
 
 log = logging.getLogger("shm.serve")
-
-
-@dataclass(frozen=True)
-class StructureModel:
-    """What a dashboard draws one structure of a fleet with: its rig (length, support,
-    orientation, sensors), the model's unit deformations (``estimator.UnitDeformations``), the
-    state layout its estimates are read through and the stations of the curvature index (m)."""
-
-    id: str
-    rig: RigDescription
-    units: Any
-    layout: StateLayout
-    stations: np.ndarray
 
 
 @runtime_checkable
@@ -135,14 +120,14 @@ class FleetDashboardService(DashboardService, Protocol):
         ...
 
 
-def start_dashboard(service: Any, settings: Any, structure: Any, token: str | None) -> Any:
+def start_dashboard(service: ServicePort, settings: Any, structure: Any, token: str | None) -> Any:
     """``web.Dashboard`` on ``settings.dashboard`` for the single ``structure`` (a ``Structure``)
     or, with ``structure=None``, for the fleet behind ``service``; None (logged) when it cannot
     start: the monitoring runs without it."""
     try:
         import web
 
-        Dashboard = getattr(web, "Dashboard")
+        Dashboard = web.Dashboard
     except (ImportError, AttributeError):
         log.warning("dashboard: web.Dashboard is not available; running without the dashboard")
         return None

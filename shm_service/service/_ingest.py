@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from itertools import chain
 from typing import Any, Final
@@ -30,6 +30,26 @@ __all__ = ["IngestError", "IngestResult", "IngestValidator"]
 
 _MAX_NS = 2**63 - 1
 _SENSOR_KINDS = ("imu", "tof", "strain", "bearing", "temperature")
+
+
+class _RecentStamps:
+    """The last ``size`` accepted stamps of a topic (a set for the look-up, a deque for the order)."""
+
+    def __init__(self, size: int = 100_000) -> None:
+        self.size = size
+        self.order: deque[int] = deque()
+        self.members: set[int] = set()
+
+    def add(self, stamps: Any) -> None:
+        for stamp in np.asarray(stamps, dtype=np.int64).tolist():
+            if stamp not in self.members:
+                self.members.add(stamp)
+                self.order.append(stamp)
+        while len(self.order) > self.size:
+            self.members.discard(self.order.popleft())
+
+    def __contains__(self, stamp: int) -> bool:
+        return stamp in self.members
 
 
 class IngestError(ValueError):
@@ -84,6 +104,8 @@ class IngestValidator:
         self.limits = limits or ValueLimits()
         self.max_errors = 20
         self._info: dict[str, Any] = {}
+        # the stamps accepted lately per topic: a re-sent batch is ``duplicate``, not ``backwards``
+        self.recent: dict[str, _RecentStamps] = {}
 
     def validate(self, document: Any, *, wall_ns: int | None = None) -> IngestResult:
         if not isinstance(document, dict) or "messages" not in document:
@@ -119,7 +141,8 @@ class IngestValidator:
                                           f"off the source's clock ({_REASONS[reason]})")
                 previous = last.get(topic)
                 if previous is not None and log_ns <= previous:
-                    reason = "duplicate" if log_ns == previous else "backwards"
+                    seen = log_ns == previous or (topic in self.recent and log_ns in self.recent[topic])
+                    reason = "duplicate" if seen else "backwards"
                     raise _Reject(reason, f"{topic}: log_time_ns {log_ns} is not after the previous sample's {previous}")
             except _Reject as exc:
                 result.rejected[exc.reason] += 1
@@ -162,6 +185,8 @@ class IngestValidator:
         """The batch of ``result`` was handed on: its times are the topics' and the clock's."""
         if result.last is not None:
             self.last = result.last
+        for block in result.blocks:
+            self.recent.setdefault(block.topic, _RecentStamps()).add(block.log_time_ns)
         if result.clock is not None:
             self.clock = result.clock
 

@@ -243,7 +243,7 @@ class Notifier:
             if isinstance(exc, (httpx.UnsupportedProtocol,)):
                 return DeliveryResult("permanent", f"{type(exc).__name__}: {exc}")
             return DeliveryResult("retry", f"{type(exc).__name__}: {exc}")
-        except (smtplib.SMTPResponseException,) as exc:
+        except smtplib.SMTPResponseException as exc:
             code = int(getattr(exc, "smtp_code", 0) or 0)
             return DeliveryResult("permanent" if 500 <= code < 600 else "retry", f"SMTP {code}: {exc}")
         except smtplib.SMTPRecipientsRefused as exc:

@@ -24,14 +24,11 @@ from threadpoolctl import threadpool_limits
 
 from analytics import AnalysisConfig, Baseline, EngineWindow, ModalMonitor, MonitoringEngine, WindowResult
 from contract import (
-    IMU_PLANAR_COLUMNS,
     TEMPERATURE_TOPIC,
     AlarmDocument,
     ChartDocument,
     CurvatureDocument,
-    EstimatorStatusDocument,
     FlagDocument,
-    LastEstimateDocument,
     LocationDocument,
     ModeDocument,
     PipelineStatusDocument,
@@ -41,20 +38,12 @@ from contract import (
     estimate_payloads,
 )
 from estimator import (
+    StreamingEstimator,
+    StreamingSettings,
     FilterOutput,
-    HealthConfig,
-    ImmsFilter,
     ImmsModel,
-    Measurements,
     RestCalibration,
-    SensorSeries,
-    aiding_window,
-    assess_health,
-    build_events,
-    calibrate_at_rest,
     damage_signatures,
-    physical_bounds,
-    restart_state,
 )
 
 from ..analysis import trend_rows
@@ -62,7 +51,9 @@ from ..recording import FollowBlock, encode_payloads_json
 from ._alarms import alarm_changes, clear_changes
 from ._archive import Archive
 from ._sinks import SinkGuard
-from ._plausibility import SourceClock, ValueLimits, all_plausible, implausible_values
+from ._checks import CheckSettings, SampleChecks
+from ._merge import MergeSettings, MergeStage
+from ._plausibility import SourceClock, ValueLimits
 from ._storage import AlarmChange, Storage, WindowCommit, is_transient
 
 __all__ = ["Batch", "Pipeline", "PipelineSink"]
@@ -123,50 +114,7 @@ def _one_blas_thread() -> None:
 # -- merge ------------------------------------------------------------------------------------
 
 
-class _Merger:
-    """Holds samples until every sensor has reported up to a time (or ``lateness`` passed),
-    then releases them in time order; a sample older than what was released is late (counted)."""
-
-    def __init__(self, lateness_s: float) -> None:
-        self.lateness_ns = int(lateness_s * _NS)
-        self.pending: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-        self.last: dict[str, int] = {}
-        self.released_to = -1  # everything < released_to was released
-        self.late: Counter = Counter()
-
-    def add(self, block: FollowBlock) -> None:
-        t, v = block.log_time_ns, block.values
-        if self.released_to >= 0 and len(t) and t[0] < self.released_to:
-            keep = t >= self.released_to
-            self.late[block.topic] += int(np.count_nonzero(~keep))
-            t, v = t[keep], v[keep]
-        if not len(t):
-            return
-        self.pending.setdefault(block.topic, []).append((t, v))
-        self.last[block.topic] = max(self.last.get(block.topic, -1), int(t[-1]))
-
-    def release(self, final: bool = False) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        if not self.last:
-            return {}
-        newest = max(self.last.values())
-        if final:
-            cutoff = newest + 1
-        else:
-            cutoff = max(newest - self.lateness_ns, min(self.last.values()) + 1)
-        if cutoff <= self.released_to:
-            return {}
-        out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        for topic, parts in self.pending.items():
-            if not parts:
-                continue
-            t = np.concatenate([p[0] for p in parts]) if len(parts) > 1 else parts[0][0]
-            v = np.concatenate([p[1] for p in parts]) if len(parts) > 1 else parts[0][1]
-            k = int(np.searchsorted(t, cutoff))
-            if k:
-                out[topic] = (t[:k], v[:k])
-            parts[:] = [(t[k:], v[k:])] if k < len(t) else []
-        self.released_to = cutoff
-        return out
+# the merge stage (``MergeStage``): its own module
 
 
 # -- estimator --------------------------------------------------------------------------------
@@ -186,187 +134,6 @@ def calibration_from_dict(d: dict) -> RestCalibration:
     kw["rested"] = bool(kw["rested"])
     kw["bearing_std"] = float("nan") if kw["bearing_std"] is None else float(kw["bearing_std"])
     return RestCalibration(**kw)
-
-
-class _Estimator:
-    """The IMMS filter over released samples. Times are s after ``epoch_ns``.
-
-    Restart policy: the filter restarts (a new one, from the current measurements, with the rest
-    calibration kept) when its health check finds it diverged (``estimator.assess_health`` over
-    each chunk: states beyond the rig's physical bounds, growing innovations, aiding refused by
-    the gate) and after a gap of ``gap_reset_s`` at the reference IMU D. The chunk in which it
-    diverged is not passed on (its estimates are not the structure's); ``restarted_at_s`` tells
-    the pipeline to hold the analysis back until the new filter settled. Health is "diverged"
-    until the new filter ran, "recovering" until it ran ``confirm_s`` without a sign, then "ok".
-    """
-
-    def __init__(self, model: ImmsModel, topics: dict[str, tuple[str, str]], calibration_s: float,
-                 calibration: RestCalibration | None, gap_reset_s: float = 5.0,
-                 health: HealthConfig | None = None) -> None:
-        self.model = model
-        self.topics = topics  # topic -> (kind, name)
-        self.calibration_s = calibration_s
-        self.calibration = calibration
-        self.gap_reset_s = gap_reset_s
-        self.health_config = health or HealthConfig()
-        self.bounds = physical_bounds(model.rig.beam.length, self.health_config)
-        self.epoch_ns: int | None = None
-        self.filter: ImmsFilter | None = None
-        self.buffer: list[dict[str, tuple[np.ndarray, np.ndarray]]] = []
-        self.buffer_span: tuple[int, int] | None = None
-        self.last_d_ns: int | None = None
-        self.dropped = 0  # samples dropped while the reference IMU D was silent
-        self.resets = 0
-        self.resets_by_reason: Counter = Counter()
-        self.state = "calibrating"
-        self.new_calibration = False
-        self.health = "ok"
-        self.health_reason: str | None = None
-        self.restarted_at_s: float | None = None  # data time (s after the epoch) of the latest restart
-        self._from_measurements = False  # the next filter starts from the measurements (after a divergence)
-        self._counters: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self.last_estimate: tuple[float, float, float, float] | None = None  # (UNIX s, d, φ, e)
-        self._tip = model.tip_row()
-
-    def _measurements(self, data: dict[str, tuple[np.ndarray, np.ndarray]]) -> Measurements:
-        imu, tof, strain, bearing = {}, {}, {}, None
-        epoch = self.epoch_ns
-        for topic, (t, v) in data.items():
-            kind, name = self.topics.get(topic, (None, None))
-            ts = (t - epoch) * 1e-9
-            if kind == "imu":
-                imu[name] = SensorSeries(ts, v[:, IMU_PLANAR_COLUMNS])
-            elif kind == "tof":
-                tof[name] = SensorSeries(ts, v[:, :1])
-            elif kind == "strain":
-                strain[name] = SensorSeries(ts, v[:, :1])
-            elif kind == "bearing":
-                bearing = SensorSeries(ts, v[:, :1])
-        return Measurements(imu=imu, tof=tof, strain=strain, bearing=bearing)
-
-    def feed(self, data: dict[str, tuple[np.ndarray, np.ndarray]]) -> FilterOutput | None:
-        data = {k: v for k, v in data.items() if k in self.topics and len(v[0])}
-        if not data:
-            return None
-        if self.epoch_ns is None:
-            first = min(int(v[0][0]) for v in data.values())
-            self.epoch_ns = first - first % _NS
-        if self.filter is None and self.calibration is None:
-            self.buffer.append(data)
-            lo = min(int(v[0][0]) for v in data.values())
-            hi = max(int(v[0][-1]) for v in data.values())
-            span = (lo, hi) if self.buffer_span is None else (min(lo, self.buffer_span[0]), max(hi, self.buffer_span[1]))
-            self.buffer_span = span
-            if span[1] - span[0] < self.calibration_s * _NS:
-                return None
-            merged: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-            for part in self.buffer:
-                for topic, (t, v) in part.items():
-                    if topic in merged:
-                        merged[topic] = (np.concatenate([merged[topic][0], t]), np.concatenate([merged[topic][1], v]))
-                    else:
-                        merged[topic] = (t, v)
-            self.buffer = []
-            self.buffer_span = None
-            if _D_TOPIC not in merged:
-                self.state = "waiting for /imu/D"
-                self.dropped += sum(len(v[0]) for v in merged.values())
-                return None
-            meas = self._measurements(merged)
-            self.calibration = calibrate_at_rest(meas, self.model)
-            self.new_calibration = True
-            data = merged
-        return self._run(data)
-
-    def _restart(self, reason: str, kind: str, at_s: float) -> None:
-        self.filter = None
-        self._counters = None
-        self.resets += 1
-        self.resets_by_reason[kind] += 1
-        self.restarted_at_s = at_s
-        if kind != "gap":
-            self.health, self.health_reason = "diverged", reason
-            self._from_measurements = True
-            if self.resets_by_reason[kind] <= 3 or self.resets % 100 == 0:
-                log.warning("estimator diverged at %.1f s (%s): restarting from the current measurements", at_s, reason)
-
-    def _run(self, data: dict[str, tuple[np.ndarray, np.ndarray]]) -> FilterOutput | None:
-        d = data.get(_D_TOPIC)
-        newest = max(int(v[0][-1]) for v in data.values())
-        if d is None:
-            if self.last_d_ns is None or newest - self.last_d_ns > self.gap_reset_s * _NS:
-                self.dropped += sum(len(v[0]) for v in data.values())
-                self.state = "stalled: /imu/D is silent"
-                if self.filter is not None:  # restart at the next D sample
-                    self._restart("/imu/D is silent", "gap", (newest - self.epoch_ns) / _NS)
-                return None
-        else:
-            first_d = int(d[0][0])
-            if self.filter is not None and self.last_d_ns is not None and first_d - self.last_d_ns > self.gap_reset_s * _NS:
-                self._restart(f"a gap of {(first_d - self.last_d_ns) / _NS:.1f} s at /imu/D", "gap",
-                              (first_d - self.epoch_ns) / _NS)
-            self.last_d_ns = int(d[0][-1])
-        meas = self._measurements(data)
-        if self.filter is None:
-            start = min(s.times[0] for s in meas.imu.values()) if meas.imu else min(int(v[0][0]) for v in data.values())
-            self.filter = ImmsFilter(self.model, self.calibration, t0=float(start))
-            if self._from_measurements:
-                self.filter.state.x[:] = restart_state(meas, self.model, self.calibration)
-                self._from_measurements = False
-        self.state = "running"
-        events = build_events(meas, self.model)
-        if not len(events):
-            return None
-        events = events.slice(int(np.searchsorted(events.t, self.filter.t)), len(events))
-        out = self.filter.process(events)
-        return self._judge(out)
-
-    def _judge(self, out: FilterOutput) -> FilterOutput | None:
-        """The health check of one chunk: restart on a sign of divergence, else pass it on."""
-        c = self.filter.counters
-        now = (c.accepted.copy(), c.rejected.copy(), c.nis_sum.copy())
-        window = None if self._counters is None else aiding_window(self.model.aiding_channels, self._counters, now)
-        self._counters = now
-        if not len(out.t):
-            return out
-        ix = self.model.state_layout.index
-        b = out.x[:, ix.b:ix.b + self.model.gamma]
-        phi = out.x[:, ix.phi] if ix.phi >= 0 else np.zeros(len(out.t))
-        verdict = assess_health(window, out.x[:, ix.d], phi, b @ self._tip, self.bounds, self.health_config)
-        if verdict.diverged:
-            self._restart(verdict.reason or verdict.kind or "diverged", verdict.kind or "diverged", float(out.t[-1]))
-            return None
-        if self.health == "diverged":
-            self.health = "recovering"
-        elif self.health == "recovering" and self.restarted_at_s is not None \
-                and out.t[-1] - self.restarted_at_s >= self.health_config.confirm_s:
-            self.health, self.health_reason = "ok", None
-        last = out.x[-1]
-        self.last_estimate = (self.epoch_ns / _NS + float(out.t[-1]), float(last[ix.d]),
-                              float(last[ix.phi]) if ix.phi >= 0 else 0.0, float(b[-1] @ self._tip))
-        return out
-
-    def flush(self) -> FilterOutput | None:
-        if self.filter is None:
-            return None
-        return self.filter.flush()
-
-    def health_problems(self) -> list[str]:
-        if self.health == "ok":
-            return []
-        return [f"estimator {self.health}: {self.health_reason} ({self.resets} filter restarts so far)"]
-
-    def diagnostics(self) -> EstimatorStatusDocument:
-        diag = self.filter.diagnostics() if self.filter is not None else {}
-        last = None
-        if self.last_estimate is not None:
-            t, d, phi, e = self.last_estimate
-            last = LastEstimateDocument(t_s=t, d_m=d, phi_rad=phi, e_m=e)
-        return EstimatorStatusDocument(
-            state=self.state, dropped_samples=self.dropped, filter_restarts=self.resets,
-            filter_restarts_by_reason=dict(self.resets_by_reason), health=self.health, health_reason=self.health_reason,
-            last_estimate=last,
-            rest_calibration=None if self.calibration is None else self.calibration.as_dict(), **diag)
 
 
 # -- analytics --------------------------------------------------------------------------------
@@ -399,6 +166,14 @@ class WindowOutput:
     alarm_changes: list[AlarmChange]
 
 
+def _monitor_stations(model) -> np.ndarray:
+    """Where curvature is monitored: the rig's truth stations, else (``truth_stations: []``) 8 evenly
+    spaced stations (damage_signatures' default)."""
+    if len(model.stations):
+        return np.asarray(model.stations, dtype=float)
+    return np.linspace(0.0, model.rig.beam.length, 9)[1:]
+
+
 class _Analytics:
     """The one engine (``analytics.MonitoringEngine``, the same ``shm analyze`` runs) over the
     estimator's b(t) and support displacement d(t), and what the service makes of its windows:
@@ -427,7 +202,7 @@ class _Analytics:
         m = self.model
         if self.signatures is None:
             # FE-predicted damage signatures of the rig: where along the beam a flag points.
-            self.signatures = damage_signatures(m.rig, m.stations, gamma=m.gamma)
+            self.signatures = damage_signatures(m.rig, _monitor_stations(m), gamma=m.gamma)
         if state is not None:
             try:
                 monitor = ModalMonitor.from_state_dict(state)
@@ -444,7 +219,8 @@ class _Analytics:
             except ValueError as exc:
                 log.warning("stored baseline unusable (%s); learning a new one", exc)
         try:
-            return ModalMonitor(m.units.frequencies_hz, m.units.curvature(m.stations), m.stations, fs=FS, config=self.config,
+            stations = _monitor_stations(m)
+            return ModalMonitor(m.units.frequencies_hz, m.units.curvature(stations), stations, fs=FS, config=self.config,
                                 baseline=stored, beam_length=m.rig.beam.length, signatures=self.signatures)
         except ValueError as exc:  # a baseline of another model (modes)
             if stored is None:
@@ -562,7 +338,7 @@ class Pipeline:
 
     def __init__(self, *, model: ImmsModel, source_id: str, storage: Storage, analysis: AnalysisConfig,
                  calibration_s: float, chunk_s: float, lateness_s: float, silent_after_s: float,
-                 raise_windows: int | None = None, clear_windows: int | None = None, archive: Archive | None = None, archive_raw: bool = False,
+                 archive: Archive | None = None, archive_raw: bool = False,
                  archive_estimates: bool = True, estimate_decimation: int = 1, sink: PipelineSink | None = None,
                  sink_guard: SinkGuard | None = None, sink_estimate_hz: float = 15.0, warmup_s: float = 120.0,
                  commit_retry_s: float = 5.0, max_pending_commits: int = 20_000, clock: SourceClock | None = None,
@@ -583,12 +359,10 @@ class Pipeline:
             except (KeyError, TypeError, ValueError) as exc:
                 log.warning("stored calibration unusable (%s); calibrating again", exc)
         self.resumed = bool(stored)
-        topics = {s.topic: (s.kind, s.name) for s in self.rig.sensors if s.kind in ("imu", "tof", "strain", "bearing")}
-        self.merger = _Merger(lateness_s)
-        self.estimator = _Estimator(model, topics, calibration_s, calibration)
-        # one alarm path: the engine's (the service's raise/clear counts, when set, are the engine's hysteresis)
-        overrides = {k: v for k, v in (("hold_windows", raise_windows), ("clear_windows", clear_windows)) if v is not None}
-        analysis = analysis.model_copy(update=overrides) if overrides else analysis
+        self.merger = MergeStage(MergeSettings(lateness_s=lateness_s))
+        # the one estimator policy (estimate(), shm estimate, shm analyze run the same)
+        self.estimator = StreamingEstimator(model, StreamingSettings(calibration_s=calibration_s, chunk_s=chunk_s), calibration)
+        # one alarm path: the engine's (the service's [alarms] hysteresis is in it: ServiceSettings.engine_config)
         self.analysis = analysis
         # Without a monitor to resume, the source's active baseline (shm baseline learn) arms a new one.
         baseline = None if blob.get("monitor") else storage.active_baseline(source_id)
@@ -601,17 +375,10 @@ class Pipeline:
         self.commit_retry_s = commit_retry_s
         self.max_pending_commits = max_pending_commits
         # plausibility of what the source delivers (None: judged by the source itself, as ingest is)
-        self.clock = clock
-        self.limits = limits
-        self.rejected: Counter = Counter()  # samples rejected here, by reason
-        self.stuck_after_ns = int(stuck_after_s * _NS)
-        self._stuck: dict[str, tuple[np.ndarray, int, int]] = {}  # topic -> (last row, run start ns, last ns)
-        self._refused_at: dict[str, int] = {}  # topic -> data time when a sample of it was last refused
-        self._order: dict[str, int] = {}  # topic -> newest stamp handed on
+        self.checks = SampleChecks(CheckSettings(stuck_after_s=stuck_after_s, silent_after_s=silent_after_s), clock, limits)
         self.storage_error: str | None = None  # set while windows wait for the database
         self.storage_errors = 0  # commits that failed (and wait to be retried)
         self.trend_rows_dropped = 0  # rows of waiting windows dropped beyond max_pending_commits (their alarms kept)
-        self.chunk_ns = int(chunk_s * _NS)
         self.silent_after_ns = int(silent_after_s * _NS)
         self.archive = archive
         self.archive_raw = archive_raw and archive is not None
@@ -639,7 +406,6 @@ class Pipeline:
         self.latest_x: np.ndarray | None = None
         self._temperature_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._bearing_cache: tuple[np.ndarray, np.ndarray] | None = None
-        self._pending_estimator: dict[str, list] = {}
         self._estimate_maps: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._warmup_set = False
         # The analysis stage (windows, commits) in a thread of its own (``start_analysis``), so that
@@ -709,17 +475,16 @@ class Pipeline:
         began = time.monotonic()
         if self._pending_commits and self._analysis_thread is None:
             self.flush_commits()
-        for block in self._plausible(batch.blocks):
+        for block in self.checks.judge(batch.blocks, self.newest_ns):
             if not len(block):
                 continue
-            self._watch_stuck(block)
+            self.checks.watch_stuck(block)
             self.samples[block.topic] += len(block)
             last = int(block.log_time_ns[-1])
             self.last_time_ns[block.topic] = max(self.last_time_ns.get(block.topic, last), last)
             self.newest_ns = last if self.newest_ns is None else max(self.newest_ns, last)
             self.merger.add(block)
-        for topic in batch.refused or ():
-            self._refused_at[topic] = self.newest_ns if self.newest_ns is not None else 0
+        self.checks.note_refused(tuple(batch.refused or ()), self.newest_ns)
         if batch.truth is not None:
             self._truth.append(batch.truth)
         if self.archive_raw and batch.raw:
@@ -731,113 +496,36 @@ class Pipeline:
         self.latency_s = done - batch.received
         self.busy_s += done - began
 
-    def _plausible(self, blocks: list[FollowBlock]) -> list[FollowBlock]:
-        """The samples of ``blocks`` on the source's clock and within the sensors' limits; the others
-        are counted (``rejected``) and their clock jumps noted (``SourceClock``)."""
-        if self.clock is None and self.limits is None:  # judged by the source (ingest)
-            return blocks
-        blocks = [b for b in blocks if len(b)]
-        clock = self.clock
-        mono = time.monotonic()
-        whole = False
-        if clock is not None and blocks:
-            firsts = {b.topic: int(b.log_time_ns[0]) for b in blocks}
-            whole = clock.source_jump(firsts, mono)
-            # The first batch has no clock yet: the topics that agree with most others are taken
-            # first, so one sensor stamped years off cannot become the source's time.
-            median = float(np.median(list(firsts.values())))
-            blocks = sorted(blocks, key=lambda b: abs(firsts[b.topic] - median))
-        out = []
-        for b in blocks:
-            keep = None
-            if clock is not None:
-                ok, codes = clock.judge(b.topic, b.log_time_ns, mono=mono, whole_source=whole)
-                if not ok.all():
-                    self.rejected.update(clock.count(b.topic, codes, b.log_time_ns, mono=mono))
-                    keep = ok
-            if self.limits is not None and b.kind in ("imu", "tof", "strain", "bearing", "temperature") \
-                    and not all_plausible(b.kind, b.values, self.limits):
-                taken = np.ones(len(b), dtype=bool) if keep is None else keep
-                nonfinite = ~np.all(np.isfinite(b.values.reshape(len(b), -1)), axis=1)
-                bad = implausible_values(b.kind, b.values, self.limits) & ~nonfinite
-                if nonfinite.any() or bad.any():
-                    self.rejected["nonfinite"] += int(np.count_nonzero(nonfinite & taken))
-                    self.rejected["implausible_value"] += int(np.count_nonzero(bad & taken))
-                    keep = taken & ~bad & ~nonfinite
-            if keep is not None:
-                b = FollowBlock(b.topic, b.kind, b.name, b.log_time_ns[keep], b.publish_time_ns[keep], b.values[keep])
-            # Each topic in time order whatever the source did (a sensor's clock stepping back):
-            # samples stamped at or before the topic's previous one are dropped, counted.
-            t = b.log_time_ns
-            previous = self._order.get(b.topic)
-            if len(t) and (previous is not None and t[0] <= previous or (len(t) > 1 and np.any(t[1:] <= t[:-1]))):
-                running = np.maximum.accumulate(np.concatenate([[previous if previous is not None else t[0] - 1], t[:-1]]))
-                ok = t > running
-                self.rejected["duplicate"] += int(np.count_nonzero(t == running))
-                self.rejected["backwards"] += int(np.count_nonzero(t < running))
-                b = FollowBlock(b.topic, b.kind, b.name, t[ok], b.publish_time_ns[ok], b.values[ok])
-                keep = np.zeros(1, dtype=bool)  # something was refused
-            if keep is not None and not keep.all():
-                # the sensor is degraded while its samples are being refused (data time of the refusal)
-                self._refused_at[b.topic] = self.newest_ns if self.newest_ns is not None else 0
-            if len(b):
-                self._order[b.topic] = int(b.log_time_ns[-1])
-            if clock is not None and len(b):
-                clock.take(b.topic, int(b.log_time_ns[-1]), mono)
-            out.append(b)
-        if whole:
-            clock.record(None, "source_jump", sum(len(b) for b in out), clock.offset_s(None, min(firsts.values()), mono))
-        return out
-
-    def _watch_stuck(self, block: FollowBlock) -> None:
-        """Track how long an IMU's or a strain gauge's readings have not changed at all (their
-        noise never lets a working one read the same value twice for long)."""
-        if block.kind not in ("imu", "strain"):
-            return
-        v, t = block.values, block.log_time_ns
-        previous = self._stuck.get(block.topic)
-        same = np.all(v[1:] == v[:-1], axis=1) if len(v) > 1 else np.zeros(0, dtype=bool)
-        changed = np.nonzero(~same)[0]
-        if len(changed):
-            start = int(t[changed[-1] + 1])
-        elif previous is not None and np.array_equal(previous[0], v[0]):
-            start = previous[1]
-        else:
-            start = int(t[0])
-        self._stuck[block.topic] = (v[-1].copy(), start, int(t[-1]))
-
     def stuck_sensors(self) -> list[str]:
         """Topics whose readings have stayed exactly the same for ``stuck_after_s`` and more."""
-        return sorted(topic for topic, (_, start, last) in self._stuck.items() if last - start >= self.stuck_after_ns)
+        return self.checks.stuck_sensors()
+
+    @property
+    def rejected(self) -> Counter:
+        return self.checks.rejected
+
+    @property
+    def clock(self) -> SourceClock | None:
+        return self.checks.clock
 
     def _advance(self, released: dict[str, tuple[np.ndarray, np.ndarray]], final: bool = False) -> None:
-        for topic, (t, v) in released.items():
-            self._pending_estimator.setdefault(topic, []).append((t, v))
-        if not self._pending_estimator:
+        if released:
+            self.processed_ns = max(int(t[-1]) for t, _ in released.values())
+        elif not final:
             return
-        lo = min(p[0][0][0] for p in self._pending_estimator.values() if p)
-        hi = max(p[-1][0][-1] for p in self._pending_estimator.values() if p)
-        if not final and hi - lo < self.chunk_ns:
-            return
-        data = {}
-        for topic, parts in self._pending_estimator.items():
-            if parts:
-                data[topic] = (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
-        self._pending_estimator = {}
-        self.processed_ns = hi
         restarts = self.estimator.resets
-        out = self.estimator.feed(data)
-        if self.estimator.resets != restarts and self.estimator.restarted_at_s is not None and self.estimator.epoch_ns:
-            # Windows that would hold the diverged filter's b (or the new one's first seconds) are not analysed.
-            settle = self.estimator.epoch_ns + int(round((self.estimator.restarted_at_s + self.estimator.health_config.settle_s) * _NS))
-            self._not_before(settle)
+        out = self.estimator.feed(released) if released else None
         if final:
-            tail = self.estimator.flush()
+            tail = self.estimator.finish()
             if tail is not None and out is not None:
                 out = FilterOutput.concatenate([out, tail], self.model.state_size)
             elif tail is not None:
                 out = tail
-        self._emit(out, data.get(TEMPERATURE_TOPIC))
+        if self.estimator.resets != restarts and self.estimator.restarted_at_s is not None and self.estimator.epoch_ns:
+            # Windows that would hold the diverged filter's b (or the new one's first seconds) are not analysed.
+            settle = self.estimator.epoch_ns + int(round((self.estimator.restarted_at_s + self.estimator.health_config.settle_s) * _NS))
+            self._not_before(settle)
+        self._emit(out, released.get(TEMPERATURE_TOPIC))
 
     def _emit(self, out: FilterOutput | None, temp) -> None:
         epoch = self.estimator.epoch_ns
@@ -1051,9 +739,7 @@ class Pipeline:
         newest = self.newest_ns
         diag = self.estimator.filter.diagnostics() if self.estimator.filter is not None else {}
         inactive = {d["sensor"] for d in diag.get("degraded_imus", []) if not d.get("active", True)}
-        inactive.update(self.stuck_sensors())
-        if newest is not None:
-            inactive.update(t for t, at in self._refused_at.items() if newest - at <= self.silent_after_ns)
+        inactive.update(self.checks.degraded(newest))
         for sensor in self.rig.sensors:
             topic = sensor.topic
             last = self.last_time_ns.get(topic)

@@ -178,10 +178,10 @@ class Structure:
             self.archive = Archive(settings.archive, self.rig, self.id, getattr(self.source, "metadata", None))
         raw = settings.archive.raw == "always" or (settings.archive.raw == "auto" and self.source.kind in ("sim", "ingest"))
         self.pipeline = Pipeline(
-            model=self.model, source_id=self.id, storage=storage, analysis=settings.analytics,
+            # the alarm hysteresis of [alarms] is in the engine's configuration (one place: engine_config)
+            model=self.model, source_id=self.id, storage=storage, analysis=settings.engine_config(),
             calibration_s=est.calibration_s, chunk_s=est.chunk_s, lateness_s=src.lateness_s,
-            silent_after_s=src.silent_after_s, raise_windows=settings.alarms.raise_windows,
-            clear_windows=settings.alarms.clear_windows, archive=self.archive, archive_raw=raw,
+            silent_after_s=src.silent_after_s, archive=self.archive, archive_raw=raw,
             archive_estimates=settings.archive.estimates, estimate_decimation=settings.archive.estimate_decimation,
             sink=sink, sink_guard=sink_guard, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
             commit_retry_s=settings.storage_retry_s,

@@ -135,7 +135,7 @@ def _beam_snapshot(ax, result: StudyResult, configs: list[Configuration], at: fl
     gain = max(scale, 0.25 * length / diff)
     for label, model, phi, b, color, ls in states:
         p = scale * phi_bm + gain * (phi - phi_bm)
-        delta_of = lambda x: units.shape(x) @ (scale * b_bm + gain * (b - b_bm))  # noqa: E731
+        delta_of = lambda x: units.shape(x) @ (scale * b_bm + gain * (b - b_bm))  # noqa: E731, B023
         delta = delta_of(eta)
         x = np.sin(p) * eta + np.cos(p) * delta
         y = -(np.cos(p) * eta - np.sin(p) * delta)

@@ -51,7 +51,7 @@ def record(seconds: float = 900.0, seed: int = 0, drop_at: float | None = None, 
         force = (0.3 * rng.standard_normal(n) - 0.5 * acc).tolist()
         x = v = 0.0
         out = []
-        for k, (p00, p01, p10, p11, q0, q1, fk) in enumerate(zip(a00.tolist(), a01.tolist(), a10.tolist(), a11.tolist(), b0.tolist(),
+        for _k, (p00, p01, p10, p11, q0, q1, fk) in enumerate(zip(a00.tolist(), a01.tolist(), a10.tolist(), a11.tolist(), b0.tolist(),
                                                                  a01.tolist(), force)):
             out.append(x)
             x, v = p00 * x + p01 * v + q0 * fk, p10 * x + p11 * v + q1 * fk

@@ -81,7 +81,7 @@ def test_the_configuration_reference_lists_every_key_with_its_default():
     page = docs_reference.configuration_page()
     keys = list(_keys(ServiceSettings))
     assert len(keys) > 80
-    for key, section in keys:
+    for key, _section in keys:
         assert f"`{key}`" in page or f"`[{key}]`" in page or f"`[[{key}]]`" in page, key
     # a default as the model has it: the API port, the rest calibration
     assert re.search(r"\| `port` \| int \| `8600` \|", page)

@@ -50,7 +50,7 @@ def tip_determinant(omega, *, length, EI, mu, masses=(), axial_gravity=0.0):
 
             def rhs(x, z, n_start=n_start, start=start):
                 z = z.reshape(4, 2, k)
-                N = n_start + slope * (x - start)
+                N = n_start + slope * (x - start)  # noqa: B023  (solved within the iteration)
                 return np.stack([z[1], z[2] / EI, z[3] + N * z[1], mu * w2 * z[0]]).ravel()
 
             sol = scipy.integrate.solve_ivp(rhs, (start, stop), y.ravel(), method="DOP853", rtol=1e-11, atol=1e-13)

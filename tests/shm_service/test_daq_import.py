@@ -344,7 +344,7 @@ def test_rate_clock_with_a_start_and_a_time_column_in_ms(tmp_path):
     npy = tmp_path / "daq.npy"
     np.save(npy, np.column_stack([d["ax"], d["eps"]]))
     doc = {"clocks": {"daq": {"rate_hz": 1000.0, "start_ns": 123}},
-           "columns": {"0": {"topic": "/imu/a1", "field": "accel", "index": 1}, "1": {"topic": "/strain/g1", "field": "strain"}}}
+           "columns": {"0": {"topic": "/imu/a1", "field": "accel", "index": 1}, "1": {"topic": "/strain/g1", "field": "strain", "scale": 1e-6}}}
     rig = {**RIG, "sensors": RIG["sensors"][:2]}
     rig_path, map_path = _files(tmp_path, d, doc, rig=rig)
     import_recording([npy], rig_path, map_path, tmp_path / "a.mcap")
@@ -354,7 +354,7 @@ def test_rate_clock_with_a_start_and_a_time_column_in_ms(tmp_path):
     # the same in a text file with the time in ms
     csv = _csv(tmp_path / "ms.csv", {"stamp": np.arange(50) * 2.5, "a": d["ax"], "e": d["eps"]})
     doc = {"clocks": {"daq": {"column": "stamp", "unit": "ms"}},
-           "columns": {"a": {"topic": "/imu/a1", "field": "accel", "index": 1}, "e": {"topic": "/strain/g1", "field": "strain"}}}
+           "columns": {"a": {"topic": "/imu/a1", "field": "accel", "index": 1}, "e": {"topic": "/strain/g1", "field": "strain", "scale": 1e-6}}}
     rig_path, map_path = _files(tmp_path, d, doc, rig=rig)
     report = import_recording([csv], rig_path, map_path, tmp_path / "b.mcap")
     np.testing.assert_array_equal(read_recording(tmp_path / "b.mcap").channels["/imu/a1"].log_time_ns, np.arange(50) * 2_500_000)
@@ -484,9 +484,20 @@ def test_a_non_uniform_time_column_names_the_column_and_sample(tmp_path):
     d = _data()
     d["time"][200:] += 0.5  # a jump: half a second of samples missing
     _refused(tmp_path, _simple_map(), d, match=["time column 'time' is not a uniform clock", "sample 199 to 200"], error=TableError)
+
+
+def test_a_repeated_or_backwards_stamp_costs_its_row_only(tmp_path):
     d = _data()
     d["time"][10] = d["time"][9]  # a repeated stamp
-    _refused(tmp_path, _simple_map(), d, match=["not a uniform clock", "sample 9 to 10"], error=TableError)
+    d["time"][20] = d["time"][5]  # one stamp backwards
+    csv = _csv(tmp_path / "daq.csv", d)
+    rig_path, map_path = _files(tmp_path, d, _simple_map())
+    report = import_recording([csv], rig_path, map_path, tmp_path / "o.mcap")
+    assert report.topics["/strain/g1"].rejected == 2 and report.topics["/strain/g1"].reasons == {"time": 2}
+    kept = np.delete(np.arange(400), [10, 20])
+    rec = read_recording(tmp_path / "o.mcap")
+    np.testing.assert_array_equal(rec.channels["/strain/g1"].log_time_ns, kept * 5_000_000)
+    np.testing.assert_array_equal(rec.channels["/strain/g1"].values[:, 0], 1e-6 * d["eps"][kept])
 
 
 def test_mismatched_lengths_are_refused(tmp_path):
@@ -565,8 +576,11 @@ def test_matlab_structs_groups_and_text_variables(tmp_path):
     np.testing.assert_array_equal(table.time, d["time"])
 
 
-def test_a_nan_in_the_time_column_names_the_sample(tmp_path):
+def test_a_nan_in_the_time_column_costs_its_row_only(tmp_path):
     d = _data()
     d["time"][42] = np.nan
-    _refused(tmp_path, _simple_map(), d, match=["time column 'time' has 1 NaN or infinite value(s), the first at sample 42"],
-             error=TableError)
+    csv = _csv(tmp_path / "daq.csv", d)
+    rig_path, map_path = _files(tmp_path, d, _simple_map())
+    report = import_recording([csv], rig_path, map_path, tmp_path / "o.mcap")
+    assert all(t.rejected == 1 and t.reasons == {"time": 1} and t.first_rejected_row == 42 for t in report.topics.values())
+    assert report.topics["/imu/a1"].by_column["ax"]["first"] == [{"sample": 42, "reason": "time", "line": 44}]

@@ -210,18 +210,20 @@ def test_nonfinite_duplicate_backwards_and_malformed_are_skipped(tmp_path: Path)
     with RecordingWriter(path, RIG) as writer:
         for i in range(100):
             t = T0 + i * FAST
-            payload: dict[str, Any] | bytes = {"strain": float(i)}
+            payload: dict[str, Any] | bytes = {"strain": i * 1e-4}
             if i == 10:
                 payload = json.dumps({"strain": math.nan}).encode()
             elif i == 11:
                 payload = json.dumps({"strain": -math.inf}).encode()
             elif i == 12:
                 payload = b'{"strain": 1e400}'
+            elif i == 40:
+                payload = {"strain": 1e30}  # no strain gauge reads that: implausible (issue 26)
             writer.write("/strain/g1", t, payload)
             if i == 20:
-                writer.write("/strain/g1", t, {"strain": -1.0})  # duplicate stamp
+                writer.write("/strain/g1", t, {"strain": -1e-4})  # duplicate stamp
             if i == 30:
-                writer.write("/strain/g1", t - 3 * FAST, {"strain": -2.0})  # backwards
+                writer.write("/strain/g1", t - 3 * FAST, {"strain": -2e-4})  # backwards
             imu_payload: dict[str, Any] | bytes = imu(i)
             if i == 5:
                 imu_payload = {"accel": [1.0, 2.0, 3.0]}
@@ -240,10 +242,11 @@ def test_nonfinite_duplicate_backwards_and_malformed_are_skipped(tmp_path: Path)
             writer.write("/truth/state", t, truth_payload)
     rec = read_recording(path)
     strain = rec.report.topics["/strain/g1"]
-    assert (strain.messages, strain.nonfinite, strain.duplicate, strain.backwards, strain.accepted) == (102, 3, 1, 1, 97)
+    assert (strain.messages, strain.nonfinite, strain.implausible, strain.duplicate, strain.backwards, strain.accepted) == (
+        102, 3, 1, 1, 1, 96)
     values = rec.channels["/strain/g1"].values[:, 0]
-    np.testing.assert_array_equal(values[:12], [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 14])
-    assert -1.0 not in values and -2.0 not in values and 20.0 in values and 30.0 in values
+    np.testing.assert_allclose(values[:12], np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 14]) * 1e-4, rtol=1e-12)
+    assert -1e-4 not in values and -2e-4 not in values and 1e30 not in values and 20e-4 in values and 30e-4 in values
     assert np.all(np.diff(rec.channels["/strain/g1"].log_time_ns) > 0)
     d = rec.report.topics["/imu/D"]
     assert (d.malformed, d.accepted) == (5, 95)
@@ -252,6 +255,7 @@ def test_nonfinite_duplicate_backwards_and_malformed_are_skipped(tmp_path: Path)
     text = "\n".join(rec.report.problems)
     assert "/imu/D: 5 malformed" in text and "missing key 'gyro'" in text
     assert "/strain/g1: 3 message(s) with NaN" in text
+    assert "/strain/g1: 1 message(s) with values beyond what a strain sensor reads skipped" in text
     assert rec.report.truncated is False
 
 

@@ -41,7 +41,7 @@ def test_read_endpoints_and_validation(running):
         assert c.get("/healthz").json()["status"] == "ok"
         st = c.get("/api/status").json()
         assert st["sources"][0]["kind"] == "ingest" and "degraded_sensors" in st
-        assert c.get("/api/trends").json() == {"rows": [], "count": 0}
+        assert c.get("/api/trends").json() == {"rows": [], "count": 0, "truncated": False}
         csv = c.get("/api/trends", params={"format": "csv"})
         assert csv.headers["content-type"].startswith("text/csv") and csv.text.startswith("source,window_start_s")
         assert c.get("/api/trends", params={"from": "2026-01-01T00:00:00Z", "to": "1767312000"}).status_code == 200
@@ -85,7 +85,9 @@ def test_ingest_accepts_valid_and_counts_bad(running):
     with httpx.Client(base_url=url, headers=auth) as c:
         r = c.post("/api/ingest", json=_imu_batch(t0, 50))
         assert r.status_code == 200 and r.json()["accepted"] == 50
-        r = c.post("/api/ingest", json=_imu_batch(t0, 3))  # time going backwards
+        r = c.post("/api/ingest", json=_imu_batch(t0, 3))  # a re-sent batch (issue 26): duplicate, not backwards
+        assert r.json()["accepted"] == 0 and r.json()["rejected_by_reason"] == {"duplicate": 3}
+        r = c.post("/api/ingest", json=_imu_batch(t0 - 3 * 5_000_000 + 1, 3))  # stamps never accepted, before the last
         assert r.json()["accepted"] == 0 and r.json()["rejected_by_reason"] == {"backwards": 3}
         assert c.post("/api/ingest", content=b'{"messages": [', headers={"Content-Type": "application/json"}).status_code == 400
         assert c.post("/api/ingest", json={"msgs": []}).status_code == 400
@@ -99,7 +101,7 @@ def test_ingest_accepts_valid_and_counts_bad(running):
                 break
             time.sleep(0.05)
         src = st["sources"][0]
-        assert src["messages"] == 50 and src["rejected"] == 4
+        assert src["messages"] == 50 and src["rejected"] == 7  # 3 duplicate, 3 backwards, 1 NaN
         assert "/imu/s1" in st["degraded_sensors"]  # never sent: reported, not fatal
         assert c.get("/healthz").json()["status"] == "ok"
 

@@ -149,7 +149,7 @@ def test_a_fleet_isolates_faults_and_serves_each_structure(tmp_path, short_recor
     try:
         with httpx.Client(base_url=api.url, timeout=30) as c:
             for sid in ("good", "broken-analysis", "corrupt"):
-                _wait(lambda: service.structure(sid).done, what=f"{sid} to end")
+                _wait(lambda: service.structure(sid).done, what=f"{sid} to end")  # noqa: B023
             doc = c.get("/api/structures").json()
             by_id = {s["id"]: s for s in doc["structures"]}
             assert list(by_id) == ["good", "broken-analysis", "missing", "corrupt", "live", "garbage"]

@@ -86,7 +86,6 @@ def test_reprocess_is_analyze_per_file_idempotent_and_feeds_the_service_baseline
     active = Storage(db).active_baseline("mast-01")
     assert active is not None and [m["f_ref_hz"] for m in active["modes"]] == [m["frequency_hz"] for m in learnt["modes"]]
 
-    from analytics import AnalysisConfig
     from estimator import build_model
     from shm_service.service._pipeline import _Analytics
 

@@ -1,0 +1,142 @@
+"""The ports of the runtime: what the HTTP routers and the dashboard may ask of a running service.
+
+``MonitoringService`` (one process) and ``WorkerFleet`` (a front over worker processes) both
+implement ``ServicePort``; the routers of ``/api/structures/{id}/...`` and the dashboard's
+structure views read one structure through ``StructurePort``. A structure of one is a fleet of
+one to these ports: the same pull path for both.
+
+Conventions of every method: thread-safe; an unknown structure id raises ``KeyError``; a known
+structure that cannot answer (its worker process ended, it failed to start) raises a
+``LookupError`` that is not a ``KeyError`` (``StructureUnavailable``); a wrong or missing token
+raises ``PermissionError``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from ._documents import (
+    AlarmDocument,
+    BaselineRequestDocument,
+    HealthDocument,
+    IngestResultDocument,
+    LiveEstimatesDocument,
+    SpectrumDocument,
+    StatusDocument,
+    StructuresDocument,
+    TrendRow,
+)
+from ._rig import RigDescription
+from ._state import StateLayout
+
+__all__ = ["ServicePort", "StructureModel", "StructurePort"]
+
+
+@dataclass(frozen=True)
+class StructureModel:
+    """What a dashboard draws one structure with: its rig (length, support, orientation, sensors),
+    the model's unit deformations (``estimator.UnitDeformations``), the state layout its estimates
+    are read through and the stations of the curvature index (m)."""
+
+    id: str
+    rig: RigDescription
+    units: Any
+    layout: StateLayout
+    stations: np.ndarray
+
+
+@runtime_checkable
+class StructurePort(Protocol):
+    """One structure of a service, by its id (as ``GET /api/structures`` lists them)."""
+
+    def structure_status(self, structure_id: str) -> StatusDocument:
+        """As ``GET /api/structures/{id}/status``."""
+        ...
+
+    def structure_trends(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
+                         limit: int = 100_000) -> list[TrendRow]:
+        """Its trend rows with ``from_s <= window_start_s < to_s`` (UNIX s; None: open)."""
+        ...
+
+    def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
+        """Its alarms, newest first."""
+        ...
+
+    def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
+        """Its latest window's spectra (None before its first window)."""
+        ...
+
+    def structure_rig(self, structure_id: str) -> RigDescription:
+        """Its rig description."""
+        ...
+
+    def structure_model(self, structure_id: str) -> StructureModel:
+        """How to draw it (built once per distinct rig and estimator settings)."""
+        ...
+
+    def live(self, structure_id: str, after: int = 0) -> LiveEstimatesDocument:
+        """Its estimates newer than ``after`` (a sequence number); a call keeps the structure
+        keeping them for a while: a structure nobody polls keeps none."""
+        ...
+
+    def request_baseline(self, structure_id: str | None = None) -> BaselineRequestDocument:
+        """Learn a new baseline from its next windows."""
+        ...
+
+    def ingest(self, document: Any, structure_id: str | None = None) -> IngestResultDocument | None:
+        """Take a batch of samples (``POST .../ingest``); None: the structure's queue is full."""
+        ...
+
+
+@runtime_checkable
+class ServicePort(StructurePort, Protocol):
+    """A running service: its structures (``StructurePort``), the stored rows of all of them,
+    its health and its life cycle."""
+
+    token: str | None
+    fleet: bool
+
+    def check_token(self, token: str | None) -> None:
+        """Raise ``PermissionError`` unless ``token`` is the service's."""
+        ...
+
+    def health(self) -> HealthDocument: ...
+
+    def status(self, structure_id: str | None = None) -> StatusDocument:
+        """As ``GET /api/status`` (one structure's service) or of ``structure_id``."""
+        ...
+
+    def structures_document(self) -> StructuresDocument:
+        """As ``GET /api/structures`` (state, lag, windows, active alarms of each)."""
+        ...
+
+    def trends(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+               limit: int = 100_000) -> list[TrendRow]: ...
+
+    def alarms(self, state: str | None = None) -> list[AlarmDocument]: ...
+
+    def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
+        """Acknowledge an alarm as ``by``; ``KeyError`` when it does not exist."""
+        ...
+
+    def spectra(self, structure_id: str | None = None) -> SpectrumDocument | None: ...
+
+    def fleet_metrics(self) -> str:
+        """The Prometheus exposition of ``/metrics``."""
+        ...
+
+    def set_paused(self, paused: bool) -> None:
+        """Pause or resume what only the dashboard needs (the monitoring itself never pauses)."""
+        ...
+
+    def start(self) -> None: ...
+
+    def stop(self, *, drain_s: float = 2.0) -> Any: ...
+
+    def wait(self, timeout: float | None = None) -> bool: ...
+
+    @property
+    def done(self) -> bool: ...

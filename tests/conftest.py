@@ -1,0 +1,94 @@
+"""The test tiers. ``make check`` runs the unit tier (``-m "not slow and not e2e and not browser"``:
+lint, types and these in under two minutes on two cores); ``make test`` runs every tier.
+
+- ``browser``: a real Chromium (the ``chromium`` fixture, or a module of browser tests);
+- ``e2e``: a real service end to end — ``shm serve``/``shm demo`` as processes, a service run over
+  a recording to its end, a dask cluster;
+- ``slow``: longer physics checks (whole simulated recordings through the estimator or the study).
+
+A module is put in a tier here by its path (one place to look), a test by its own marker.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+_HERE = Path(__file__).resolve().parent
+
+#: modules of end-to-end tests (relative to tests/)
+E2E = {
+    "shm_service/test_demo.py",
+    "shm_service/test_one_estimator.py",
+    "shm_service/service/test_processes.py",
+    "shm_service/service/test_serve_end_to_end.py",
+    "shm_service/service/test_follow_faults.py",
+    "shm_service/service/test_fleet.py",
+    "shm_service/service/test_fleet_live_metrics.py",
+    "shm_service/service/test_one_engine.py",
+    "shm_service/service/test_reprocess.py",
+    "shm_service/service/test_faults.py",
+    "shm_service/service/test_storage_faults.py",
+    "shm_service/service/test_open_doors.py",
+    "shm_service/service/test_source_lag.py",
+    "shm_service/service/test_sinks.py",
+    "shm_service/service/test_api.py",
+    "shm_service/service/test_api_docs.py",
+    "shm_service/service/test_notify.py",
+    "shm_service/service/test_retention.py",
+    "shm_service/service/test_group_commit.py",
+    "shm_service/service/test_inputs.py",
+    "docs/test_documentation.py",
+}
+
+#: modules of slow physics checks (those of more than ~5 s a test, measured with --durations)
+SLOW = {
+    "estimator/test_imms.py",
+    "estimator/test_clamped.py",
+    "estimator/test_fixed_support.py",
+    "estimator/test_fixed_bearing_spectra.py",
+    "estimator/test_combimode_error.py",
+    "estimator/test_combimode_shape.py",
+    "estimator/test_input_weights.py",
+    "estimator/test_calibration.py",
+    "analytics/test_dropbear.py",
+    "analytics/test_curvature_chart_monitor.py",
+    "analytics/test_location_and_chain.py",
+    "analytics/test_frf.py",
+    "analytics/test_engine.py",
+    "analytics/test_ssi.py",
+    "analytics/test_loads_monitor.py",
+    "analytics/test_modes_physical.py",
+    "estimator/test_filterpy_reference.py",
+    "estimator/test_damage_signatures.py",
+    "shm_service/test_study.py",
+    "shm_service/test_other_tool.py",
+    "shm_service/test_daq_import.py",
+    "shm_service/test_loads_cli.py",
+    "shm_service/test_modes_any_beam.py",
+    "shm_service/test_simulate_rig.py",
+    "shm_service/test_virtual_rig.py",
+    "shm_service/test_virtual_rig_sections.py",
+    "shm_service/test_cli.py",
+    "shm_service/test_oma_cli.py",
+}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "browser: needs a real Chromium (make test only)")
+    config.addinivalue_line("markers", "e2e: a real service end to end, processes or a whole run (make test only)")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        try:
+            rel = Path(str(item.path)).resolve().relative_to(_HERE).as_posix()
+        except ValueError:
+            continue
+        if "chromium" in getattr(item, "fixturenames", ()) or "browser" in Path(rel).name or rel == "web/test_dashboard_gate.py":
+            item.add_marker(pytest.mark.browser)
+        if rel in E2E:
+            item.add_marker(pytest.mark.e2e)
+        if rel in SLOW:
+            item.add_marker(pytest.mark.slow)
