@@ -184,12 +184,12 @@ def simulation_settings(settings: ServiceSettings):
     from ..virtual_rig import SimulationSettings
 
     s = settings.sim
-    common = dict(duration=s.duration_s, seed=s.seed, excitation=s.excitation,
-                  damage=tuple(s.damage) if s.damage_at_s is not None else (), damage_at=s.damage_at_s,
-                  temperature_mean=s.temperature_mean_c, temperature_swing=s.temperature_swing_k,
-                  wind_load_rms=s.wind_load_rms,
-                  wind_storm=None if s.storm_start_s is None else
-                  {"start_s": s.storm_start_s, "end_s": s.storm_end_s, "peak": s.storm_peak})
+    common = {"duration": s.duration_s, "seed": s.seed, "excitation": s.excitation,
+              "damage": tuple(s.damage) if s.damage_at_s is not None else (), "damage_at": s.damage_at_s,
+              "temperature_mean": s.temperature_mean_c, "temperature_swing": s.temperature_swing_k,
+              "wind_load_rms": s.wind_load_rms,
+              "wind_storm": None if s.storm_start_s is None else
+              {"start_s": s.storm_start_s, "end_s": s.storm_end_s, "peak": s.storm_peak}}
     rig = simulated_rig(settings)
     if rig is None:
         return SimulationSettings(layout=s.layout, support=s.support, orientation=s.orientation, length=s.length_m, **common)

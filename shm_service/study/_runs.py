@@ -53,8 +53,8 @@ def simulate_seed(task: SimulationTask) -> str:
     rig = s.rig_description() if s.rig is not None else None
     # the bearing's friction acts on a pinned support's rotation; a clamp has none
     friction = s.friction_torque if rig is None or rig.support == "pinned" else 0.0
-    common = dict(duration=s.duration, seed=task.seed, excitation=s.excitation, ideal=s.ideal, rest=s.rest,
-                  plant=PlantSettings(friction_torque=friction))
+    common = {"duration": s.duration, "seed": task.seed, "excitation": s.excitation, "ideal": s.ideal, "rest": s.rest,
+              "plant": PlantSettings(friction_torque=friction)}
     if rig is None:
         settings = SimulationSettings(layout=s.layout, **common)
     else:

@@ -9,8 +9,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from estimator import PointMass, StiffnessSegment
 
-__all__ = ["Damage", "OperationalSettings", "WindStorm", "PlantSettings", "SensorErrors", "SimulationSettings", "parse_damage",
-           "settings_for_rig"]
+__all__ = ["Damage", "OperationalSettings", "PlantSettings", "SensorErrors", "SimulationSettings", "WindStorm",
+           "parse_damage", "settings_for_rig"]
 
 
 class _Closed(BaseModel):

@@ -318,7 +318,8 @@ def test_a_storm_that_passes_scales_the_wind_load_and_nothing_else():
     with pytest.raises(ValueError, match="must come before"):
         WindStorm(start_s=10.0, end_s=10.0)
     x = np.linspace(0.5, 20.0, 40)
-    kwargs = dict(rms_n_per_m=100.0, correlation_m=5.0, band_hz=(0.1, 30.0), sample_rate_hz=200.0, start_s=0.0, ramp_s=0.0)
+    kwargs = {"rms_n_per_m": 100.0, "correlation_m": 5.0, "band_hz": (0.1, 30.0), "sample_rate_hz": 200.0,
+              "start_s": 0.0, "ramp_s": 0.0}
     calm = DistributedLoad(np.random.default_rng(3), x, **kwargs)
     storm = DistributedLoad(np.random.default_rng(3), x, storm=(100.0, 300.0, 4.0), **kwargs)
     t = np.arange(200 * 400) / 200.0
