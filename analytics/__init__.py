@@ -19,8 +19,10 @@ from ._sn_curves import DNV_RP_C203_CURVES, EN1993_DETAIL_CATEGORIES, SnCurve, d
 from ._monitor import Baseline, BaselineError, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model, support_acceleration
 from ._oma import (
     IdentifiedMode, ModalIdentification, OmaConfig, OmaResult, OmaWindow, OperationalModalAnalysis, damping_estimates, identify_modes,
-    identify_windows, prepare_band, subspace_damping, tracked_frequency,
+    identify_windows, local_visibility, prepare_band, subspace_damping, track_windows, tracked_frequency,
 )
+from ._moving import SubwindowTrack, subwindow_frequencies
+from ._tracks import ModeTrack, ModeTracker
 from ._peaks import Peak, find_peaks, interpolate_peak
 from ._spectrum import Spectrum, amplitude_spectrum, averaged_spectrum, cross_spectra
 from ._ssi import (
@@ -45,6 +47,8 @@ __all__ = [
     "classify_excitation", "cluster_poles", "damping_estimates", "frf_h1", "frf_modes", "identify_modes", "identify_windows", "modal_assurance",
     "modal_phase_collinearity", "output_correlations", "prepare_band", "segment_correlations", "ssi_cov", "ssi_poles",
     "stabilisation_diagram", "subspace_damping", "toeplitz_from_data", "tracked_frequency",
+    # issue 25: physical modes, moving modes, tracks across windows
+    "ModeTrack", "ModeTracker", "SubwindowTrack", "local_visibility", "subwindow_frequencies", "track_windows",
     # loads and fatigue (issue 21): streaming rainflow, S–N curves, Miner damage, remaining life
     "Cycles", "DNV_RP_C203_CURVES", "EN1993_DETAIL_CATEGORIES", "FatigueDetail", "HalfCyclePolicy", "HotSpotFatigue",
     "LifeEstimate", "LoadsWindow", "RainflowCounter", "RainflowResidue", "SECONDS_PER_YEAR", "SnCurve", "cycles_by_range",

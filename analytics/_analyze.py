@@ -77,6 +77,7 @@ class AnalysisResult:
     skipped: dict | None = None
     config: AnalysisConfig | None = None
     loads: tuple = ()  # per window (contract.LoadsWindowDocument, its fatigue AlarmEvents), with hot spots
+    tracks: tuple = ()  # analytics.ModeTrack: each subspace mode followed across the windows (the engine's tracker)
 
     def as_dict(self) -> dict:
         """JSON-safe {"modes": [...], "windows": [...], "flags": [...], "baseline": {...}} (None instead of NaN)."""
@@ -88,7 +89,8 @@ class AnalysisResult:
                              "slope_per_k": m.slope_per_k, "sigma_rel": m.sigma_rel, "windows": m.windows,
                              "charted": m.mode not in problems, "reason": problems.get(m.mode)} for m in self.baseline.modes]}
         out = {"modes": [m.as_dict() for m in self.modes], "windows": [w.as_dict() for w in self.windows],
-               "flags": [dict(f) for f in self.flags], "baseline": bl, "skipped_windows": dict(self.skipped or {})}
+               "flags": [dict(f) for f in self.flags], "baseline": bl, "skipped_windows": dict(self.skipped or {}),
+               "tracks": [t.as_dict() for t in self.tracks]}
         if self.loads:
             out["loads"] = [{**doc.model_dump(mode="json"), "alarm_events": [{"action": e.action, "chart": e.chart, "level": e.level,
                                                                                "at_s": e.at_s, "message": e.message()} for e in events]}
@@ -174,7 +176,9 @@ def _record_identification(B: np.ndarray, fs: float, spans: list[tuple[int, int]
     y = np.concatenate(parts)
     rows = int(min(max(math.ceil(fsb / (2 * max(cfg.fmin_hz, 1e-3))), 12), max(12, 240 // B.shape[1]), max(4, y.shape[0] // 10)))
     try:
-        return identify_modes(y, fsb, config=cfg.model_copy(update={"block_rows": rows}), band_ready=True), y
+        # the record's estimate is the mean over its trusted spans: a mode drifting with the
+        # temperature over the record is followed by the windows, not split here
+        return identify_modes(y, fsb, config=cfg.model_copy(update={"block_rows": rows, "moving_modes": False}), band_ready=True), y
     except (ValueError, np.linalg.LinAlgError):
         return None, None
 
@@ -394,7 +398,8 @@ def analyze(
             flags[(f["kind"], f["mode"], f["since_s"])] = f
     summaries = _summaries(mon, windows, B, t, d, fs, cfg, 0.0)
     return AnalysisResult(summaries, windows, tuple(flags.values()), mon.baseline,
-                          {"incomplete": engine.skipped_incomplete, "warmup": engine.skipped_warmup}, cfg, loads_windows)
+                          {"incomplete": engine.skipped_incomplete, "warmup": engine.skipped_warmup}, cfg, loads_windows,
+                          mon.tracker.tracks())
 
 
 def learn_baseline(

@@ -4,7 +4,7 @@ against the amplitude spectra), mode tracking, curvature, baseline, control char
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -20,6 +20,7 @@ from ._frf import ExcitationClass, classify_excitation
 from ._location import DamageLocation, locate_damage
 from ._oma import IdentifiedMode, ModalIdentification, OmaConfig, identify_modes
 from ._peaks import Peak, find_peaks
+from ._tracks import ModeTracker
 from ._spectrum import Spectrum, amplitude_spectrum, cross_spectra
 from ._ssi import modal_assurance
 from ._validate import as_signal, as_times, check_fs
@@ -52,7 +53,8 @@ class ModeEstimate:
     the shape; mac : MAC of the shape against the baseline's (None before one); shape : (Γ,) real
     shape over the unit deformations (unit norm). spectral_hz : the amplitude spectrum's peak
     nearest the estimate (the cross-check; None if it shows none); confirmed : the two agree
-    within the spectrum's resolution (or 3σ).
+    within the spectrum's resolution (or 3σ). track : id of the subspace mode's track across
+    windows (:class:`analytics.ModeTracker`, the same as ``shm oma``'s; None without a subspace mode).
     """
 
     mode: int
@@ -69,10 +71,11 @@ class ModeEstimate:
     spectral_hz: float | None = None
     confirmed: bool = False
     method: str | None = None
+    track: int | None = None
 
     def as_dict(self) -> dict:
         return {
-            "mode": self.mode, "unit": self.unit, "frequency_hz": _none(self.frequency_hz), "amplitude": _none(self.amplitude),
+            "mode": self.mode, "unit": self.unit, "track": self.track, "frequency_hz": _none(self.frequency_hz), "amplitude": _none(self.amplitude),
             "confidence": round(self.confidence, 4), "method": self.method,
             "frequency_std_hz": _none(self.frequency_std_hz), "damping_ratio": _none(self.damping_ratio),
             "damping_std": _none(self.damping_std), "damping_method": "ssi" if self.method == "ssi" and self.damping_ratio is not None else None,
@@ -216,6 +219,7 @@ class WindowResult:
     charts: tuple[ChartDocument, ...] = ()
     alarm_events: tuple[AlarmEvent, ...] = ()
     spectrum: Spectrum | None = field(default=None, repr=False, compare=False)
+    identified: tuple[IdentifiedMode, ...] = ()
 
     def as_dict(self) -> dict:
         exc = self.excitation
@@ -239,6 +243,7 @@ class WindowResult:
             "alarm_events": [{"action": e.action, "chart": e.chart, "level": e.level, "at_s": e.at_s, "since_s": e.since_s,
                               "score_sigma": _none(e.score_sigma), "threshold_sigma": e.threshold_sigma} for e in self.alarm_events],
             "location": None if self.location is None else self.location.as_dict(),
+            "identified_modes": [{k: (_none(v) if isinstance(v, float) else v) for k, v in m.as_dict().items()} for m in self.identified],
         }
 
 
@@ -375,6 +380,7 @@ class ModalMonitor:
         if baseline is not None and expected_hz is not None and len(baseline.modes) != len(self.f0):
             raise ValueError(f"baseline has {len(baseline.modes)} modes, expected_hz gives {len(self.f0)}")
         self._records: list[_Record] = []
+        self.tracker = ModeTracker()
         self._first_trusted: float | None = None
         self._trusted = 0  # trusted windows seen while learning
         self._cross = None  # (modes, Γ) complex EWMA of cross spectra
@@ -411,7 +417,10 @@ class ModalMonitor:
         lo = c.band_low_fraction * min(self.f0)
         hi = min(c.band_high_fraction * max(self.f0), 0.45 * self.fs)
         order = c.max_order or min(40, max(16, 4 * len(self.f0) + 4))
-        return OmaConfig(fmin_hz=lo, fmax_hz=hi, max_order=order)
+        # a mode's change within a monitoring window is followed across windows by the charts;
+        # the sub-window split (shm oma's short windows of a moving support) stays off here, where
+        # its 1 % departure test would trade a window's subspace estimate for a noisier one
+        return OmaConfig(fmin_hz=lo, fmax_hz=hi, max_order=order, moving_modes=False)
 
     def _chart(self, inflation: float) -> EwmaChart:
         warning, alarm = self.config.chart_levels("frequency")
@@ -576,8 +585,18 @@ class ModalMonitor:
                                      spec.enbw_bins, spec.enbw_hz, spec.window, spec.n_samples, spec.pad_factor, spec.averages)
         if trusted and not self.ref:
             self._init_modes(spec)
+        identified: tuple[IdentifiedMode, ...] = ()
         if trusted and self.ref:
-            est = self._estimate(self._identify(B, acc), fallback_spec)
+            ident = self._identify(B, acc)
+            est = self._estimate(ident, fallback_spec)
+            if ident is not None:
+                # every subspace mode of the window, tracked as shm oma tracks its windows' modes
+                ms = ident.modes
+                ids = self.tracker.assign(float(t[0]), [(m.frequency_hz, m.start_hz if m.moving else m.frequency_hz,
+                                                         m.end_hz if m.moving else m.frequency_hz, m.shape, m.contribution) for m in ms])
+                identified = tuple(replace(m, track=i) for m, i in zip(ms, ids))
+                est = [replace(e, track=next((m.track for m in identified if e.frequency_hz is not None and abs(m.frequency_hz - e.frequency_hz) < 1e-9), None))
+                       if e.method == "ssi" else e for e in est]
         else:
             est = [ModeEstimate(i + 1, self.units[i] + 1, None, None, 0.0) for i in range(self.n_modes)]
         t0, t1 = float(t[0]), float(t[-1] + 1 / self.fs)
@@ -658,7 +677,7 @@ class ModalMonitor:
         events = self.alarms.update(charts, t1)
         flags = self._flags(change, scores, ci_score, location)
         return WindowResult(t0, t1, kind, trusted, T, tuple(est), tuple(scores), change, ci_score, levels, tuple(flags), location,
-                            excitation, tuple(charts), tuple(events), spec)
+                            excitation, tuple(charts), tuple(events), spec, identified)
 
 
     def _shapes(self, G: np.ndarray | None) -> np.ndarray | None:
@@ -863,6 +882,7 @@ class ModalMonitor:
             "charts": [ch.state_dict() for ch in self._charts],
             "ci_chart": None if self._ci_chart is None else self._ci_chart.state_dict(),
             "alarms": self.alarms.state_dict(),
+            "tracker": self.tracker.state_dict(),
         }
 
     @classmethod
@@ -889,6 +909,8 @@ class ModalMonitor:
             m._ci_chart = None if d["ci_chart"] is None else EwmaChart.from_state_dict(d["ci_chart"])
             m.alarms = AlarmLogic(raise_windows=m.config.hold_windows, clear_windows=m.config.clear_windows,
                                   clear_sigma=m.config.clear_sigma, state=d.get("alarms"))
+            if d.get("tracker") is not None:  # states stored before tracks: new ids
+                m.tracker = ModeTracker.from_state_dict(d["tracker"])
         except KeyError as exc:
             raise ValueError(f"state dict lacks {exc}") from exc
         return m

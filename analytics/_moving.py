@@ -124,14 +124,15 @@ def subwindow_frequencies(x: object, fs: float, f0_hz: float, *, lo_hz: float, h
         raise ValueError(f"the band ({lo_hz=}, {hi_hz=}) must hold {f0_hz=}")
     n = a.size
     T = n / fs
-    L = int(round(max(cycles / f0_hz, T / 4) * fs))
+    L = round(max(cycles / f0_hz, T / 4) * fs)
     L = min(L, n)
     step = max(1, L // 2)
     starts = list(range(0, n - L + 1, step))
     if len(starts) < min_subwindows:
         return None
     hi_hz = min(hi_hz, 0.49 * fs)
-    res = max(1e-3 * f0_hz, 0.02 / (L / fs))
+    # the parabola refines between grid points: a few hundred points over the band are plenty
+    res = max(1e-3 * f0_hz, 0.02 / (L / fs), (hi_hz - lo_hz) / 400)
     grid = np.arange(lo_hz, hi_hz + res, res)
     t = np.arange(L) / fs
     w = np.hanning(L + 2)[1:-1]

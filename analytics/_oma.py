@@ -359,14 +359,23 @@ def identify_modes(
     if l > 1 and len(clusters):
         together &= modal_assurance(sh_c, sh_c) >= 0.9
     visible = local_visibility(lam_c, amp_c, T, together)
+    # a steady line and a lightly damped mode look alike until the window spans many of the
+    # mode's correlation times 1/(ζω): test only windows that long (Brincker et al. 2000)
+    harmonic = np.array([abs(c.damping_ratio) < cfg.harmonic_damping and 2 * np.pi * c.frequency_hz * cfg.harmonic_damping * T >= 20
+                         and _kurtosis_near(yb, fsb, c.frequency_hz, T) < cfg.harmonic_kurtosis for c in clusters], bool)
+    # the structure's response: the shares leave out forced lines
     with np.errstate(invalid="ignore", divide="ignore"):
-        chan_share = np.nan_to_num(amp_c / amp_c.sum(axis=0, keepdims=True)).max(axis=1) if len(clusters) else np.zeros(0)
+        resp = amp_c[~harmonic].sum(axis=0, keepdims=True) if len(clusters) else np.zeros((1, l))
+        chan_share = np.nan_to_num(amp_c / resp).max(axis=1) if len(clusters) else np.zeros(0)
     refs = None if reference_shapes is None else np.atleast_2d(np.asarray(reference_shapes, dtype=float))
     if refs is not None and refs.shape[1] != l:
         raise ValueError(f"reference_shapes has {refs.shape[1]} components, y has {l} channels")
     n_orders = len(orders)
     for c, share, vis, cshare in zip(clusters, contrib, visible, chan_share):
         f, z = c.frequency_hz, c.damping_ratio
+        if harmonic[clusters.index(c)]:
+            rejected.append((f, "harmonic: a steady line (band-passed kurtosis ≈ 1.5), not a resonance"))
+            continue
         if cshare < cfg.min_share:
             rejected.append((f, f"negligible: {100 * cshare:.1f} % of the response in any channel, {100 * cfg.min_share:g} % needed"))
             continue
@@ -380,11 +389,6 @@ def identify_modes(
             j = int(np.argmax(at_f))
             rejected.append((f, f"buried: {100 * vis:.0f} % of the modelled response at its frequency, under the mode at "
                                 f"{clusters[j].frequency_hz:.3f} Hz ({100 * contrib[j]:.0f} % of the response)"))
-            continue
-        # a steady line and a lightly damped mode look alike until the window spans many of the
-        # mode's correlation times 1/(ζω): test only windows that long (Brincker et al. 2000)
-        if abs(z) < cfg.harmonic_damping and 2 * np.pi * f * cfg.harmonic_damping * T >= 20 and _kurtosis_near(yb, fsb, f, T) < cfg.harmonic_kurtosis:
-            rejected.append((f, "harmonic: a steady line (band-passed kurtosis ≈ 1.5), not a resonance"))
             continue
         sf, sz = _pole_std(model, c, jack, orders_cache) if jack is not None else (float("nan"), float("nan"))
         spread_f = c.frequency_spread_hz if c.orders > 1 else 0.0

@@ -159,7 +159,7 @@ class ModeTracker:
                 "live": [one(t) for t in self._live], "closed": [one(t) for t in self._closed]}
 
     @classmethod
-    def from_state_dict(cls, d: dict) -> "ModeTracker":
+    def from_state_dict(cls, d: dict) -> ModeTracker:
         try:
             tr = cls(float(d["gate_rel"]), float(d["mac_min"]), int(d["max_gap"]))
             tr._next, tr._window = int(d["next"]), int(d["window"])

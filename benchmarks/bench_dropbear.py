@@ -37,7 +37,7 @@ def evaluate(path: Path, channels: str = "accel", window: float = 0.5, step: flo
     secs = time.perf_counter() - t0
     f, naive, rms, pm, ps, nmodes, moving = [], [], [], [], [], [], []
     for w in res.windows:
-        a, b = int(round(w.start_s * fs)), int(round(w.end_s * fs))
+        a, b = round(w.start_s * fs), round(w.end_s * fs)
         ms = [m for m in w.modes if 15 <= m.frequency_hz <= 80]
         f.append(min((m.frequency_hz for m in ms), default=np.nan))
         moving.append(any(getattr(m, "moving", False) for m in ms))

@@ -5,7 +5,12 @@ A structure here is one hour at 200 Hz of a narrow-band strain signal at each of
 signal of a lightly damped beam's first modes plus noise), counted in 10 s windows the way the
 engine counts (HotSpotFatigue: streaming count, window DEL, Miner damage on an EN 1993-1-9 curve).
 
-Run: PYTHONPATH=. .venv/bin/python benchmarks/bench_loads.py [--quick]
+With ``--accuracy RAW EST`` it measures the virtual sensor instead: RAW a virtual-rig recording with
+its truth (``shm simulate --ideal --duration 300``), EST its estimate (``shm estimate RAW --out EST``);
+per truth station the strain RMS error and the DEL errors (m = 3, 5) against the truth's curvature
+(ε_true = −c κ_true), and whether the true DEL lies in the band ``shm loads`` gives.
+
+Run: PYTHONPATH=. .venv/bin/python benchmarks/bench_loads.py [--quick] [--accuracy RAW EST]
 """
 
 from __future__ import annotations
@@ -31,8 +36,46 @@ def _signal(seconds: float, seed: int) -> np.ndarray:
     return x + 2e6 * rng.normal(size=n)
 
 
+def accuracy(raw_path: str, est_path: str) -> None:
+    """Virtual strain and DELs at the truth stations against the truth (see the module docstring)."""
+    from analytics import signal_loads, virtual_strain
+    from shm_service.estimation import deformation_record, truth_from_recording
+    from shm_service.loads import loads_of_recording
+    from shm_service.recording import read_recording
+
+    raw, est = read_recording(raw_path), read_recording(est_path)
+    record = deformation_record(est)
+    stations = tuple(raw.rig.truth_stations)
+    doc = loads_of_recording(raw, record=record, model_args={}, stations=stations, curve=None, exponents=(3.0, 5.0), n_eq=None,
+                             half_cycles="half", start_s=None)
+    truth = truth_from_recording(raw)
+    keep = record.times >= (record.rest_end_s or 0.0)
+    idx = np.searchsorted(truth.t, record.times[keep])
+    c = raw.rig.beam.fibre_distance(np.asarray(stations))
+    true = -truth.curvature[idx] * c
+    virtual = virtual_strain(record.b[keep], record.units.curvature(np.asarray(stations)), c)
+    print(f"accuracy of the virtual strain: {est_path} against the truth of {raw_path}, {doc['duration_s']:.1f} s from {doc['start_s']:.1f} s")
+    print(f"  band: {doc['band_method']}")
+    print(f"  {'η [m]':>6} {'RMS err %':>10} {'DEL3 err %':>11} {'DEL5 err %':>11}  true DEL in band (m=3, 5)")
+    inside = [0, 0]
+    for j, station in enumerate(doc["stations"]):
+        ref = signal_loads(true[:, j], n_eq=doc["duration_s"]).dels
+        rms = np.sqrt(np.mean((virtual[:, j] - true[:, j]) ** 2) / np.mean(true[:, j] ** 2))
+        errs, ok = [], []
+        for k, (entry, (_m, _n, dt)) in enumerate(zip(station["del"], ref)):
+            errs.append(100 * (entry["strain_range"] / dt - 1))
+            ok.append(entry["band"] is not None and entry["band"][0] <= dt <= entry["band"][1])
+            inside[k] += ok[-1]
+        print(f"  {station['position_m']:6.2f} {100 * rms:10.2f} {errs[0]:11.2f} {errs[1]:11.2f}  {ok}")
+    print(f"  true DEL inside the band at {inside[0]} (m=3) and {inside[1]} (m=5) of {len(stations)} stations")
+
+
 def main(argv: list[str] | None = None) -> None:
     args = list(sys.argv[1:] if argv is None else argv)
+    if "--accuracy" in args:
+        i = args.index("--accuracy")
+        accuracy(args[i + 1], args[i + 2])
+        return
     seconds = 600.0 if "--quick" in args else 3600.0
     window = int(10 * FS)
     signals = [_signal(seconds, seed) for seed in range(HOT_SPOTS)]

@@ -222,6 +222,7 @@ class ModeDocument(_Document):
     mac: Num = Field(None, description="MAC of the shape against the baseline's, 0..1 (None before a baseline)")
     method: Literal["ssi", "spectrum"] | None = Field(
         None, description="ssi: the subspace identification (cross-checked against the spectrum); spectrum: the spectral peak alone")
+    track: int | None = Field(None, ge=0, description="id of the subspace mode's track across windows (analytics.ModeTracker; None without one)")
 
 
 class ChartDocument(_Document):

@@ -83,14 +83,27 @@ def _detail(curve: Any, scf: float = 1.0, gamma_ff: float = 1.0, gamma_mf: float
         raise LoadsError(str(exc)) from None
 
 
-def _signal_doc(loads, *, to_stress: float, band=None) -> dict[str, Any]:
-    """The per-station / per-channel JSON of the issue: strain in m/m, stress in Pa."""
+def _life(damage: float | None, duration_s: float, design_life_years: float | None) -> dict[str, Any]:
+    """The life the counted span's load would give if it went on: duration/D, or no damage below the cut-off."""
+    from analytics import SECONDS_PER_YEAR
+
+    if damage is None:
+        return {"life_at_this_load_years": None, "life_verdict": None}
+    if damage == 0.0:
+        return {"life_at_this_load_years": None, "life_verdict": "no_damage_below_cutoff"}
+    years = duration_s / damage / SECONDS_PER_YEAR
+    return {"life_at_this_load_years": years, "life_verdict": "finite",
+            "exhausts_design_life_early": None if design_life_years is None else bool(years < design_life_years)}
+
+
+def _signal_doc(loads, *, to_stress: float | None, band=None) -> dict[str, Any]:
+    """The per-station / per-channel JSON of the issue: strain in m/m, stress in Pa (None without E)."""
     pairs, width = loads.cycles_by_range()
     dels = []
     for m, n_eq, value in loads.dels:
-        entry = {"m": m, "n_eq": n_eq, "strain_range": value, "stress_range_pa": value * to_stress,
+        entry = {"m": m, "n_eq": n_eq, "strain_range": value, "stress_range_pa": None if to_stress is None else value * to_stress,
                  "band": None if band is None else [value * band.low, value * band.high]}
-        if band is not None:
+        if band is not None and to_stress is not None:
             entry["stress_band_pa"] = [value * band.low * to_stress, value * band.high * to_stress]
         dels.append(entry)
     return {"strain_rms": loads.rms, "strain_range_max": loads.range_max, "del": dels, "damage": loads.damage,
@@ -110,9 +123,9 @@ def _time_span(times: np.ndarray, start: float) -> tuple[np.ndarray, float, floa
 
 
 def gauge_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, exponents: tuple[float, ...], n_eq: float,
-               in_sample: bool, half_cycles: str = "half"):
+               in_sample: tuple[str, ...], half_cycles: str = "half"):
     """The band of the virtual stations from the gauges' (name, position, virtual, measured) strains;
-    returns (DelBand or None, per-gauge discrepancies)."""
+    ``in_sample`` names the gauges that aided the estimate. Returns (DelBand or None, per-gauge discrepancies)."""
     import numpy as np
 
     from analytics import DelBand, signal_loads
@@ -125,19 +138,21 @@ def gauge_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, expon
         g = signal_loads(measured, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain gauge {name}")
         rel = {m: (dv / dg - 1.0) if dg > 0 else 0.0 for (m, _, dv), (_, _, dg) in zip(v.dels, g.dels)}
         rms = float(np.sqrt(np.mean((virtual - measured) ** 2)) / max(g.rms, 1e-300))
-        rows.append({"name": name, "position_m": position, "del_discrepancy": [{"m": m, "relative": r} for m, r in rel.items()],
-                     "strain_rms_discrepancy": rms})
-        worst = max(worst, max(abs(r) for r in rel.values()))
-    a = max(BAND_FLOOR, (IN_SAMPLE_FACTOR if in_sample else 1.0) * worst)
+        aided = name in in_sample
+        rows.append({"name": name, "position_m": position, "aided_the_estimate": aided,
+                     "del_discrepancy": [{"m": m, "relative": r} for m, r in rel.items()], "strain_rms_discrepancy": rms})
+        worst = max(worst, (IN_SAMPLE_FACTOR if aided else 1.0) * max(abs(r) for r in rel.values()))
+    a = max(BAND_FLOOR, worst)
     method = (f"modal truncation seen at the strain gauges ({', '.join(r['name'] for r in rows)}): largest relative DEL "
-              f"discrepancy of the virtual against the measured strain{f' x{IN_SAMPLE_FACTOR:g} (the gauges aided the estimate)' if in_sample else ''}, "
+              f"discrepancy of the virtual against the measured strain, x{IN_SAMPLE_FACTOR:g} at a gauge that aided the estimate, "
               f"at least {BAND_FLOOR:.0%}; band [DEL/(1+a), DEL*(1+a)] with a = {a:.4f}")
     return DelBand(1.0 / (1.0 + a), 1.0 + a, method), rows
 
 
 def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[float, ...] | None, curve: Any, exponents: tuple[float, ...],
-                       n_eq: float | None, half_cycles: str, start_s: float | None) -> dict[str, Any]:
-    """The ``shm loads`` document of a contract recording (raw or estimate)."""
+                       n_eq: float | None, half_cycles: str, start_s: float | None, window_s: float | None = None) -> dict[str, Any]:
+    """The ``shm loads`` document of a contract recording (raw or estimate); with ``window_s`` also
+    per window of that length (each counted on its own, its band from that window's gauges)."""
     import numpy as np
 
     from analytics import bending_moment, signal_loads, virtual_strain
@@ -159,7 +174,7 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
 
     spots = {round(h.position, 9): h for h in rig.hot_spots}
     grid = stations if stations is not None else tuple(np.linspace(0.0, beam.length, 17)[1:-1])
-    positions = sorted(set(round(p, 9) for p in grid) | set(spots))
+    positions = sorted({round(p, 9) for p in grid} | set(spots))
     eta = np.asarray(positions, dtype=float)
     shapes = units.curvature(eta)
     strain = virtual_strain(b[keep], shapes, beam.fibre_distance(eta))
@@ -169,11 +184,12 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     if record.temperature is not None:
         temp = np.interp(t, *record.temperature)
         factor = 1.0 + beam.youngs_modulus_temperature_coefficient * (temp - beam.reference_temperature)
-    youngs = beam.youngs_modulus * factor
+    # stress is E·ε for rectangles and tubes; a beam of table sections only has no E: strain and moment only
+    youngs = None if beam.youngs_modulus is None else beam.youngs_modulus * factor
     moment = bending_moment(kappa, beam.bending_stiffness(eta)) * factor[:, None]
 
     # the gauges: measured strain against the virtual strain at their positions
-    gauges = []
+    gauges, gauge_masks = [], []
     for sensor in rig.sensors_of("strain"):
         channel = rec.channels.get(sensor.topic)
         if channel is None or len(channel) < 2:
@@ -186,35 +202,40 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         virtual = virtual_strain(b[keep][inside], units.curvature(np.array([sensor.position])),
                                  beam.fibre_distance([sensor.position]))[:, 0]
         gauges.append((sensor.name, float(sensor.position), virtual, measured))
+        gauge_masks.append(inside)
     used = _gauges_used(rec, record, model_args)
-    band, gauge_rows = gauge_band(gauges, exponents=exponents, n_eq=n_eq_value, in_sample=bool(used), half_cycles=half_cycles)
+    band, gauge_rows = gauge_band(gauges, exponents=exponents, n_eq=n_eq_value, in_sample=used, half_cycles=half_cycles)
 
     default_detail = None if curve is None else _detail(curve)
+    design = rig.fatigue.design_life_years if rig.fatigue is not None else None
     out_stations = []
     for j, pos in enumerate(positions):
         spot = spots.get(pos)
         detail = _detail(spot.curve, spot.scf, spot.gamma_Ff, spot.gamma_Mf) if spot is not None else default_detail
-        stress = strain[:, j] * youngs
-        sl = signal_loads(stress, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, detail=detail, band=band,
-                          name=f"stress at {pos} m")
         el = signal_loads(strain[:, j], exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name=f"strain at {pos} m")
         doc = _signal_doc(el, to_stress=beam.youngs_modulus, band=band)
-        # stress from its own count (E follows the temperature sample by sample)
-        for entry, (_, _, s_del) in zip(doc["del"], sl.dels):
-            entry["stress_range_pa"] = s_del
-            if band is not None:
-                entry["stress_band_pa"] = [s_del * band.low, s_del * band.high]
-        doc.update(damage=sl.damage, damage_band=None if sl.damage_band is None else list(sl.damage_band))
+        stress_rms = None
+        if youngs is not None:
+            # stress from its own count (E follows the temperature sample by sample)
+            sl = signal_loads(strain[:, j] * youngs, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, detail=detail,
+                              band=band, name=f"stress at {pos} m")
+            for entry, (_, _, s_del) in zip(doc["del"], sl.dels):
+                entry["stress_range_pa"] = s_del
+                if band is not None:
+                    entry["stress_band_pa"] = [s_del * band.low, s_del * band.high]
+            doc.update(damage=sl.damage, damage_band=None if sl.damage_band is None else list(sl.damage_band))
+            stress_rms = sl.rms
         out_stations.append({"position_m": pos, "hot_spot": None if spot is None else spot.name,
-                             "curve": None if detail is None else detail.curve.name, **doc,
-                             "stress_rms_pa": sl.rms, "bending_moment_rms_nm": float(np.sqrt(np.mean(moment[:, j] ** 2))),
+                             "curve": None if detail is None else detail.curve.name, **doc, **_life(doc["damage"], duration, design),
+                             "stress_rms_pa": stress_rms, "bending_moment_rms_nm": float(np.sqrt(np.mean(moment[:, j] ** 2))),
                              "bending_moment_range_max_nm": float(np.ptp(moment[:, j]))})
 
     channels = []
     for name, position, _virtual, measured in gauges:
         gl = signal_loads(measured, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name=f"strain gauge {name}",
-                          detail=default_detail, to_stress=beam.youngs_modulus)
-        channels.append({"name": name, "position_m": position, **_signal_doc(gl, to_stress=beam.youngs_modulus)})
+                          detail=default_detail if beam.youngs_modulus is not None else None, to_stress=beam.youngs_modulus or 1.0)
+        gdoc = _signal_doc(gl, to_stress=beam.youngs_modulus)
+        channels.append({"name": name, "position_m": position, **gdoc, **_life(gdoc["damage"], duration, design)})
 
     root = None
     if rig.support == "clamped":
@@ -227,25 +248,55 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         "start_s": span_start, "duration_s": duration, "source": "virtual strain from the estimate" + (
             " (estimated here)" if record.estimated_here else ""),
         "half_cycles": half_cycles,
-        "band_method": band.method if band is not None else "no strain gauge to see the modal truncation at: no band",
+        "band_method": band.method if band is not None else ("no strain gauge samples in the recording (an estimate written before it carried the gauges, or a rig "
+                                                                   "without gauges): the modal truncation cannot be seen, no band"),
         "gauges": gauge_rows,
         "stations": out_stations,
         "channels": channels,
         "root_bending_moment": root,
+        "windows": None if window_s is None else _windows(t, strain, gauges, gauge_masks, positions, window_s, exponents=exponents,
+                                                          half_cycles=half_cycles, used=used, origin=float(times[0])),
     }
 
 
+def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, exponents, half_cycles: str, used, origin: float) -> list[dict[str, Any]]:
+    """Per window of ``window_s`` (1 Hz equivalent): each station's strain DEL with the band of that window's gauges."""
+    import numpy as np
+
+    from analytics import signal_loads
+
+    out = []
+    edges = np.arange(t[0], t[-1] + 1e-9, window_s)
+    for a in edges:
+        sel = (t >= a) & (t < a + window_s)
+        if sel.sum() < 2 or (t[sel][-1] - t[sel][0]) < 0.5 * window_s:
+            continue
+        duration = float(sel.sum()) * float(np.median(np.diff(t)))
+        # each gauge's samples lie on t[mask]: its part of the window is sel[mask]
+        g = [(n, p, v[sel[mask]], m[sel[mask]]) for (n, p, v, m), mask in zip(gauges, gauge_masks) if sel[mask].sum() >= 2]
+        band, _rows = gauge_band(g, exponents=exponents, n_eq=duration, in_sample=used, half_cycles=half_cycles)
+        rows = []
+        for j, pos in enumerate(positions):
+            sl = signal_loads(strain[sel, j], exponents=exponents, n_eq=duration, half_cycles=half_cycles, name=f"strain at {pos} m")
+            rows.append({"position_m": pos, "del": [{"m": m, "n_eq": n, "strain_range": v,
+                                                      "band": None if band is None else [v * band.low, v * band.high]}
+                                                     for m, n, v in sl.dels]})
+        out.append({"start_s": float(a - origin), "duration_s": duration,
+                    "band_half_width": None if band is None else band.high - 1.0, "stations": rows})
+    return out
+
+
 def _gauges_used(rec, record, model_args: dict) -> tuple[str, ...]:
-    """The gauges the estimate was aided by (in-sample), from the estimator's metadata or the model."""
+    """The gauges the estimate was aided by (their discrepancy is in-sample), from the estimator's
+    metadata of an estimate recording or from the model the estimator ran with here."""
     if not record.estimated_here:
         try:
             return tuple(json.loads(rec.metadata["estimator"]["selection"]).get("gauges", ()))
         except (KeyError, TypeError, ValueError):
             return tuple(s.name for s in rec.rig.sensors_of("strain"))  # unknown: assume in-sample (wider band)
-    gauges = model_args.get("gauges", 4)
-    if isinstance(gauges, tuple):
-        return gauges
-    return tuple(s.name for s in rec.rig.sensors_of("strain"))[: int(gauges)]
+    from estimator import build_model
+
+    return tuple(build_model(rec.rig, **model_args).selection.gauges)
 
 
 def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: float | None, half_cycles: str,
@@ -255,11 +306,7 @@ def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: flo
 
     from analytics import signal_loads
 
-    if quantity == "strain":
-        to_stress = youngs_modulus
-    elif quantity == "stress":
-        to_stress = 1.0
-    else:
+    if quantity not in ("strain", "stress"):
         raise LoadsError(f"--quantity {quantity!r} must be strain or stress")
     n = table.data.shape[0]
     times = table.time - table.time[0] if table.time is not None else np.arange(n) / float(table.fs_hz)
@@ -272,9 +319,16 @@ def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: flo
         strain = x if quantity == "strain" else x / youngs_modulus
         sl = signal_loads(strain, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, detail=detail,
                           to_stress=youngs_modulus, name=f"channel {name}")
-        channels.append({"name": name, **_signal_doc(sl, to_stress=youngs_modulus)})
+        cdoc = _signal_doc(sl, to_stress=youngs_modulus)
+        channels.append({"name": name, **cdoc, **_life(cdoc["damage"], duration, None)})
+    # a unit row that says the channel is not in the quantity's SI unit (volts, µε, MPa): say so, do not guess a scale
+    expected = {"strain": ("m/m", "strain", "-", "1", ""), "stress": ("pa", "n/m2", "n/m²")}[quantity]
+    warnings = [f"channel {name!r} is in {unit!r}, not {'m/m' if quantity == 'strain' else 'Pa'}: the figures are in that unit; "
+                "scale it first (shm import's channel map has scale and offset)"
+                for name, unit in zip(table.channels, table.units or ()) if unit is not None and unit.strip().lower() not in expected]
     return {"start_s": span_start, "duration_s": duration, "source": f"measured {quantity} channels ({table.format})",
-            "half_cycles": half_cycles, "youngs_modulus_pa": youngs_modulus, "stations": [], "channels": channels}
+            "half_cycles": half_cycles, "youngs_modulus_pa": youngs_modulus, "stations": [], "channels": channels,
+            "warnings": warnings}
 
 
 def _cmd_loads(args: argparse.Namespace) -> int:
@@ -304,7 +358,7 @@ def _cmd_loads(args: argparse.Namespace) -> int:
                 if args.aided:
                     model_args["aided"] = tuple(int(a) for a in args.aided.split(","))
                 doc = loads_of_recording(rec, model_args=model_args, stations=stations, curve=curve, exponents=exponents,
-                                         n_eq=args.neq, half_cycles=args.half_cycles, start_s=args.start)
+                                         n_eq=args.neq, half_cycles=args.half_cycles, start_s=args.start, window_s=args.window)
         if doc is None:
             if args.stations:
                 raise LoadsError("--stations needs a contract recording (plain channels are counted where they were measured)")
@@ -328,13 +382,20 @@ def _print_table(doc: dict[str, Any]) -> None:
     print(f"{doc['source']}: {doc['duration_s']:.3f} s counted from {doc['start_s']:.3f} s; half cycles: {doc['half_cycles']}")
     if doc.get("band_method"):
         print(f"band: {doc['band_method']}")
+    for warning in doc.get("warnings") or ():
+        print(f"warning: {warning}")
 
     def row(label: str, s: dict[str, Any]) -> str:
         dels = "  ".join(
-            f"DEL{e['m']:g} {1e6 * e['strain_range']:.3f} µε {e['stress_range_pa'] / 1e6:.3f} MPa"
+            f"DEL{e['m']:g} {1e6 * e['strain_range']:.3f} µε"
+            + ("" if e["stress_range_pa"] is None else f" {e['stress_range_pa'] / 1e6:.3f} MPa")
             + (f" [{1e6 * e['band'][0]:.3f}, {1e6 * e['band'][1]:.3f}] µε" if e["band"] else "")
             for e in s["del"])
         damage = "-" if s["damage"] is None else f"{s['damage']:.3e}"
+        if s.get("life_verdict") == "finite":
+            damage += f" (life at this load {s['life_at_this_load_years']:.3g} years)"
+        elif s.get("life_verdict") == "no_damage_below_cutoff":
+            damage += " (below the cut-off: nothing consumed)"
         return (f"{label:>22}  rms {1e6 * s['strain_rms']:9.3f} µε  max range {1e6 * s['strain_range_max']:9.3f} µε  {dels}  "
                 f"D {damage}  cycles {s['cycles']:g}")
 
@@ -363,6 +424,8 @@ def add_loads_parser(sub) -> None:
     p.add_argument("--exponents", default="3,5", metavar="m,...", help="Wöhler exponents of the DELs (default 3,5)")
     p.add_argument("--half-cycles", choices=("half", "full", "ignore"), default="half",
                    help="the residue's half cycles: half (ASTM E1049, default), full (conservative) or ignore")
+    p.add_argument("--window", type=number(low=0, low_open=True, unit="s"), default=None, metavar="S",
+                   help="also per window of S s (a contract recording): each station's DEL with its window's band")
     p.add_argument("--start", type=number(low=0, unit="s"), default=None, metavar="S",
                    help="count from S seconds into the record (default: the estimator's rest-phase end, else 0)")
     # shm estimate's options, for raw recordings

@@ -85,6 +85,7 @@ def test_windows_are_the_same_whatever_the_chunking_and_aligned_in_data_time(ope
     assert [g.result.start_s for g in got] == [w.start_s for w in whole.windows]
     for g, w in zip(got, whole.windows):
         assert [e.frequency_hz for e in g.result.estimates] == [e.frequency_hz for e in w.estimates]  # identical, not close
+        assert [e.track for e in g.result.estimates] == [e.track for e in w.estimates]  # one tracker, the same ids
         assert g.result.levels == w.levels and g.result.flags == w.flags and g.result.temperature_c == w.temperature_c
 
 
@@ -100,6 +101,14 @@ def test_a_randomly_moving_support_is_an_input_and_the_modes_come_out(operationa
     window = res.windows[5].estimates[1]
     assert window.method == "ssi" and window.confirmed and window.frequency_std_hz > 0 and 0.9 < window.mpc <= 1.0
     assert res.flags == () and len(res.modes) == 3
+    # each eigenmode is one track through the record (the engine's tracker, as shm oma's), listed with its range
+    doc = res.as_dict()
+    for k, f in enumerate(MODES):
+        ids = {w.estimates[k].track for w in res.windows if w.estimates[k].method == "ssi"}
+        assert len(ids) == 1 and None not in ids, ids
+        (track,) = [tr for tr in doc["tracks"] if tr["track"] in ids]
+        assert track["min_hz"] <= f * 1.01 and track["max_hz"] >= f * 0.99
+    assert all(m["track"] is not None for w in doc["windows"] for m in w["identified_modes"])
 
 
 def test_a_sine_at_a_mode_in_the_support_motion_distrusts_only_its_windows():

@@ -63,5 +63,5 @@ def test_uniform_fibre_distance_and_bending_stiffness():
     assert beam.bending_stiffness(eta) == pytest.approx([ei] * 3, rel=1e-12)
     warm = beam.bending_stiffness(1.0, temperature_c=beam.reference_temperature + 10)
     assert warm == pytest.approx(ei * (1 + 10 * beam.youngs_modulus_temperature_coefficient), rel=1e-12)
-    with pytest.raises(RigError, match="position 5.0 is outside the beam"):
+    with pytest.raises(RigError, match=r"positions must lie on the beam \[0, 4.0\] m, got \[5.0\]"):
         beam.fibre_distance([1.0, 5.0])

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from analytics import FatigueDetail, bending_moment, HotSpotFatigue, rainflow_cycles, signal_loads, sn_curve, virtual_strain
+from analytics import FatigueDetail, HotSpotFatigue, bending_moment, rainflow_cycles, signal_loads, sn_curve, virtual_strain
 from shm_service.cli import main
 
 ASTM = [-2, 1, -3, 5, -1, 3, -4, 4, -2]
@@ -144,5 +144,23 @@ def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path
             assert est_del == pytest.approx(true_del, rel=0.1)
             low, high = s["del"][0]["band"]
             assert low < est_del < high and high / est_del - 1 <= 0.05  # the ideal paper excitation: a narrow band
+    # per window: each window counted on its own, with the band of its gauges
+    code, out, err = run(capsys, "loads", str(est), "--stations", "2.0", "--window", "5", "--json")
+    assert code == 0, err
+    windows = json.loads(out)["windows"]
+    assert len(windows) >= 2 and all(w["duration_s"] == pytest.approx(5.0) for w in windows)
+    assert all(w["band_half_width"] >= 0.02 and w["stations"][0]["del"][0]["band"] is not None for w in windows)
     code, _, err = run(capsys, "loads", str(est), "--stations", "4.5")
     assert code == 2 and "--stations: 4.5 is outside the beam [0, 4.0]" in err
+
+
+def test_channels_in_volts_are_counted_with_a_warning(capsys):
+    from pathlib import Path
+
+    path = next((Path(__file__).parents[1] / "data" / "dropbear" / "random-dwell").glob("*.txt"))
+    code, out, err = run(capsys, "loads", str(path), "--channels", "SG_300_a", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["warnings"] == ["channel 'SG_300_a' is in 'Voltage (unscaled)', not m/m: the figures are in that unit; "
+                               "scale it first (shm import's channel map has scale and offset)"]
+    assert doc["channels"][0]["cycles"] > 1000

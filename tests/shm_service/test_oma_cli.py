@@ -143,9 +143,16 @@ def test_windows_are_listed_with_times_from_the_first_sample(tmp_path, capsys, r
     doc = json.loads(out)
     assert code == 0
     np.testing.assert_allclose([(w["start_s"], w["end_s"]) for w in doc["windows"]], [(30.0 * k, 30.0 * k + 60) for k in range(5)], atol=0.1)
+    first = set()
     for w in doc["windows"]:
         f = [m["frequency_hz"] for m in w["modes"]]
         assert any(abs(x / SYSTEM.frequencies_hz[0] - 1) < 0.02 for x in f), f
+        first |= {m["track"] for m in w["modes"] if abs(m["frequency_hz"] / SYSTEM.frequencies_hz[0] - 1) < 0.02}
+        assert all(set(r) == {"frequency_hz", "reason"} for r in w["rejected"])
+    # the first mode is one track through the record, and the document lists it with its range
+    assert len(first) == 1
+    (track,) = [t for t in doc["tracks"] if t["track"] in first]
+    assert track["windows"] == 5 and track["min_hz"] <= SYSTEM.frequencies_hz[0] * 1.02 and track["max_hz"] >= SYSTEM.frequencies_hz[0] * 0.98
     code, out, _ = run(capsys, "oma", p, "--fs", FS, *BAND)
     assert code == 0 and "f [Hz]" in out
 
