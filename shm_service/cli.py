@@ -268,6 +268,9 @@ def _cmd_study(args: argparse.Namespace) -> int:
         "seeds": _int_list(args.seeds, "--seeds") if args.seeds else None,
         "duration": args.duration, "rest": args.rest, "ideal": args.ideal or None, "workers": args.workers,
         "tofs": _int_list(args.tofs, "--tofs") if args.tofs else None,
+        "modes": args.modes,
+        # a rig file: its wind load (the ambient excitation scaled to the structure), no bearing friction
+        **({"rig": args.rig, "excitation": "ambient", "friction_torque": 0.0} if args.rig else {}),
     }
     fields = {k: v for k, v in fields.items() if v is not None}
     targets = None
@@ -630,6 +633,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="recording length, s, up to 3600 (default 300)")
     p.add_argument("--rest", type=number(low=5, unit="s"), default=None, help="initial rest phase, s, at least 5 (default 60)")
     p.add_argument("--tofs", default=None, help="ν_ρ swept, e.g. 4-13 (default)")
+    p.add_argument("--rig", default=None, metavar="FILE",
+                   help="study this rig description (.json/.toml) instead of the paper's dense layout, under its "
+                        "ambient wind: the sweeps keep the sensor counts it has (no ToFs: ν_ρ = 0)")
+    p.add_argument("--modes", type=number(int, low=1, high=5), default=None, metavar="Γ",
+                   help="unit deformations Γ (default 4, the paper's; another Γ needs --rig)")
     p.add_argument("--ideal", action="store_true", help="idealised plant (the drift without gauges disappears)")
     p.add_argument("--quick", action="store_true", help="small study: 2 seeds of 240 s, ν_ρ = 4, 5, ν_ε = 0, 2, 4")
     p.add_argument("--workers", type=number(int, low=1, high=64), default=None, help="worker processes, 1-64 (default: the cores)")

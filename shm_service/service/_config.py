@@ -137,10 +137,28 @@ class SimSettings(_Closed):
     temperature_mean_c: float = Field(20.0, description="mean temperature, degC")
     temperature_swing_k: float = Field(40.0, ge=0, description="peak-to-peak temperature swing over the whole run, K")
     block_s: float = Field(1.0, gt=0, le=60, description="simulated seconds per block handed to the pipeline")
+    rig: str | None = Field(
+        None, description="simulate this rig description (.json/.toml; its beam, support, orientation and sensors, as "
+        "shm simulate --rig) instead of the built-in sheet of layout/support/orientation/length_m")
+    wind_load_rms: float | None = Field(
+        None, ge=0, description="RMS of the wind load along the beam, N/m (None: scaled to the structure for a rig file)")
+    storm_start_s: float | None = Field(
+        None, ge=0, description="a storm that passes begins, s (None: no storm): the wind load's RMS rises to storm_peak "
+        "times its ambient level halfway to storm_end_s and falls back (the virtual rig's WindStorm)")
+    storm_end_s: float | None = Field(None, gt=0, description="the storm has passed, s")
+    storm_peak: float = Field(3.0, gt=0, le=100, description="the wind load's RMS at the storm's peak over its ambient RMS")
     faults: tuple[str, ...] = Field(
         (), description="sensor faults to inject, KIND:TOPIC[.FIELD]@START+DURATION[:VALUE] with KIND silence, nan, "
         "spike (VALUE added), stuck or clock (stamps shifted by VALUE s); START and DURATION in simulated s, "
         "e.g. spike:/imu/D.accel_y@300+1:100")
+
+    @model_validator(mode="after")
+    def _storm(self) -> "SimSettings":
+        if (self.storm_start_s is None) != (self.storm_end_s is None):
+            raise ValueError("sim.storm_start_s and sim.storm_end_s come together (a storm begins and passes)")
+        if self.storm_start_s is not None and not self.storm_start_s < self.storm_end_s:
+            raise ValueError(f"sim.storm_start_s={self.storm_start_s} must come before sim.storm_end_s={self.storm_end_s}")
+        return self
 
     @field_validator("faults")
     @classmethod

@@ -184,12 +184,29 @@ def simulation_settings(settings: ServiceSettings):
     from ..virtual_rig import SimulationSettings
 
     s = settings.sim
-    return SimulationSettings(
-        duration=s.duration_s, seed=s.seed, excitation=s.excitation, layout=s.layout,
-        support=s.support, orientation=s.orientation, length=s.length_m,
-        damage=tuple(s.damage) if s.damage_at_s is not None else (), damage_at=s.damage_at_s,
-        temperature_mean=s.temperature_mean_c, temperature_swing=s.temperature_swing_k,
-    )
+    common = {"duration": s.duration_s, "seed": s.seed, "excitation": s.excitation,
+              "damage": tuple(s.damage) if s.damage_at_s is not None else (), "damage_at": s.damage_at_s,
+              "temperature_mean": s.temperature_mean_c, "temperature_swing": s.temperature_swing_k,
+              "wind_load_rms": s.wind_load_rms,
+              "wind_storm": None if s.storm_start_s is None else
+              {"start_s": s.storm_start_s, "end_s": s.storm_end_s, "peak": s.storm_peak}}
+    rig = simulated_rig(settings)
+    if rig is None:
+        return SimulationSettings(layout=s.layout, support=s.support, orientation=s.orientation, length=s.length_m, **common)
+    from ..virtual_rig import settings_for_rig
+
+    # the rig file's own simulator settings, then the service's (support and orientation the rig's)
+    given = {k for k, v in common.items() if v is not None}
+    return settings_for_rig(rig, SimulationSettings(**common), given)
+
+
+def simulated_rig(settings: ServiceSettings):
+    """The rig description ``sim.rig`` names (None: the built-in sheet)."""
+    if settings.sim.rig is None:
+        return None
+    from estimator import load_rig
+
+    return load_rig(settings.sim.rig)
 
 
 class SimSource(Source):
@@ -204,12 +221,15 @@ class SimSource(Source):
 
         s = settings.sim
         self.settings = simulation_settings(settings)
-        if rig is not None:
-            # source.rig: simulate that rig (its simulator settings under the service's sim section).
+        sim_rig = simulated_rig(settings)
+        if sim_rig is None and rig is not None:
+            # source.rig (`shm serve --source sim --rig FILE`): simulate that rig, its simulator settings
+            # under the service's sim section
             given = {name for name in ("duration", "seed", "excitation", "damage", "damage_at", "temperature_mean",
                                        "temperature_swing") if name in self.settings.model_fields_set}
             self.settings = settings_for_rig(rig, self.settings, given)
-        self.rigsim = VirtualRig(self.settings, rig)
+            sim_rig = rig
+        self.rigsim = VirtualRig(self.settings, sim_rig)
         self.rig = self.rigsim.nominal_rig
         self.block_s = s.block_s
         speed = settings.source.speed

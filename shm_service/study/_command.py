@@ -81,9 +81,11 @@ def run_command(settings: StudySettings, out: str | Path, *, targets: DesignTarg
     if rows is not None:
         print(f"reusing the study table in {out}/results.json (same settings)", file=stdout)
     else:
-        result = run_study(settings, out, progress=progress, series_for=figure_configurations(settings),
+        result = run_study(settings, out, progress=progress,
+                           series_for=figure_configurations(settings) if settings.rig is None else (),
                            keep_recordings=keep_recordings)
-        figures = make_study_figures(result, out)
+        # the paper's figures (Figs. 15-19) are drawn for its sheet's sweeps; a rig file's study is its table
+        figures = make_study_figures(result, out) if settings.rig is None else []
         rows = result.results
         print(f"study: {len(rows)} configurations × {len(settings.seeds)} seeds in {result.wall_seconds:.0f} s "
               f"on {result.workers} workers; wrote {out}/results.csv, results.json, study.json and "
@@ -104,7 +106,9 @@ def run_command(settings: StudySettings, out: str | Path, *, targets: DesignTarg
         (out / "design.json").write_text(json.dumps({"targets": targets.model_dump(), "configurations": []}, indent=2) + "\n")
         return 1
     shown = chosen[:top]
-    series, bench = series_of(settings, [r.config for r in shown], out, progress=progress)
+    # the design figures need time series (a re-run of the first seed); a rig file's study draws none
+    series, bench = (series_of(settings, [r.config for r in shown], out, progress=progress) if settings.rig is None
+                     else ({}, {}))
     base = result or StudyResult(settings=settings, results=rows, wall_seconds=0.0, workers=0)
     base = StudyResult(settings=settings, results=rows, wall_seconds=base.wall_seconds, workers=base.workers,
                        series=series, benchmark_series=bench)
@@ -116,9 +120,11 @@ def run_command(settings: StudySettings, out: str | Path, *, targets: DesignTarg
     print(_HEADER, file=stdout)
     for rank, r in enumerate(chosen, start=1):
         entry = {**r.as_json(), "boards": r.boards, "sensors": r.selection, "rank": rank}
-        if rank <= top:
+        if rank <= top and settings.rig is None:
             entry["figure"] = make_design_figure(base, r, rank, out).name
             print(_row_text(r) + f"  → {entry['figure']}", file=stdout)
+        elif rank <= top:
+            print(_row_text(r), file=stdout)
         design["configurations"].append(entry)
     (out / "design.json").write_text(json.dumps(design, indent=2, allow_nan=False) + "\n")
     print(f"wrote {out}/design.json", file=stdout)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._config import GAMMA, Configuration, StudySettings
+from ._config import Configuration, StudySettings
 
 # Per-process caches: the last recording (rig, measurements, truth) and benchmark series read.
 _RECORDING: dict[str, tuple] = {}
@@ -32,6 +32,7 @@ class EstimateTask:
     benchmark: str  # .npz of the gyro benchmark of this seed (written by the benchmark task)
     config: Configuration
     want_series: bool = False
+    is_benchmark: bool = False  # the study's reference configuration (it writes ``benchmark``)
 
 
 @dataclass(frozen=True)
@@ -49,9 +50,16 @@ def simulate_seed(task: SimulationTask) -> str:
     from ..virtual_rig import PlantSettings, SimulationSettings, simulate
 
     s = task.settings
-    settings = SimulationSettings(duration=s.duration, seed=task.seed, layout=s.layout, excitation=s.excitation,
-                                  ideal=s.ideal, rest=s.rest, plant=PlantSettings(friction_torque=s.friction_torque))
-    simulate(settings, task.path)
+    rig = s.rig_description() if s.rig is not None else None
+    # the bearing's friction acts on a pinned support's rotation; a clamp has none
+    friction = s.friction_torque if rig is None or rig.support == "pinned" else 0.0
+    common = {"duration": s.duration, "seed": task.seed, "excitation": s.excitation, "ideal": s.ideal, "rest": s.rest,
+              "plant": PlantSettings(friction_torque=friction)}
+    if rig is None:
+        settings = SimulationSettings(layout=s.layout, **common)
+    else:
+        settings = SimulationSettings(support=rig.support, orientation=rig.orientation, **common)
+    simulate(settings, task.path, rig=rig)
     return task.path
 
 
@@ -113,13 +121,13 @@ def estimate_configuration(task: EstimateTask) -> RunOutcome:
 
     rig, meas, truth = _load_recording(task.recording)
     c = task.config
-    model = build_model(rig, peripheral=c.peripheral, modes=GAMMA, imus=c.imus, tofs=c.tofs, gauges=c.gauges,
+    model = build_model(rig, peripheral=c.peripheral, modes=c.modes, imus=c.imus, tofs=c.tofs, gauges=c.gauges,
                         aided=c.aided if c.gauges else None)
     result = estimate(meas, model)
     rest_end = float(result.calibration.rest_end)
     t, phi, e, b = result.t, result.phi, result.e, result.b
     rmse = score_against_truth(result, truth, after=rest_end)["rmse"]
-    if c.is_benchmark:
+    if task.is_benchmark:
         truth_phi, truth_e = _truth_at(truth, t)
         Path(task.benchmark).parent.mkdir(parents=True, exist_ok=True)
         tmp = task.benchmark + ".part.npz"

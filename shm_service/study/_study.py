@@ -17,7 +17,7 @@ from typing import Iterable, TextIO
 
 import numpy as np
 
-from ._config import GAMMA, Configuration, StudySettings, benchmark
+from ._config import Configuration, StudySettings
 from ._runs import EstimateTask, RunOutcome, SimulationTask, estimate_configuration, simulate_seed
 
 RESULT_KEYS = ("phi_deg", "e_m", "deflection_m")
@@ -121,7 +121,7 @@ class _Progress:
 def _execute(settings: StudySettings, configs: tuple[Configuration, ...], seeds: tuple[int, ...], workdir: Path,
              want_series: set[Configuration], series_seed: int, progress: TextIO | None,
              recorded: dict[int, Path] | None = None) -> tuple[list[RunOutcome], int]:
-    bm = benchmark()
+    bm = settings.benchmark()
     if bm not in configs:
         configs = (bm, *configs)
     others = [c for c in configs if c != bm]
@@ -133,7 +133,8 @@ def _execute(settings: StudySettings, configs: tuple[Configuration, ...], seeds:
     bench = {s: str(workdir / f"seed{s}_benchmark.npz") for s in seeds}
 
     def task(seed: int, c: Configuration) -> EstimateTask:
-        return EstimateTask(seed, paths[seed], bench[seed], c, want_series=seed == series_seed and c in want_series)
+        return EstimateTask(seed, paths[seed], bench[seed], c, want_series=seed == series_seed and c in want_series,
+                            is_benchmark=c == bm)
 
     # "spawn": workers start clean (no fork of a threaded parent), the worker functions are importable.
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
@@ -245,7 +246,7 @@ def series_of(settings: StudySettings, configs: Iterable[Configuration], out: st
     seed = settings.seeds[0]
     kept = out / "recordings" / f"seed{seed}.mcap"
     try:
-        outcomes, _ = _execute(settings, configs, (seed,), workdir, set(configs) | {benchmark()}, seed, progress,
+        outcomes, _ = _execute(settings, configs, (seed,), workdir, set(configs) | {settings.benchmark()}, seed, progress,
                                recorded={seed: kept} if kept.is_file() else None)
         bench_series = _load_npz(workdir / f"seed{seed}_benchmark.npz")
     finally:
@@ -264,7 +265,7 @@ def write_tables(result: StudyResult, out: Path) -> None:
     (out / "results.json").write_text(json.dumps(rows, indent=2, allow_nan=False) + "\n")
     with open(out / "results.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
-        b_cols = [f"bm_b{k + 1}" for k in range(GAMMA)]
+        b_cols = [f"bm_b{k + 1}" for k in range(result.settings.modes)]
         writer.writerow(
             ["peripheral", "imus", "tofs", "gauges", "aided", "seeds", "boards",
              "truth_phi_deg", "truth_phi_deg_std", "truth_e_m", "truth_e_m_std", "truth_deflection_m", "truth_deflection_m_std",
@@ -275,7 +276,7 @@ def write_tables(result: StudyResult, out: Path) -> None:
             c = r.config
             truth = [x for k in RESULT_KEYS for x in (r.rmse_truth[k], r.rmse_truth_std[k])]
             bm = [x for k in BENCHMARK_KEYS for x in (r.rmse_benchmark[k], r.rmse_benchmark_std[k])]
-            bm_b = [x for k in range(GAMMA) for x in (r.rmse_benchmark["b"][k], r.rmse_benchmark_std["b"][k])]
+            bm_b = [x for k in range(result.settings.modes) for x in (r.rmse_benchmark["b"][k], r.rmse_benchmark_std["b"][k])]
             writer.writerow(
                 [c.peripheral, c.imus, c.tofs, c.gauges, " ".join(map(str, c.aided)), " ".join(map(str, r.seeds)), r.boards]
                 + [f"{v:.6g}" for v in truth + bm + bm_b]
@@ -307,7 +308,7 @@ def load_results(out: str | Path, settings: StudySettings) -> tuple[Configuratio
     try:
         for row in rows:
             c = Configuration(peripheral=row["peripheral"], imus=row["imus"], tofs=row["tofs"], gauges=row["gauges"],
-                              aided=tuple(row["aided"]))
+                              aided=tuple(row["aided"]), modes=settings.modes)
             results.append(ConfigurationResult(
                 config=c, seeds=tuple(row["seeds"]), selection=meta["selections"][c.slug],
                 rmse_truth=row["rmse_truth"], rmse_truth_std=row["rmse_truth_std"],

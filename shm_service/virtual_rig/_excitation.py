@@ -18,6 +18,8 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
+from ._wind import storm_factor
+
 __all__ = [
     "BearingMotion", "DistributedLoad", "Excitation", "ExcitationKind", "OperationalExcitation", "RandomBearingMotion",
     "make_excitation",
@@ -241,7 +243,8 @@ class DistributedLoad:
     """
 
     def __init__(self, rng: np.random.Generator, nodes_m: np.ndarray, *, rms_n_per_m: float, correlation_m: float,
-                 band_hz: tuple[float, float], sample_rate_hz: float, start_s: float, ramp_s: float) -> None:
+                 band_hz: tuple[float, float], sample_rate_hz: float, start_s: float, ramp_s: float,
+                 storm: tuple[float, float, float] | None = None) -> None:
         x = np.asarray(nodes_m, dtype=float)
         if x.ndim != 1 or x.size < 1 or np.any(np.diff(x) <= 0):
             raise ValueError("nodes_m must be increasing positions along the beam, m")
@@ -264,6 +267,10 @@ class DistributedLoad:
         self.rng = rng
         self.rms = float(rms_n_per_m)
         self.start_s, self.ramp_s = float(start_s), float(ramp_s)
+        #: (start s, end s, peak factor) of a storm that passes, or None
+        self.storm = storm
+        if storm is not None:
+            storm_factor([0.0], *storm)  # refuses a bad storm now, not in the middle of a run
 
     def nodal_loads(self, t: np.ndarray) -> np.ndarray:
         """Loads (len(t), nodes) in N at the next len(t) sample times ``t`` (s)."""
@@ -271,6 +278,8 @@ class DistributedLoad:
         white = self.rng.standard_normal((t.size, self._basis.shape[1]))
         z, self._zi = scipy.signal.sosfilt(self._sos, white, axis=0, zi=self._zi)
         env = _ramp(t, self.start_s, self.ramp_s)[0]
+        if self.storm is not None:
+            env = env * storm_factor(t, *self.storm)
         p = (z * (self._gain * self.rms)) @ self._basis.T
         return p * env[:, None] * self._tributary[None, :]
 

@@ -9,8 +9,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from estimator import PointMass, StiffnessSegment
 
-__all__ = ["Damage", "OperationalSettings", "PlantSettings", "SensorErrors", "SimulationSettings", "parse_damage",
-           "settings_for_rig"]
+__all__ = ["Damage", "OperationalSettings", "PlantSettings", "SensorErrors", "SimulationSettings", "WindStorm",
+           "parse_damage", "settings_for_rig"]
 
 
 class _Closed(BaseModel):
@@ -135,6 +135,21 @@ def parse_damage(text: str) -> Damage:
     raise ValueError(f"damage {text!r} must be 'mass:KG@POS' (KG > 0) or 'stiffness:FACTOR@A-B' (FACTOR > 0, A < B)")
 
 
+class WindStorm(_Closed):
+    """A storm that passes: the wind load's RMS rises smoothly from its ambient level to ``peak``
+    times it halfway between ``start_s`` and ``end_s`` and falls back (``_wind.storm_factor``)."""
+
+    start_s: float = Field(ge=0, description="when the storm begins, s")
+    end_s: float = Field(gt=0, description="when it has passed, s")
+    peak: float = Field(3.0, gt=0, le=100, description="the load's RMS at the peak over its ambient RMS (load ~ wind speed²)")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "WindStorm":
+        if not self.start_s < self.end_s:
+            raise ValueError(f"the storm's start_s={self.start_s} must come before its end_s={self.end_s}")
+        return self
+
+
 class SimulationSettings(_Closed):
     duration: float = Field(300.0, gt=0, le=7 * 24 * 3600, description="recording length, s")
     seed: int = Field(1, ge=0)
@@ -165,6 +180,9 @@ class SimulationSettings(_Closed):
     wind_correlation: float | None = Field(
         None, gt=0, description="correlation length of the wind load along the beam, m; None: operational.load_correlation "
         "for the built-in sheet, a quarter of the beam (at least 1 m) for a rig file")
+    wind_storm: WindStorm | None = Field(
+        None, description="a storm that passes: the wind load (ambient and operational excitations with a wind load) "
+        "ramps up to peak times its RMS and back down between start_s and end_s")
     start_time_ns: int = Field(1_767_225_600_000_000_000, ge=0, description="log_time of the first sample (2026-01-01 UTC)")
     plant: PlantSettings = PlantSettings()
     errors: SensorErrors = SensorErrors()

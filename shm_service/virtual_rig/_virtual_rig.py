@@ -193,7 +193,9 @@ class VirtualRig:
             self._distributed_load = DistributedLoad(
                 self._rng_ambient, np.asarray(basis.nodes[1:], dtype=float), rms_n_per_m=self.wind_load_rms,
                 correlation_m=self.wind_correlation_m, band_hz=tuple(op.load_band), sample_rate_hz=SAMPLE_RATE_HZ,
-                start_s=self.excitation.rest_s, ramp_s=op.ramp)
+                start_s=self.excitation.rest_s, ramp_s=op.ramp,
+                storm=None if settings.wind_storm is None else (settings.wind_storm.start_s, settings.wind_storm.end_s,
+                                                                settings.wind_storm.peak))
         self._sensor_setup()
         self._state = (np.zeros(self.plants[0].size), np.zeros(self.plants[0].size))
         self._next_sample = 0
@@ -285,6 +287,8 @@ class VirtualRig:
         if self._distributed_load is not None:
             meta["wind_load"] = json.dumps({"rms_n_per_m": round(self.wind_load_rms, 9),
                                             "correlation_m": round(self.wind_correlation_m, 6)})
+            if self.settings.wind_storm is not None:
+                meta["wind_storm"] = self.settings.wind_storm.model_dump_json()
         if self.damaged_rig is not None:
             meta["eigenfrequencies_after_damage_hz"] = json.dumps(self.plants[1].linear_frequencies_hz[:8].round(6).tolist())
             meta["damage_time_s"] = json.dumps((self.damage_sample or 0) / SAMPLE_RATE_HZ)

@@ -22,7 +22,7 @@ import numpy as np
 from estimator import RigDescription
 
 __all__ = ["DEFAULT_WIND_BASE_STRAIN", "bending_stiffness_at", "fibre_distance_at", "scaled_wind_load",
-           "support_moment_factor"]
+           "storm_factor", "support_moment_factor"]
 
 #: Quasi-static RMS bending strain at the support that the scaled wind load gives (50 µε).
 DEFAULT_WIND_BASE_STRAIN = 5e-5
@@ -75,3 +75,43 @@ def scaled_wind_load(rig: RigDescription, correlation_m: float, base_strain: flo
     if not (c0 > 0 and ei0 > 0):
         raise ValueError(f"the section at the support has fibre distance {c0} m and EI {ei0} N·m²: both must be positive")
     return base_strain * ei0 / (c0 * support_moment_factor(rig.beam.length, correlation_m))
+
+
+def storm_factor(t: np.ndarray | list[float], start_s: float, end_s: float, peak: float) -> np.ndarray:
+    """The wind load's RMS relative to its ambient level while a storm passes: 1 before ``start_s``
+    and after ``end_s`` (s), rising smoothly to ``peak`` halfway and falling back,
+    1 + (peak − 1) sin²(π (t − start)/(end − start)) (continuous with its slope at both ends, so the
+    load has no step a real storm front would not have).
+
+    Parameters
+    ----------
+    t : array_like
+        Times, s.
+    start_s, end_s : float
+        When the storm begins and has passed, s (start < end).
+    peak : float
+        The load's RMS at the storm's peak over its ambient RMS (> 0; the load goes with the wind
+        speed squared, so 4 is twice the wind speed).
+
+    Returns
+    -------
+    numpy.ndarray
+        The factor at ``t`` (same shape).
+
+    Raises
+    ------
+    ValueError
+        For start ≥ end or a non-positive or non-finite peak.
+
+    Examples
+    --------
+    >>> storm_factor([0.0, 150.0, 200.0, 250.0, 400.0], 100.0, 300.0, 3.0).tolist()
+    [1.0, 2.0, 3.0, 2.0, 1.0]
+    """
+    if not (math.isfinite(start_s) and math.isfinite(end_s) and start_s < end_s):
+        raise ValueError(f"the storm's start_s={start_s} must come before its end_s={end_s}")
+    if not (math.isfinite(peak) and peak > 0):
+        raise ValueError(f"the storm's peak={peak} must be a positive factor")
+    t = np.asarray(t, dtype=float)
+    phase = np.clip((t - start_s) / (end_s - start_s), 0.0, 1.0)
+    return 1.0 + (peak - 1.0) * np.sin(np.pi * phase) ** 2

@@ -203,3 +203,55 @@ def test_ctrl_c_in_make_demo_prints_no_make_error(tmp_path):
     assert "make: ***" not in out, out
     # make itself dies of the SIGINT it got too (status 130 in a shell, -2 here): that is make's way, not an error
     assert code in (0, -signal.SIGINT, 128 + signal.SIGINT), (code, out)
+
+
+def test_the_mast_demo_has_its_storm_and_its_damage_in_the_timeline():
+    import argparse
+
+    from shm_service.demo import add_demo_parser, demo_overrides
+
+    parser = argparse.ArgumentParser()
+    add_demo_parser(parser.add_subparsers())
+    args = parser.parse_args(["demo", "--structure", "mast", "--storm-peak", "3"])
+    settings = load_settings(None, demo_overrides(args, Path("unused")))
+    assert settings.sim.rig.endswith("examples/mast/rig.json") and settings.estimator.tofs == 0
+    # 1 % of the mast's own mass (1443.4 kg: tapered tubes, 7850 kg/m³) at its 20 m tip
+    assert settings.sim.damage == ("mass:14.4@20",)
+    t = demo_timeline(settings)
+    # the storm begins and has passed at 40 % and 80 % of the 1740 s after the 60 s rest
+    assert t.storm == pytest.approx((60.0 + 0.4 * 1740, 60.0 + 0.6 * 1740, 60.0 + 0.8 * 1740, 3.0))
+    assert t.baseline_s < t.storm[0]  # the baseline is the mast in ambient wind
+    sheet = parser.parse_args(["demo"])
+    assert demo_timeline(load_settings(None, demo_overrides(sheet, Path("unused")))).storm is None
+
+
+def test_a_short_mast_demo_under_a_storm_runs_at_max_speed(tmp_path):
+    config = tmp_path / "short.toml"
+    config.write_text(SHORT_CONFIG)
+    demo = tmp_path / "demo"
+    args = ["demo", "--structure", "mast", "--dir", str(demo), "--config", str(config), "--duration", "150",
+            "--speed", "max", "--damage-at", "115", "--no-dashboard", "--port", "0"]
+    result = subprocess.run(_shm(*args), capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    out = result.stdout + result.stderr
+    assert result.returncode == 0, out
+    assert "Traceback" not in out and "shm demo: done (exit 0)" in out
+    assert "examples/mast/rig.json at max speed" in out
+    # storm: 60 s rest, then 40 %-80 % of the 90 s after it, peaking halfway; the wind is scaled to the mast
+    assert re.search(r"\n\s+96 s\s+a storm begins", out) and re.search(r"\n\s+114 s\s+the storm peaks: the wind load is 4 x", out)
+    assert re.search(r"\n\s+132 s\s+the storm has passed", out)
+    assert re.search(r"ambient wind, [\d.]+ N/m RMS along the beam", out)
+    assert re.search(r"115 s\s+the damage appears: mass:14\.4@20", out)
+    storage = Storage(demo / "shm.sqlite")
+    try:
+        assert storage.count("trends") > 0
+    finally:
+        storage.close()
+    # the recording is the mast's: its rig has the tubes' sections and no ToF
+    from mcap.reader import make_reader
+
+    (recording,) = (demo / "recordings").glob("*.mcap")
+    with recording.open("rb") as f:
+        attachments = {a.name: a.data for a in make_reader(f).iter_attachments()}
+    rig = json.loads(attachments["rig.json"])
+    assert rig["beam"]["sections"][0]["shape"] == "tube"
+    assert not any(s["kind"] == "tof" for s in rig["sensors"])

@@ -159,3 +159,35 @@ def test_cli_rejects_bad_values(capsys, tmp_path):
     assert "--seeds '1,x' must list integers" in capsys.readouterr().err
     assert main(["study", "--out", str(tmp_path), "--target-phi-deg", "-1"]) == 2
     assert "argument --target-phi-deg: -1 is out of range (valid: a number > 0 and <= 90 °)" in capsys.readouterr().err
+
+
+MAST = __import__("pathlib").Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json"
+
+
+def test_a_rig_file_is_studied_with_the_sensors_it_has(tmp_path):
+    # the 20 m mast: four peripheral IMUs, four strain gauges, no ToF, clamped on a fixed foundation
+    settings = StudySettings(rig=str(MAST), seeds=(1,), duration=60.0, rest=20.0, excitation="ambient",
+                             friction_torque=0.0, workers=1)
+    bm = Configuration(peripheral="gyro", imus=4, tofs=0, gauges=4)
+    assert settings.benchmark() == bm
+    # no ToFs: ν_ρ = 0, and fewer gauges than Γ would leave unit deformations nothing observes
+    assert settings.configurations() == (bm, Configuration(peripheral="acc", imus=4, tofs=0, gauges=4))
+    stdout = io.StringIO()
+    assert run_command(settings, tmp_path, targets=DesignTargets(e_m=0.05), progress=None, stdout=stdout) == 0
+    rows = json.loads((tmp_path / "results.json").read_text())
+    assert [(r["peripheral"], r["tofs"], r["gauges"]) for r in rows] == [("gyro", 0, 4), ("acc", 0, 4)]
+    assert rows[0]["rmse_benchmark"] == {"phi_deg": 0.0, "e_m": 0.0, "b": [0.0] * 4}
+    assert all(0 < r["rmse_truth"]["e_m"] < 0.05 for r in rows)
+    design = json.loads((tmp_path / "design.json").read_text())
+    assert design["configurations"][0]["sensors"]["tofs"] == []
+    assert set(design["configurations"][0]["sensors"]["gauges"]) == {"g1", "g2", "g3", "g4"}
+    assert load_results(tmp_path, settings) is not None  # design mode reuses the table
+
+
+def test_a_rig_files_study_is_validated():
+    with pytest.raises(ValidationError, match="has 4 peripheral IMUs: Γ=5 needs at least 5"):
+        StudySettings(rig=str(MAST), modes=5)
+    with pytest.raises(ValidationError, match="studied with Γ=4; give a rig file"):
+        StudySettings(modes=3)
+    with pytest.raises(ValidationError, match="imus=3 must be at least Γ=4"):
+        Configuration(peripheral="gyro", imus=3, tofs=0, gauges=4)

@@ -301,3 +301,29 @@ def test_operational_distributed_load_is_spatially_correlated():
     with pytest.raises(ValueError, match="band_hz"):
         DistributedLoad(np.random.default_rng(2), x, rms_n_per_m=0.05, correlation_m=1.0, band_hz=(0.1, 300.0),
                         sample_rate_hz=200.0, start_s=0.0, ramp_s=0.0)
+
+
+def test_a_storm_that_passes_scales_the_wind_load_and_nothing_else():
+    from shm_service.virtual_rig import WindStorm
+    from shm_service.virtual_rig._excitation import DistributedLoad
+    from shm_service.virtual_rig._wind import storm_factor
+
+    # 1 + (peak − 1) sin²(π (t − start)/(end − start)): 1 outside, the peak halfway, half way up at a quarter
+    np.testing.assert_allclose(storm_factor([0.0, 100.0, 150.0, 200.0, 250.0, 300.0, 900.0], 100.0, 300.0, 5.0),
+                               [1.0, 1.0, 3.0, 5.0, 3.0, 1.0, 1.0], atol=1e-12)
+    with pytest.raises(ValueError, match="start_s=300.0 must come before its end_s=100.0"):
+        storm_factor([0.0], 300.0, 100.0, 2.0)
+    with pytest.raises(ValueError, match="peak=0.0"):
+        storm_factor([0.0], 0.0, 1.0, 0.0)
+    with pytest.raises(ValueError, match="must come before"):
+        WindStorm(start_s=10.0, end_s=10.0)
+    x = np.linspace(0.5, 20.0, 40)
+    kwargs = {"rms_n_per_m": 100.0, "correlation_m": 5.0, "band_hz": (0.1, 30.0), "sample_rate_hz": 200.0,
+              "start_s": 0.0, "ramp_s": 0.0}
+    calm = DistributedLoad(np.random.default_rng(3), x, **kwargs)
+    storm = DistributedLoad(np.random.default_rng(3), x, storm=(100.0, 300.0, 4.0), **kwargs)
+    t = np.arange(200 * 400) / 200.0
+    loads = calm.nodal_loads(t)
+    ratio = storm.nodal_loads(t) / np.where(loads == 0.0, np.nan, loads)
+    # the same random load (same seed), scaled by the storm's envelope sample by sample
+    np.testing.assert_allclose(np.nanmedian(ratio, axis=1), storm_factor(t, 100.0, 300.0, 4.0), rtol=1e-9)
