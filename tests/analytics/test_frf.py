@@ -60,7 +60,10 @@ def test_frf_modal_fit_and_output_only_agree_on_the_oscillator():
     oo = identify_modes(acc, FS, config=OmaConfig(fmin_hz=1.0, fmax_hz=8.0), inputs=ag)
     f = [x.frequency_hz for x in oo.modes]
     assert len(f) == 1 and f[0] == pytest.approx(3.0, rel=0.01), f
-    assert len(oo.rejected) == len(alone.modes) - 1 and all(why.startswith("input") for _, why in oo.rejected)
+    # what the outputs alone still list beside the mode, the measured input refutes; the poles that
+    # fail on physical grounds are rejected with their own reasons either way
+    refuted = [why for _, why in oo.rejected if why.startswith("input")]
+    assert len(refuted) == len(alone.modes) - 1
     assert oo.excitation is not None and oo.excitation.kind == "broadband"
     # and the input–output cross-check of the same call fits the FRFs to the same mode
     assert len(oo.frf_modes) == 1 and oo.frf_modes[0].frequency_hz == pytest.approx(3.0, rel=5e-3)

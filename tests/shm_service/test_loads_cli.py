@@ -55,7 +55,7 @@ def test_stress_channels_give_damage_on_a_curve(capsys, tmp_path):
 
 
 @pytest.mark.parametrize("content, argv, message", [
-    ("strain\n0\nnan\n1\n", [], "channel 'strain' has 1 NaN or infinite value(s), the first at sample 1"),
+    ("strain\n0\nnan\n1\n", [], "channel 'strain' has 1 rejected value(s) (NaN, infinite, blank or not a number), the first at sample 1"),
     ("strain\n0\n1\n", ["--curve", "EN1993-1-9:72"], "unknown EN 1993-1-9 detail category '72'"),
     ("strain\n0\n1\n", ["--exponents", "3,0"], "Wöhler exponents must be > 0, got 0.0"),
     ("strain\n0\n1\n", ["--stations", "1.0"], "--stations needs a contract recording"),
