@@ -116,17 +116,9 @@ def _dnv(row: tuple[float, float, float, float], n_knee: float, name: str) -> Sn
 
 
 def _user(points: object, name: str) -> SnCurve:
-    try:
-        p = np.asarray(points, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"curve points {points!r} must be [[N, stress_range_pa], ...]") from None
-    if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 2:
-        raise ValueError(f"curve points must be at least two [N, stress_range_pa] pairs, got shape {p.shape}")
-    if not np.all(np.isfinite(p)) or np.any(p <= 0):
-        raise ValueError(f"curve points must be finite and > 0, got {p.tolist()}")
+    check_curve_spec({"points": points})  # the contract's rules for a user curve, defined once
+    p = np.asarray(points, dtype=float)
     n, s = p[:, 0], p[:, 1]
-    if np.any(np.diff(n) <= 0) or np.any(np.diff(s) >= 0):
-        raise ValueError(f"curve points need N increasing and stress range decreasing, got {p.tolist()}")
     slopes = -np.diff(np.log10(n)) / np.diff(np.log10(s))
     logk = np.log10(n[:-1]) + slopes * np.log10(s[:-1])
     return SnCurve(name, tuple(float(v) for v in s[1:-1]), tuple(float(v) for v in slopes), tuple(float(v) for v in logk),
