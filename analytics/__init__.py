@@ -6,7 +6,8 @@ from ._alarms import AlarmEvent, AlarmLogic
 from ._analyze import AnalysisResult, ModeSummary, analyze, learn_baseline
 from ._chart import EwmaChart, chart_level
 from ._config import AnalysisConfig
-from ._curvature import CurvatureChange, beam_third, curvature_change, curvature_field, curvature_shape
+from ._curvature import (CurvatureChange, CurvatureStatistic, beam_third, curvature_change, curvature_field, curvature_shape,
+                         curvature_statistic, mode_shape_curvature)
 from ._damping import DampingEstimate, bandpass, combine_estimates, envelope_decay, find_decay_segments, log_decrement, random_decrement
 from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
 from ._location import DamageLocation, locate_damage
@@ -38,7 +39,8 @@ __all__ = [
     "AnalysisConfig", "AnalysisResult", "Baseline", "BaselineMode", "CurvatureChange", "DamageLocation", "DampingEstimate",
     "EwmaChart", "ModalMonitor", "ModeEstimate", "ModeSummary", "Peak", "Spectrum", "WindowResult",
     "amplitude_spectrum", "analyze", "averaged_spectrum", "bandpass", "beam_third", "combine_estimates",
-    "cross_spectra", "curvature_change", "curvature_field", "curvature_shape", "envelope_decay",
+    "cross_spectra", "curvature_change", "curvature_field", "curvature_shape", "curvature_statistic", "envelope_decay",
+    "mode_shape_curvature", "CurvatureStatistic",
     "find_decay_segments", "find_peaks", "fit_temperature_model", "interpolate_peak", "locate_damage", "log_decrement",
     "random_decrement",
     # operational modal analysis (SSI-cov, stabilisation, clustering, FRFs)
