@@ -710,6 +710,8 @@ class ModalMonitor:
         C/n_eff; :func:`analytics.curvature_statistic` adds the tolerance ``curvature_min_std`` per
         station."""
         bl, c = self.baseline, self.config
+        if bl.curvature_covariance is None:  # a stored state whose baseline predates the index
+            return None
         K = np.asarray(bl.curvature_shapes, dtype=float)
         C = np.asarray(bl.curvature_covariance, dtype=float)
         m = K.shape[0]
