@@ -165,3 +165,20 @@ def test_a_stiffness_loss_of_the_mast_raises_the_curvature_chart_and_is_located(
     # located by the FE signatures at the damaged segment (9–11 m), a stiffness loss, in the middle third
     assert cur[0]["located_by"] == "signatures" and 9.0 <= cur[0]["eta_m"] <= 11.0
     assert cur[0]["damage_kind"] == "stiffness" and cur[0]["third"] == "middle"
+
+
+def test_a_baseline_stored_before_the_mode_shape_index_arms_the_frequency_charts_only():
+    phis = np.eye(3)
+    exp = ((1.0,), (2.5,), (4.0,))
+    t = np.arange(int(900.0 * FS)) / FS
+    b = 1e-3 * resonators(t, FS, (1.0, 2.5, 4.0), phis, (1.0, 1.0, 1.0), seed=11)
+    cfg = AnalysisConfig(baseline_s=300.0, curvature_memory_windows=2.0)
+    new = analyze(t[: int(450 * FS)], b[: int(450 * FS)], S2, ETA, fs=FS, expected_hz=exp, config=cfg).baseline
+    old = new.to_dict()
+    del old["curvature_index"], old["curvature_covariance"], old["curvature_mode_windows"]
+    for baseline, charted in ((new.to_dict(), True), (old, False)):
+        res = analyze(t[int(450 * FS):], b[int(450 * FS):], S2, ETA, fs=FS, expected_hz=exp, config=cfg, baseline=baseline,
+                      time_origin_ns=int(450e9))
+        assert any(w.curvature_score is not None for w in res.windows) is charted
+        assert any(s is not None for w in res.windows for s in w.frequency_scores)
+        assert res.flags == ()
