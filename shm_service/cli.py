@@ -754,12 +754,47 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help (0) or an argument error (2, already printed)
         return exc.code if isinstance(exc.code, int) else 2
     try:
-        return args.func(args)
+        code = args.func(args)
+        sys.stdout.flush()  # a reader that went away (``| head``) answers here, not in the flush at exit
+        return code
+    except BrokenPipeError:
+        if not _stdout_closed():
+            raise  # another pipe of the command's: its own error
+        return _stdout_gone()
     except Exception as exc:
         if not isinstance(exc, _user_errors()):
             raise
         print(f"shm {args.command}: error: {exc}", file=sys.stderr)
         return 2
+
+
+#: The exit status of a writer whose reader closed the pipe (the shell's 128 + SIGPIPE).
+EXIT_BROKEN_PIPE = 141
+
+
+def _stdout_closed() -> bool:
+    """Whether stdout is a pipe whose reader has gone (poll reports an error on its write end)."""
+    import select
+
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poller.poll(0))
+    except (AttributeError, OSError, ValueError):
+        return True  # no file descriptor to ask: the error was raised writing to it
+
+
+def _stdout_gone() -> int:
+    """What Python's documentation advises for SIGPIPE: stdout pointed at devnull, so the flush at
+    exit does not raise again, and a quiet exit with the shell's status of a closed pipe."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (AttributeError, OSError, ValueError):
+        pass
+    return EXIT_BROKEN_PIPE
 
 
 if __name__ == "__main__":

@@ -790,7 +790,7 @@ def window_document(source: str, res: WindowResult, rows: list[TrendRow] | tuple
             mode=e.mode, unit=e.unit, frequency_hz=e.frequency_hz, amplitude=e.amplitude, confidence=round(e.confidence, 4),
             damping_ratio=damping.get(e.mode, e.damping_ratio), score_sigma=res.frequency_scores[i] if i < len(res.frequency_scores) else None,
             level=None if chart is None else chart.level, frequency_std_hz=e.frequency_std_hz, damping_std=e.damping_std,
-            mpc=e.mpc, mac=e.mac, method=e.method,
+            mpc=e.mpc, mac=e.mac, method=e.method, track=e.track,
         ))
     curvature = None
     if res.curvature is not None:
