@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from contract import ChartDocument, HotSpotLoadsDocument, LoadsWindowDocument, chart_name
+from contract import ChartDocument, HotSpotLoadsDocument, LoadsWindowDocument, StationLoadsDocument, chart_name
 
 from ._alarms import AlarmEvent, AlarmLogic
 from ._fatigue import FatigueDetail, HotSpotFatigue
@@ -49,6 +49,8 @@ class LoadsConfig(BaseModel):
     raise_windows: int = Field(3, ge=1)
     clear_windows: int = Field(3, ge=1)
     clear_fraction: float = Field(0.8, gt=0.0, lt=1.0, description="clear below this fraction of the warning line")
+    envelope_stations: int = Field(16, ge=0, le=400, description="stations of the strain envelope along the beam "
+                                   "(evenly spaced from the support, the free end left out: its curvature is zero)")
 
     @model_validator(mode="after")
     def _ordered(self) -> "LoadsConfig":
@@ -84,7 +86,7 @@ class LoadsMonitor:
 
     def __init__(self, hot_spots: list[HotSpotSpec], *, youngs_modulus: float, temperature_coefficient: float = 0.0,
                  reference_temperature: float = 20.0, design_life_years: float | None = None, config: LoadsConfig | None = None,
-                 state: dict[str, Any] | None = None) -> None:
+                 state: dict[str, Any] | None = None, stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
         if not hot_spots:
             raise ValueError("hot_spots is empty: the rig description names no hot spot")
         names = [h.name for h in hot_spots]
@@ -109,6 +111,17 @@ class LoadsMonitor:
         self.alarms = AlarmLogic(raise_windows=c.raise_windows, clear_windows=c.clear_windows, clear_sigma=c.clear_fraction,
                                  state=state.get("alarms"))
         self.events: list[AlarmEvent] = []
+        # the strain envelope's stations: (η (S,), s'' (S, Γ), c (S,)), or None
+        self.stations = None
+        if stations is not None:
+            eta, shapes, c = (np.asarray(a, dtype=float) for a in stations)
+            if eta.ndim != 1 or shapes.shape[0] != eta.size or c.shape != eta.shape or np.any(c <= 0):
+                raise ValueError(f"stations must be η (S,), s'' (S, Γ) and c (S,) > 0; got {eta.shape}, {shapes.shape}, {c.shape}")
+            self.stations = (eta, shapes, c)
+        #: when a list, each window's input is appended to it as the arguments of :meth:`process_stress`
+        #: (start_s, stress (n, hot spots) Pa at the reference E, duration_s, temperature_c, stations):
+        #: ``shm reprocess`` chains the files of an archive through one monitor with it
+        self.tap: list[tuple] | None = None
 
     @classmethod
     def from_rig(cls, rig: Any, curvature_at: Any, *, config: LoadsConfig | None = None, state: dict[str, Any] | None = None) -> "LoadsMonitor":
@@ -128,12 +141,19 @@ class LoadsMonitor:
         spots = [HotSpotSpec(h.name, float(h.position), FatigueDetail(sn_curve(h.curve), h.scf, h.gamma_Ff, h.gamma_Mf), shapes[i],
                              float(c[i])) for i, h in enumerate(rig.hot_spots)]
         design = rig.fatigue.design_life_years if rig.fatigue is not None else None
+        n = (config or LoadsConfig()).envelope_stations
+        stations = None
+        if n:
+            grid = np.linspace(0.0, beam.length, n + 1)[:-1]
+            stations = (grid, np.asarray(curvature_at(grid), dtype=float), np.asarray(beam.fibre_distance(grid), dtype=float))
         return cls(spots, youngs_modulus=beam.youngs_modulus, temperature_coefficient=beam.youngs_modulus_temperature_coefficient,
-                   reference_temperature=beam.reference_temperature, design_life_years=design, config=config, state=state)
+                   reference_temperature=beam.reference_temperature, design_life_years=design, config=config, state=state,
+                   stations=stations)
 
     def state_dict(self) -> dict[str, Any]:
-        return {"spots": {k: f.state_dict() for k, f in self.fatigue.items()}, "del_history": dict(self.del_history),
-                "alarms": self.alarms.state_dict()}
+        # copies: a window's state may be serialised after later windows ran (a commit waiting for the database)
+        return {"spots": {k: f.state_dict() for k, f in self.fatigue.items()},
+                "del_history": {k: list(v) for k, v in self.del_history.items()}, "alarms": self.alarms.state_dict()}
 
     def _chart(self, spot: str, condition: str, score: float | None, warning: float, alarm: float) -> ChartDocument:
         level = "ok" if score is None or score < warning else ("alarm" if score >= alarm else "warning")
@@ -147,16 +167,33 @@ class LoadsMonitor:
             raise ValueError(f"b must be (n, Γ) with n >= 1, got shape {B.shape}")
         if not np.all(np.isfinite(B)):
             raise ValueError("b contains NaN or inf")
-        duration = B.shape[0] / float(fs)
+        # nominal stress at the reference E: σ = −c E (b · s''); E(T) is applied per window
+        stress = np.column_stack([-h.fibre_distance_m * (B @ h.curvature_shape) * self.youngs_modulus for h in self.hot_spots])
+        stations = None
+        if self.stations is not None:
+            eta, shapes, c = self.stations
+            strain = -(B @ shapes.T) * c
+            stations = (eta, np.sqrt(np.mean(strain**2, axis=0)), np.ptp(strain, axis=0))
+        return self.process_stress(start_s, stress, B.shape[0] / float(fs), temperature_c, stations=stations)
+
+    def process_stress(self, start_s: float, stress: object, duration_s: float, temperature_c: float | None, *,
+                       stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> LoadsWindowDocument:
+        """Count one window's hot-spot stress (n, hot spots) in Pa at the reference E, lasting ``duration_s``;
+        ``stations``: (η, strain RMS, strain range) of the window's envelope, or None."""
+        S = np.asarray(stress, dtype=float)
+        if S.ndim != 2 or S.shape[1] != len(self.hot_spots) or S.shape[0] < 1:
+            raise ValueError(f"stress must be (n, {len(self.hot_spots)}) with n >= 1, got shape {S.shape}")
+        if self.tap is not None:
+            self.tap.append((float(start_s), S.copy(), float(duration_s), temperature_c, stations))
+        duration = float(duration_s)
         factor = 1.0
         if temperature_c is not None:
             factor = 1.0 + self.temperature_coefficient * (temperature_c - self.reference_temperature)
         c = self.config
         docs, charts = [], []
         m0 = str(int(c.exponents[0])) if float(c.exponents[0]).is_integer() else str(c.exponents[0])
-        for h in self.hot_spots:
-            stress = -h.fibre_distance_m * (B @ h.curvature_shape) * self.youngs_modulus * factor
-            w = self.fatigue[h.name].push(stress, duration, start_s=start_s)
+        for k, h in enumerate(self.hot_spots):
+            w = self.fatigue[h.name].push(S[:, k] * factor, duration, start_s=start_s)
             life = self.fatigue[h.name].life(self.design_life_years)
             dels = {(str(int(m)) if float(m).is_integer() else str(m)): v for m, v in w.del_pa.items()}
             docs.append(HotSpotLoadsDocument(
@@ -181,4 +218,10 @@ class LoadsMonitor:
                 usage = None if life.rate_per_year is None else life.rate_per_year * self.design_life_years
                 charts.append(self._chart(h.name, "rate", usage, 1.0, c.rate_alarm_usage))
         self.events = self.alarms.update(charts, start_s + duration)
-        return LoadsWindowDocument(start_s=start_s, duration_s=duration, temperature_c=temperature_c, hot_spots=docs, charts=charts)
+        envelope = []
+        if stations is not None:
+            e_t = self.youngs_modulus * factor
+            envelope = [StationLoadsDocument(position_m=float(x), strain_rms=float(r), strain_range_max=float(p),
+                                             stress_range_max_pa=float(p * e_t)) for x, r, p in zip(*stations)]
+        return LoadsWindowDocument(start_s=start_s, duration_s=duration, temperature_c=temperature_c, hot_spots=docs, charts=charts,
+                                   stations=envelope)

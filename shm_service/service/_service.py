@@ -21,6 +21,7 @@ from contract import (
     BaselineRequestDocument,
     BaselineStatusDocument,
     ChartLevelsDocument,
+    FatigueDocument,
     HealthDocument,
     IngestResultDocument,
     LiveEstimatesDocument,
@@ -55,6 +56,7 @@ from ._retention import RetentionWorker
 from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
 from ._storage import Storage, is_transient
+from ._store_fatigue import fatigue_document
 
 __all__ = ["MonitoringService", "NotSingleStructure", "ServiceError", "Structure", "StructureUnavailable"]
 
@@ -434,6 +436,21 @@ class _StoredRows:
     def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
         self._known(structure_id)
         return self.storage.alarms(state=state, source=structure_id)
+
+    def structure_fatigue(self, structure_id: str, from_s: float | None = None, to_s: float | None = None,
+                          limit: int = 100_000) -> FatigueDocument:
+        """Its hot spots' loads and life from the stored windows (issue 21; ``_store_fatigue``)."""
+        self._known(structure_id)
+        return fatigue_document(structure_id, *self.storage.fatigue_windows(structure_id, from_s=from_s, to_s=to_s, limit=limit))
+
+    def fatigue(self, structure_id: str | None = None, from_s: float | None = None, to_s: float | None = None,
+                limit: int = 100_000) -> FatigueDocument:
+        """As ``structure_fatigue``; None: the single structure (NotSingleStructure for a fleet)."""
+        if structure_id is None:
+            if getattr(self, "fleet", False):
+                raise NotSingleStructure("this service monitors a fleet ([[structures]]): use /api/structures/{id}/fatigue")
+            structure_id = next(iter(self.structures))  # type: ignore[attr-defined]
+        return self.structure_fatigue(structure_id, from_s, to_s, limit)
 
 
 class MonitoringService(_StoredRows):
