@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ._argtypes import number
+from ._commands import add_model_arguments
 
 if TYPE_CHECKING:
     import numpy as np
@@ -428,13 +429,6 @@ def add_loads_parser(sub) -> None:
                    help="also per window of S s (a contract recording): each station's DEL with its window's band")
     p.add_argument("--start", type=number(low=0, unit="s"), default=None, metavar="S",
                    help="count from S seconds into the record (default: the estimator's rest-phase end, else 0)")
-    # shm estimate's options, for raw recordings
-    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
-    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
-    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
-    p.add_argument("--imus", default=None, help="peripheral IMUs: a count or names (as shm estimate)")
-    p.add_argument("--tofs", default=None, help="ToFs: a count or names (as shm estimate)")
-    p.add_argument("--gauges", default=None, help="strain gauges: a count or names (as shm estimate)")
-    p.add_argument("--aided", default=None, help="unit deformations aided by the gauges, e.g. 2,3,4 (Eq. 22)")
+    add_model_arguments(p)  # shm estimate's options, for raw recordings
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_loads)
