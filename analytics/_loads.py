@@ -16,7 +16,7 @@ from ._rainflow import Cycles, HalfCyclePolicy, _finite_samples, _half_weight, c
 from ._sn_curves import damage_equivalent_range
 from ._validate import as_signal
 
-__all__ = ["DelBand", "SignalLoads", "bending_moment", "signal_loads", "virtual_strain"]
+__all__ = ["DelBand", "SignalLoads", "VirtualLoads", "bending_moment", "signal_loads", "virtual_strain"]
 
 
 def virtual_strain(b: object, curvature_shapes: object, fibre_distance: object) -> np.ndarray:
@@ -116,3 +116,71 @@ def signal_loads(x: object, *, exponents: tuple[float, ...] = (3.0, 5.0), n_eq: 
         if band is not None:
             damage_band = (detail.damage(stress, band.low), detail.damage(stress, band.high))
     return SignalLoads(float(np.sqrt(np.mean(v**2))), float(np.ptp(v)), dels, cycles, damage, damage_band)
+
+
+class VirtualLoads:
+    """Virtual strain, stress and bending moment at stations along the beam, per estimate sample.
+
+    ε(η, t) = −c(η) κ(η, t), κ = Σ b s''(η); σ = E(T) ε (None for a beam of table sections,
+    which has no E); M = EI(η, T) κ; for a clamped support also the root bending moment
+    M(0) = EI(0, T) κ(0). Built once per model (:meth:`from_rig`), applied per batch (``__call__``).
+
+    Parameters
+    ----------
+    positions : (S,) stations, m. names : (S,) a hot spot's name or "" for a grid station.
+    curvature_shapes : (S, Γ) s'' at the stations (1/m per unit b). fibre_distance : (S,) c, m.
+    beam : contract.Beam (E(T), EI(η, T)). root_shape : (Γ,) s'' at η = 0 for a clamped support, or None.
+    """
+
+    def __init__(self, positions: object, names: list[str], curvature_shapes: object, fibre_distance: object, beam: object,
+                 root_shape: object | None = None) -> None:
+        self.positions = as_signal("positions", positions, min_len=1, ndim=(1,))
+        self.names = list(names)
+        self.shapes = as_signal("curvature_shapes", curvature_shapes, min_len=1, ndim=(2,))
+        self.fibre = as_signal("fibre_distance", fibre_distance, min_len=1, ndim=(1,))
+        if not (len(self.names) == self.positions.size == self.shapes.shape[0] == self.fibre.size):
+            raise ValueError(f"{len(self.names)} names, {self.positions.size} positions, {self.shapes.shape[0]} curvature shapes "
+                             f"and {self.fibre.size} fibre distances must agree")
+        if np.any(self.fibre <= 0):
+            raise ValueError("fibre_distance must be > 0")
+        self.beam = beam
+        self.root_shape = None if root_shape is None else np.asarray(root_shape, dtype=float).reshape(-1)
+
+    @classmethod
+    def from_rig(cls, rig: object, curvature_at: object, *, grid: int | tuple[float, ...] = 16) -> "VirtualLoads":
+        """The rig's hot spots and a grid (``grid`` evenly spaced stations from the support, the free end
+        left out, or the positions given); ``curvature_at(η)`` gives s'' (len(η), Γ)."""
+        beam = rig.beam  # type: ignore[attr-defined]
+        if isinstance(grid, int):
+            if grid < 0:
+                raise ValueError(f"{grid=} must be >= 0")
+            points = np.linspace(0.0, beam.length, grid + 1)[:-1]
+        else:
+            points = np.asarray(grid, dtype=float)
+            bad = points[(points < 0) | (points > beam.length) | ~np.isfinite(points)]
+            if bad.size:
+                raise ValueError(f"station {bad[0]} m is outside the beam [0, {beam.length}] m")
+        spots = list(rig.hot_spots)  # type: ignore[attr-defined]
+        positions = np.concatenate([[h.position for h in spots], points])
+        names = [h.name for h in spots] + [""] * points.size
+        if positions.size == 0:
+            raise ValueError("no stations: the rig names no hot spot and the grid is empty")
+        shapes = np.asarray(curvature_at(positions), dtype=float)
+        root = np.asarray(curvature_at(np.array([0.0])), dtype=float)[0] if rig.support == "clamped" else None  # type: ignore[attr-defined]
+        return cls(positions, names, shapes, np.asarray(beam.fibre_distance(positions), dtype=float), beam, root)
+
+    def __call__(self, b: object, temperature_c: float | None = None) -> dict[str, np.ndarray | None]:
+        """{"strain": (N, S) m/m, "stress_pa": (N, S) or None, "moment_nm": (N, S), "root_moment_nm": (N,) or None} of b (N, Γ)."""
+        B = as_signal("b", b, min_len=1, ndim=(2,))
+        if B.shape[1] != self.shapes.shape[1]:
+            raise ValueError(f"b has {B.shape[1]} unit deformations, the stations' shapes {self.shapes.shape[1]}")
+        kappa = B @ self.shapes.T
+        strain = -kappa * self.fibre
+        stress = None
+        if getattr(self.beam, "youngs_modulus", None) is not None:
+            stress = strain * self.beam.youngs_modulus_at(temperature_c)  # type: ignore[attr-defined]
+        ei = np.asarray(self.beam.bending_stiffness(self.positions, temperature_c), dtype=float)  # type: ignore[attr-defined]
+        root = None
+        if self.root_shape is not None:
+            root = (B @ self.root_shape) * float(self.beam.bending_stiffness(0.0, temperature_c))  # type: ignore[attr-defined]
+        return {"strain": strain, "stress_pa": stress, "moment_nm": kappa * ei, "root_moment_nm": root}

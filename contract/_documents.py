@@ -720,6 +720,14 @@ class LiveEstimatesDocument(_Document):
     x: list[list[Finite]] = Field(default_factory=list, description="the state vector of each estimate")
     sensors: dict[str, SensorState] = Field(default_factory=dict, description="topic -> state, now")
     watch_s: Finite = Field(description="how long the structure keeps estimates after this read, s")
+    # virtual loads of each estimate (issue 21): the hot spots, then a grid from the support
+    loads_stations_m: list[Finite] = Field(default_factory=list, description="stations of strain, stress and moment, m")
+    loads_station_names: list[str] = Field(default_factory=list, description="the hot spot at each station, '' for a grid station")
+    strain: list[list[Finite]] = Field(default_factory=list, description="bending strain ε = −c κ per estimate and station, m/m")
+    stress_pa: list[list[Finite]] | None = Field(None, description="nominal stress E ε per estimate and station, Pa, at the "
+                                                               "reference temperature's E (None: a beam of table sections has no E)")
+    moment_nm: list[list[Finite]] = Field(default_factory=list, description="bending moment EI κ per estimate and station, N·m")
+    root_moment_nm: list[Finite] | None = Field(None, description="the root bending moment per estimate, N·m (clamped support only)")
 
 
 class ErrorDocument(_Document):

@@ -90,10 +90,18 @@ def served(mast_recording, tmp_path_factory):
     toml = _config(tmp, mast_recording, tmp / "shm.sqlite")
     serve = _serve(toml, tmp)
     try:
-        _wait(lambda: _finished(serve.url))
+        sid = httpx.get(f"{serve.url}/api/structures", timeout=30).json()["structures"][0]["id"]
+        live: list[dict] = []
+
+        def finished() -> bool:  # watching the live view meanwhile (a read keeps the structure keeping estimates)
+            doc = httpx.get(f"{serve.url}/api/structures/{sid}/live", timeout=30).json()
+            if doc["t_s"]:
+                live.append(doc)
+            return _finished(serve.url)
+
+        _wait(finished)
         with httpx.Client(base_url=serve.url, timeout=30) as c:
-            sid = c.get("/api/structures").json()["structures"][0]["id"]
-            answers = {"sid": sid, "status": c.get("/api/status").json(), "single": c.get("/api/fatigue"),
+            answers = {"sid": sid, "live": live, "status": c.get("/api/status").json(), "single": c.get("/api/fatigue"),
                        "structure": c.get(f"/api/structures/{sid}/fatigue"),
                        "csv": c.get(f"/api/structures/{sid}/fatigue", params={"format": "csv"}),
                        "limited": c.get(f"/api/structures/{sid}/fatigue", params={"limit": 2}),
@@ -251,3 +259,30 @@ def test_reprocess_of_the_archive_accumulates_the_damage_the_live_service_did(se
     for spot in SPOTS:
         last = max(k for k in live if k[1] == spot)
         assert again[last][1] == pytest.approx(live[last][1], rel=1e-5)
+
+
+def test_the_live_view_carries_virtual_strain_stress_and_moments(served):
+    """Each live estimate carries ε = −c κ, σ = E ε, M = EI κ at the hot spots and the grid, and the
+    clamped mast's root bending moment (issue 21, deliverable 1)."""
+    import numpy as np
+
+    from contract import LiveEstimatesDocument, load_rig
+
+    _, _, a = served
+    assert a["live"], "the live view kept no estimate while watched"
+    doc = LiveEstimatesDocument.model_validate(a["live"][-1])
+    n, names = len(doc.t_s), doc.loads_station_names
+    assert names[:2] == ["base_flange_weld", "door_opening"] and doc.loads_stations_m[:2] == [0.15, 2.0]
+    assert len(doc.loads_stations_m) == 2 + 16 and set(names[2:]) == {""}
+    strain, stress, moment = np.array(doc.strain), np.array(doc.stress_pa), np.array(doc.moment_nm)
+    assert strain.shape == stress.shape == moment.shape == (n, 18) and len(doc.root_moment_nm) == n
+    beam = load_rig(MAST).beam
+    eta = np.array(doc.loads_stations_m)
+    np.testing.assert_allclose(stress, strain * 2.1e11, rtol=1e-12)
+    # M = EI κ and ε = −c κ: M = −EI ε / c at every station
+    np.testing.assert_allclose(moment, -strain * beam.bending_stiffness(eta) / beam.fibre_distance(eta), rtol=1e-9, atol=1e-9)
+    # the grid's first station is the root: the root moment is its moment
+    np.testing.assert_allclose(doc.root_moment_nm, moment[:, 2], rtol=1e-12)
+    assert np.max(np.abs(strain[:, 2])) > 1e-6  # the wind bends the mast
+    # the status's hot spots, the live view's and the fatigue rows name the same hot spots
+    assert set(names[:2]) == {h["name"] for h in a["status"]["pipeline"]["hot_spots"]}
