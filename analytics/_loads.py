@@ -16,7 +16,7 @@ from ._rainflow import Cycles, HalfCyclePolicy, _finite_samples, _half_weight, c
 from ._sn_curves import damage_equivalent_range
 from ._validate import as_signal
 
-__all__ = ["DelBand", "SignalLoads", "VirtualLoads", "bending_moment", "signal_loads", "virtual_strain"]
+__all__ = ["BAND_FLOOR", "IN_SAMPLE_FACTOR", "DelBand", "SignalLoads", "VirtualLoads", "bending_moment", "signal_loads", "truncation_band", "virtual_strain"]
 
 
 def virtual_strain(b: object, curvature_shapes: object, fibre_distance: object) -> np.ndarray:
@@ -65,6 +65,50 @@ class DelBand:
     low: float
     high: float
     method: str
+
+
+#: Smallest half-width of a virtual station's DEL band (the estimate's own resolution).
+BAND_FLOOR = 0.02
+#: The gauges pulled the estimate towards themselves: their in-sample discrepancy is scaled by this.
+IN_SAMPLE_FACTOR = 2.0
+
+
+def truncation_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, exponents: tuple[float, ...], n_eq: float,
+                    in_sample: tuple[str, ...], half_cycles: HalfCyclePolicy = "half") -> tuple[DelBand | None, list[dict]]:
+    """The DEL band of virtual stations: the modal truncation seen at the strain gauges.
+
+    At each gauge the DEL of the virtual strain (from b) is compared with the DEL of the measured
+    strain; the largest relative discrepancy over the gauges and exponents, times ``IN_SAMPLE_FACTOR``
+    at a gauge that aided the estimate (the estimate was pulled towards it, so its discrepancy
+    understates the one between gauges), at least ``BAND_FLOOR``, is the half-width a of the band
+    [DEL/(1 + a), DEL·(1 + a)].
+
+    Parameters
+    ----------
+    gauges : (name, position m, virtual strain (n,), measured strain (n,)) per gauge.
+    exponents : Wöhler exponents. n_eq : equivalent cycles. in_sample : the gauges that aided the estimate.
+
+    Returns
+    -------
+    (DelBand, or None without gauges; per gauge its discrepancies).
+    """
+    if not gauges:
+        return None, []
+    worst, rows = 0.0, []
+    for name, position, virtual, measured in gauges:
+        v = signal_loads(virtual, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"virtual strain at {name}")
+        g = signal_loads(measured, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain gauge {name}")
+        rel = {m: (dv / dg - 1.0) if dg > 0 else 0.0 for (m, _, dv), (_, _, dg) in zip(v.dels, g.dels)}
+        rms = float(np.sqrt(np.mean((np.asarray(virtual) - np.asarray(measured)) ** 2)) / max(g.rms, 1e-300))
+        aided = name in in_sample
+        rows.append({"name": name, "position_m": position, "aided_the_estimate": aided,
+                     "del_discrepancy": [{"m": m, "relative": r} for m, r in rel.items()], "strain_rms_discrepancy": rms})
+        worst = max(worst, (IN_SAMPLE_FACTOR if aided else 1.0) * max(abs(r) for r in rel.values()))
+    a = max(BAND_FLOOR, worst)
+    method = (f"modal truncation seen at the strain gauges ({', '.join(r['name'] for r in rows)}): largest relative DEL "
+              f"discrepancy of the virtual against the measured strain, x{IN_SAMPLE_FACTOR:g} at a gauge that aided the estimate, "
+              f"at least {BAND_FLOOR:.0%}; band [DEL/(1+a), DEL*(1+a)] with a = {a:.4f}")
+    return DelBand(1.0 / (1.0 + a), 1.0 + a, method), rows
 
 
 @dataclass(frozen=True)

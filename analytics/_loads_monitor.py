@@ -12,6 +12,10 @@ line (1 = the warning line; the alarm line and the clear line are multiples of i
 * ``del``: the window's DEL (m = the first exponent) against its baseline, the median of the first
   ``baseline_windows`` windows: score (ratio − 1)/(del_warning_ratio − 1).
 * ``consumed``: D / consumed_warning (alarm at consumed_alarm / consumed_warning).
+
+With strain gauges (``GaugeSpec``) and their measured strain in a window, each hot spot's DELs
+and damage increment carry a band, the modal truncation seen at the gauges
+(:func:`analytics.truncation_band`, the same as ``shm loads``), with the method stated.
 """
 
 from __future__ import annotations
@@ -26,9 +30,10 @@ from contract import ChartDocument, HotSpotLoadsDocument, LoadsWindowDocument, S
 
 from ._alarms import AlarmEvent, AlarmLogic
 from ._fatigue import FatigueDetail, HotSpotFatigue
+from ._loads import truncation_band
 from ._rainflow import HalfCyclePolicy
 
-__all__ = ["HotSpotSpec", "LoadsConfig", "LoadsMonitor"]
+__all__ = ["GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor"]
 
 
 class LoadsConfig(BaseModel):
@@ -74,6 +79,17 @@ class HotSpotSpec:
     fibre_distance_m: float
 
 
+@dataclass(frozen=True)
+class GaugeSpec:
+    """A strain gauge as the band needs it: where, s'' there (Γ,) (1/m), c (m), and whether it aided the estimate."""
+
+    name: str
+    position_m: float
+    curvature_shape: np.ndarray
+    fibre_distance_m: float
+    in_sample: bool
+
+
 class LoadsMonitor:
     """Per-window loads of the hot spots (see the module docstring).
 
@@ -86,7 +102,8 @@ class LoadsMonitor:
 
     def __init__(self, hot_spots: list[HotSpotSpec], *, youngs_modulus: float, temperature_coefficient: float = 0.0,
                  reference_temperature: float = 20.0, design_life_years: float | None = None, config: LoadsConfig | None = None,
-                 state: dict[str, Any] | None = None, stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+                 state: dict[str, Any] | None = None, stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                 gauges: list[GaugeSpec] | None = None) -> None:
         if not hot_spots:
             raise ValueError("hot_spots is empty: the rig description names no hot spot")
         names = [h.name for h in hot_spots]
@@ -122,11 +139,15 @@ class LoadsMonitor:
         #: (start_s, stress (n, hot spots) Pa at the reference E, duration_s, temperature_c, stations):
         #: ``shm reprocess`` chains the files of an archive through one monitor with it
         self.tap: list[tuple] | None = None
+        self.gauges = list(gauges or [])
 
     @classmethod
-    def from_rig(cls, rig: Any, curvature_at: Any, *, config: LoadsConfig | None = None, state: dict[str, Any] | None = None) -> "LoadsMonitor":
+    def from_rig(cls, rig: Any, curvature_at: Any, *, config: LoadsConfig | None = None, state: dict[str, Any] | None = None,
+                 gauges_in_sample: tuple[str, ...] | None = None) -> "LoadsMonitor":
         """The monitor of a rig description's ``hot_spots`` (contract.RigDescription); ``curvature_at(η)`` gives the
-        unit deformations' s'' at positions η (len(η), Γ) (``estimator.UnitDeformations.curvature``)."""
+        unit deformations' s'' at positions η (len(η), Γ) (``estimator.UnitDeformations.curvature``).
+        The rig's strain gauges judge the band; ``gauges_in_sample`` names those that aided the estimate
+        (None: unknown, all of them are taken as in-sample: the wider band)."""
         from ._sn_curves import sn_curve
 
         beam = rig.beam
@@ -146,9 +167,16 @@ class LoadsMonitor:
         if n:
             grid = np.linspace(0.0, beam.length, n + 1)[:-1]
             stations = (grid, np.asarray(curvature_at(grid), dtype=float), np.asarray(beam.fibre_distance(grid), dtype=float))
+        gauges = []
+        sensors = list(rig.sensors_of("strain"))
+        if sensors:
+            at = np.array([g.position for g in sensors], dtype=float)
+            g_shapes, g_c = np.asarray(curvature_at(at), dtype=float), np.asarray(beam.fibre_distance(at), dtype=float)
+            gauges = [GaugeSpec(g.name, float(g.position), g_shapes[k], float(g_c[k]),
+                                gauges_in_sample is None or g.name in gauges_in_sample) for k, g in enumerate(sensors)]
         return cls(spots, youngs_modulus=beam.youngs_modulus, temperature_coefficient=beam.youngs_modulus_temperature_coefficient,
                    reference_temperature=beam.reference_temperature, design_life_years=design, config=config, state=state,
-                   stations=stations)
+                   stations=stations, gauges=gauges)
 
     def state_dict(self) -> dict[str, Any]:
         # copies: a window's state may be serialised after later windows ran (a commit waiting for the database)
@@ -160,8 +188,10 @@ class LoadsMonitor:
         return ChartDocument(name=chart_name("fatigue", hot_spot=spot, condition=condition), kind="fatigue", level=level,
                              score_sigma=score, warning_sigma=warning, alarm_sigma=alarm)
 
-    def process_window(self, start_s: float, b: object, fs: float, temperature_c: float | None) -> LoadsWindowDocument:
-        """Count one window's new samples b (n, Γ) at ``fs`` Hz (the part no earlier window counted)."""
+    def process_window(self, start_s: float, b: object, fs: float, temperature_c: float | None,
+                       measured: dict[str, np.ndarray] | None = None) -> LoadsWindowDocument:
+        """Count one window's new samples b (n, Γ) at ``fs`` Hz (the part no earlier window counted);
+        ``measured``: the gauges' strain on the same samples (name → (n,)), for the band."""
         B = np.asarray(b, dtype=float)
         if B.ndim != 2 or B.shape[0] < 1:
             raise ValueError(f"b must be (n, Γ) with n >= 1, got shape {B.shape}")
@@ -174,17 +204,37 @@ class LoadsMonitor:
             eta, shapes, c = self.stations
             strain = -(B @ shapes.T) * c
             stations = (eta, np.sqrt(np.mean(strain**2, axis=0)), np.ptp(strain, axis=0))
-        return self.process_stress(start_s, stress, B.shape[0] / float(fs), temperature_c, stations=stations)
+        band = self._band(B, measured, B.shape[0] / float(fs))
+        return self.process_stress(start_s, stress, B.shape[0] / float(fs), temperature_c, stations=stations, band=band)
+
+    def _band(self, B: np.ndarray, measured: dict[str, np.ndarray] | None, duration: float) -> tuple[float, float, str] | None:
+        """(low, high, method) of the window's DEL band from the gauges measured over all of it, else None."""
+        if not measured or not self.gauges:
+            return None
+        pairs = []
+        for g in self.gauges:
+            m = measured.get(g.name)
+            if m is None or len(m) != B.shape[0] or not np.all(np.isfinite(m)):
+                continue
+            pairs.append((g.name, g.position_m, -g.fibre_distance_m * (B @ g.curvature_shape), np.asarray(m, dtype=float)))
+        if not pairs:
+            return None
+        in_sample = tuple(g.name for g in self.gauges if g.in_sample)
+        found, _rows = truncation_band(pairs, exponents=self.config.exponents, n_eq=self.config.n_eq_per_s * duration,
+                                       in_sample=in_sample, half_cycles=self.config.half_cycles)
+        return None if found is None else (found.low, found.high, found.method)
 
     def process_stress(self, start_s: float, stress: object, duration_s: float, temperature_c: float | None, *,
-                       stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> LoadsWindowDocument:
+                       stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                       band: tuple[float, float, str] | None = None) -> LoadsWindowDocument:
         """Count one window's hot-spot stress (n, hot spots) in Pa at the reference E, lasting ``duration_s``;
-        ``stations``: (η, strain RMS, strain range) of the window's envelope, or None."""
+        ``stations``: (η, strain RMS, strain range) of the window's envelope, or None; ``band``: (low, high,
+        method) of the DELs relative to their value, or None."""
         S = np.asarray(stress, dtype=float)
         if S.ndim != 2 or S.shape[1] != len(self.hot_spots) or S.shape[0] < 1:
             raise ValueError(f"stress must be (n, {len(self.hot_spots)}) with n >= 1, got shape {S.shape}")
         if self.tap is not None:
-            self.tap.append((float(start_s), S.copy(), float(duration_s), temperature_c, stations))
+            self.tap.append((float(start_s), S.copy(), float(duration_s), temperature_c, stations, band))
         duration = float(duration_s)
         factor = 1.0
         if temperature_c is not None:
@@ -196,13 +246,20 @@ class LoadsMonitor:
             w = self.fatigue[h.name].push(S[:, k] * factor, duration, start_s=start_s)
             life = self.fatigue[h.name].life(self.design_life_years)
             dels = {(str(int(m)) if float(m).is_integer() else str(m)): v for m, v in w.del_pa.items()}
+            banded: dict[str, Any] = {}
+            if band is not None:
+                low, high, method = band
+                fatigue = self.fatigue[h.name]
+                banded = {"del_band_pa": {k: [v * low, v * high] for k, v in dels.items()}, "band_method": method,
+                          "damage_band": [fatigue.detail.damage(fatigue.last_closed, low),
+                                          fatigue.detail.damage(fatigue.last_closed, high)]}
             docs.append(HotSpotLoadsDocument(
                 name=h.name, position_m=h.position_m, curve=h.detail.curve.name, del_pa=dels, n_eq=c.n_eq_per_s * duration,
                 max_range_pa=w.max_range_pa, damage_increment=w.damage_increment, consumed=w.consumed,
                 rate_per_year=life.rate_per_year, rate_band_per_year=None if life.rate_band_per_year is None else list(life.rate_band_per_year),
                 remaining_years=life.remaining_years,
                 remaining_band_years=None if life.remaining_band_years is None else list(life.remaining_band_years),
-                verdict=life.verdict, design_life_years=self.design_life_years))
+                verdict=life.verdict, design_life_years=self.design_life_years, **banded))
             # DEL against its baseline (the median of the first windows)
             history = self.del_history.setdefault(h.name, [])
             score_del = None

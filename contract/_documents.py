@@ -557,6 +557,11 @@ class HotSpotLoadsDocument(_Document):
     remaining_band_years: list[Num] | None = None
     verdict: Literal["finite", "no_damage_below_cutoff", "exhausted", "no_data"]
     design_life_years: Num = None
+    del_band_pa: dict[str, list[Num]] | None = Field(None, description="[low, high] of each DEL: where the true DEL lies "
+                                                     "(None: no measured strain gauge to judge the virtual strain by)")
+    damage_band: list[Num] | None = Field(None, description="[low, high] of the damage increment, the closed cycles' ranges "
+                                          "scaled by the DEL band's ends")
+    band_method: str | None = Field(None, description="how the band was found")
 
 
 class PipelineStatusDocument(_Document):

@@ -162,8 +162,8 @@ class _LoadsChain:
             return []
         if self.monitor is None:
             self.monitor = result["loads"]
-        return [self.monitor.process_stress(start, stress, duration, temperature, stations=stations)
-                for start, stress, duration, temperature, stations in result["tap"]]
+        return [self.monitor.process_stress(start, stress, duration, temperature, stations=stations, band=band)
+                for start, stress, duration, temperature, stations, band in result["tap"]]
 
 
 def recording_start_ns(path: str) -> int | None:

@@ -236,13 +236,17 @@ class _Analytics:
     def _loads(self, state: dict | None) -> LoadsMonitor:
         units = self.model.units
         try:
-            return LoadsMonitor.from_rig(self.model.rig, units.curvature, state=state)
+            return LoadsMonitor.from_rig(self.model.rig, units.curvature, state=state, gauges_in_sample=self._aiding_gauges())
         except ValueError as exc:
             if state is None:
                 raise
             # never silently: the consumed life starts again from zero
             log.error("%s: stored loads state unusable (%s); the hot spots' damage is counted from zero", self.source_id, exc)
-            return LoadsMonitor.from_rig(self.model.rig, units.curvature)
+            return LoadsMonitor.from_rig(self.model.rig, units.curvature, gauges_in_sample=self._aiding_gauges())
+
+    def _aiding_gauges(self) -> tuple[str, ...]:
+        """The strain gauges the estimator uses (their discrepancy is in-sample: the band doubles it)."""
+        return tuple(getattr(getattr(self.model, "selection", None), "gauges", ()) or ())
 
     def state(self) -> dict:
         """The engine state a window's commit persists: the monitor's and the loads' (the residue)."""
@@ -294,7 +298,7 @@ class _Analytics:
 
     # -- data ---------------------------------------------------------------------------------
     def add(self, epoch_ns: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None,
-            temperature: tuple[np.ndarray, np.ndarray] | None) -> list[WindowOutput]:
+            temperature: tuple[np.ndarray, np.ndarray] | None, gauges: dict | None = None) -> list[WindowOutput]:
         """b (n, Γ) and the support displacement d (n,) at t (n,) s after ``epoch_ns``; temperature
         (times s after epoch_ns, °C) or None."""
         if self.engine is None:
@@ -316,7 +320,7 @@ class _Analytics:
                 self.engine.add([], np.zeros((0, self.gamma)), temperature=temperature_now)
             return out
         had = self.monitor.baseline is not None
-        for w in self.engine.add(t, b, support=d, temperature=temperature_now):
+        for w in self.engine.add(t, b, support=d, temperature=temperature_now, gauges=gauges):
             out.append(self._output(w, had))
             had = self.monitor.baseline is not None
         return out
@@ -552,15 +556,24 @@ class Pipeline:
             # Windows that would hold the diverged filter's b (or the new one's first seconds) are not analysed.
             settle = self.estimator.epoch_ns + int(round((self.estimator.restarted_at_s + self.estimator.health_config.settle_s) * _NS))
             self._not_before(settle)
-        self._emit(out, released.get(TEMPERATURE_TOPIC))
+        self._emit(out, released.get(TEMPERATURE_TOPIC), self._gauges(released))
 
-    def _emit(self, out: FilterOutput | None, temp) -> None:
+    def _gauges(self, released: dict) -> dict | None:
+        """The released strain gauge samples by gauge name (UNIX ns, values): the loads' band (issue 21)."""
+        if self.analytics.loads is None or not self.analytics.loads.gauges:
+            return None
+        topics = {f"/strain/{g.name}": g.name for g in self.analytics.loads.gauges}
+        return {topics[k]: (v[0], v[1][:, 0]) for k, v in released.items() if k in topics and len(v[0])} or None
+
+    def _emit(self, out: FilterOutput | None, temp, gauges: dict | None = None) -> None:
         epoch = self.estimator.epoch_ns
         if epoch is None:
             return
         # times after the estimator's epoch (whole UNIX seconds): the engine aligns its windows
         # in data time from there to the nanosecond
         temperature = None if temp is None else ((temp[0] - epoch) * 1e-9, temp[1][:, 0])
+        if gauges is not None:  # times after the epoch, as b's
+            gauges = {k: ((tv[0] - epoch) * 1e-9, tv[1]) for k, tv in gauges.items()}
         if out is None or not len(out.t):
             if temperature is not None:
                 self._analyse(epoch, np.zeros(0), np.zeros((0, self.model.gamma)), None, temperature, None)
@@ -578,15 +591,16 @@ class Pipeline:
         if self.archive_estimates:
             self._archive_estimates(out)
         self._push_estimates(t_abs, out)
-        self._analyse(epoch, out.t, b, d, temperature, float(t_abs[0]))
+        self._analyse(epoch, out.t, b, d, temperature, float(t_abs[0]), gauges)
 
     # -- the analysis stage (inline, or in its thread in this order) ----------------------------
 
-    def _analyse(self, epoch: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None, temperature, first_s: float | None) -> None:
+    def _analyse(self, epoch: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None, temperature, first_s: float | None,
+                 gauges: dict | None = None) -> None:
         if self._analysis_thread is None:
-            self._analyse_now(epoch, t, b, d, temperature, first_s)
+            self._analyse_now(epoch, t, b, d, temperature, first_s, gauges)
         else:
-            self._put(("chunk", (epoch, t, b, d, temperature, first_s)))
+            self._put(("chunk", (epoch, t, b, d, temperature, first_s, gauges)))
 
     def _not_before(self, ns: int) -> None:
         if self._analysis_thread is None:
@@ -603,12 +617,12 @@ class Pipeline:
         self.analytics.set_not_before(max(self.analytics.not_before_ns or ns, ns))
 
     def _analyse_now(self, epoch: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None, temperature,
-                     first_s: float | None) -> None:
+                     first_s: float | None, gauges: dict | None = None) -> None:
         if first_s is not None and self._reset_requested:
             self._reset_requested = False
             self.analytics.reset()
             self._clear_for_new_baseline(first_s)
-        for window in self.analytics.add(epoch, t, b, d, temperature):
+        for window in self.analytics.add(epoch, t, b, d, temperature, gauges):
             self._commit(window)
 
     def drain_analysis(self) -> None:

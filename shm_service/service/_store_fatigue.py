@@ -50,13 +50,17 @@ FATIGUE_SCHEMA = """
         remaining_band_years TEXT,
         verdict TEXT NOT NULL,
         design_life_years REAL,
+        del_band_pa TEXT,
+        damage_band TEXT,
+        band_method TEXT,
         PRIMARY KEY (source, window_start_s, hot_spot)
     ) WITHOUT ROWID
 """
 
 _SPOT_COLUMNS = ("position_m", "curve", "del_pa", "n_eq", "max_range_pa", "damage_increment", "consumed", "rate_per_year",
-                 "rate_band_per_year", "remaining_years", "remaining_band_years", "verdict", "design_life_years")
-_JSON = frozenset({"del_pa", "rate_band_per_year", "remaining_band_years"})
+                 "rate_band_per_year", "remaining_years", "remaining_band_years", "verdict", "design_life_years", "del_band_pa",
+                 "damage_band", "band_method")
+_JSON = frozenset({"del_pa", "rate_band_per_year", "remaining_band_years", "del_band_pa", "damage_band"})
 
 
 def _conditions(source: str, from_s: float | None, to_s: float | None) -> tuple[str, list[Any]]:

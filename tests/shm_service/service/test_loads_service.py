@@ -133,6 +133,13 @@ def test_the_service_counts_the_hot_spots_and_serves_their_fatigue(served):
         assert spot.del_pa["3"] > 0 and spot.del_pa["5"] > 0 and spot.verdict in ("finite", "no_damage_below_cutoff")
         # each window counts its first step (10 s of the 20 s window): N_eq = 1 Hz × 10 s
         assert all(h.n_eq == pytest.approx(10.0) for h in trend)
+        # the band of each window, judged at the mast's four strain gauges, with its method stated
+        for h in trend:
+            assert h.band_method.startswith("modal truncation seen at the strain gauges (g1, g2, g3, g4)")
+            for m, (low, high) in h.del_band_pa.items():
+                assert low < h.del_pa[m] < high and high / h.del_pa[m] == pytest.approx(h.del_pa[m] / low, rel=1e-9)
+                assert high / h.del_pa[m] >= 1.02  # at least the 2 % floor
+            assert h.damage_band[0] <= h.damage_increment <= h.damage_band[1]
     # the strain envelope along the 20 m mast: 16 stations from the foundation, largest at the root
     env = doc.envelope
     assert len(env) == 16 and env[0].position_m == 0.0 and env[-1].position_m == pytest.approx(18.75)
