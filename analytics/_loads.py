@@ -7,7 +7,9 @@ M = EI(η, T)·κ. Pure numerics: arrays in, arrays and frozen results out.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -105,7 +107,7 @@ def truncation_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, 
                      "del_discrepancy": [{"m": m, "relative": r} for m, r in rel.items()], "strain_rms_discrepancy": rms})
         worst = max(worst, (IN_SAMPLE_FACTOR if aided else 1.0) * max(abs(r) for r in rel.values()))
     a = max(BAND_FLOOR, worst)
-    method = (f"modal truncation seen at the strain gauges ({', '.join(r['name'] for r in rows)}): largest relative DEL "
+    method = (f"modal truncation seen at the strain gauges ({', '.join(str(g[0]) for g in gauges)}): largest relative DEL "
               f"discrepancy of the virtual against the measured strain, x{IN_SAMPLE_FACTOR:g} at a gauge that aided the estimate, "
               f"at least {BAND_FLOOR:.0%}; band [DEL/(1+a), DEL*(1+a)] with a = {a:.4f}")
     return DelBand(1.0 / (1.0 + a), 1.0 + a, method), rows
@@ -176,7 +178,7 @@ class VirtualLoads:
     beam : contract.Beam (E(T), EI(η, T)). root_shape : (Γ,) s'' at η = 0 for a clamped support, or None.
     """
 
-    def __init__(self, positions: object, names: list[str], curvature_shapes: object, fibre_distance: object, beam: object,
+    def __init__(self, positions: object, names: list[str], curvature_shapes: object, fibre_distance: object, beam: Any,
                  root_shape: object | None = None) -> None:
         self.positions = as_signal("positions", positions, min_len=1, ndim=(1,))
         self.names = list(names)
@@ -191,10 +193,10 @@ class VirtualLoads:
         self.root_shape = None if root_shape is None else np.asarray(root_shape, dtype=float).reshape(-1)
 
     @classmethod
-    def from_rig(cls, rig: object, curvature_at: object, *, grid: int | tuple[float, ...] = 16) -> "VirtualLoads":
+    def from_rig(cls, rig: Any, curvature_at: Callable[[np.ndarray], Any], *, grid: int | tuple[float, ...] = 16) -> "VirtualLoads":
         """The rig's hot spots and a grid (``grid`` evenly spaced stations from the support, the free end
         left out, or the positions given); ``curvature_at(η)`` gives s'' (len(η), Γ)."""
-        beam = rig.beam  # type: ignore[attr-defined]
+        beam = rig.beam
         if isinstance(grid, int):
             if grid < 0:
                 raise ValueError(f"{grid=} must be >= 0")
@@ -204,13 +206,13 @@ class VirtualLoads:
             bad = points[(points < 0) | (points > beam.length) | ~np.isfinite(points)]
             if bad.size:
                 raise ValueError(f"station {bad[0]} m is outside the beam [0, {beam.length}] m")
-        spots = list(rig.hot_spots)  # type: ignore[attr-defined]
+        spots = list(rig.hot_spots)
         positions = np.concatenate([[h.position for h in spots], points])
-        names = [h.name for h in spots] + [""] * points.size
+        names: list[str] = [str(h.name) for h in spots] + [""] * points.size
         if positions.size == 0:
             raise ValueError("no stations: the rig names no hot spot and the grid is empty")
         shapes = np.asarray(curvature_at(positions), dtype=float)
-        root = np.asarray(curvature_at(np.array([0.0])), dtype=float)[0] if rig.support == "clamped" else None  # type: ignore[attr-defined]
+        root = np.asarray(curvature_at(np.array([0.0])), dtype=float)[0] if rig.support == "clamped" else None
         return cls(positions, names, shapes, np.asarray(beam.fibre_distance(positions), dtype=float), beam, root)
 
     def __call__(self, b: object, temperature_c: float | None = None) -> dict[str, np.ndarray | None]:
@@ -222,9 +224,9 @@ class VirtualLoads:
         strain = -kappa * self.fibre
         stress = None
         if getattr(self.beam, "youngs_modulus", None) is not None:
-            stress = strain * self.beam.youngs_modulus_at(temperature_c)  # type: ignore[attr-defined]
-        ei = np.asarray(self.beam.bending_stiffness(self.positions, temperature_c), dtype=float)  # type: ignore[attr-defined]
+            stress = strain * self.beam.youngs_modulus_at(temperature_c)
+        ei = np.asarray(self.beam.bending_stiffness(self.positions, temperature_c), dtype=float)
         root = None
         if self.root_shape is not None:
-            root = (B @ self.root_shape) * float(self.beam.bending_stiffness(0.0, temperature_c))  # type: ignore[attr-defined]
+            root = (B @ self.root_shape) * float(self.beam.bending_stiffness(0.0, temperature_c))
         return {"strain": strain, "stress_pa": stress, "moment_nm": kappa * ei, "root_moment_nm": root}

@@ -129,12 +129,12 @@ class LoadsMonitor:
                                  state=state.get("alarms"))
         self.events: list[AlarmEvent] = []
         # the strain envelope's stations: (η (S,), s'' (S, Γ), c (S,)), or None
-        self.stations = None
+        self.stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         if stations is not None:
-            eta, shapes, c = (np.asarray(a, dtype=float) for a in stations)
-            if eta.ndim != 1 or shapes.shape[0] != eta.size or c.shape != eta.shape or np.any(c <= 0):
-                raise ValueError(f"stations must be η (S,), s'' (S, Γ) and c (S,) > 0; got {eta.shape}, {shapes.shape}, {c.shape}")
-            self.stations = (eta, shapes, c)
+            eta, shapes, fibre = (np.asarray(a, dtype=float) for a in stations)
+            if eta.ndim != 1 or shapes.shape[0] != eta.size or fibre.shape != eta.shape or np.any(fibre <= 0):
+                raise ValueError(f"stations must be η (S,), s'' (S, Γ) and c (S,) > 0; got {eta.shape}, {shapes.shape}, {fibre.shape}")
+            self.stations = (eta, shapes, fibre)
         #: when a list, each window's input is appended to it as the arguments of :meth:`process_stress`
         #: (start_s, stress (n, hot spots) Pa at the reference E, duration_s, temperature_c, stations):
         #: ``shm reprocess`` chains the files of an archive through one monitor with it
