@@ -21,6 +21,7 @@ import numpy as np
 from ._documents import (
     AlarmDocument,
     BaselineRequestDocument,
+    FatigueDocument,
     HealthDocument,
     IngestResultDocument,
     LiveEstimatesDocument,
@@ -63,6 +64,12 @@ class StructurePort(Protocol):
 
     def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
         """Its alarms, newest first."""
+        ...
+
+    def structure_fatigue(self, structure_id: str, from_s: float | None = None, to_s: float | None = None,
+                          limit: int = 100_000) -> FatigueDocument:
+        """Its hot spots' loads and life, the per-window trend with ``from_s <= start_s < to_s``
+        (UNIX s; None: open) and the strain envelope of those windows."""
         ...
 
     def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
@@ -117,6 +124,12 @@ class ServicePort(StructurePort, Protocol):
                limit: int = 100_000) -> list[TrendRow]: ...
 
     def alarms(self, state: str | None = None) -> list[AlarmDocument]: ...
+
+    def fatigue(self, structure_id: str | None = None, from_s: float | None = None, to_s: float | None = None,
+                limit: int = 100_000) -> FatigueDocument:
+        """As ``structure_fatigue`` of ``structure_id``; None: the service's one structure (a fleet
+        raises ``LookupError`` as ``status(None)`` does: ask per structure)."""
+        ...
 
     def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         """Acknowledge an alarm as ``by``; ``KeyError`` when it does not exist."""

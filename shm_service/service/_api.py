@@ -500,6 +500,10 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
         return result
 
     _fleet_routes(app, service, authorize)
+    from ._routes_fatigue import router as fatigue_router  # issue 21 (store's create_app includes the routers)
+
+    app.state.port = service
+    app.include_router(fatigue_router)
 
     @app.get("/metrics", summary="Prometheus metrics (text format); of a fleet, per structure (label structure)", response_class=PlainTextResponse,
              responses={**_AUTH_RESPONSES, 200: {"content": {"text/plain": {"schema": {"type": "string"}}}}})

@@ -21,6 +21,7 @@ from contract import (
     BaselineRequestDocument,
     BaselineStatusDocument,
     ChartLevelsDocument,
+    FatigueDocument,
     HealthDocument,
     IngestResultDocument,
     LiveEstimatesDocument,
@@ -55,6 +56,7 @@ from ._retention import RetentionWorker
 from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
 from ._storage import Storage, is_transient
+from ._store_fatigue import fatigue_document
 
 __all__ = ["MonitoringService", "NotSingleStructure", "ServiceError", "Structure", "StructureUnavailable"]
 
@@ -168,7 +170,8 @@ class Structure:
                                             unit_modes=[list(g) for g in m.mode_map.unit_modes])
         self.pipeline: Pipeline | None = None
         self.archive: Archive | None = None
-        self.live = LiveRing(self.id, list(m.state_layout.names))  # its estimates for a live view, kept while watched
+        # its estimates for a live view, kept while watched, with their virtual strain, stress and moment (issue 21)
+        self.live = LiveRing(self.id, list(m.state_layout.names), loads=_virtual_loads(self.rig, m))
 
     def attach(self, storage: Storage, sink: Any, sink_guard: SinkGuard) -> None:
         """Create the pipeline on the shared ``storage`` (after the source, so a bad source fails first)."""
@@ -434,6 +437,21 @@ class _StoredRows:
     def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
         self._known(structure_id)
         return self.storage.alarms(state=state, source=structure_id)
+
+    def structure_fatigue(self, structure_id: str, from_s: float | None = None, to_s: float | None = None,
+                          limit: int = 100_000) -> FatigueDocument:
+        """Its hot spots' loads and life from the stored windows (issue 21; ``_store_fatigue``)."""
+        self._known(structure_id)
+        return fatigue_document(structure_id, *self.storage.fatigue_windows(structure_id, from_s=from_s, to_s=to_s, limit=limit))
+
+    def fatigue(self, structure_id: str | None = None, from_s: float | None = None, to_s: float | None = None,
+                limit: int = 100_000) -> FatigueDocument:
+        """As ``structure_fatigue``; None: the single structure (NotSingleStructure for a fleet)."""
+        if structure_id is None:
+            if getattr(self, "fleet", False):
+                raise NotSingleStructure("this service monitors a fleet ([[structures]]): use /api/structures/{id}/fatigue")
+            structure_id = next(iter(self.structures))  # type: ignore[attr-defined]
+        return self.structure_fatigue(structure_id, from_s, to_s, limit)
 
 
 class MonitoringService(_StoredRows):
@@ -837,6 +855,17 @@ class MonitoringService(_StoredRows):
             raise LookupError(f"{what} is {structure.source.kind}, not ingest")
         result = structure.source.submit(document)
         return None if result is None else IngestResultDocument(**result.as_dict())
+
+
+def _virtual_loads(rig: RigDescription, model: Any) -> tuple[Any, Any] | None:
+    """(analytics.VirtualLoads of the rig's hot spots and a 16-station grid, b of states) for the live view."""
+    from analytics import VirtualLoads
+
+    try:
+        return VirtualLoads.from_rig(rig, model.units.curvature), model.state_layout.b_of
+    except ValueError as exc:  # never stops the service: the live view goes without loads
+        log.warning("no virtual loads in the live view: %s", exc)
+        return None
 
 
 def _check_sensor_counts(rig: RigDescription, est: Any) -> None:

@@ -51,7 +51,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from contract import AlarmDocument, AlarmEventDocument, TrendRow
+from contract import AlarmDocument, AlarmEventDocument, LoadsWindowDocument, TrendRow
+
+from ._store_fatigue import FATIGUE_SCHEMA, FatigueRepository
 
 __all__ = ["AlarmChange", "SCHEMA_VERSION", "Storage", "StorageUnavailable", "WindowCommit", "is_transient"]
 
@@ -205,6 +207,8 @@ _MIGRATIONS: tuple[str, ...] = (
         done_at REAL NOT NULL
     );
     """,
+    # 5: the hot spots' loads and life per window (issue 21; the residue is in monitor_state's engine state)
+    FATIGUE_SCHEMA,
 )
 
 SCHEMA_VERSION = len(_MIGRATIONS)
@@ -299,6 +303,7 @@ class WindowCommit:
     calibration: dict | None
     alarm_changes: list[AlarmChange] = field(default_factory=list)
     baseline: dict | None = None  # a newly learnt baseline to store as active
+    loads: LoadsWindowDocument | None = None  # the hot spots' loads of the window (its residue is in monitor_state)
 
 
 class Storage:
@@ -627,9 +632,10 @@ class Storage:
         return self._read(run)
 
     def commit_reprocessed(self, *, key: str, path: str, source: str, content_sha256: str, configuration: str,
-                           windows: int, start_s: float | None, end_s: float | None, rows: list[TrendRow]) -> None:
-        """A reprocessed recording's trend rows (replacing those of the same windows) and its
-        ledger row, in one transaction: after a kill a file is either done or not started."""
+                           windows: int, start_s: float | None, end_s: float | None, rows: list[TrendRow],
+                           loads: Sequence[LoadsWindowDocument] = ()) -> None:
+        """A reprocessed recording's trend rows and loads windows (replacing those of the same windows)
+        and its ledger row, in one transaction: after a kill a file is either done or not started."""
         now = time.time()
         for r in rows:
             if r.source != source:
@@ -640,6 +646,8 @@ class Storage:
                 f"INSERT OR REPLACE INTO trends ({', '.join(TREND_COLUMNS)}, created_at) VALUES ({', '.join('?' * (len(TREND_COLUMNS) + 1))})",
                 [(*(getattr(r, c) for c in TREND_COLUMNS), now) for r in rows],
             )
+            for doc in loads:
+                FatigueRepository.insert_window(db, source, doc, at=now, replace=True)
             db.execute(
                 "INSERT INTO sources (id, kind, detail, first_seen_s, last_seen_s) VALUES (?, 'reprocess', ?, ?, ?) "
                 "ON CONFLICT(id) DO UPDATE SET first_seen_s=MIN(first_seen_s, excluded.first_seen_s), "
@@ -684,6 +692,8 @@ class Storage:
                        f"VALUES ({', '.join('?' * (len(_STATE_COLUMNS) + 1))}) {_STATE_UPSERT}", (*state, now))
             # The source is judged again: its alarms are no longer stale.
             db.execute("UPDATE alarms SET stale=0 WHERE source=? AND stale=1", (commit.source,))
+            if commit.loads is not None:
+                FatigueRepository.insert_window(db, commit.source, commit.loads, at=now)
             if commit.baseline is not None:
                 self._store_baseline(db, commit.source, commit.baseline, now)
             for change in commit.alarm_changes:
@@ -693,7 +703,7 @@ class Storage:
             return events
 
         plain = None
-        if not commit.alarm_changes and commit.baseline is None:
+        if not commit.alarm_changes and commit.baseline is None and commit.loads is None:
             plain = (rows, state)
         return self._group_commit(_Ticket(run, bool(commit.alarm_changes), self.retry_s if retry_s is None else float(retry_s),
                                           plain))
@@ -935,6 +945,19 @@ class Storage:
         args.append(int(limit))
         rows = self._read(lambda db: db.execute(sql, args).fetchall())
         return [TrendRow.model_validate(dict(r)) for r in rows]
+
+    def fatigue_windows(self, source: str, *, from_s: float | None = None, to_s: float | None = None,
+                        limit: int = 100_000) -> tuple[list[LoadsWindowDocument], int, LoadsWindowDocument | None]:
+        """(the stored loads windows of ``source`` with ``from_s <= start < to_s``, oldest first, at most
+        ``limit``; how many the period holds; the newest window of the period) in one read."""
+
+        def run(db: sqlite3.Connection):
+            latest = FatigueRepository.latest(db, source, to_s)
+            if latest is not None and from_s is not None and latest.start_s < from_s:
+                latest = None
+            return FatigueRepository.windows(db, source, from_s, to_s, limit), FatigueRepository.count(db, source, from_s, to_s), latest
+
+        return self._read(run)
 
     def delete_trends_older_than(self, age_s: float) -> int:
         """Delete the trend rows whose window starts more than ``age_s`` before the newest window of
