@@ -26,6 +26,7 @@ from contract import (
     LiveEstimatesDocument,
     ModelDocument,
     NotificationStatusDocument,
+    Page,
     RigDescription,
     ServiceStatusDocument,
     SourceStatusDocument,
@@ -427,6 +428,23 @@ class _StoredRows:
                          limit: int = 100_000) -> list[TrendRow]:
         self._known(structure_id)
         return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit)
+
+    def trends_page(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+                    *, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        return self.storage.trends_page(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit, cursor=cursor)
+
+    def structure_trends_page(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
+                              *, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        self._known(structure_id)
+        return self.storage.trends_page(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit, cursor=cursor)
+
+    def alarms_page(self, state: str | None = None, *, limit: int = 1000, cursor: str | None = None) -> Page[AlarmDocument]:
+        return self.storage.alarms_page(state=state, limit=limit, cursor=cursor)
+
+    def structure_alarms_page(self, structure_id: str, state: str | None = None, *, limit: int = 1000,
+                              cursor: str | None = None) -> Page[AlarmDocument]:
+        self._known(structure_id)
+        return self.storage.alarms_page(state=state, source=structure_id, limit=limit, cursor=cursor)
 
     def alarms(self, state: str | None = None) -> list[AlarmDocument]:
         return self.storage.alarms(state=state)

@@ -44,14 +44,17 @@ import random
 import sqlite3
 import threading
 import time
-import uuid
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from contract import AlarmDocument, AlarmEventDocument, TrendRow
+from contract import AlarmDocument, Page, TrendRow
+
+from ._store_alarms import AlarmChange, AlarmQuery, AlarmRepository, NotifyPolicy
+from ._store_paging import decode_cursor, open_page
+from ._store_trends import TREND_COLUMNS, TrendQuery, TrendRepository
 
 __all__ = ["AlarmChange", "SCHEMA_VERSION", "Storage", "StorageUnavailable", "WindowCommit", "is_transient"]
 
@@ -209,9 +212,6 @@ _MIGRATIONS: tuple[str, ...] = (
 
 SCHEMA_VERSION = len(_MIGRATIONS)
 
-#: The trend table's columns are the trend row document's fields, the alarm table's the alarm document's.
-TREND_COLUMNS = tuple(TrendRow.model_fields)
-ALARM_COLUMNS = tuple(AlarmDocument.model_fields)
 #: A window's monitor state row (then ``updated_at``), and how it replaces the stored one (a
 #: window without a calibration keeps the stored calibration); written by a window's transaction
 #: and by the plain windows' trigger alike.
@@ -247,31 +247,6 @@ def _conditions(pairs: Sequence[tuple[str, Any]]) -> tuple[list[str], list[Any]]
     """The SQL conditions (and their arguments) of the pairs whose value is not None."""
     kept = [(sql, value) for sql, value in pairs if value is not None]
     return [sql for sql, _ in kept], [value for _, value in kept]
-
-
-def _finite(x: Any) -> float | None:
-    if x is None:
-        return None
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
-@dataclass(frozen=True)
-class AlarmChange:
-    """What the alarm logic decided for one chart in one window.
-
-    ``action``: "raise" (new alarm at ``level``), "escalate" (the active alarm of the chart goes
-    to "alarm"), "clear" (the active alarm of the chart clears)."""
-
-    action: str
-    chart: str
-    kind: str
-    mode: int | None
-    level: str
-    at_s: float
-    value: float | None
-    threshold: float | None
-    message: str
 
 
 @dataclass(eq=False)
@@ -338,6 +313,7 @@ class Storage:
         self._leading = False
         self.groups = 0  # group transactions written
         self.grouped_windows = 0  # windows written in them
+        self._busy_timeout_s = float(busy_timeout_s)
         self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None, timeout=busy_timeout_s)
         self._db.row_factory = sqlite3.Row
         self._db.execute("PRAGMA journal_mode=WAL")
@@ -358,6 +334,8 @@ class Storage:
             self._rlock = threading.RLock()
         self._stage()
         self._instance = self._read(lambda db: str(db.execute("SELECT value FROM meta WHERE key='instance'").fetchone()[0]))
+        self.policy = NotifyPolicy(self._instance, self.notify_targets, self.notify_levels, bool(notify_cleared),
+                                   bool(notify_stale))
 
     def _stage(self) -> None:
         """The writing connection's TEMP tables and trigger of the plain windows (module docstring):
@@ -636,10 +614,7 @@ class Storage:
                 raise ValueError(f"trend row of source {r.source!r} for source {source!r}")
 
         def run(db: sqlite3.Connection) -> None:
-            db.executemany(
-                f"INSERT OR REPLACE INTO trends ({', '.join(TREND_COLUMNS)}, created_at) VALUES ({', '.join('?' * (len(TREND_COLUMNS) + 1))})",
-                [(*(getattr(r, c) for c in TREND_COLUMNS), now) for r in rows],
-            )
+            TrendRepository(db).insert([tuple(getattr(r, c) for c in TREND_COLUMNS) for r in rows], now, replace=True)
             db.execute(
                 "INSERT INTO sources (id, kind, detail, first_seen_s, last_seen_s) VALUES (?, 'reprocess', ?, ?, ?) "
                 "ON CONFLICT(id) DO UPDATE SET first_seen_s=MIN(first_seen_s, excluded.first_seen_s), "
@@ -676,18 +651,15 @@ class Storage:
         def run(db: sqlite3.Connection) -> list[int]:
             now = time.time()
             events: list[int] = []
-            db.executemany(
-                f"INSERT OR IGNORE INTO trends ({', '.join(TREND_COLUMNS)}, created_at) VALUES ({', '.join('?' * (len(TREND_COLUMNS) + 1))})",
-                [(*row, now) for row in rows],
-            )
+            TrendRepository(db).insert(rows, now)
             db.execute(f"INSERT INTO monitor_state ({', '.join(_STATE_COLUMNS)}, updated_at) "
                        f"VALUES ({', '.join('?' * (len(_STATE_COLUMNS) + 1))}) {_STATE_UPSERT}", (*state, now))
-            # The source is judged again: its alarms are no longer stale.
-            db.execute("UPDATE alarms SET stale=0 WHERE source=? AND stale=1", (commit.source,))
+            alarms = AlarmRepository(db, self.policy)
+            alarms.clear_stale([commit.source])  # the source is judged again: its alarms are no longer stale
             if commit.baseline is not None:
                 self._store_baseline(db, commit.source, commit.baseline, now)
             for change in commit.alarm_changes:
-                event = self._apply_alarm(db, commit.source, change, now)
+                event = alarms.apply(commit.source, change, now)
                 if event is not None:
                     events.append(event)
             return events
@@ -824,63 +796,6 @@ class Storage:
         else:
             db.execute("UPDATE baselines SET state='active', learnt_at=?, start_s=?, end_s=?, data=? WHERE id=?", (*args, row["id"]))
 
-    def _apply_alarm(self, db: sqlite3.Connection, source: str, change: AlarmChange, now: float) -> int | None:
-        active = db.execute(
-            "SELECT * FROM alarms WHERE source=? AND chart=? AND state='active' ORDER BY id DESC LIMIT 1", (source, change.chart)
-        ).fetchone()
-        if change.action == "raise":
-            if active is not None:
-                return None
-            cur = db.execute(
-                "INSERT OR IGNORE INTO alarms (source, chart, kind, mode, level, state, raised_at_s, value, threshold, message) "
-                "VALUES (?, ?, ?, ?, ?, 'active', ?, ?, ?, ?)",
-                (source, change.chart, change.kind, change.mode, change.level, change.at_s, _finite(change.value),
-                 _finite(change.threshold), change.message),
-            )
-            if not cur.rowcount:
-                return None
-            alarm_id, event = int(cur.lastrowid), "raised"
-        elif change.action == "escalate":
-            if active is None or active["level"] == "alarm":
-                return None
-            alarm_id, event = int(active["id"]), "escalated"
-            db.execute("UPDATE alarms SET level='alarm', value=?, threshold=?, message=? WHERE id=?",
-                       (_finite(change.value), _finite(change.threshold), change.message, alarm_id))
-        elif change.action == "clear":
-            if active is None:
-                return None
-            alarm_id, event = int(active["id"]), "cleared"
-            db.execute("UPDATE alarms SET state='cleared', cleared_at_s=? WHERE id=?", (change.at_s, alarm_id))
-        else:
-            raise ValueError(f"unknown alarm action {change.action!r}")
-        return self._event(db, alarm_id, event, change.level, change.at_s, now)
-
-    def _event(self, db: sqlite3.Connection, alarm_id: int, event: str, level: str, at_s: float, now: float,
-               *, notify: bool | None = None) -> int:
-        """Insert an alarm event (its per-alarm sequence number and UUID) and, when it notifies,
-        its outbox rows, one per target."""
-        seq = int(db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM alarm_events WHERE alarm_id=?", (alarm_id,)).fetchone()[0])
-        event_uuid = uuid.uuid4().hex
-        cur = db.execute(
-            "INSERT INTO alarm_events (alarm_id, seq, uuid, event, level, at_s, created_at) VALUES (?, ?, ?, ?, ?, ?, ?)",
-            (alarm_id, seq, event_uuid, event, level, at_s, now),
-        )
-        event_id = int(cur.lastrowid)
-        if notify is None:
-            notify = ((event in ("raised", "escalated", "repeated") and level in self.notify_levels)
-                      or (event == "cleared" and self.notify_cleared) or (event == "stale" and self.notify_stale))
-        if notify and self.notify_targets:
-            alarm = AlarmDocument.model_validate(dict(db.execute(
-                f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE id=?", (alarm_id,)).fetchone()))
-            payload = AlarmEventDocument(id=f"shm-{self._instance}-{event_uuid}", event=event, sequence=seq, level=level,
-                                         at_s=at_s, alarm=alarm).model_dump_json()
-            db.executemany(
-                "INSERT OR IGNORE INTO outbox (event_id, alarm_id, channel, target, payload, status, next_attempt_at, created_at) "
-                "VALUES (?, ?, ?, ?, ?, 'pending', ?, ?)",
-                [(event_id, alarm_id, channel, target, payload, now, now) for channel, target in self.notify_targets],
-            )
-        return event_id
-
     # -- re-notification and stale alarms --------------------------------------------------------
 
     def renotify_due(self, interval_s: float, now: float | None = None) -> list[int]:
@@ -888,37 +803,30 @@ class Storage:
         event (raised, escalated, repeated) is ``interval_s`` old. Returns the new event ids."""
         if not (math.isfinite(interval_s) and interval_s > 0):
             raise ValueError(f"{interval_s=} must be a positive number of seconds")
-        now = time.time() if now is None else now
-
-        def due(db: sqlite3.Connection) -> list:
-            return db.execute(
-                "SELECT a.id, a.level FROM alarms AS a WHERE a.state='active' AND a.stale=0 AND "
-                "(SELECT MAX(e.created_at) FROM alarm_events AS e WHERE e.alarm_id=a.id AND "
-                "e.event IN ('raised', 'escalated', 'repeated')) <= ?", (now - interval_s,)).fetchall()
-
-        if not self._read(due):
+        at = time.time() if now is None else now
+        if not self._read(lambda db: AlarmRepository(db).due_for_repeat(at - interval_s)):
             return []
 
         def run(db: sqlite3.Connection) -> list[int]:
-            return [self._event(db, int(r["id"]), "repeated", r["level"], now, now) for r in due(db)]
+            alarms = AlarmRepository(db, self.policy)
+            return [alarms.event(i, "repeated", level, at, at) for i, level in alarms.due_for_repeat(at - interval_s)]
 
         return self._write(run, durable=True)
 
     def mark_stale(self, silent_since: float, now: float | None = None) -> list[int]:
         """Mark stale the active alarms of every source not seen since ``silent_since`` (UNIX s,
         wall clock; ``sources.last_seen_s``), with a 'stale' event each. Returns the alarm ids."""
-        now = time.time() if now is None else now
-        query = ("SELECT a.id, a.level FROM alarms AS a JOIN sources AS s ON s.id = a.source "
-                 "WHERE a.state='active' AND a.stale=0 AND s.last_seen_s < ?")
-        if not self._read(lambda db: db.execute(query, (silent_since,)).fetchall()):
+        at = time.time() if now is None else now
+        if not self._read(lambda db: AlarmRepository(db).silent(silent_since)):
             return []
 
         def run(db: sqlite3.Connection) -> list[int]:
-            rows = db.execute(query, (silent_since,)).fetchall()
-            for r in rows:
-                db.execute("UPDATE alarms SET stale=1 WHERE id=?", (r["id"],))
-                self._event(db, int(r["id"]), "stale", r["level"], now, now)
-            return [int(r["id"]) for r in rows]
+            alarms = AlarmRepository(db, self.policy)
+            found = alarms.silent(silent_since)
+            for alarm_id, level in found:
+                alarms.mark_stale(alarm_id)
+                alarms.event(alarm_id, "stale", level, at, at)
+            return [alarm_id for alarm_id, _ in found]
 
         return self._write(run, durable=True)
 
@@ -926,29 +834,46 @@ class Storage:
 
     def trends(self, *, from_s: float | None = None, to_s: float | None = None, mode: int | None = None,
                source: str | None = None, limit: int = 100_000) -> list[TrendRow]:
-        where, args = _conditions([("window_start_s >= ?", from_s), ("window_start_s < ?", to_s), ("mode = ?", mode),
-                                   ("source = ?", source)])
-        sql = f"SELECT {', '.join(TREND_COLUMNS)} FROM trends"
-        if where:
-            sql += " WHERE " + " AND ".join(where)
-        sql += " ORDER BY window_start_s, source, mode LIMIT ?"
-        args.append(int(limit))
-        rows = self._read(lambda db: db.execute(sql, args).fetchall())
-        return [TrendRow.model_validate(dict(r)) for r in rows]
+        query = TrendQuery(from_s, to_s, mode, source)
+        return self._read(lambda db: TrendRepository(db).query(query, limit))
+
+    def trends_page(self, *, from_s: float | None = None, to_s: float | None = None, mode: int | None = None,
+                    source: str | None = None, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        """A page of trend rows after ``cursor`` (``_store_paging``: counted in one snapshot, streamed)."""
+        after = decode_cursor(TrendRepository.name, cursor, TrendRepository.key_types)
+        return self._page(TrendRepository, TrendQuery(from_s, to_s, mode, source), limit=limit, after=after)
+
+    def alarms_page(self, *, state: str | None = None, source: str | None = None, limit: int = 1000,
+                    cursor: str | None = None) -> Page[AlarmDocument]:
+        """A page of alarms, newest first, after ``cursor``."""
+        after = decode_cursor(AlarmRepository.name, cursor, AlarmRepository.key_types)
+        return self._page(AlarmRepository, AlarmQuery(state, source), limit=limit, after=after)
+
+    def _page(self, repository: Callable[[sqlite3.Connection], Any], query: Any, *, limit: int,
+              after: tuple | None) -> Page[Any]:
+        if self._rdb is self._db:  # in memory (tests): no second connection sees it; read at once
+            def whole(db: sqlite3.Connection) -> Page[Any]:
+                page = open_page(lambda: (db, lambda: None), repository(db), query, limit=limit, after=after)
+                page.items = iter(list(page.items))
+                return page
+
+            return self._read(whole)
+
+        def attempt() -> Page[Any]:
+            # a reading connection of its own for the page (WAL: its read transaction is a
+            # snapshot no writer waits for), closed when the page is read or closed
+            db = sqlite3.connect(str(self.path), check_same_thread=False, isolation_level=None, timeout=self._busy_timeout_s)
+            db.execute("PRAGMA query_only=ON")
+            return open_page(lambda: (db, db.close), repository(db), query, limit=limit, after=after)
+
+        return self._call_with_retry(attempt)
 
     def delete_trends_older_than(self, age_s: float) -> int:
         """Delete the trend rows whose window starts more than ``age_s`` before the newest window of
         their source (data time: a replay of old data keeps its rows). Returns how many went."""
         if not (math.isfinite(age_s) and age_s > 0):
             raise ValueError(f"{age_s=} must be a positive number of seconds")
-
-        def run(db: sqlite3.Connection) -> int:
-            cur = db.execute(
-                "DELETE FROM trends WHERE window_start_s < "
-                "(SELECT MAX(t.window_start_s) FROM trends AS t WHERE t.source = trends.source) - ?", (float(age_s),))
-            return int(cur.rowcount)
-
-        return self._write(run)
+        return self._write(lambda db: TrendRepository(db).delete_older_than(age_s))
 
     def count(self, table: str) -> int:
         if table not in ("trends", "alarms", "alarm_events", "outbox", "notification_log", "baselines"):
@@ -958,43 +883,21 @@ class Storage:
     def alarms(self, *, state: str | None = None, limit: int = 1000, source: str | None = None) -> list[AlarmDocument]:
         """Alarms, newest first (only those in ``state``: "active" or "cleared"; only those of
         ``source`` when given)."""
-        if state not in (None, "active", "cleared"):
-            raise ValueError(f"{state=} must be 'active', 'cleared' or None")
-        where, args = _conditions([("state = ?", state), ("source = ?", source)])
-        sql = f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms"
-        if where:
-            sql += " WHERE " + " AND ".join(where)
-        sql += " ORDER BY id DESC LIMIT ?"
-        args.append(int(limit))
-
-        def run(db: sqlite3.Connection) -> list:
-            return db.execute(sql, args).fetchall()
-
-        return [AlarmDocument.model_validate(dict(r)) for r in self._read(run)]
+        query = AlarmQuery(state, source)
+        return self._read(lambda db: AlarmRepository(db).list(query, limit))
 
     def alarm(self, alarm_id: int) -> AlarmDocument | None:
-        row = self._read(lambda db: db.execute(f"SELECT {', '.join(ALARM_COLUMNS)} FROM alarms WHERE id=?", (alarm_id,)).fetchone())
-        return None if row is None else AlarmDocument.model_validate(dict(row))
+        return self._read(lambda db: AlarmRepository(db).get(alarm_id))
 
     def acknowledge(self, alarm_id: int, by: str, *, retry_s: float | None = None) -> AlarmDocument | None:
         """Acknowledge an alarm (idempotent: a second acknowledgement keeps the first)."""
-
-        def run(db: sqlite3.Connection) -> bool:
-            now = time.time()
-            row = db.execute("SELECT * FROM alarms WHERE id=?", (alarm_id,)).fetchone()
-            if row is None:
-                return False
-            if row["acknowledged_at_s"] is None:
-                db.execute("UPDATE alarms SET acknowledged_at_s=?, acknowledged_by=? WHERE id=?", (now, by, alarm_id))
-                self._event(db, alarm_id, "acknowledged", row["level"], now, now, notify=False)
-            return True
-
-        if not self._write(run, durable=True, retry_s=retry_s):
+        if not self._write(lambda db: AlarmRepository(db, self.policy).acknowledge(alarm_id, by, time.time()), durable=True,
+                           retry_s=retry_s):
             return None
         return self.alarm(alarm_id)
 
     def alarm_events(self) -> list[dict[str, Any]]:
-        return [dict(r) for r in self._read(lambda db: db.execute("SELECT * FROM alarm_events ORDER BY id").fetchall())]
+        return self._read(lambda db: AlarmRepository(db).events())
 
     # -- outbox ---------------------------------------------------------------------------------
 
