@@ -15,12 +15,15 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from pydantic import TypeAdapter
+
 from contract import AlarmDocument, AlarmEventDocument
 
 __all__ = ["ALARM_COLUMNS", "AlarmChange", "AlarmQuery", "AlarmRepository", "AlarmStore", "NotifyPolicy"]
 
 #: The alarm table's columns are the alarm document's fields.
 ALARM_COLUMNS = tuple(AlarmDocument.model_fields)
+_ALARMS = TypeAdapter(list[AlarmDocument])
 
 
 def _finite(x: Any) -> float | None:
@@ -239,7 +242,7 @@ class AlarmRepository:
             rows = cursor.fetchmany(self.chunk_rows)
             if not rows:
                 return
-            yield [AlarmDocument.model_validate(dict(zip(ALARM_COLUMNS, r))) for r in rows]
+            yield _ALARMS.validate_python([dict(zip(ALARM_COLUMNS, r)) for r in rows])
 
     def list(self, query: AlarmQuery, limit: int) -> list[AlarmDocument]:
         return [a for chunk in self.chunks(query, None, limit) for a in chunk]
