@@ -52,9 +52,9 @@ def test_pages_by_cursor_hold_every_row_once(running):
         assert (doc["count"], doc["total"], doc["truncated"]) == (2, 5, True) and doc["next_cursor"]
         assert first.headers["x-total-count"] == "5" and first.headers["x-next-cursor"] == doc["next_cursor"]
         starts = [r["window_start_s"] for r in doc["rows"]]
-        pages = 1
+        pages, page = 1, first
         while doc["truncated"]:
-            link = first.headers["link"] if pages == 1 else page.headers["link"]
+            link = page.headers["link"]
             assert link.endswith('>; rel="next"') and "cursor=" in link
             page = c.get(link[1:link.index(">")])  # the Link header's URL is the next page
             doc = page.json()
