@@ -106,6 +106,8 @@ class AlarmStore(Protocol):
 
     def get(self, alarm_id: int) -> AlarmDocument | None: ...
 
+    def newest(self, query: AlarmQuery, limit: int) -> list[AlarmDocument]: ...
+
     def acknowledge(self, alarm_id: int, by: str, now: float) -> bool: ...
 
     def count(self, query: AlarmQuery, after: tuple | None) -> int: ...
@@ -175,8 +177,8 @@ class AlarmRepository:
             notify = self.policy.notifies(event, level)
         if notify and self.policy.targets:
             alarm = self.get(alarm_id)
-            payload = AlarmEventDocument(id=f"shm-{self.policy.instance}-{event_uuid}", event=event,  # type: ignore[arg-type]
-                                         sequence=seq, level=level, at_s=at_s, alarm=alarm).model_dump_json()  # type: ignore[arg-type]
+            payload = AlarmEventDocument(id=f"shm-{self.policy.instance}-{event_uuid}", event=event,
+                                         sequence=seq, level=level, at_s=at_s, alarm=alarm).model_dump_json()
             self.db.executemany(
                 "INSERT OR IGNORE INTO outbox (event_id, alarm_id, channel, target, payload, status, next_attempt_at, created_at) "
                 "VALUES (?, ?, ?, ?, ?, 'pending', ?, ?)",
@@ -244,7 +246,7 @@ class AlarmRepository:
                 return
             yield _ALARMS.validate_python([dict(zip(ALARM_COLUMNS, r)) for r in rows])
 
-    def list(self, query: AlarmQuery, limit: int) -> list[AlarmDocument]:
+    def newest(self, query: AlarmQuery, limit: int) -> list[AlarmDocument]:
         return [a for chunk in self.chunks(query, None, limit) for a in chunk]
 
     def events(self) -> list[dict[str, Any]]:
