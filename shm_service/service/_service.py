@@ -56,6 +56,7 @@ from ._retention import RetentionWorker
 from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
 from ._storage import Storage, is_transient
+from ._store_writer import open_storage
 
 __all__ = ["MonitoringService", "NotSingleStructure", "ServiceError", "Structure", "StructureUnavailable"]
 
@@ -488,7 +489,8 @@ class MonitoringService(_StoredRows):
                     # One structure's bad file or rig must not keep the others from monitoring.
                     log.error("structure %s cannot start: %s", st.id, exc)
                     self.structures[st.id] = _FailedStructure(st.id, st.source.partition(":")[0], str(exc))
-        self.storage = Storage(settings.db, notify_targets=notify_targets(settings.notify),
+        # a worker of a fleet writes through its front (one writer per database: _store_writer)
+        self.storage = open_storage(settings.db, notify_targets=notify_targets(settings.notify),
                                notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
                                notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
                                alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)

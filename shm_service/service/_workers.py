@@ -4,7 +4,8 @@ every N-th structure on the one shared database, and serves one API over them. T
 processes run the sources, pipelines, retention and housekeeping of their structures; this front
 process delivers the notifications of all (one deliverer per outbox) and answers the API: the
 database's rows (trends, alarms, acknowledgements) itself, a structure's live state (status,
-spectra, ingest, baseline) from the worker that hosts it."""
+spectra, ingest, baseline) from the worker that hosts it. It is the database's one writer: the
+workers hand it their window commits and other writes (``_store_writer``) and only read it."""
 
 from __future__ import annotations
 
@@ -42,6 +43,7 @@ from ._notify import Notifier, notify_targets
 from ._processes import StaleWorkers, record_workers, stop_stale_workers
 from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable, _ModelCache, _StoredRows
 from ._storage import Storage
+from ._store_writer import WriterServer
 
 __all__ = ["WorkerFleet", "part_of"]
 
@@ -98,6 +100,7 @@ class WorkerFleet(_StoredRows):
         self.dashboard: Any = None
         self._models = _ModelCache()
         self._structure_models: dict[str, StructureModel] = {}
+        self.writer: WriterServer | None = None
 
     # -- running ----------------------------------------------------------------------------
 
@@ -114,6 +117,9 @@ class WorkerFleet(_StoredRows):
         if ended:
             log.warning("ended %d workers of an earlier front on %s (pids %s)", len(ended), self.settings.db, ended)
         config.write_text(render_toml(self.settings), encoding="utf-8")
+        # this process is the database's one writer: the workers hand it their writes
+        self.writer = WriterServer(self.storage)
+        environ = {**self._environ, **self.writer.environ()}
         self._starting = True
         launched: list[tuple[int, list[str], ServeProcess]] = []
         try:
@@ -126,7 +132,7 @@ class WorkerFleet(_StoredRows):
                         "--no-dashboard"]  # the front's dashboard reads each structure from its worker
                 if self._json:
                     args.append("--json")
-                launched.append((i, ids, start_serve(args, env=self._environ, stdout=subprocess.PIPE,
+                launched.append((i, ids, start_serve(args, env=environ, stdout=subprocess.PIPE,
                                                      ready_file=directory / f"fleet-worker-{i}.ready.json", timeout=None)))
             record_workers(self.settings.db, [started.pid for _, _, started in launched])
             pending = [(_Worker(i, started.process, "", ids), started) for i, ids, started in launched]
@@ -194,7 +200,9 @@ class WorkerFleet(_StoredRows):
                 self.dashboard.stop()
             except Exception as exc:
                 log.warning("dashboard stop failed: %s", exc)
-        self._terminate(wait_s=60.0)
+        self._terminate(wait_s=60.0)  # the workers' last windows are written before the writer stops
+        if self.writer is not None:
+            self.writer.stop()
         self.notifier.stop(drain_s=drain_s)
         self._client.close()
         self.storage.close()
