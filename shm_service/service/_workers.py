@@ -325,23 +325,7 @@ class WorkerFleet(_StoredRows):
     def fleet_metrics(self) -> str:
         """``/metrics``: the workers' expositions merged (each structure's samples as its worker gives
         them, the processes' counters summed); the notifications are the front's (it delivers them)."""
-        texts = []
-        headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
-        for worker in self.workers:
-            if worker.process.poll() is not None:
-                continue
-            try:
-                r = self._client.get(f"{worker.url}/metrics", headers=headers)
-                r.raise_for_status()
-                texts.append(r.text)
-            except httpx.HTTPError as exc:
-                log.warning("worker %d: /metrics failed: %s", worker.index, exc)
-        outcomes, _ = self.notifier.snapshot()
-        overrides = {"shm_notifications_total": [({"outcome": k}, float(outcomes.get(k, 0)))
-                                                 for k in ("sent", "retry", "permanent", "given_up")],
-                     "shm_uptime_seconds": [({}, round(time.time() - self.started_at, 1))]}
-        # the structures as the front lists them (a worker that died: its structures failed)
-        return merge_expositions(texts, overrides, front=fleet_metrics(self.structures_document(), {}))
+        return _fleet_exposition(self)
 
     # -- the dashboard's port (FleetDashboardService) ---------------------------------------
 
@@ -377,3 +361,24 @@ class WorkerFleet(_StoredRows):
         found = StructureModel(id=structure_id, rig=rig, units=model.units, layout=model.state_layout, stations=model.stations)
         self._structure_models[structure_id] = found
         return found
+
+
+def _fleet_exposition(fleet: WorkerFleet) -> str:
+    """The merged exposition of ``WorkerFleet.fleet_metrics``."""
+    texts = []
+    headers = {"Authorization": f"Bearer {fleet.token}"} if fleet.token else {}
+    for worker in fleet.workers:
+        if worker.process.poll() is not None:
+            continue
+        try:
+            r = fleet._client.get(f"{worker.url}/metrics", headers=headers)
+            r.raise_for_status()
+            texts.append(r.text)
+        except httpx.HTTPError as exc:
+            log.warning("worker %d: /metrics failed: %s", worker.index, exc)
+    outcomes, _ = fleet.notifier.snapshot()
+    overrides = {"shm_notifications_total": [({"outcome": k}, float(outcomes.get(k, 0)))
+                                             for k in ("sent", "retry", "permanent", "given_up")],
+                 "shm_uptime_seconds": [({}, round(time.time() - fleet.started_at, 1))]}
+    # the structures as the front lists them (a worker that died: its structures failed)
+    return merge_expositions(texts, overrides, front=fleet_metrics(fleet.structures_document(), {}))
