@@ -102,3 +102,18 @@ def test_alarms_page_newest_first(running, tmp_path):
         assert ids == sorted(ids, reverse=True) and len(set(ids)) == 5
         active = c.get("/api/structures/ingest/alarms", params={"state": "active", "limit": 4}).json()
         assert (active["count"], active["total"], active["truncated"]) == (4, 5, True)
+
+
+def test_the_apps_lifespan_starts_and_stops_its_port(tmp_path):
+    settings = load_settings(None, fast_overrides(tmp_path, **{"source.spec": "ingest"}))
+    service = MonitoringService(settings, environ={"SHM_TOKEN": "t0ken-for-tests"})
+    structure = next(iter(service.structures.values()))
+    assert not structure.started
+    api = ApiServer(create_app(service, start_port=True), "127.0.0.1", 0).start()
+    try:
+        assert structure.started and not service._stopping.is_set()
+        with httpx.Client(base_url=api.url) as c:
+            assert c.get("/api/trends").json()["total"] == 0
+    finally:
+        api.stop()
+    assert service._stopping.is_set()  # stopped by the app's lifespan, with the server
