@@ -162,12 +162,13 @@ class WorkerFleet(_StoredRows):
             self.dashboard = start_dashboard(self, self.settings, None, self.token)
 
     def _drain(self, worker: _Worker) -> None:
-        for line in worker.process.stdout:  # type: ignore[union-attr]
-            line = line.strip()
-            if line:
-                worker.summary = line
-                if not self._json:
-                    print(line, flush=True)
+        with worker.process.stdout:  # type: ignore[union-attr]  (closed at its end: no pipe left to the GC)
+            for line in worker.process.stdout:  # type: ignore[union-attr]
+                line = line.strip()
+                if line:
+                    worker.summary = line
+                    if not self._json:
+                        print(line, flush=True)
 
     def _watch(self) -> None:
         for worker in self.workers:
