@@ -684,9 +684,14 @@ class StructureSummaryDocument(_Document):
 
 
 class StructuresDocument(_Document):
-    """``GET /api/structures``."""
+    """``GET /api/structures``: the structures in their configured order, one page of ``total``
+    (paged as ``TrendsDocument``; a document of the whole fleet has every structure)."""
 
     structures: list[StructureSummaryDocument]
+    count: Count | None = Field(None, description="structures in this page (null: all of them)")
+    total: Count | None = Field(None, description="structures of the service, on every page (null: as many as listed)")
+    truncated: bool = Field(False, description="more structures follow this page")
+    next_cursor: str | None = Field(None, description="pass as cursor= for the next page (null: this is the last)")
 
 
 class LiveEstimatesDocument(_Document):

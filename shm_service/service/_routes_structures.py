@@ -4,7 +4,7 @@ forms ``/api/spectra/latest`` and ``/api/baseline`` (a service of one structure)
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Depends, HTTPException, Query
+from fastapi import APIRouter, Depends, HTTPException, Query, Response
 
 from contract import (
     BaselineRequestDocument,
@@ -18,16 +18,38 @@ from contract import (
 
 from ._deps import require_token, service_port
 from ._http_common import AUTH_RESPONSES, INVALID, STRUCTURE_ID, UNKNOWN, error, of_structure
+from ._http_pages import PageParams
+from ._store_paging import decode_cursor, encode_cursor
 
 __all__ = ["router"]
 
 router = APIRouter(tags=["structures"])
 
 
-@router.get("/api/structures", summary="every structure: state, lag, committed windows, active alarms",
-            response_model=StructuresDocument, responses=AUTH_RESPONSES)
-def structures(port: ServicePort = Depends(service_port)) -> StructuresDocument:
-    return port.structures_document()
+@router.get("/api/structures", summary="every structure: state, lag, committed windows, active alarms; paged",
+            response_model=StructuresDocument, responses={**AUTH_RESPONSES, **INVALID})
+def structures(response: Response, paging: PageParams = Depends(),
+               port: ServicePort = Depends(service_port)) -> StructuresDocument:
+    listed = port.structures_document().structures
+    start = 0
+    if paging.cursor is not None:
+        try:
+            (after,) = decode_cursor("structures", paging.cursor, (str,)) or ("",)
+        except ValueError as exc:
+            raise HTTPException(422, str(exc)) from None
+        ids = [s.id for s in listed]
+        if after not in ids:
+            raise HTTPException(422, f"cursor names structure {after!r}, which this service no longer lists")
+        start = ids.index(after) + 1
+    page = listed[start:start + paging.limit]
+    truncated = start + len(page) < len(listed)
+    next_cursor = encode_cursor("structures", [page[-1].id]) if truncated and page else None
+    response.headers.update({"X-Count": str(len(page)), "X-Total-Count": str(len(listed)),
+                             "X-Truncated": "true" if truncated else "false"})
+    if next_cursor is not None:
+        response.headers["X-Next-Cursor"] = next_cursor
+    return StructuresDocument(structures=page, count=len(page), total=len(listed), truncated=truncated,
+                              next_cursor=next_cursor)
 
 
 @router.get("/api/structures/{structure_id}/status", summary="one structure's status (as /api/status)",

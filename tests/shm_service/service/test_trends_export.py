@@ -117,3 +117,25 @@ def test_the_apps_lifespan_starts_and_stops_its_port(tmp_path):
     finally:
         api.stop()
     assert service._stopping.is_set()  # stopped by the app's lifespan, with the server
+
+
+def test_the_structures_of_a_fleet_page_in_their_order(tmp_path):
+    settings = load_settings(None, {**fast_overrides(tmp_path), "workers": 1, "archive": {"enabled": False},
+                                    "structures": [{"id": i, "source": "ingest"} for i in ("c", "a", "b")]})
+    service = MonitoringService(settings, environ={})
+    api = ApiServer(create_app(service, start_port=True), "127.0.0.1", 0).start()
+    try:
+        with httpx.Client(base_url=api.url) as c:
+            whole = c.get("/api/structures").json()
+            assert [s["id"] for s in whole["structures"]] == ["c", "a", "b"]
+            assert (whole["count"], whole["total"], whole["truncated"], whole["next_cursor"]) == (3, 3, False, None)
+            first = c.get("/api/structures", params={"limit": 2})
+            assert [s["id"] for s in first.json()["structures"]] == ["c", "a"] and first.json()["truncated"]
+            assert first.headers["x-total-count"] == "3" and first.headers["x-next-cursor"] == first.json()["next_cursor"]
+            rest = c.get("/api/structures", params={"limit": 2, "cursor": first.json()["next_cursor"]}).json()
+            assert [s["id"] for s in rest["structures"]] == ["b"] and not rest["truncated"] and rest["total"] == 3
+            trends_cursor = c.get("/api/trends", params={"limit": 1}).json()["next_cursor"]
+            assert trends_cursor is None  # no rows: nothing follows
+            assert c.get("/api/structures", params={"cursor": "bm90LW91cnM"}).status_code == 422
+    finally:
+        api.stop()
