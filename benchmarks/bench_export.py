@@ -10,7 +10,8 @@ time). The server's peak resident memory during each export is its ``VmHWM`` aft
 is that peak minus its resident memory before the export. The bar: a million-row export raises
 the server's memory by no more than 100 MB.
 
-``python -m benchmarks.bench_export [--rows 1000000]``.
+``python -m benchmarks.bench_export [--rows 1000000] [--before TREE]`` (``--before``: the same
+exports from ``shm serve`` of another source tree, side by side).
 """
 
 from __future__ import annotations
@@ -128,10 +129,28 @@ def page_through(client: httpx.Client, pid: int, limit: int) -> dict:
             "growth_mb": memory.growth_mb}
 
 
+def before(tree: Path, db: Path, rows: int) -> None:
+    """The one-request exports from ``shm serve`` of another source tree (its own code: run from it)."""
+    import os
+
+    from shm_service.service._launch import start_serve
+
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    with start_serve(["--source", "ingest", "--db", str(db), "--port", "0", "--no-dashboard", "--no-archive"], env=env,
+                     cwd=tree, stdout=sys.stderr, timeout=600, until=lambda doc: doc.get("state") == "serving") as served, \
+            httpx.Client(base_url=served.url, timeout=3600) as client:
+        for name, params in (("JSON", {"limit": rows}), ("CSV", {"limit": rows, "format": "csv"})):
+            out = export(client, served.pid, params)
+            print(f"| {name}, one request, from {tree} | {rows} | {out['bytes'] / 1e6:.1f} | {out['s']:.1f} | "
+                  f"{out['before_mb']:.0f} | {out['peak_mb']:.0f} | {out['growth_mb']:.1f} |", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_export", description=__doc__.split("\n\n")[0])
     parser.add_argument("--rows", type=int, default=1_000_000, help="trend rows stored and exported (default 1000000)")
     parser.add_argument("--page", type=int, default=100_000, help="page size of the paged read (default 100000)")
+    parser.add_argument("--before", metavar="TREE", help="also export once from `shm serve` of this source tree (the "
+                                                          "tree before a change), side by side on the same database")
     args, _ = parser.parse_known_args(argv)
     from shm_service.service._launch import start_serve
 
@@ -161,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"| JSON, {paged['pages']} pages of {args.page} by cursor | {paged['rows']} | | {paged['s']:.1f} | | | "
                   f"{paged['growth_mb']:.1f} |")
             ok &= paged["rows"] == paged["distinct"] == paged["total"] == args.rows and paged["growth_mb"] <= BAR_MB
+        if args.before:
+            before(Path(args.before), db, args.rows)
     print(f"\nbar: growth <= {BAR_MB:g} MB per export, every row exported once, the total and the cut said: "
           f"{'met' if ok else 'NOT MET'}")
     return 0 if ok else 1
