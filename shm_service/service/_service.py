@@ -27,6 +27,7 @@ from contract import (
     LiveEstimatesDocument,
     ModelDocument,
     NotificationStatusDocument,
+    Page,
     RigDescription,
     ServiceStatusDocument,
     SourceStatusDocument,
@@ -57,6 +58,7 @@ from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
 from ._storage import Storage, is_transient
 from ._store_fatigue import fatigue_document
+from ._store_writer import open_storage
 
 __all__ = ["MonitoringService", "NotSingleStructure", "ServiceError", "Structure", "StructureUnavailable"]
 
@@ -431,6 +433,23 @@ class _StoredRows:
         self._known(structure_id)
         return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit)
 
+    def trends_page(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+                    *, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        return self.storage.trends_page(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit, cursor=cursor)
+
+    def structure_trends_page(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
+                              *, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        self._known(structure_id)
+        return self.storage.trends_page(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit, cursor=cursor)
+
+    def alarms_page(self, state: str | None = None, *, limit: int = 1000, cursor: str | None = None) -> Page[AlarmDocument]:
+        return self.storage.alarms_page(state=state, limit=limit, cursor=cursor)
+
+    def structure_alarms_page(self, structure_id: str, state: str | None = None, *, limit: int = 1000,
+                              cursor: str | None = None) -> Page[AlarmDocument]:
+        self._known(structure_id)
+        return self.storage.alarms_page(state=state, source=structure_id, limit=limit, cursor=cursor)
+
     def alarms(self, state: str | None = None) -> list[AlarmDocument]:
         return self.storage.alarms(state=state)
 
@@ -488,7 +507,8 @@ class MonitoringService(_StoredRows):
                     # One structure's bad file or rig must not keep the others from monitoring.
                     log.error("structure %s cannot start: %s", st.id, exc)
                     self.structures[st.id] = _FailedStructure(st.id, st.source.partition(":")[0], str(exc))
-        self.storage = Storage(settings.db, notify_targets=notify_targets(settings.notify),
+        # a worker of a fleet writes through its front (one writer per database: _store_writer)
+        self.storage = open_storage(settings.db, notify_targets=notify_targets(settings.notify),
                                notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
                                notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
                                alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
