@@ -694,6 +694,9 @@ class LiveEstimatesDocument(_Document):
     x: list[list[Finite]] = Field(default_factory=list, description="the state vector of each estimate")
     sensors: dict[str, SensorState] = Field(default_factory=dict, description="topic -> state, now")
     watch_s: Finite = Field(description="how long the structure keeps estimates after this read, s")
+    truth_deflection: list[list[Finite] | None] | None = Field(
+        None, description="a simulated source only: the true deflection (m) at the structure's stations at each estimate "
+                          "(None where the simulation gave none near it); None for measured data")
 
 
 class ErrorDocument(_Document):

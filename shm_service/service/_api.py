@@ -41,6 +41,7 @@ from contract import (
     StructuresDocument,
     TrendRow,
     TrendsDocument,
+    WindowDocument,
 )
 
 from ._docs import serve_docs_offline
@@ -589,6 +590,14 @@ def _fleet_routes(app: FastAPI, service: ServicePort, authorize: Callable[[Reque
         if spec is None:
             raise HTTPException(404, f"structure {structure_id!r} has no analysis window yet")
         return spec
+
+    @app.get("/api/structures/{structure_id}/windows/latest", summary="the structure's latest committed analysis window",
+             response_model=WindowDocument, responses={**_AUTH_RESPONSES, **_UNKNOWN})
+    def structure_window(structure_id: str = _STRUCTURE_ID) -> WindowDocument:
+        window = call(service.structure_window, structure_id)
+        if window is None:
+            raise HTTPException(404, f"structure {structure_id!r} has no analysis window yet")
+        return window
 
     @app.get("/api/structures/{structure_id}/rig", summary="the rig the structure is monitored with (rig.json)",
              response_model=RigDescription, responses={**_AUTH_RESPONSES, **_UNKNOWN})
