@@ -10,7 +10,7 @@ import numpy as np
 
 from ._data import LoadsRecord
 from ._html import LOADS_INTRO, hot_spots_html
-from ._plots import colour
+from ._plots import colour, scales_of, set_scales
 
 if TYPE_CHECKING:
     from ._feed import Snapshot, StructureFeed
@@ -56,8 +56,8 @@ class LoadsPanel:
         self.stress = gui.add_uplot(
             data=(x0, z, z), series=({"label": "η m"}, {"label": "largest stress range MPa", "stroke": "#b91c1c", "width": 2},
                                      {"label": "hot spots", "stroke": "#111111", "width": 0, "points": {"show": True, "size": 9}}),
-            scales={"x": {"time": False}}, title="Stress envelope along the beam: largest range (MPa, η from the support, m)",
-            height=160, visible=False, legend={"live": False})
+            scales={"x": {"time": False}}, title="Stress envelope: largest range (MPa) along η (m)",
+            height=170, visible=False, legend={"live": False})
         self.strain = gui.add_uplot(
             data=(x0, z, z), series=({"label": "η m"}, {"label": "largest strain range µε", "stroke": "#0f766e", "width": 2},
                                      {"label": "RMS strain µε", "stroke": "#14b8a6", "width": 1.5, "dash": (5, 4)}),
@@ -80,9 +80,11 @@ class LoadsPanel:
             return
         self.table.content = hot_spots_html(record, snap.loads_error)
         if record.positions_m.size >= 2:
-            self.stress.data = envelope_plot(record, self.hot_spots)
+            self.stress.data = data = envelope_plot(record, self.hot_spots)
+            set_scales(self.stress, scales_of(False, *data[1:]))
             self.stress.visible = bool(np.isfinite(record.stress_range_max_pa).any())
-            self.strain.data = (record.positions_m, 1e6 * record.strain_range_max, 1e6 * record.strain_rms)
+            self.strain.data = data = (record.positions_m, 1e6 * record.strain_range_max, 1e6 * record.strain_rms)
+            set_scales(self.strain, scales_of(False, *data[1:]))
             self.strain.visible = bool(np.isfinite(record.strain_range_max).any())
         if record.t_s.size:
             self._render_trends(record)
@@ -99,13 +101,13 @@ class LoadsPanel:
         def column(v: np.ndarray) -> np.ndarray:
             return np.repeat(v, 2) if doubled else v
 
-        self.consumed.scales = {"x": {"time": time_axis}}
-        self.consumed.data = (x, *(column(record.consumed.get(n, np.full(record.t_s.size, NAN))) for n in self.names))
+        self.consumed.data = data = (x, *(column(record.consumed.get(n, np.full(record.t_s.size, NAN))) for n in self.names))
+        set_scales(self.consumed, scales_of(time_axis, *data[1:]))
         self.consumed.visible = True
         for m, by_name in record.dels_pa.items():
             plot = self.dels.get(m) or self._add_del_plot(m)
-            plot.scales = {"x": {"time": time_axis}}
-            plot.data = (x, *(column(by_name.get(n, np.full(record.t_s.size, NAN)) / 1e6) for n in self.names))
+            plot.data = data = (x, *(column(by_name.get(n, np.full(record.t_s.size, NAN)) / 1e6) for n in self.names))
+            set_scales(plot, scales_of(time_axis, *data[1:]))
             plot.visible = True
 
     def _add_del_plot(self, m: str) -> Any:

@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from ._context import ViewSettings
     from ._feed import Snapshot, StructureFeed
 
-__all__ = ["SpectraPanel", "TrendsPanel", "threshold_lines", "threshold_series"]
+__all__ = ["SpectraPanel", "TrendsPanel", "scales_of", "threshold_lines", "threshold_series"]
 
 MODE_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 MAX_TREND_POINTS = 2000
@@ -46,6 +46,24 @@ def threshold_lines(levels: tuple[float, float] | None, n: int) -> tuple[np.ndar
     warning, alarm = levels if levels is not None else (NAN, NAN)
     ones = np.ones(n)
     return warning * ones, -warning * ones, alarm * ones, -alarm * ones
+
+
+def scales_of(time_axis: bool, *ys: np.ndarray, log: bool = False) -> dict:
+    """uPlot scales with the y range of the finite values of ``ys`` (5 % margin). uPlot's own
+    autoscale takes NaN, the gap of a missing value, as a number and then draws nothing."""
+    values = np.concatenate([np.asarray(y, dtype=float).ravel() for y in ys]) if ys else np.zeros(0)
+    values = values[np.isfinite(values)]
+    scales: dict = {"x": {"time": time_axis}}
+    if values.size:
+        lo, hi = float(values.min()), float(values.max())
+        pad = 0.05 * (hi - lo) if hi > lo else max(abs(hi) * 0.05, 1e-12)
+        scales["y"] = {"auto": False, "range": [lo - pad, hi + pad]}
+    return scales
+
+
+def set_scales(plot: Any, scales: dict) -> None:
+    if plot.scales != scales:
+        plot.scales = scales
 
 
 def _plot(gui: Any, data: tuple, series: tuple, title: str, height: int, **kwargs: Any) -> Any:
@@ -127,7 +145,7 @@ class TrendsPanel:
     def __init__(self, gui: Any, feed: "StructureFeed") -> None:
         self.feed = feed
         self.drawn_thresholds: dict[str, tuple[float, float]] | None = None
-        self._time_axis: bool | None = None
+        self.time_axis = False
         self.info = gui.add_html("<p>Waiting for the first analysis window…</p>")
         mm, modes = feed.mode_map, feed.mode_map.modes
         x0, z = np.array([0.0, 1.0]), np.zeros(2)
@@ -159,15 +177,6 @@ class TrendsPanel:
             "label": "curvature σ", "stroke": "#7c3aed", "width": 1.5}) + threshold_series(),
             "Curvature control chart: score (σ) and alarm thresholds", 140)
 
-    def _x(self, times: np.ndarray) -> np.ndarray:
-        """Trend x: UNIX seconds on a date axis; seconds since start on a plain axis."""
-        time_axis = bool(times.size and times[-1] > 1e9)
-        if time_axis != self._time_axis:
-            self._time_axis = time_axis
-            for p in (*self.freq_plots.values(), self.damping, self.score, self.temperature, self.curv_trend, self.curv_score):
-                p.scales = {"x": {"time": time_axis}}
-        return times
-
     def render(self, snap: "Snapshot", settings: "ViewSettings") -> None:
         windows = snap.windows
         if not windows:
@@ -176,7 +185,9 @@ class TrendsPanel:
         shown = [w for w in windows if w.t_s >= t_end - settings.trend_window_s]
         if len(shown) > MAX_TREND_POINTS:  # keep the browser fast: thin evenly
             shown = shown[:: math.ceil(len(shown) / MAX_TREND_POINTS)]
-        x = self._x(np.array([w.t_s for w in shown]))
+        # trend x: UNIX seconds on a date axis; seconds since the start on a plain axis
+        x = np.array([w.t_s for w in shown])
+        self.time_axis = bool(x.size and x[-1] > 1e9)
         if x.size == 1:  # uPlot needs two x values to draw a range
             x = np.array([x[0] - 1.0, x[0]])
             shown = [shown[0], shown[0]]
@@ -193,14 +204,17 @@ class TrendsPanel:
             plot.visible = mode in visible
             if mode in visible:
                 bands = [feed.band(snap, w, mode) for w in shown]
-                plot.data = (x, arr([w.frequency_hz.get(mode) for w in shown]), arr([b[0] for b in bands]),
-                             arr([b[1] for b in bands]), arr([b[2] for b in bands]))
+                plot.data = data = (x, arr([w.frequency_hz.get(mode) for w in shown]), arr([b[0] for b in bands]),
+                                    arr([b[1] for b in bands]), arr([b[2] for b in bands]))
+                set_scales(plot, scales_of(self.time_axis, *data[1:]))
         modes = feed.mode_map.modes
         damping = [arr([None if w.damping_ratio.get(m) is None else 100 * w.damping_ratio[m] for w in shown]) for m in modes]
         self.damping.data = (x, *damping)
+        set_scales(self.damping, scales_of(self.time_axis, *damping))
         self.damping.visible = any(np.isfinite(d).any() for d in damping)
         scores = [arr([w.score_sigma.get(m) for w in shown]) for m in modes]
-        self.score.data = (x, *scores, *threshold_lines(th.get("frequency"), x.size))
+        self.score.data = data = (x, *scores, *threshold_lines(th.get("frequency"), x.size))
+        set_scales(self.score, scales_of(self.time_axis, *data[1:]))
         self.score.visible = any(np.isfinite(s).any() for s in scores)
         for plot, levels in ((self.damping, None), (self.score, th.get("frequency"))):
             series = list(plot.series)
@@ -213,19 +227,23 @@ class TrendsPanel:
                 plot.series = tuple(series)
         temps = arr([w.temperature_c for w in shown])
         self.temperature.data = (x, temps)
+        set_scales(self.temperature, scales_of(self.time_axis, temps))
         self.temperature.visible = bool(np.isfinite(temps).any())
 
     def _render_curvature(self, shown: list, x: np.ndarray, th: dict[str, tuple[float, float]]) -> None:
         totals = arr([w.curvature_total for w in shown])
         self.curv_trend.data = (x, totals)
+        set_scales(self.curv_trend, scales_of(self.time_axis, totals))
         self.curv_trend.visible = bool(np.isfinite(totals).any())
         scores = arr([w.curvature_score_sigma for w in shown])
-        self.curv_score.data = (x, scores, *threshold_lines(th.get("curvature"), x.size))
+        self.curv_score.data = data = (x, scores, *threshold_lines(th.get("curvature"), x.size))
+        set_scales(self.curv_score, scales_of(self.time_axis, *data[1:]))
         self.curv_score.visible = bool(np.isfinite(scores).any())
         series = (*self.curv_score.series[:2], *threshold_series(th.get("curvature")))
         if tuple(self.curv_score.series) != series:
             self.curv_score.series = series
         profiles = [w.curvature_profile for w in shown if w.curvature_profile is not None]
         if profiles:
-            self.curv_profile.data = (self.feed.stations, profiles[-1], np.nanmax(np.array(profiles), axis=0))
+            self.curv_profile.data = data = (self.feed.stations, profiles[-1], np.nanmax(np.array(profiles), axis=0))
+            set_scales(self.curv_profile, scales_of(False, *data[1:]))
             self.curv_profile.visible = True

@@ -95,7 +95,7 @@ def test_dashboard_in_headless_chromium(chromium, live_dashboard, tmp_path):
         assert background.mean() < 0.97, "the scene looks blank"
         # The plots: uPlot charts in the DOM, the first spectrum visible and drawn.
         assert page.locator(".uplot").count() >= layout_gamma(dash)
-        assert page.locator(".uplot canvas").first.isvisible()
+        assert page.locator(".uplot canvas").first.is_visible()
         assert_chart_drawn(page)
         # The beam moves: two pictures of the scene differ.
         shot_a, _ = scene_picture(page)
