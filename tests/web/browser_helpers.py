@@ -121,11 +121,16 @@ def browser_page(chromium: str, tmp_path: Path) -> Iterator[Any]:
         try:
             yield page
         except BaseException:
-            page.screenshot(path=str(tmp_path / "failure.png"))
-            print("failure screenshot:", tmp_path / "failure.png")
+            save_failure(page, tmp_path)
             raise
         finally:
             context.close()
+
+
+def save_failure(page: Any, tmp_path: Path) -> None:
+    """A screenshot of ``page`` in ``tmp_path/failure.png`` (said in the test's output)."""
+    page.screenshot(path=str(tmp_path / "failure.png"))
+    print("failure screenshot:", tmp_path / "failure.png")
 
 
 def serve_urls(serve: ServeProcess, log: Path, what: str = "shm serve") -> tuple[str, str] | None:

@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from browser_helpers import CHROMIUM_ARGS, VIEWPORT, interrupt_group, serve_urls, start_demo, visible, wait
+from browser_helpers import CHROMIUM_ARGS, VIEWPORT, interrupt_group, save_failure, serve_urls, start_demo, visible, wait
 #: the issue's bound on this 2-core machine when quiet: live estimates this soon after the dashboard's
 #: port opens. Other processes' load stretches every wall-clock time, so the bound is stretched by the
 #: machine's load per core when that is above 1 (the test still fails when the kernels compile at the
@@ -77,8 +77,7 @@ def test_the_first_demo_shows_its_header_and_counts_estimates_within_30_s(chromi
                 # the page follows: the header shows the live state (t = …) once estimates flow
                 visible(page, "t = ", exact=False).wait_for(timeout=30_000)
         except BaseException:
-            page.screenshot(path=str(tmp_path / "failure.png"))
-            print("failure screenshot:", tmp_path / "failure.png")
+            save_failure(page, tmp_path)
             raise
         finally:
             browser.close()
