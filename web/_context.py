@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from contract import AlarmDocument, StructuresDocument, StructureSummaryDocument
 
@@ -27,7 +27,7 @@ class DashboardStats:
     last_frame_s: float
 
 
-class Structures:
+class Structures(Protocol):
     """What a view reads of the service's structures: the overview and the feeds of those shown
     (``web._poller.PortPoller`` implements it)."""
 
@@ -36,13 +36,16 @@ class Structures:
     overview_version: int
 
     def ids(self) -> list[str]:
-        raise NotImplementedError
+        """The structures' ids, as the overview lists them."""
+        ...
 
     def summary(self, structure_id: str | None) -> StructureSummaryDocument | None:
-        raise NotImplementedError
+        """The overview's line of ``structure_id`` (None: none)."""
+        ...
 
     def feed(self, structure_id: str) -> "StructureFeed | str | None":
-        raise NotImplementedError
+        """Its feed, the reason it cannot be drawn, or None while it is read (asking keeps it read)."""
+        ...
 
 
 @dataclass(frozen=True)

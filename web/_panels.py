@@ -28,7 +28,7 @@ class ControlsPanel:
     """What does not depend on the structure shown: the header, pause, overscale, and for a
     fleet the structure selector and the overview."""
 
-    def __init__(self, gui: Any, ctx: ViewContext, settings: ViewSettings, on_pause: Callable[[], None]) -> None:
+    def __init__(self, gui: Any, ctx: ViewContext, settings: ViewSettings) -> None:
         self.ctx, self.settings = ctx, settings
         self.header = gui.add_html("", order=0)
         self.wanted: str | None = None  # a fleet: the structure chosen (shown once its feed is ready)
@@ -54,7 +54,6 @@ class ControlsPanel:
         def _(_: Any) -> None:
             settings.paused = bool(self.pause.value)
             settings.dirty_scene = settings.dirty_trends = True
-            on_pause()
 
         @self.overscale.on_update
         def _(event: Any) -> None:

@@ -213,8 +213,9 @@ class TrendsPanel:
         set_scales(self.damping, scales_of(self.time_axis, *damping))
         self.damping.visible = any(np.isfinite(d).any() for d in damping)
         scores = [arr([w.score_sigma.get(m) for w in shown]) for m in modes]
-        self.score.data = data = (x, *scores, *threshold_lines(th.get("frequency"), x.size))
-        set_scales(self.score, scales_of(self.time_axis, *data[1:]))
+        levels_drawn = threshold_lines(th.get("frequency"), x.size)
+        self.score.data = (x, *scores, *levels_drawn)
+        set_scales(self.score, scales_of(self.time_axis, *scores, *levels_drawn))
         self.score.visible = any(np.isfinite(s).any() for s in scores)
         for plot, levels in ((self.damping, None), (self.score, th.get("frequency"))):
             series = list(plot.series)

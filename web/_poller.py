@@ -19,11 +19,10 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol
 
 from contract import AlarmDocument, ServicePort, StatusDocument, StructuresDocument, StructureSummaryDocument
 
-from ._context import Structures
 from ._data import loads_record, windows_from_trend_rows
 from ._feed import StructureFeed
 from ._html import severity, severity_key
@@ -46,8 +45,11 @@ DROP_AFTER_S = 30.0  # and its feed (its history) is forgotten after this
 class Watcher(Protocol):
     """A browser's view as the poller sees it: the feed it shows and whether it paused."""
 
-    feed: StructureFeed | None
-    paused: bool
+    @property
+    def feed(self) -> StructureFeed | None: ...
+
+    @property
+    def paused(self) -> bool: ...
 
 
 @dataclass
@@ -68,7 +70,7 @@ class Notice:
 
     title: str
     body: str
-    color: str
+    color: Literal["red", "yellow", "green", "blue"]
     close_s: float | None
 
 
@@ -117,7 +119,7 @@ def fleet_notices(old: StructuresDocument | None, new: StructuresDocument) -> li
     return notices
 
 
-class PortPoller(Structures):
+class PortPoller:
     """Reads a ``contract.ServicePort`` for the dashboard (see the module docstring).
 
     Parameters
@@ -128,7 +130,7 @@ class PortPoller(Structures):
         browser; else those showing it).
     """
 
-    def __init__(self, service: ServicePort, watchers: Callable[[], list[Watcher]],
+    def __init__(self, service: ServicePort, watchers: Callable[[], Sequence[Watcher]],
                  notify: Callable[[Notice, StructureFeed | None], None]) -> None:
         self.service = service
         self.fleet = bool(getattr(service, "fleet", False))

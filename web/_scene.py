@@ -70,8 +70,8 @@ def camera_of(feed: "StructureFeed") -> tuple[tuple[float, float, float], tuple[
 def add_rig(scene: Any, feed: "StructureFeed") -> None:
     """The rig's static parts: the rail the support runs on (above D for a hanging beam, below a
     standing mast), the reflector, a grid in the beam's plane and the plumb line."""
-    L, has_reflector = feed.length, feed.reflector_distance is not None
-    refl = feed.reflector_distance if has_reflector else 0.0  # no ToFs: no reflector to draw
+    has_reflector = feed.reflector_distance is not None
+    L, refl = feed.length, float(feed.reflector_distance or 0.0)  # no ToFs: no reflector to draw
     up = up_sign(feed.standing)  # world z per unit η: the beam hangs down or stands up from D
     rail_lo, rail_hi = min(-0.6, refl - 1.2), refl + 0.05
     scene.add_box(
@@ -301,7 +301,7 @@ class SceneView:
         self.rays.visible = opt.rays
         if opt.rays:
             items = self.sensor_groups["tof"]
-            rays = tof_rays(state, feed.units, np.array([e for _, e in items]), feed.reflector_distance,
+            rays = tof_rays(state, feed.units, np.array([e for _, e in items]), float(feed.reflector_distance or 0.0),
                             elastic_scale=opt.elastic_scale, rigid_scale=opt.rigid_scale, standing=feed.standing)
             rays[:, :, 1] = self.marker_offsets["tof"]
             self.rays.points = rays

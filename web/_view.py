@@ -47,7 +47,7 @@ class _Shown:
             self.status = StatusPanel(gui, ctx)
         with tabs.add_tab("View", viser.Icon.SETTINGS):
             labels = {u: self.spectra.unit_label(u) for u in range(1, feed.gamma + 1)}
-            self.settings = SettingsPanel(gui, settings, labels, self.spectra.show_units)
+            self.view_tab = SettingsPanel(gui, settings, labels, self.spectra.show_units)
         self.versions: dict[str, int] = {}
         self.drawn: Any = None  # (estimate, mean state) drawn last
         self.last_spectra = -math.inf
@@ -75,7 +75,7 @@ class ClientView:
         self._camera: tuple | None = None  # a camera to set once the browser's is known
         self._last_text = -math.inf
         with client.atomic():
-            self.controls = ControlsPanel(client.gui, ctx, self.settings, on_pause=lambda: None)
+            self.controls = ControlsPanel(client.gui, ctx, self.settings)
             self.controls.header.content = header_html(self._header_info(), None, None)
 
     @property
@@ -181,7 +181,8 @@ class ClientView:
             if scale != s.elastic_scale:
                 s.elastic_scale = scale
                 self.controls.overscale.value = scale
-        shown.scene.render(*shown.drawn, shown.settings.options(), texts=s.paused or texts)
+        est, mean = shown.drawn
+        shown.scene.render(est, mean, shown.view_tab.options(), texts=s.paused or texts)
 
     def _render_plots(self, shown: _Shown, snap: "Snapshot", now: float) -> None:
         s = self.settings
