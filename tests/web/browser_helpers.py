@@ -84,13 +84,18 @@ def assert_tall_beam(scene: np.ndarray, height: int) -> None:
     assert rows[-1] - rows[0] > 0.3 * height, "the beam should be a tall vertical ribbon"
 
 
-def assert_chart_drawn(page: Any) -> None:
-    """The first uPlot canvas is visible, large enough and not blank.
+def assert_chart_drawn(page: Any, title: str | None = None) -> None:
+    """The first uPlot canvas (or that of the chart whose title starts with ``title``) is visible,
+    large enough and not blank.
 
     viser re-creates a uPlot canvas when its data changes, so an element screenshot can race a live
-    update ("not attached"); a page screenshot clipped to where the first canvas is cannot."""
-    box = page.evaluate("() => { const r = document.querySelector('.uplot canvas').getBoundingClientRect();"
-                        " return [r.x, r.y, r.width, r.height]; }")
+    update ("not attached"); a page screenshot clipped to where the canvas is cannot."""
+    box = page.evaluate(
+        "(title) => { const plots = [...document.querySelectorAll('.uplot')].filter(p => title === null ||"
+        " (p.querySelector('.u-title') || {}).textContent?.startsWith(title));"
+        " const r = plots[0].querySelector('canvas').getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; }",
+        title,
+    )
     assert box[2] > 50 and box[3] > 50, f"chart canvas too small: {box}"
     chart = image(page.screenshot(clip=dict(zip(("x", "y", "width", "height"), box))))
     assert (np.abs(chart - 255).sum(axis=-1) > 60).sum() > 300, "the chart canvas is blank"

@@ -67,6 +67,8 @@ def test_dashboard_in_headless_chromium(chromium, live_dashboard, tmp_path):
         visible(page, "Pause live view").wait_for(timeout=30_000)
         visible(page, "b1 · mode 1+2", exact=False).wait_for(timeout=15_000)
         print(f"page ready after {time.monotonic() - t_start:.1f} s")
+        # the sheet has no hot spots: no Loads tab (and its fatigue is never asked for)
+        assert page.get_by_text("Loads", exact=True).count() == 0 and "structure_fatigue" not in dash.poller.polls
         # Live: frames keep coming at >= 10 per second, the estimates at the live ring's 10 per second,
         # and memory stays flat.
         time.sleep(2.0)
