@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ._data import LoadsRecord
-from ._html import LOADS_INTRO, hot_spots_html
+from ._html import LOADS_INTRO, hot_spots_html, message_html
 from ._plots import colour, scales_of, set_scales
 
 if TYPE_CHECKING:
@@ -51,7 +51,7 @@ class LoadsPanel:
         self.hot_spots = [(h.name, float(h.position)) for h in feed.rig.hot_spots]
         self._version = -1
         gui.add_markdown(LOADS_INTRO)
-        self.table = gui.add_html("<p>Waiting for the structure's loads…</p>")
+        self.table = gui.add_html(message_html("Waiting for the structure's loads…"))
         x0, z = np.array([0.0, feed.length]), np.zeros(2)
         self.stress = gui.add_uplot(
             data=(x0, z, z), series=({"label": "η m"}, {"label": "largest stress range MPa", "stroke": "#b91c1c", "width": 2},

@@ -118,7 +118,7 @@ class AlarmsPanel:
     def __init__(self, gui: Any, ctx: ViewContext, feed: "StructureFeed") -> None:
         self.ctx, self.feed = ctx, feed
         self.options: dict[str, int] = {}  # dropdown label -> alarm id
-        self.list = gui.add_html("<p>No alarms.</p>")
+        self.list = gui.add_html(alarms_html((), str))
         self.choice = gui.add_dropdown("Alarm", ("(none)",), initial_value="(none)")
         self.token = gui.add_text("Operator token", "", hint="Required to acknowledge (same rules as the HTTP API)")
         self.button = gui.add_button("Acknowledge", icon=viser.Icon.CHECK, color="red")
@@ -167,7 +167,7 @@ class AlarmsPanel:
 class StatusPanel:
     def __init__(self, gui: Any, ctx: ViewContext) -> None:
         self.ctx = ctx
-        self.html = gui.add_html("<p>Waiting for the service status…</p>")
+        self.html = gui.add_html(message_html("Waiting for the service status…"))
 
     def render(self, snap: "Snapshot") -> None:
         self.html.content = status_html(snap, self.ctx.stats())

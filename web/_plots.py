@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ._data import frequencies_of, spectrum_plot
-from ._html import MODES_SHOWN, SPECTRA_INTRO, trend_info_html  # noqa: F401  (MODES_SHOWN: the settings' heading)
+from ._html import SPECTRA_INTRO, message_html, trend_info_html
 
 if TYPE_CHECKING:
     from ._context import ViewSettings
@@ -146,7 +146,7 @@ class TrendsPanel:
         self.feed = feed
         self.drawn_thresholds: dict[str, tuple[float, float]] | None = None
         self.time_axis = False
-        self.info = gui.add_html("<p>Waiting for the first analysis window…</p>")
+        self.info = gui.add_html(message_html("Waiting for the first analysis window…"))
         mm, modes = feed.mode_map, feed.mode_map.modes
         x0, z = np.array([0.0, 1.0]), np.zeros(2)
         self.freq_plots = {mode: _plot(
