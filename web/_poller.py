@@ -37,6 +37,7 @@ STATUS_S = 1.0
 ALARMS_S = 2.0
 SPECTRA_S = 15.0  # at the latest (sooner after a new window)
 LOADS_S = 30.0  # at the latest (sooner after a new window)
+LOADS_MIN_S = 5.0  # at the soonest
 RETRY_S = 5.0  # a structure whose model could not be read is tried again after this
 SHOWN_S = 1.0  # a structure no browser asked for within this is not read (the views ask every frame)
 DROP_AFTER_S = 30.0  # and its feed (its history) is forgotten after this
@@ -305,7 +306,9 @@ class PortPoller:
             watch.last["spectra"] = now
             self._read_rows(sid, watch)
             self._read_window(sid, watch)
-        if watch.feed.rig.hot_spots and (fresh or self._due(watch, "loads", LOADS_S, now)):
+        # the fatigue document holds every window's trend: after a new window, but not more often than LOADS_MIN_S
+        since = now - watch.last.get("loads", -math.inf)
+        if watch.feed.rig.hot_spots and (since >= LOADS_S or (fresh and since >= LOADS_MIN_S)):
             watch.last["loads"] = now
             self._read_loads(sid, watch)
 
