@@ -139,7 +139,8 @@ class FakePort:
         self._check(structure_id)
         return self.spectrum
 
-    def structure_fatigue(self, structure_id: str, from_s: float | None = None, to_s: float | None = None) -> Any:
+    def structure_fatigue(self, structure_id: str, from_s: float | None = None, to_s: float | None = None,
+                          limit: int = 100_000) -> Any:
         self._check(structure_id)
         if self.fatigue is None:
             raise LookupError(f"structure {structure_id!r} has no hot spots")
