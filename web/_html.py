@@ -56,8 +56,9 @@ SPECTRA_INTRO = ("Amplitude spectra of the deformation variables b<sub>χ</sub> 
 MODES_SHOWN = "**Modes shown** (spectra and trends)"
 MARKER_LEGEND = ("Marker colours: <span style='color:#28a745'>●</span> ok, <span style='color:#ffaa00'>●</span> degraded, "
                  "<span style='color:#dc2626'>●</span> rejected samples. Circles: IMUs, squares: ToFs, diamonds: strain gauges.")
-LOADS_INTRO = ("Virtual strain and stress from the estimated curvature (ε = −c κ, σ = E ε) at the hot spots and along "
-               "the beam; Palmgren–Miner damage on each hot spot's S–N curve.")
+LOADS_INTRO = ("Virtual strain and nominal stress from the estimated curvature (ε = −c κ, σ = E ε) at the hot spots and "
+               "along the beam; Palmgren–Miner damage on each hot spot's S–N curve (with its stress concentration and "
+               "partial factors). Remaining life = (1 − D) / damage rate, its band from the windows' scatter.")
 _TONES = {"info": "#333", "ok": "#15803d", "warn": "#b45309", "error": "#dc2626"}
 
 
@@ -431,6 +432,6 @@ def hot_spots_html(record: LoadsRecord, error: str | None = None) -> str:
         f"<div style='font-size:12px'>{stale}<b>{len(record.hot_spots)} hot spot(s)</b> · {design}"
         f"{record.windows} window(s) counted{' (the oldest left out)' if record.truncated else ''}."
         "<table style='width:100%;font-size:12px;border-collapse:collapse'><tr><th style='text-align:left'>hot spot</th>"
-        "<th>curve</th><th>consumed D</th><th>rate /year</th><th>remaining life</th><th>DEL MPa</th>"
+        "<th>curve</th><th>consumed D</th><th>rate /year</th><th>remaining life</th><th>DEL MPa (latest window)</th>"
         "<th>max range MPa</th></tr>" + "".join(rows) + "</table></div>"
     )
