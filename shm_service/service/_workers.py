@@ -32,6 +32,7 @@ from contract import (
     StatusDocument,
     StructuresDocument,
     StructureSummaryDocument,
+    WindowDocument,
 )
 
 from ._config import ServiceSettings, render_toml, resolve_token
@@ -159,7 +160,7 @@ class WorkerFleet(_StoredRows):
         self.notifier.start()
         threading.Thread(target=self._watch, name="workers", daemon=True).start()
         if self.settings.dashboard.enabled:
-            self.dashboard = start_dashboard(self, self.settings, None, self.token)
+            self.dashboard = start_dashboard(self, self.settings, self.token)
 
     def _drain(self, worker: _Worker) -> None:
         with worker.process.stdout:  # type: ignore[union-attr]  (closed at its end: no pipe left to the GC)
@@ -218,7 +219,7 @@ class WorkerFleet(_StoredRows):
             r = self._client.request(method, f"{worker.url}/api/structures/{structure_id}/{path}", headers=headers, **kwargs)
         except httpx.HTTPError as exc:
             raise StructureUnavailable(f"structure {structure_id!r}: its worker process does not answer ({exc})") from None
-        if r.status_code == 404 and path != "spectra/latest":
+        if r.status_code == 404 and path not in ("spectra/latest", "windows/latest"):
             raise KeyError(r.json().get("detail", f"no structure {structure_id!r}"))
         if r.status_code == 409:
             raise StructureUnavailable(r.json().get("detail"))
@@ -338,6 +339,13 @@ class WorkerFleet(_StoredRows):
 
     def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
         return self.spectra(structure_id)
+
+    def structure_window(self, structure_id: str) -> WindowDocument | None:
+        r = self._forward("GET", structure_id, "windows/latest")
+        if r.status_code == 404:
+            return None
+        r.raise_for_status()
+        return WindowDocument.model_validate(r.json())
 
     def structure_rig(self, structure_id: str) -> RigDescription:
         r = self._forward("GET", structure_id, "rig")
