@@ -25,6 +25,7 @@ from ._commands import (  # noqa: F401  (the commands' shared parts; reprocess, 
     _print_json,
     _recording_problems,
     _sensor_counts,
+    add_model_arguments,
 )
 
 __all__ = ["main"]
@@ -422,12 +423,7 @@ def _cmd_baseline_learn(args: argparse.Namespace) -> int:
 
 def _add_analysis_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=None, help="a `shm serve` configuration (TOML): the same analytics, alarm hysteresis and warm-up")
-    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
-    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
-    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
-    p.add_argument("--imus", default=None, help="as for estimate")
-    p.add_argument("--tofs", default=None, help="as for estimate")
-    p.add_argument("--gauges", default=None, help="as for estimate")
+    add_model_arguments(p, aided=False)
 
 
 def _add_cluster_arguments(p: argparse.ArgumentParser) -> None:
@@ -614,14 +610,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("estimate", help="run the IMMS estimator over a recording")
     p.add_argument("recording")
-    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
-    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
-    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
-    p.add_argument("--imus", default=None,
-                   help="peripheral IMUs: a count Γ..(the rig's) chosen by EfI, or names s1,s2,... (default 4, or all if fewer)")
-    p.add_argument("--tofs", default=None, help="ToFs: a count 0..(the rig's) or names (default 4, or all if fewer)")
-    p.add_argument("--gauges", default=None, help="strain gauges: a count 0..(the rig's) or names (default 4, or all if fewer)")
-    p.add_argument("--aided", default=None, help="unit deformations aided by the gauges, e.g. 2,3,4 (Eq. 22)")
+    add_model_arguments(p)
     p.add_argument("--out", type=output_path, help="write the estimates to this .mcap (its directory must exist)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_estimate)

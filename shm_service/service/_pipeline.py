@@ -17,18 +17,19 @@ import threading
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from analytics import AnalysisConfig, Baseline, EngineWindow, ModalMonitor, MonitoringEngine, WindowResult
+from analytics import AnalysisConfig, Baseline, EngineWindow, LoadsMonitor, ModalMonitor, MonitoringEngine, WindowResult
 from contract import (
     TEMPERATURE_TOPIC,
     AlarmDocument,
     ChartDocument,
     CurvatureDocument,
     FlagDocument,
+    LoadsWindowDocument,
     LocationDocument,
     ModeDocument,
     PipelineStatusDocument,
@@ -89,9 +90,10 @@ class PipelineSink(Protocol):
 
 
 class LiveRingLike(Protocol):
-    """A structure's live ring (``_live.LiveRing``): takes every batch's estimates (``t_s`` (n,), ``x`` (n, nx))."""
+    """A structure's live ring (``_live.LiveRing``): takes every batch's estimates (``t_s`` (n,), ``x`` (n, nx))
+    and, from a simulated source, a lookup of the true deflection at given times."""
 
-    def add(self, t_s: np.ndarray, x: np.ndarray) -> None: ...
+    def add(self, t_s: np.ndarray, x: np.ndarray, truth: Any = None) -> None: ...
 
 
 _blas_limit = None
@@ -164,6 +166,7 @@ class WindowOutput:
     start_s: float
     new_baseline: bool
     alarm_changes: list[AlarmChange]
+    loads: LoadsWindowDocument | None = None  # the hot spots' loads of the window (issue 21)
 
 
 def _monitor_stations(model) -> np.ndarray:
@@ -181,7 +184,7 @@ class _Analytics:
     time, so replaying a period gives the same windows (and the unique key of the trend rows holds)."""
 
     def __init__(self, model: ImmsModel, config: AnalysisConfig, monitor_state: dict | None, last_window_start: float | None,
-                 source_id: str, min_coverage: float = 0.8, baseline: dict | None = None) -> None:
+                 source_id: str, min_coverage: float = 0.8, baseline: dict | None = None, loads_state: dict | None = None) -> None:
         self.model = model
         self.config = config
         self.source_id = source_id
@@ -191,6 +194,9 @@ class _Analytics:
         self.min_coverage = min_coverage
         self.signatures = None
         self.monitor = self._monitor(monitor_state, baseline)
+        # the hot spots' loads in the same engine (issue 21); its state (the rainflow residue, the
+        # damage) is committed with every window, so a restart continues the count exactly
+        self.loads = self._loads(loads_state) if model.rig.hot_spots else None
         self.engine: MonitoringEngine | None = None
         self._next_start_ns = None if last_window_start is None else int(round(last_window_start * _NS)) + int(round(self.step_s * _NS))
         self.not_before_ns: int | None = None  # windows starting earlier are not analysed (filter converging)
@@ -228,6 +234,28 @@ class _Analytics:
             log.warning("stored baseline does not fit the model (%s); learning a new one", exc)
             return self._monitor(None)
 
+    def _loads(self, state: dict | None) -> LoadsMonitor:
+        units = self.model.units
+        try:
+            return LoadsMonitor.from_rig(self.model.rig, units.curvature, state=state, gauges_in_sample=self._aiding_gauges())
+        except ValueError as exc:
+            if state is None:
+                raise
+            # never silently: the consumed life starts again from zero
+            log.error("%s: stored loads state unusable (%s); the hot spots' damage is counted from zero", self.source_id, exc)
+            return LoadsMonitor.from_rig(self.model.rig, units.curvature, gauges_in_sample=self._aiding_gauges())
+
+    def _aiding_gauges(self) -> tuple[str, ...]:
+        """The strain gauges the estimator uses (their discrepancy is in-sample: the band doubles it)."""
+        return tuple(getattr(getattr(self.model, "selection", None), "gauges", ()) or ())
+
+    def state(self) -> dict:
+        """The engine state a window's commit persists: the monitor's and the loads' (the residue)."""
+        out: dict = {"monitor": self.monitor.state_dict()}
+        if self.loads is not None:
+            out["loads"] = self.loads.state_dict()
+        return out
+
     @property
     def latest_spectrum(self) -> SpectrumDocument | None:
         latest = self._latest_spectrum
@@ -252,7 +280,10 @@ class _Analytics:
         return None if ns is None else ns / _NS
 
     def active(self) -> dict[str, str]:
-        return self.monitor.alarms.raised()
+        raised = self.monitor.alarms.raised()
+        if self.loads is not None:
+            raised.update(self.loads.alarms.raised())
+        return raised
 
     def set_not_before(self, ns: int) -> None:
         self.not_before_ns = int(ns)
@@ -268,7 +299,7 @@ class _Analytics:
 
     # -- data ---------------------------------------------------------------------------------
     def add(self, epoch_ns: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None,
-            temperature: tuple[np.ndarray, np.ndarray] | None) -> list[WindowOutput]:
+            temperature: tuple[np.ndarray, np.ndarray] | None, gauges: dict | None = None) -> list[WindowOutput]:
         """b (n, Γ) and the support displacement d (n,) at t (n,) s after ``epoch_ns``; temperature
         (times s after epoch_ns, °C) or None."""
         if self.engine is None:
@@ -277,7 +308,7 @@ class _Analytics:
             if not len(t):
                 return []
             self.engine = MonitoringEngine(self.monitor, origin_ns=epoch_ns, time_zero_ns=0, not_before_ns=self.not_before_ns,
-                                           next_start_ns=self._next_start_ns, min_coverage=self.min_coverage)
+                                           next_start_ns=self._next_start_ns, min_coverage=self.min_coverage, loads=self.loads)
             for tt, tv in self._temperature:  # the current chunk's temperature is among them
                 self.engine.add([], np.zeros((0, self.gamma)), temperature=(tt, tv))
             self._temperature = []
@@ -290,7 +321,7 @@ class _Analytics:
                 self.engine.add([], np.zeros((0, self.gamma)), temperature=temperature_now)
             return out
         had = self.monitor.baseline is not None
-        for w in self.engine.add(t, b, support=d, temperature=temperature_now):
+        for w in self.engine.add(t, b, support=d, temperature=temperature_now, gauges=gauges):
             out.append(self._output(w, had))
             had = self.monitor.baseline is not None
         return out
@@ -315,7 +346,7 @@ class _Analytics:
             baseline_hz=None if baseline is None else self._per_unit([m.f_ref_hz for m in baseline.modes]),
         )
         return WindowOutput(res, rows, spectrum, start, baseline is not None and not had_baseline,
-                            alarm_changes(res.alarm_events))
+                            alarm_changes([*res.alarm_events, *w.loads_events]), w.loads)
 
 
 # -- the pipeline -----------------------------------------------------------------------------
@@ -367,7 +398,8 @@ class Pipeline:
         # Without a monitor to resume, the source's active baseline (shm baseline learn) arms a new one.
         baseline = None if blob.get("monitor") else storage.active_baseline(source_id)
         self.analytics = _Analytics(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id,
-                                    baseline=baseline)
+                                    baseline=baseline, loads_state=blob.get("loads"))
+        self.last_loads: LoadsWindowDocument | None = None  # of the newest committed window
         # The alarms as the database holds them: the engine's alarm logic runs ahead of it while
         # windows wait for the database, and what is reported comes from here.
         self.committed_alarms: dict[str, str] = self.analytics.active()
@@ -525,15 +557,24 @@ class Pipeline:
             # Windows that would hold the diverged filter's b (or the new one's first seconds) are not analysed.
             settle = self.estimator.epoch_ns + int(round((self.estimator.restarted_at_s + self.estimator.health_config.settle_s) * _NS))
             self._not_before(settle)
-        self._emit(out, released.get(TEMPERATURE_TOPIC))
+        self._emit(out, released.get(TEMPERATURE_TOPIC), self._gauges(released))
 
-    def _emit(self, out: FilterOutput | None, temp) -> None:
+    def _gauges(self, released: dict) -> dict | None:
+        """The released strain gauge samples by gauge name (UNIX ns, values): the loads' band (issue 21)."""
+        if self.analytics.loads is None or not self.analytics.loads.gauges:
+            return None
+        topics = {f"/strain/{g.name}": g.name for g in self.analytics.loads.gauges}
+        return {topics[k]: (v[0], v[1][:, 0]) for k, v in released.items() if k in topics and len(v[0])} or None
+
+    def _emit(self, out: FilterOutput | None, temp, gauges: dict | None = None) -> None:
         epoch = self.estimator.epoch_ns
         if epoch is None:
             return
         # times after the estimator's epoch (whole UNIX seconds): the engine aligns its windows
         # in data time from there to the nanosecond
         temperature = None if temp is None else ((temp[0] - epoch) * 1e-9, temp[1][:, 0])
+        if gauges is not None:  # times after the epoch, as b's
+            gauges = {k: ((tv[0] - epoch) * 1e-9, tv[1]) for k, tv in gauges.items()}
         if out is None or not len(out.t):
             if temperature is not None:
                 self._analyse(epoch, np.zeros(0), np.zeros((0, self.model.gamma)), None, temperature, None)
@@ -551,15 +592,16 @@ class Pipeline:
         if self.archive_estimates:
             self._archive_estimates(out)
         self._push_estimates(t_abs, out)
-        self._analyse(epoch, out.t, b, d, temperature, float(t_abs[0]))
+        self._analyse(epoch, out.t, b, d, temperature, float(t_abs[0]), gauges)
 
     # -- the analysis stage (inline, or in its thread in this order) ----------------------------
 
-    def _analyse(self, epoch: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None, temperature, first_s: float | None) -> None:
+    def _analyse(self, epoch: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None, temperature, first_s: float | None,
+                 gauges: dict | None = None) -> None:
         if self._analysis_thread is None:
-            self._analyse_now(epoch, t, b, d, temperature, first_s)
+            self._analyse_now(epoch, t, b, d, temperature, first_s, gauges)
         else:
-            self._put(("chunk", (epoch, t, b, d, temperature, first_s)))
+            self._put(("chunk", (epoch, t, b, d, temperature, first_s, gauges)))
 
     def _not_before(self, ns: int) -> None:
         if self._analysis_thread is None:
@@ -576,12 +618,12 @@ class Pipeline:
         self.analytics.set_not_before(max(self.analytics.not_before_ns or ns, ns))
 
     def _analyse_now(self, epoch: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None, temperature,
-                     first_s: float | None) -> None:
+                     first_s: float | None, gauges: dict | None = None) -> None:
         if first_s is not None and self._reset_requested:
             self._reset_requested = False
             self.analytics.reset()
             self._clear_for_new_baseline(first_s)
-        for window in self.analytics.add(epoch, t, b, d, temperature):
+        for window in self.analytics.add(epoch, t, b, d, temperature, gauges):
             self._commit(window)
 
     def drain_analysis(self) -> None:
@@ -608,7 +650,7 @@ class Pipeline:
 
     def _push_estimates(self, t_abs: np.ndarray, out: FilterOutput) -> None:
         if self.live is not None:  # the structure's live ring: keeps them (decimated) only while watched
-            self.sink_guard.call("live", self.live.add, t_abs, out.x)
+            self.sink_guard.call("live", self.live.add, t_abs, out.x, self._truth_at if self._truth else None)
         if self.sink is None:
             return
         now = time.monotonic()
@@ -624,12 +666,23 @@ class Pipeline:
                 truth = defl[k]
         self.sink_guard.call("estimate", self.sink.estimate, float(t_abs[-1]), out.x[-1].copy(), truth)
 
+    def _truth_at(self, t_abs: np.ndarray) -> list[np.ndarray | None]:
+        """The simulation's true deflection at the stations nearest each time (UNIX s; None farther than 50 ms)."""
+        tt = np.concatenate([t for t, _ in self._truth])
+        defl = np.concatenate([d for _, d in self._truth])
+        target = np.round(np.asarray(t_abs, dtype=float) * 1e9).astype(np.int64)
+        k = np.clip(np.searchsorted(tt, target), 0, len(tt) - 1)
+        return [defl[j] if abs(int(tt[j]) - int(want)) < 50_000_000 else None for j, want in zip(k, target)]
+
     def _clear_for_new_baseline(self, at_s: float) -> None:
         """A new baseline: every chart starts over and every active alarm of the source clears
         (those stored and those raised by windows still waiting for the database)."""
-        active = {a.chart: a for a in self.storage.alarms(state="active") if a.source == self.source_id}
+        # the fatigue alarms stay: a new modal baseline does not change what the hot spots consumed
+        active = {a.chart: a for a in self.storage.alarms(state="active") if a.source == self.source_id and a.kind != "fatigue"}
         for pending in self._pending_commits:
             for c in pending.commit.alarm_changes:
+                if c.kind == "fatigue":
+                    continue
                 if c.action == "raise":
                     active[c.chart] = AlarmDocument(id=1, source=self.source_id, chart=c.chart, kind=c.kind, mode=c.mode,
                                                     level=c.level, state="active", raised_at_s=c.at_s, message=c.message)
@@ -637,7 +690,9 @@ class Pipeline:
                     active.pop(c.chart, None)
         changes = clear_changes(active.values(), at_s)
         start = self.analytics.next_start - self.analytics.step_s if self.analytics.next_start else at_s
-        commit = WindowCommit(self.source_id, start, at_s, [], {"monitor": None}, None, changes)
+        state = self.analytics.state()
+        state["monitor"] = None
+        commit = WindowCommit(self.source_id, start, at_s, [], state, None, changes)
         self._pending_commits.append(_PendingCommit(commit, {}))
         self.flush_commits()
 
@@ -653,8 +708,8 @@ class Pipeline:
         document = window_document(self.source_id, res, window.rows, charts)
         commit = WindowCommit(
             source=self.source_id, window_start_s=window.start_s, data_time_s=res.end_s, rows=window.rows,
-            monitor_state={"monitor": self.analytics.monitor.state_dict()},
-            calibration=calibration, alarm_changes=changes, baseline=baseline,
+            monitor_state=self.analytics.state(),
+            calibration=calibration, alarm_changes=changes, baseline=baseline, loads=window.loads,
         )
         self._pending_commits.append(_PendingCommit(commit, self.analytics.active(), document, window.spectrum))
         if len(self._pending_commits) > self.max_pending_commits:
@@ -688,6 +743,8 @@ class Pipeline:
             if pending.document is not None:
                 self.windows_committed += 1
                 self.last_window = pending.document
+            if pending.commit.loads is not None:
+                self.last_loads = pending.commit.loads
             self._after_commit(pending)
         self.storage_error = None
         return True
@@ -774,6 +831,7 @@ class Pipeline:
             pipeline_latency_s=round(self.latency_s, 4),
             busy_fraction=round(self.busy_s / elapsed, 3),
             active_alarms=dict(self.committed_alarms),
+            hot_spots=[] if self.last_loads is None else list(self.last_loads.hot_spots),
         )
 
 
