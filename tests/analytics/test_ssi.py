@@ -78,7 +78,8 @@ def test_standard_deviations_cover_the_errors_at_their_stated_rate(uncertainty):
     s = three_dof()
     cfg = OmaConfig(fmin_hz=1.0, fmax_hz=15.0, uncertainty=uncertainty)
     zf, zz = [], []
-    for seed in range(40):
+    runs = 40 if uncertainty == "jackknife" else 24  # the record's variants identify every segment again: fewer runs
+    for seed in range(runs):
         y = ambient_response(s, FS, 6_000, seed=100 + seed, noise_rel=0.2)
         ident = identify_modes(y, FS, config=cfg)
         for m in ident.modes:
@@ -87,7 +88,7 @@ def test_standard_deviations_cover_the_errors_at_their_stated_rate(uncertainty):
                 zf.append((m.frequency_hz - s.frequencies_hz[k]) / m.frequency_std_hz)
                 zz.append((m.damping_ratio - s.damping[k]) / m.damping_std)
     zf, zz = np.abs(zf), np.abs(zz)
-    assert zf.size >= 100  # the modes are found in nearly every run
+    assert zf.size >= 2.5 * runs  # the modes are found in nearly every run
     for z in (zf, zz):
         assert 0.55 <= np.mean(z <= 1) <= 0.85, np.mean(z <= 1)
         assert np.mean(z <= 2) >= 0.85, np.mean(z <= 2)
