@@ -4,12 +4,10 @@ remaining life and its band, and "no damage: below the cut-off" instead of an in
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 
-from contract import HotSpotLoadsDocument, LoadsWindowDocument
+from contract import FatigueDocument, HotSpotLoadsDocument, LoadsWindowDocument, StationLoadsDocument
 from web import envelope_plot, hot_spots_html, loads_record
 
 
@@ -30,9 +28,9 @@ def _document(total=2):
     ]
     hot = [_spot("flange", 0.5, consumed=2e-6, remaining=40.0, band=[30.0, 55.0], rate=2.5e-2),
            _spot("door", 3.0, consumed=0.0, verdict="no_damage_below_cutoff")]
-    envelope = [SimpleNamespace(position_m=p, strain_range_max=1e-4 / (1 + p), stress_range_max_pa=2.1e7 / (1 + p),
-                                strain_rms=2e-5 / (1 + p)) for p in (4.0, 0.0, 1.0, 2.0)]  # not in order: sorted
-    return SimpleNamespace(structure_id="mast", design_life_years=25.0, hot_spots=hot, windows=windows, envelope=envelope,
+    envelope = [StationLoadsDocument(position_m=p, strain_range_max=1e-4 / (1 + p), stress_range_max_pa=2.1e7 / (1 + p),
+                                     strain_rms=2e-5 / (1 + p)) for p in (4.0, 0.0, 1.0, 2.0)]  # not in order: sorted
+    return FatigueDocument(structure_id="mast", design_life_years=25.0, hot_spots=hot, windows=windows, envelope=envelope,
                            total=total, truncated=False)
 
 
@@ -61,8 +59,7 @@ def test_the_table_says_remaining_life_with_its_band_and_no_damage_below_the_cut
     assert "no damage: below the cut-off" in text and "inf" not in text.lower()
     assert "design life 25.0 years" in text and "2 window(s) counted" in text
     assert "m=3: 10.00" in text  # the latest DEL in MPa
-    empty = SimpleNamespace(structure_id="m", design_life_years=None, hot_spots=[], windows=[], envelope=[], total=0,
-                            truncated=False)
+    empty = FatigueDocument(structure_id="m", design_life_years=None, hot_spots=[], windows=[], envelope=[], total=0)
     assert "No loads yet" in hot_spots_html(loads_record(empty))
     assert "boom" in hot_spots_html(loads_record(empty), "the loads could not be read: boom")
 
@@ -76,4 +73,4 @@ def test_a_life_shorter_than_the_design_life_is_marked():
 
 def test_a_document_without_the_fields_is_refused():
     with pytest.raises(ValueError, match="FatigueDocument"):
-        loads_record(SimpleNamespace(hot_spots=[]))
+        loads_record({"hot_spots": []})
