@@ -55,10 +55,10 @@ def test_the_envelope_marks_the_hot_spots_on_the_beam():
 
 def test_the_table_says_remaining_life_with_its_band_and_no_damage_below_the_cut_off():
     text = hot_spots_html(loads_record(_document()))
-    assert "40.0 years" in text and "(30.0–55.0)" in text  # the remaining life and its band
+    assert "40.0 years" in text and "(30.0 years – 55.0 years)" in text  # the remaining life and its band
     assert "no damage: below the cut-off" in text and "inf" not in text.lower()
     assert "design life 25.0 years" in text and "2 window(s) counted" in text
-    assert "m=3: 10.00" in text  # the latest DEL in MPa
+    assert "DEL<sub>3</sub> 10.00" in text and "max 30.00" in text  # the latest window's DEL and largest range, MPa
     empty = FatigueDocument(structure_id="m", design_life_years=None, hot_spots=[], windows=[], envelope=[], total=0)
     assert "No loads yet" in hot_spots_html(loads_record(empty))
     assert "boom" in hot_spots_html(loads_record(empty), "the loads could not be read: boom")
@@ -69,6 +69,11 @@ def test_a_life_shorter_than_the_design_life_is_marked():
     doc.hot_spots[0] = _spot("flange", 0.5, consumed=0.5, remaining=3.0, band=[2.0, 4.5], rate=0.1)
     text = hot_spots_html(loads_record(doc))
     assert "color:#dc2626;font-weight:bold'>3.0 years" in text
+    # a life shorter than a year in days, shorter than a day in hours (never "0.0 years")
+    day = 1 / 365.25
+    doc.hot_spots[0] = _spot("flange", 0.5, consumed=0.5, remaining=10 * day, band=[5 * day / 24, 30 * day], rate=20.0)
+    text = hot_spots_html(loads_record(doc))
+    assert ">10.0 days</span>" in text and "(5.0 hours – 30.0 days)" in text
 
 
 def test_a_document_without_the_fields_is_refused():
