@@ -105,12 +105,12 @@ from ._rig import (
     parse_rig,
 )
 from ._state import Peripheral, StateIndex, StateLayout
-from ._ports import ServicePort, StructureModel, StructurePort
+from ._ports import MAX_PAGE, Page, ServicePort, StructureModel, StructurePort
 
 __all__ = [
     "is_loopback",
     # the runtime's ports (the HTTP routers and the dashboard are typed against them)
-    "ServicePort", "StructureModel", "StructurePort",
+    "MAX_PAGE", "Page", "ServicePort", "StructureModel", "StructurePort",
     # rig.json
     "Beam", "Orientation", "PointMass", "RigDescription",
     "DNV_RP_C203_CURVE_NAMES", "DNV_RP_C203_ENVIRONMENTS", "EN1993_DETAIL_CATEGORIES", "EN1993_SHEAR_CATEGORIES",

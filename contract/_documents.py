@@ -321,12 +321,15 @@ class TrendRow(_Document):
 
 
 class TrendsDocument(_Document):
-    """Trend rows in window order; ``truncated``: more rows match than ``limit`` returned (ask again
-    with ``from`` at the last row's window start for the rest)."""
+    """Trend rows in window order (window start, source, mode): one page of ``total`` rows that
+    match. ``truncated``: rows come after this page; ask again with ``cursor=next_cursor`` for
+    them (the ``Link: <...>; rel="next"`` header holds that URL)."""
 
     rows: list[TrendRow]
-    count: Count
-    truncated: bool = False
+    count: Count = Field(description="rows in this page")
+    total: Count = Field(0, description="rows that match the query, on every page (with the rows before the cursor)")
+    truncated: bool = Field(False, description="more rows follow this page")
+    next_cursor: str | None = Field(None, description="pass as cursor= for the next page (null: this is the last)")
 
 
 class SpectrumDocument(_Document):
@@ -413,8 +416,13 @@ class AlarmDocument(_Document):
 
 
 class AlarmsDocument(_Document):
+    """Alarms, newest first: one page of ``total`` (paged as ``TrendsDocument``)."""
+
     alarms: list[AlarmDocument]
-    count: Count
+    count: Count = Field(description="alarms in this page")
+    total: Count = Field(0, description="alarms that match the query, on every page")
+    truncated: bool = Field(False, description="more alarms follow this page")
+    next_cursor: str | None = Field(None, description="pass as cursor= for the next page (null: this is the last)")
 
 
 AlarmEvent = Literal["raised", "escalated", "cleared", "acknowledged", "repeated", "stale"]
@@ -707,9 +715,14 @@ class StructureSummaryDocument(_Document):
 
 
 class StructuresDocument(_Document):
-    """``GET /api/structures``."""
+    """``GET /api/structures``: the structures in their configured order, one page of ``total``
+    (paged as ``TrendsDocument``; a document of the whole fleet has every structure)."""
 
     structures: list[StructureSummaryDocument]
+    count: Count | None = Field(None, description="structures in this page (null: all of them)")
+    total: Count | None = Field(None, description="structures of the service, on every page (null: as many as listed)")
+    truncated: bool = Field(False, description="more structures follow this page")
+    next_cursor: str | None = Field(None, description="pass as cursor= for the next page (null: this is the last)")
 
 
 class LiveEstimatesDocument(_Document):
@@ -733,6 +746,9 @@ class LiveEstimatesDocument(_Document):
                                                                "reference temperature's E (None: a beam of table sections has no E)")
     moment_nm: list[list[Finite]] = Field(default_factory=list, description="bending moment EI κ per estimate and station, N·m")
     root_moment_nm: list[Finite] | None = Field(None, description="the root bending moment per estimate, N·m (clamped support only)")
+    truth_deflection: list[list[Finite] | None] | None = Field(
+        None, description="a simulated source only: the true deflection (m) at the structure's stations at each estimate "
+                          "(None where the simulation gave none near it); None for measured data")
 
 
 class ErrorDocument(_Document):

@@ -17,7 +17,7 @@ import threading
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -90,9 +90,10 @@ class PipelineSink(Protocol):
 
 
 class LiveRingLike(Protocol):
-    """A structure's live ring (``_live.LiveRing``): takes every batch's estimates (``t_s`` (n,), ``x`` (n, nx))."""
+    """A structure's live ring (``_live.LiveRing``): takes every batch's estimates (``t_s`` (n,), ``x`` (n, nx))
+    and, from a simulated source, a lookup of the true deflection at given times."""
 
-    def add(self, t_s: np.ndarray, x: np.ndarray) -> None: ...
+    def add(self, t_s: np.ndarray, x: np.ndarray, truth: Any = None) -> None: ...
 
 
 _blas_limit = None
@@ -649,7 +650,7 @@ class Pipeline:
 
     def _push_estimates(self, t_abs: np.ndarray, out: FilterOutput) -> None:
         if self.live is not None:  # the structure's live ring: keeps them (decimated) only while watched
-            self.sink_guard.call("live", self.live.add, t_abs, out.x)
+            self.sink_guard.call("live", self.live.add, t_abs, out.x, self._truth_at if self._truth else None)
         if self.sink is None:
             return
         now = time.monotonic()
@@ -664,6 +665,14 @@ class Pipeline:
             if abs(int(tt[k]) - target) < 50_000_000:
                 truth = defl[k]
         self.sink_guard.call("estimate", self.sink.estimate, float(t_abs[-1]), out.x[-1].copy(), truth)
+
+    def _truth_at(self, t_abs: np.ndarray) -> list[np.ndarray | None]:
+        """The simulation's true deflection at the stations nearest each time (UNIX s; None farther than 50 ms)."""
+        tt = np.concatenate([t for t, _ in self._truth])
+        defl = np.concatenate([d for _, d in self._truth])
+        target = np.round(np.asarray(t_abs, dtype=float) * 1e9).astype(np.int64)
+        k = np.clip(np.searchsorted(tt, target), 0, len(tt) - 1)
+        return [defl[j] if abs(int(tt[j]) - int(want)) < 50_000_000 else None for j, want in zip(k, target)]
 
     def _clear_for_new_baseline(self, at_s: float) -> None:
         """A new baseline: every chart starts over and every active alarm of the source clears

@@ -11,7 +11,7 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response
 
 from contract import FatigueDocument, ServicePort
 
-from ._api import _AUTH_RESPONSES, _INVALID, _error, _parse_time
+from ._http_common import AUTH_RESPONSES as _AUTH_RESPONSES, INVALID as _INVALID, error as _error, parse_time as _parse_time
 from ._deps import service_port
 
 __all__ = ["router", "fatigue_csv"]

@@ -1,5 +1,5 @@
 """The monitoring service: wires a source, the pipeline, storage, notifications, the HTTP API
-and the dashboard, and implements the dashboard's ``DashboardService`` port."""
+and the dashboard, and implements the ``contract.ServicePort`` the API and the dashboard read."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 
 from contract import (
     AlarmCountsDocument,
@@ -27,6 +26,7 @@ from contract import (
     LiveEstimatesDocument,
     ModelDocument,
     NotificationStatusDocument,
+    Page,
     RigDescription,
     ServiceStatusDocument,
     SourceStatusDocument,
@@ -57,6 +57,7 @@ from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
 from ._storage import Storage, is_transient
 from ._store_fatigue import fatigue_document
+from ._store_writer import open_storage
 
 __all__ = ["MonitoringService", "NotSingleStructure", "ServiceError", "Structure", "StructureUnavailable"]
 
@@ -70,35 +71,6 @@ class ServiceError(RuntimeError):
 
 class RigPending(ServiceError):
     """``follow:``: the file (or its rig.json) is not there yet; the service can be made once it is."""
-
-
-class _DashboardSink:
-    """Adapts a structure's pipeline pushes to ``web.Dashboard`` (the pipeline's ``SinkGuard``
-    counts and isolates what it raises). Nothing is pushed while every browser has paused."""
-
-    def __init__(self, dashboard: Any, service: "MonitoringService", structure: "Structure") -> None:
-        self.dashboard = dashboard
-        self.service = service
-        self.structure = structure
-
-    def estimate(self, t_s: float, x: np.ndarray, truth: np.ndarray | None) -> None:
-        if self.service.paused:
-            return
-        pipeline = self.structure.pipeline
-        states = pipeline.sensor_states() if pipeline is not None else {}
-        self.dashboard.push_estimate(t_s, x, states, truth)
-
-    def spectra(self, spectrum: SpectrumDocument) -> None:
-        if not self.service.paused:
-            self.dashboard.push_spectra(spectrum)
-
-    def window(self, window: WindowDocument) -> None:
-        if not self.service.paused:
-            self.dashboard.push_window(window)
-
-    def alarm(self, alarm: AlarmDocument) -> None:
-        # Alarms reach the dashboard while paused too: pausing freezes the picture, not the alarms.
-        self.dashboard.push_alarm(alarm)
 
 
 class StructureUnavailable(LookupError):
@@ -431,6 +403,23 @@ class _StoredRows:
         self._known(structure_id)
         return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit)
 
+    def trends_page(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+                    *, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        return self.storage.trends_page(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit, cursor=cursor)
+
+    def structure_trends_page(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
+                              *, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        self._known(structure_id)
+        return self.storage.trends_page(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit, cursor=cursor)
+
+    def alarms_page(self, state: str | None = None, *, limit: int = 1000, cursor: str | None = None) -> Page[AlarmDocument]:
+        return self.storage.alarms_page(state=state, limit=limit, cursor=cursor)
+
+    def structure_alarms_page(self, structure_id: str, state: str | None = None, *, limit: int = 1000,
+                              cursor: str | None = None) -> Page[AlarmDocument]:
+        self._known(structure_id)
+        return self.storage.alarms_page(state=state, source=structure_id, limit=limit, cursor=cursor)
+
     def alarms(self, state: str | None = None) -> list[AlarmDocument]:
         return self.storage.alarms(state=state)
 
@@ -488,7 +477,8 @@ class MonitoringService(_StoredRows):
                     # One structure's bad file or rig must not keep the others from monitoring.
                     log.error("structure %s cannot start: %s", st.id, exc)
                     self.structures[st.id] = _FailedStructure(st.id, st.source.partition(":")[0], str(exc))
-        self.storage = Storage(settings.db, notify_targets=notify_targets(settings.notify),
+        # a worker of a fleet writes through its front (one writer per database: _store_writer)
+        self.storage = open_storage(settings.db, notify_targets=notify_targets(settings.notify),
                                notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
                                notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
                                alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
@@ -496,12 +486,11 @@ class MonitoringService(_StoredRows):
         self.dashboard_guard = SinkGuard("dashboard", log)
         shown = next((s for s in self.structures.values() if isinstance(s, Structure)), None)
         if settings.dashboard.enabled and shown is not None:
-            # a fleet's dashboard reads the structure each browser selects through the port (live ring, status,
-            # rows, spectra); a single structure's is pushed its data
-            self.dashboard = self._start_dashboard(None if self.fleet else shown)
+            # the dashboard reads the structure each browser shows through the port (live ring, status, rows,
+            # latest window and spectra), one structure as a fleet: nothing is pushed into it
+            self.dashboard = start_dashboard(self, self.settings, self.token)
         for structure in self.running_structures():
-            sink = _DashboardSink(self.dashboard, self, structure) if self.dashboard is not None and not self.fleet else None
-            structure.attach(self.storage, sink, self.dashboard_guard)
+            structure.attach(self.storage, None, self.dashboard_guard)
         self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
         archives = [s.archive for s in self.running_structures() if s.archive is not None]
         self.retention = RetentionWorker(settings.retention, storage=self.storage,
@@ -578,9 +567,6 @@ class MonitoringService(_StoredRows):
             raise StructureUnavailable(f"structure {structure_id!r} failed to start: {found.error}")
         return found
 
-    def _start_dashboard(self, structure: Structure | None) -> Any:
-        """The dashboard of the single ``structure``, or of the fleet (``None``)."""
-        return start_dashboard(self, self.settings, structure, self.token)
 
     # -- running ----------------------------------------------------------------------------
 
@@ -833,6 +819,10 @@ class MonitoringService(_StoredRows):
 
     def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
         return self.spectra(structure_id)
+
+    def structure_window(self, structure_id: str) -> WindowDocument | None:
+        """Its latest committed window (``GET /api/structures/{id}/windows/latest``)."""
+        return self.structure(structure_id).pipeline.last_window
 
     def structure_rig(self, structure_id: str) -> RigDescription:
         """The rig structure ``structure_id`` is monitored with (``GET /api/structures/{id}/rig``)."""
