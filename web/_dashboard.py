@@ -35,7 +35,7 @@ __all__ = ["Dashboard", "SENSOR_STATES"]
 log = logging.getLogger(__name__)
 #: What the dashboard reads of the port (a missing one is refused at construction).
 PORT_METHODS = ("structures_document", "structure_model", "structure_status", "structure_trends", "structure_alarms",
-                "structure_window", "structure_spectra", "live", "acknowledge")
+                "structure_window", "structure_spectra", "structure_fatigue", "live", "acknowledge")
 
 
 class Dashboard:

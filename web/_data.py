@@ -14,7 +14,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from contract import BaselineModeDocument, HotSpotLoadsDocument, SpectrumDocument, ThresholdsDocument, TrendRow, WindowDocument
+from contract import (
+    BaselineModeDocument,
+    FatigueDocument,
+    HotSpotLoadsDocument,
+    SpectrumDocument,
+    ThresholdsDocument,
+    TrendRow,
+    WindowDocument,
+)
 
 __all__ = [
     "BAND_SIGMA",
@@ -249,16 +257,14 @@ def _num(v: object) -> float:
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(float(v)) else math.nan
 
 
-def loads_record(doc: object) -> LoadsRecord:
-    """The Loads tab's record of a ``contract.FatigueDocument`` (its envelope sorted along the beam).
-    Raises ValueError when ``doc`` lacks a field the tab draws."""
-    try:
-        envelope = sorted(doc.envelope, key=lambda e: e.position_m)  # type: ignore[attr-defined]
-        windows = list(doc.windows)  # type: ignore[attr-defined]
-        hot_spots = tuple(doc.hot_spots)  # type: ignore[attr-defined]
-        design, total, truncated = doc.design_life_years, doc.total, doc.truncated  # type: ignore[attr-defined]
-    except AttributeError as exc:
-        raise ValueError(f"not a contract.FatigueDocument: {exc}") from None
+def loads_record(doc: FatigueDocument) -> LoadsRecord:
+    """The Loads tab's record of a structure's ``contract.FatigueDocument`` (its envelope sorted
+    along the beam). Raises ValueError for anything else."""
+    if not isinstance(doc, FatigueDocument):
+        raise ValueError(f"fatigue must be a contract.FatigueDocument, got {type(doc).__name__}")
+    envelope = sorted(doc.envelope, key=lambda e: e.position_m)
+    windows, hot_spots = list(doc.windows), tuple(doc.hot_spots)
+    design, total, truncated = doc.design_life_years, doc.total, doc.truncated
     names = [h.name for h in hot_spots]
     exponents = sorted({m for w in windows for h in w.hot_spots for m in h.del_pa}, key=float)
     dels = {m: {n: np.full(len(windows), math.nan) for n in names} for m in exponents}

@@ -392,9 +392,15 @@ _VERDICT = {"finite": ("#15803d", "finite life"), "no_damage_below_cutoff": ("#2
 
 
 def _years(v: float | None) -> str:
+    """A life in years, or in days or hours when it is shorter than a year or a day."""
     if v is None or not math.isfinite(v):
         return "–"
-    return f"{v:,.0f}" if v >= 100 else f"{v:.1f}"
+    if v >= 100:
+        return f"{v:,.0f} years"
+    if v >= 1:
+        return f"{v:.1f} years"
+    days = v * 365.25
+    return f"{days:.1f} days" if days >= 1 else f"{24 * days:.1f} hours"
 
 
 def _remaining(rec: Any) -> str:
@@ -405,11 +411,11 @@ def _remaining(rec: Any) -> str:
     band = ""
     if rec.remaining_band_years and len(rec.remaining_band_years) == 2:
         lo, hi = rec.remaining_band_years
-        band = f" <span style='color:#666'>({_years(lo)}–{_years(hi)})</span>"
+        band = f" <span style='color:#666'>({_years(lo)} – {_years(hi)})</span>"
     design = rec.design_life_years
     warn = design is not None and rec.remaining_years is not None and rec.remaining_years < design
     style = "color:#dc2626;font-weight:bold" if warn else ""
-    return f"<span style='{style}'>{_years(rec.remaining_years)} years</span>{band}"
+    return f"<span style='{style}'>{_years(rec.remaining_years)}</span>{band}"
 
 
 def hot_spots_html(record: LoadsRecord, error: str | None = None) -> str:
@@ -419,19 +425,20 @@ def hot_spots_html(record: LoadsRecord, error: str | None = None) -> str:
     if not record.hot_spots:
         return f"<div style='font-size:12px'>{stale}<p>No loads yet: the first analysis window brings them.</p></div>"
     rows = []
+    grey = "<span style='color:#666'>"
     for h in record.hot_spots:
-        dels = " · ".join(f"m={html.escape(m)}: {_fmt(None if v is None else v / 1e6, '{:.2f}')}" for m, v in sorted(h.del_pa.items()))
-        rate = _fmt(h.rate_per_year, "{:.2e}")
+        dels = "<br>".join(f"DEL<sub>{html.escape(m)}</sub> {_fmt(None if v is None else v / 1e6, '{:.2f}')}"
+                           for m, v in sorted(h.del_pa.items(), key=lambda kv: float(kv[0])))
+        peak = _fmt(None if h.max_range_pa is None else h.max_range_pa / 1e6, "{:.2f}")
         rows.append(
-            f"<tr><td><b>{html.escape(h.name)}</b><br><span style='color:#666'>η = {h.position_m:.2f} m</span></td>"
-            f"<td>{html.escape(h.curve)}</td><td>{_fmt(h.consumed, '{:.3e}')}</td><td>{rate}</td>"
-            f"<td>{_remaining(h)}</td><td>{dels}</td><td>{_fmt(None if h.max_range_pa is None else h.max_range_pa / 1e6, '{:.2f}')}</td></tr>"
+            f"<tr><td><b>{html.escape(h.name)}</b><br>{grey}η = {h.position_m:.2f} m · {html.escape(h.curve)}</span></td>"
+            f"<td>{_fmt(h.consumed, '{:.3e}')}<br>{grey}{_fmt(h.rate_per_year, '{:.2e}')} /year</span></td>"
+            f"<td>{_remaining(h)}</td><td>{dels}<br>{grey}max {peak}</span></td></tr>"
         )
-    design = f"design life {_years(record.design_life_years)} years · " if record.design_life_years else ""
+    design = f"design life {_years(record.design_life_years)} · " if record.design_life_years else ""
     return (
         f"<div style='font-size:12px'>{stale}<b>{len(record.hot_spots)} hot spot(s)</b> · {design}"
         f"{record.windows} window(s) counted{' (the oldest left out)' if record.truncated else ''}."
         "<table style='width:100%;font-size:12px;border-collapse:collapse'><tr><th style='text-align:left'>hot spot</th>"
-        "<th>curve</th><th>consumed D</th><th>rate /year</th><th>remaining life</th><th>DEL MPa (latest window)</th>"
-        "<th>max range MPa</th></tr>" + "".join(rows) + "</table></div>"
+        "<th>consumed D, rate</th><th>remaining life</th><th>latest window, MPa</th></tr>" + "".join(rows) + "</table></div>"
     )

@@ -244,16 +244,7 @@ class WorkerFleet(_StoredRows):
         MonitoringService.check_token(self, token)  # type: ignore[arg-type]
 
     def health(self) -> HealthDocument:
-        reasons: list[str] = []
-        for worker in self.workers:
-            try:
-                doc = self._client.get(f"{worker.url}/healthz",
-                                       headers={"Authorization": f"Bearer {self.token}"} if self.token else {}).json()
-                reasons.extend(doc.get("reasons", []))
-            except (httpx.HTTPError, ValueError) as exc:
-                reasons.append(f"worker process {worker.index} ({', '.join(worker.ids[:3])}, ...) does not answer: {exc}")
-        return HealthDocument(status="degraded" if reasons else "ok", uptime_s=round(time.time() - self.started_at, 1),
-                              reasons=reasons)
+        return _fleet_health(self)
 
     def status(self, structure_id: str | None = None) -> StatusDocument:
         if structure_id is None:
@@ -391,3 +382,17 @@ def _fleet_exposition(fleet: WorkerFleet) -> str:
                  "shm_uptime_seconds": [({}, round(time.time() - fleet.started_at, 1))]}
     # the structures as the front lists them (a worker that died: its structures failed)
     return merge_expositions(texts, overrides, front=fleet_metrics(fleet.structures_document(), {}))
+
+
+def _fleet_health(fleet: WorkerFleet) -> HealthDocument:
+    """``WorkerFleet.health``: the reasons of every worker, or that it does not answer."""
+    reasons: list[str] = []
+    for worker in fleet.workers:
+        try:
+            doc = fleet._client.get(f"{worker.url}/healthz",
+                                    headers={"Authorization": f"Bearer {fleet.token}"} if fleet.token else {}).json()
+            reasons.extend(doc.get("reasons", []))
+        except (httpx.HTTPError, ValueError) as exc:
+            reasons.append(f"worker process {worker.index} ({', '.join(worker.ids[:3])}, ...) does not answer: {exc}")
+    return HealthDocument(status="degraded" if reasons else "ok", uptime_s=round(time.time() - fleet.started_at, 1),
+                          reasons=reasons)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import tempfile
 import tomllib
 from pathlib import Path
 
@@ -21,6 +22,8 @@ from browser_helpers import (
 from shm_service.service import start_serve
 
 MAST = ROOT / "examples" / "mast"
+# The docs' picture of the Loads tab: SHM_LOADS_SCREENSHOT=docs/loads-tab.png (else a temporary file).
+SCREENSHOT = Path(os.environ.get("SHM_LOADS_SCREENSHOT", Path(tempfile.gettempdir()) / "shm-loads-tab.png"))
 
 
 def _config(tmp: Path) -> dict:
@@ -29,7 +32,7 @@ def _config(tmp: Path) -> dict:
     config["data_dir"] = str(tmp / "var")
     config["source"] = {"spec": "sim", "speed": "4", "keep_running": True}
     config["sim"] = {"rig": str(tmp / "examples" / "mast" / "rig.json"), "excitation": "ambient", "duration_s": 900.0,
-                     "damage": [], "damage_at_s": None, "storm_start_s": 150.0, "storm_end_s": 600.0, "storm_peak": 4.0}
+                     "damage": [], "storm_start_s": 150.0, "storm_end_s": 600.0, "storm_peak": 4.0}
     config["estimator"].update(calibration_s=30.0, warmup_s=10.0)
     config["analytics"].update(window_s=40.0, baseline_s=200.0)
     config["archive"] = {"enabled": False}
@@ -83,6 +86,7 @@ def test_the_loads_tab_of_the_mast(chromium, tmp_path):
                 visible(page, "Consumed life D per hot spot", exact=False).wait_for(timeout=30_000)
                 visible(page, "window(s) counted", exact=False).wait_for(timeout=30_000)
                 assert_chart_drawn(page, "Stress envelope")
+                SCREENSHOT.write_bytes(page.screenshot())
                 print({h["name"]: (h["verdict"], h["consumed"], h["remaining_years"]) for h in doc["hot_spots"]})
     finally:
         stop_process(serve.process)

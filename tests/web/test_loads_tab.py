@@ -4,12 +4,10 @@ remaining life and its band, and "no damage: below the cut-off" instead of an in
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 
-from contract import HotSpotLoadsDocument, LoadsWindowDocument
+from contract import FatigueDocument, HotSpotLoadsDocument, LoadsWindowDocument, StationLoadsDocument
 from web import envelope_plot, hot_spots_html, loads_record
 
 
@@ -30,9 +28,9 @@ def _document(total=2):
     ]
     hot = [_spot("flange", 0.5, consumed=2e-6, remaining=40.0, band=[30.0, 55.0], rate=2.5e-2),
            _spot("door", 3.0, consumed=0.0, verdict="no_damage_below_cutoff")]
-    envelope = [SimpleNamespace(position_m=p, strain_range_max=1e-4 / (1 + p), stress_range_max_pa=2.1e7 / (1 + p),
-                                strain_rms=2e-5 / (1 + p)) for p in (4.0, 0.0, 1.0, 2.0)]  # not in order: sorted
-    return SimpleNamespace(structure_id="mast", design_life_years=25.0, hot_spots=hot, windows=windows, envelope=envelope,
+    envelope = [StationLoadsDocument(position_m=p, strain_range_max=1e-4 / (1 + p), stress_range_max_pa=2.1e7 / (1 + p),
+                                     strain_rms=2e-5 / (1 + p)) for p in (4.0, 0.0, 1.0, 2.0)]  # not in order: sorted
+    return FatigueDocument(structure_id="mast", design_life_years=25.0, hot_spots=hot, windows=windows, envelope=envelope,
                            total=total, truncated=False)
 
 
@@ -57,12 +55,11 @@ def test_the_envelope_marks_the_hot_spots_on_the_beam():
 
 def test_the_table_says_remaining_life_with_its_band_and_no_damage_below_the_cut_off():
     text = hot_spots_html(loads_record(_document()))
-    assert "40.0 years" in text and "(30.0–55.0)" in text  # the remaining life and its band
+    assert "40.0 years" in text and "(30.0 years – 55.0 years)" in text  # the remaining life and its band
     assert "no damage: below the cut-off" in text and "inf" not in text.lower()
     assert "design life 25.0 years" in text and "2 window(s) counted" in text
-    assert "m=3: 10.00" in text  # the latest DEL in MPa
-    empty = SimpleNamespace(structure_id="m", design_life_years=None, hot_spots=[], windows=[], envelope=[], total=0,
-                            truncated=False)
+    assert "DEL<sub>3</sub> 10.00" in text and "max 30.00" in text  # the latest window's DEL and largest range, MPa
+    empty = FatigueDocument(structure_id="m", design_life_years=None, hot_spots=[], windows=[], envelope=[], total=0)
     assert "No loads yet" in hot_spots_html(loads_record(empty))
     assert "boom" in hot_spots_html(loads_record(empty), "the loads could not be read: boom")
 
@@ -72,8 +69,13 @@ def test_a_life_shorter_than_the_design_life_is_marked():
     doc.hot_spots[0] = _spot("flange", 0.5, consumed=0.5, remaining=3.0, band=[2.0, 4.5], rate=0.1)
     text = hot_spots_html(loads_record(doc))
     assert "color:#dc2626;font-weight:bold'>3.0 years" in text
+    # a life shorter than a year in days, shorter than a day in hours (never "0.0 years")
+    day = 1 / 365.25
+    doc.hot_spots[0] = _spot("flange", 0.5, consumed=0.5, remaining=10 * day, band=[5 * day / 24, 30 * day], rate=20.0)
+    text = hot_spots_html(loads_record(doc))
+    assert ">10.0 days</span>" in text and "(5.0 hours – 30.0 days)" in text
 
 
 def test_a_document_without_the_fields_is_refused():
     with pytest.raises(ValueError, match="FatigueDocument"):
-        loads_record(SimpleNamespace(hot_spots=[]))
+        loads_record({"hot_spots": []})
