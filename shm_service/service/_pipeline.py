@@ -322,6 +322,35 @@ class _Analytics:
 
 
 @dataclass
+class _SetAside:
+    """What a stop under a backlog left unanalysed: samples (and how many of them went to the
+    recording), their data time span, analysis chunks."""
+
+    samples: int = 0
+    recorded: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
+    chunks: int = 0
+
+    def add(self, batch: Batch) -> None:
+        for block in batch.blocks:
+            if len(block):
+                self.samples += len(block)
+                lo, hi = int(block.log_time_ns[0]), int(block.log_time_ns[-1])
+                self.first_ns = lo if self.first_ns is None else min(self.first_ns, lo)
+                self.last_ns = hi if self.last_ns is None else max(self.last_ns, hi)
+
+    def describe(self) -> str | None:
+        if not self.samples and not self.chunks:
+            return None
+        span = "" if self.first_ns is None else f" ({(self.last_ns - self.first_ns) / _NS:.1f} s of data from {self.first_ns / _NS:.3f})"
+        where = (f"{self.recorded} of them in the recording" if self.recorded
+                 else "not recorded (their source's file holds them, or the recording of raw samples is off)")
+        return (f"stopped under a backlog: {self.samples} samples{span} not estimated, {where}; "
+                f"{self.chunks} estimator chunk(s) not analysed")
+
+
+@dataclass
 class _PendingCommit:
     """A window's transaction not yet written (the database was unavailable), with the alarm
     state it leads to and what goes to the dashboard once it is written."""
@@ -415,6 +444,10 @@ class Pipeline:
         self._analysis_thread: threading.Thread | None = None
         self._on_analysis_error = None
         self.analysis_error: str | None = None  # the last chunk's analysis error; None once one analyses fine
+        # A stop under a backlog: after this monotonic instant the batches and chunks left are set
+        # aside (their raw samples recorded when the recording takes them), not estimated.
+        self.stop_deadline: float | None = None
+        self.set_aside = _SetAside()
 
     # -- control ----------------------------------------------------------------------------
 
@@ -444,6 +477,9 @@ class Pipeline:
             if item is None:
                 return
             kind, args = item
+            if kind == "chunk" and self.past_stop_deadline():
+                self.set_aside.chunks += 1
+                continue
             if kind == "chunk":
                 if self._guarded(self._flush_then_analyse, *args):
                     self.analysis_error = None
@@ -495,6 +531,17 @@ class Pipeline:
         done = time.monotonic()
         self.latency_s = done - batch.received
         self.busy_s += done - began
+
+    def past_stop_deadline(self) -> bool:
+        return self.stop_deadline is not None and time.monotonic() > self.stop_deadline
+
+    def set_batch_aside(self, batch: Batch) -> None:
+        """A batch of the backlog left at the stop's deadline: recorded (when the recording takes
+        the raw samples; a file source's data are in its file), not estimated."""
+        self.set_aside.add(batch)
+        if self.archive_raw and batch.raw:
+            self.archive.write_many(batch.raw)
+            self.set_aside.recorded += sum(len(b) for b in batch.blocks)
 
     def stuck_sensors(self) -> list[str]:
         """Topics whose readings have stayed exactly the same for ``stuck_after_s`` and more."""

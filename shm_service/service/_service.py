@@ -154,6 +154,7 @@ class Structure:
         self.pipeline_errors = 0
         self.last_pipeline_error: str | None = None
         self._touched_samples = 0
+        self._stopping = False
         self._done = threading.Event()
         self._thread: threading.Thread | None = None
         a = settings.analytics
@@ -253,8 +254,10 @@ class Structure:
         try:
             while True:
                 try:
-                    item = self.queue.get(timeout=1.0)
+                    item = self.queue.get(timeout=0.2 if self._stopping else 1.0)
                 except queue.Empty:
+                    if self._stopping:  # stopped, nothing left (a full queue may have kept its END out)
+                        break
                     # No data: windows that wait for the database are tried again meanwhile
                     # (by the analysis thread when there is one).
                     if pipeline.pending_commits and not pipeline.analysis_threaded:
@@ -267,6 +270,9 @@ class Structure:
                     continue
                 if item is END:
                     break
+                if pipeline.past_stop_deadline():
+                    pipeline.set_batch_aside(item)
+                    continue
                 try:
                     pipeline.process(item)
                 except Exception as exc:
@@ -281,6 +287,9 @@ class Structure:
                 self.service.notifier.wake()
             pipeline.finish()
             self.pipeline_error = pipeline.storage_error
+            left = pipeline.set_aside.describe()
+            if left:
+                log.warning("%s%s", f"structure {self.id}: " if self.service.fleet else "", left)
         except Exception as exc:
             self._batch_failed(exc, what="pipeline failed at the end of the source")
         finally:
@@ -326,7 +335,11 @@ class Structure:
         return self._thread is not None
 
     def stop_source(self) -> None:
-        self.source.stop()
+        """Stop the source; the backlog is estimated and analysed for ``stop_drain_s`` more, the rest set aside."""
+        if self.pipeline is not None:
+            self.pipeline.stop_deadline = time.monotonic() + self.settings.stop_drain_s
+        self.source.stop()  # returns once no request of an ingest source is putting a batch any more
+        self._stopping = True
 
     # -- what it reports --------------------------------------------------------------------
 

@@ -499,7 +499,8 @@ class IngestSource(Source):
         self.state = "running"
 
     def stop(self) -> None:
-        super().stop()
+        with self._lock:  # a request putting its batch now completes first; later ones are refused
+            super().stop()
         if self.state == "running":
             self.state = "finished"
             try:
@@ -511,6 +512,9 @@ class IngestSource(Source):
         """Validate and enqueue; returns the result, or None when the pipeline had no room
         within ``wait_s`` (nothing of the request was taken: the client retries)."""
         with self._lock:  # one request at a time keeps each topic's time order
+            if self._stop.is_set():  # stopping: nothing more is taken (the client retries with the next service)
+                self.refused += 1
+                return None
             self.requests += 1
             result = self.validator.validate(document)
             batch = Batch(result.blocks, result.raw if self.raw else None, refused=dict(result.refused_by_topic))
