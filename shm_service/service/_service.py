@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hmac
 import logging
-import queue
 import threading
 import time
 from collections.abc import Mapping
@@ -14,24 +13,15 @@ from typing import Any
 
 
 from contract import (
-    AlarmCountsDocument,
     AlarmDocument,
-    BaselineModeDocument,
     BaselineRequestDocument,
-    BaselineStatusDocument,
     HealthDocument,
     IngestResultDocument,
     LiveEstimatesDocument,
-    ModelDocument,
-    NotificationStatusDocument,
     RigDescription,
-    ServiceStatusDocument,
-    SourceStatusDocument,
     SpectrumDocument,
     StatusDocument,
-    StorageStatusDocument,
     StructuresDocument,
-    ThresholdsDocument,
     TrendRow,
 )
 
@@ -39,14 +29,14 @@ from ._config import ServiceSettings, SettingsError, resolve_token
 from ._dashboard_port import StructureModel, start_dashboard
 from ._metrics import fleet_metrics
 from ._notify import Notifier, notify_targets
-from ._pipeline import Pipeline
-from ._progress import describe_progress
 from ._retention import RetentionWorker
 from ._scheduler import Scheduler, SchedulerSettings
 from ._sinks import SinkGuard
-from ._sources import IngestSource, Source
+from ._sources import IngestSource
 from ._storage import Storage, is_transient
+from ._status import service_state, status_of
 from ._structure import (
+    SingleStructureView,
     NotSingleStructure,
     RigPending,
     ServiceError,
@@ -60,7 +50,6 @@ from ._structure import (
 __all__ = ["MonitoringService", "NotSingleStructure", "RigPending", "ServiceError", "Structure", "StructureUnavailable"]
 
 log = logging.getLogger("shm.serve")
-VERSION = "0.1.0"
 
 
 class _StoredRows:
@@ -90,7 +79,7 @@ class _StoredRows:
         return self.storage.alarms(state=state, source=structure_id)
 
 
-class MonitoringService(_StoredRows):
+class MonitoringService(_StoredRows, SingleStructureView):
     """One running ``shm serve``: one structure (``[source]``), or a fleet (``[[structures]]``)
     sharing one database, notifier, retention and API. ``environ`` is the environment the token
     is read from (default ``os.environ``; tests pass a dict)."""
@@ -164,46 +153,6 @@ class MonitoringService(_StoredRows):
             raise NotSingleStructure("this service monitors a fleet ([[structures]]): use /api/structures and "
                                      "/api/structures/{id}/...")
         return next(iter(self.structures.values()))  # type: ignore[return-value]
-
-    @property
-    def source(self) -> Source:
-        return self.primary.source
-
-    @property
-    def pipeline(self) -> Pipeline:
-        return self.primary.pipeline  # type: ignore[return-value]
-
-    @property
-    def queue(self) -> queue.Queue:
-        return self.primary.queue
-
-    @property
-    def model(self) -> Any:
-        return self.primary.model
-
-    @property
-    def rig(self) -> RigDescription:
-        return self.primary.rig
-
-    @property
-    def thresholds(self) -> ThresholdsDocument:
-        return self.primary.thresholds
-
-    @property
-    def model_document(self) -> ModelDocument:
-        return self.primary.model_document
-
-    @property
-    def pipeline_error(self) -> str | None:
-        return self.primary.pipeline_error
-
-    @property
-    def pipeline_errors(self) -> int:
-        return self.primary.pipeline_errors
-
-    @property
-    def last_pipeline_error(self) -> str | None:
-        return self.primary.last_pipeline_error
 
     def structure(self, structure_id: str) -> Structure:
         """The running structure ``structure_id`` (KeyError naming it when there is none,
@@ -351,90 +300,20 @@ class MonitoringService(_StoredRows):
     def status(self, structure_id: str | None = None) -> StatusDocument:
         """The status of the single structure, or of ``structure_id`` of a fleet."""
         structure = self.primary if structure_id is None else self.structure(structure_id)
-        return self._status_of(structure, self._service_state())
-
-    def _service_state(self) -> dict[str, Any]:
-        """What every structure's status shares: the database's counts and the notifier's (read once
-        for all structures of ``/metrics``)."""
-        return {"active": self.storage.alarms(state="active"), "outbox": self.storage.outbox_counts(),
-                "trend_rows": self.storage.count("trends"), "notifier": self.notifier.snapshot()}
+        return status_of(self, structure, service_state(self))
 
     def statuses(self) -> dict[str, StatusDocument]:
         """The status of every running structure (the database read once)."""
-        shared = self._service_state()
-        return {s.id: self._status_of(s, shared) for s in self.running_structures()}
+        shared = service_state(self)
+        return {s.id: status_of(self, s, shared) for s in self.running_structures()}
 
     def fleet_metrics(self) -> str:
         """``/metrics`` of a fleet: every structure's samples labelled ``structure``."""
         return fleet_metrics(self.structures_document(), self.statuses())
 
-    def _status_of(self, structure: Structure, shared: dict[str, Any]) -> StatusDocument:
-        pipeline = structure.pipeline
-        p = pipeline.status(queue_depth=structure.queue.qsize(), queue_capacity=structure.queue.maxsize)
-        src = structure.source.status()
-        src["dropped"] = src["dropped"] + p.late_samples + p.estimator.dropped_samples
-        if pipeline.rejected:  # judged by the pipeline (off the clock, implausible values)
-            by_reason = dict(src["rejected_by_reason"])
-            for reason, n in pipeline.rejected.items():
-                by_reason[reason] = by_reason.get(reason, 0) + n
-            src["rejected_by_reason"] = by_reason
-            src["rejected"] = sum(by_reason.values())
-        src["problems"] = src["problems"] + pipeline.health_problems()
-        src["clock_jumps"] = src.get("clock_jumps", 0) + (pipeline.clock.jump_count if pipeline.clock else 0)
-        src["latency_s"] = p.pipeline_latency_s
-        states = pipeline.sensor_states()
-        counts = {"warning": 0, "alarm": 0}
-        for a in shared["active"]:
-            if not self.fleet or a.source == structure.id:
-                counts[a.level] += 1
-        outcomes, notifier_sink = shared["notifier"]
-        return StatusDocument(
-            service=ServiceStatusDocument(
-                version=VERSION, started_at=self.started_at, uptime_s=round(time.time() - self.started_at, 1),
-                paused=self.paused, done=structure.done if self.fleet else self.done,
-                pipeline_error=structure.pipeline_error, pipeline_errors=structure.pipeline_errors,
-                last_pipeline_error=structure.last_pipeline_error,
-                progress=self._progress(structure, p)),
-            sources=[SourceStatusDocument(**src)],
-            pipeline=p,
-            degraded_sensors=sorted(t for t, s in states.items() if s != "ok"),
-            sensors=states,
-            baseline=BaselineStatusDocument(state=p.baseline, modes=self._baseline_modes(structure)),
-            alarms=AlarmCountsDocument(active=counts),
-            notifications=NotificationStatusDocument(**shared["outbox"], sent_this_run=outcomes["sent"],
-                                                     failed_attempts_this_run=outcomes["retry"] + outcomes["permanent"]
-                                                     + outcomes["given_up"],
-                                                     outcomes_this_run=dict(outcomes),
-                                                     last_error=self.notifier.last_error),
-            storage=StorageStatusDocument(db=str(self.settings.db), schema_version=self.storage.schema_version,
-                                          trend_rows=shared["trend_rows"],
-                                          archive=None if pipeline.archive is None else pipeline.archive.status(),
-                                          write_retries=self.storage.retries, write_failures=self.storage.failures,
-                                          windows_waiting=pipeline.pending_commits, last_error=self.storage.last_error),
-            sinks={"dashboard": self.dashboard_guard.status(), "notifier": notifier_sink,
-                   "housekeeping": self.housekeeping_guard.status()},
-            thresholds=structure.thresholds,
-            model=structure.model_document,
-        )
-
-    def _progress(self, structure: Structure, p: Any) -> str | None:
-        """What ``structure`` is doing now (``_progress``); never breaks the status."""
-        try:
-            return describe_progress(structure, p, getattr(self, "compiling_since", None))
-        except Exception as exc:
-            log.debug("progress of %s: %s", structure.id, exc)
-            return None
-
     def structures_document(self) -> StructuresDocument:
         """``GET /api/structures``: every structure's state, lag, windows and active alarms."""
         return StructuresDocument(structures=[s.summary() for s in self.structures.values()])
-
-    def _baseline_modes(self, structure: Structure | None = None) -> list[BaselineModeDocument] | None:
-        bl = (structure or self.primary).pipeline.analytics.monitor.baseline
-        if bl is None:
-            return None
-        return [BaselineModeDocument(mode=m.mode, unit=m.unit + 1, f_ref_hz=m.f_ref_hz, temperature_ref_c=m.temperature_ref_c,
-                                     slope_per_k=m.slope_per_k, sigma_rel=m.sigma_rel) for m in bl.modes]
 
     def _known(self, structure_id: str) -> None:
         """KeyError naming ``structure_id`` unless the service has such a structure (a failed

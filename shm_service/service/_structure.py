@@ -44,7 +44,7 @@ from ._storage import Storage
 if TYPE_CHECKING:
     from ._service import MonitoringService
 
-__all__ = ["NotSingleStructure", "RigPending", "ServiceError", "Structure", "StructureUnavailable"]
+__all__ = ["NotSingleStructure", "SingleStructureView", "RigPending", "ServiceError", "Structure", "StructureUnavailable"]
 
 log = logging.getLogger("shm.serve")
 
@@ -462,3 +462,52 @@ def _check_sensor_counts(rig: RigDescription, est: Any) -> None:
             problem = sensor_count_problem(rig, kind, getattr(est, kind), modes=est.modes)
             if problem:
                 raise ServiceError(f"estimator.{kind} = {getattr(est, kind)}: {problem}")
+
+
+class SingleStructureView:
+    """What a service of one structure answers of it (``primary``: its structure; a fleet's raises
+    ``NotSingleStructure``)."""
+
+    @property
+    def primary(self) -> Structure:
+        raise NotImplementedError
+
+    @property
+    def source(self) -> Source:
+        return self.primary.source
+
+    @property
+    def pipeline(self) -> Pipeline:
+        return self.primary.pipeline  # type: ignore[return-value]
+
+    @property
+    def queue(self) -> queue.Queue:
+        return self.primary.queue
+
+    @property
+    def model(self) -> Any:
+        return self.primary.model
+
+    @property
+    def rig(self) -> RigDescription:
+        return self.primary.rig
+
+    @property
+    def thresholds(self) -> ThresholdsDocument:
+        return self.primary.thresholds
+
+    @property
+    def model_document(self) -> ModelDocument:
+        return self.primary.model_document
+
+    @property
+    def pipeline_error(self) -> str | None:
+        return self.primary.pipeline_error
+
+    @property
+    def pipeline_errors(self) -> int:
+        return self.primary.pipeline_errors
+
+    @property
+    def last_pipeline_error(self) -> str | None:
+        return self.primary.last_pipeline_error
