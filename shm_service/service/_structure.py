@@ -281,7 +281,10 @@ class Structure:
         for lane in self._lanes:
             scheduler.add(lane)
         self._started = True
-        self.source.start()
+        if isinstance(self.source, SimSource):  # a simulation is stepped on the pool too
+            self.source.start_on(scheduler)
+        else:
+            self.source.start()
 
     def step_data(self) -> None:
         """The data lane's step: one batch of the source's queue through the pipeline (or its end)."""
