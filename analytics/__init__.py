@@ -6,14 +6,15 @@ from ._alarms import AlarmEvent, AlarmLogic
 from ._analyze import AnalysisResult, ModeSummary, analyze, learn_baseline
 from ._chart import EwmaChart, chart_level
 from ._config import AnalysisConfig
-from ._curvature import CurvatureChange, beam_third, curvature_change, curvature_field, curvature_shape
+from ._curvature import (CurvatureChange, CurvatureStatistic, beam_third, curvature_change, curvature_field, curvature_shape,
+                         curvature_statistic, mode_shape_curvature)
 from ._damping import DampingEstimate, bandpass, combine_estimates, envelope_decay, find_decay_segments, log_decrement, random_decrement
 from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
 from ._location import DamageLocation, locate_damage
 from ._engine import EngineWindow, MonitoringEngine
 from ._fatigue import SECONDS_PER_YEAR, FatigueDetail, HotSpotFatigue, LifeEstimate, LoadsWindow, remaining_life
-from ._loads_monitor import HotSpotSpec, LoadsConfig, LoadsMonitor
-from ._loads import DelBand, SignalLoads, bending_moment, signal_loads, virtual_strain
+from ._loads_monitor import GaugeSpec, HotSpotSpec, LoadsConfig, LoadsMonitor
+from ._loads import BAND_FLOOR, IN_SAMPLE_FACTOR, DelBand, SignalLoads, VirtualLoads, bending_moment, signal_loads, truncation_band, virtual_strain
 from ._rainflow import Cycles, HalfCyclePolicy, RainflowCounter, RainflowResidue, cycles_by_range, rainflow_cycles
 from ._sn_curves import DNV_RP_C203_CURVES, EN1993_DETAIL_CATEGORIES, SnCurve, damage_equivalent_range, miner_damage, sn_curve
 from ._monitor import Baseline, BaselineError, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model, support_acceleration
@@ -38,7 +39,8 @@ __all__ = [
     "AnalysisConfig", "AnalysisResult", "Baseline", "BaselineMode", "CurvatureChange", "DamageLocation", "DampingEstimate",
     "EwmaChart", "ModalMonitor", "ModeEstimate", "ModeSummary", "Peak", "Spectrum", "WindowResult",
     "amplitude_spectrum", "analyze", "averaged_spectrum", "bandpass", "beam_third", "combine_estimates",
-    "cross_spectra", "curvature_change", "curvature_field", "curvature_shape", "envelope_decay",
+    "cross_spectra", "curvature_change", "curvature_field", "curvature_shape", "curvature_statistic", "envelope_decay",
+    "mode_shape_curvature", "CurvatureStatistic",
     "find_decay_segments", "find_peaks", "fit_temperature_model", "interpolate_peak", "locate_damage", "log_decrement",
     "random_decrement",
     # operational modal analysis (SSI-cov, stabilisation, clustering, FRFs)
@@ -53,5 +55,5 @@ __all__ = [
     "Cycles", "DNV_RP_C203_CURVES", "EN1993_DETAIL_CATEGORIES", "FatigueDetail", "HalfCyclePolicy", "HotSpotFatigue",
     "LifeEstimate", "LoadsWindow", "RainflowCounter", "RainflowResidue", "SECONDS_PER_YEAR", "SnCurve", "cycles_by_range",
     "damage_equivalent_range", "miner_damage", "rainflow_cycles", "remaining_life", "sn_curve",
-    "DelBand", "SignalLoads", "bending_moment", "signal_loads", "virtual_strain", "HotSpotSpec", "LoadsConfig", "LoadsMonitor",
+    "BAND_FLOOR", "IN_SAMPLE_FACTOR", "DelBand", "SignalLoads", "VirtualLoads", "bending_moment", "signal_loads", "truncation_band", "virtual_strain", "GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor",
 ]

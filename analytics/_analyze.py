@@ -158,11 +158,23 @@ def _spans(windows: tuple[WindowResult, ...], times: np.ndarray, zero_s: float) 
     return out
 
 
-def _record_identification(B: np.ndarray, fs: float, spans: list[tuple[int, int]], cfg: OmaConfig):
+#: Cycles of the slowest tracked mode in each segment of the record's batch-means uncertainty:
+#: enough for each segment's own estimate of it to be near the linear regime.
+_SEGMENT_CYCLES = 40.0
+#: SVD budget of the record's identification (block rows × channels).
+_RECORD_SVD_BUDGET = 480
+
+
+def _record_identification(B: np.ndarray, fs: float, spans: list[tuple[int, int]], cfg: OmaConfig, slowest_hz: float | None = None):
     """The subspace modes of the trusted spans together: each span band-prepared on its own (no
-    filter runs across a gap), the prepared spans joined (a few Hankel columns per joint). The
-    correlations span half a period of the band's lowest frequency, within an SVD budget of
-    i·l ≤ 240 (a record has far more samples than a window: it affords longer lags)."""
+    filter runs across a gap), the prepared spans joined (a few Hankel columns per joint).
+
+    The correlation lags span a full period of the slowest tracked mode (``slowest_hz``; else half
+    a period of the band's lower edge) within an SVD budget of i·l ≤ 480: a record has far more
+    samples than a window and affords the lags a slow mode needs. Each frequency's 1σ is a batch
+    mean over segments of the record holding ≥ 40 cycles of the slowest mode each (3 … 12
+    segments), widened by Student's t: the spread of independent estimates, which holds for the
+    slow modes where the first-order jackknife of a window underrates it."""
     parts = []
     fsb = fs
     for s, e in spans:
@@ -174,11 +186,14 @@ def _record_identification(B: np.ndarray, fs: float, spans: list[tuple[int, int]
     if not parts:
         return None, None
     y = np.concatenate(parts)
-    rows = int(min(max(math.ceil(fsb / (2 * max(cfg.fmin_hz, 1e-3))), 12), max(12, 240 // B.shape[1]), max(4, y.shape[0] // 10)))
+    slow = slowest_hz if slowest_hz is not None and slowest_hz > 0 else 2 * max(cfg.fmin_hz, 1e-3)
+    rows = int(min(max(math.ceil(fsb / slow), 12), max(12, _RECORD_SVD_BUDGET // B.shape[1]), max(4, y.shape[0] // 10)))
+    segments = int(np.clip(math.floor(y.shape[0] / fsb * slow / _SEGMENT_CYCLES), 3, 12))
     try:
         # the record's estimate is the mean over its trusted spans: a mode drifting with the
         # temperature over the record is followed by the windows, not split here
-        return identify_modes(y, fsb, config=cfg.model_copy(update={"block_rows": rows, "moving_modes": False}), band_ready=True), y
+        return identify_modes(y, fsb, config=cfg.model_copy(update={"block_rows": rows, "moving_modes": False, "segments": segments,
+                                                                    "uncertainty": "batch"}), band_ready=True), y
     except (ValueError, np.linalg.LinAlgError):
         return None, None
 
@@ -210,7 +225,7 @@ def _summaries(mon: ModalMonitor, windows: tuple[WindowResult, ...], B: np.ndarr
     ocfg = mon.oma_config
     ident = y_band = None
     if ocfg is not None and spans:
-        ident, y_band = _record_identification(B, fs, spans, ocfg)
+        ident, y_band = _record_identification(B, fs, spans, ocfg, min(mon.ref) if mon.ref else None)
     # the averaged power spectra of the trusted windows: the record's cross-check
     power = None
     for w in trusted:

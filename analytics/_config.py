@@ -59,8 +59,15 @@ class AnalysisConfig(BaseModel):
                                     "with fewer (the 0.3 Hz pendulum mode in a 60 s window: 18) the peak is biased by the window's low-frequency "
                                     "leakage and its scatter heavy-tailed; the mode is still tracked and reported")
     min_sigma_rel: float = Field(2e-4, gt=0, description="floor of a mode's frequency scatter, relative [2e-4]")
-    curvature_memory_windows: float = Field(10.0, ge=1, description="time constant of the curvature cross-spectra average, windows [10]")
-    curvature_min_std: float = Field(0.005, gt=0, description="floor of one window's curvature-shape scatter (unit-RMS shape) [0.005]: a few high-SNR windows (free decays) underrate the scatter between events")
+    curvature_memory_windows: float = Field(10.0, ge=1, description="time constant of the average of each mode's identified mode-shape "
+                                            "curvature, windows [10]")
+    curvature_min_std: float = Field(0.015, gt=0, description="tolerance of the curvature chart, per station (unit-RMS curvature shape) [0.015]: "
+                                     "the 1σ by which a healthy structure's averaged mode-shape curvature may differ from the baseline's "
+                                     "beyond the baseline's own scatter, added in quadrature to it (on the 20 m mast: two healthy 30 min "
+                                     "recordings differ by up to 0.008 RMS, a storm of 4 x the ambient wind load moved it by 0.011; a 1 % "
+                                     "tip mass by 0.038, a 30 % stiffness loss over 2 m by a few per cent)")
+    curvature_mac_min: float = Field(0.9, gt=0, le=1, description="a window's identified mode shape enters the curvature index only if its "
+                                     "MAC with the baseline's shape reaches this [0.9]")
     spectrum_memory_windows: float = Field(1.0, ge=1, description="time constant of the power-spectra average the spectral fallback reads a mode from when the subspace identification finds none, windows [1: each window alone]")
 
     def chart_levels(self, kind: str) -> tuple[float, float]:

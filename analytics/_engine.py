@@ -144,6 +144,7 @@ class MonitoringEngine:
         self.loads_errors = 0
         self.b = _Series()
         self.temperature = _Series()
+        self.gauges: dict[str, _Series] = {}  # measured strain by gauge name: the loads' band (issue 21)
         self.windows = 0
         self.skipped_incomplete = 0
         self.skipped_warmup = 0
@@ -161,12 +162,20 @@ class MonitoringEngine:
 
     # -- data ---------------------------------------------------------------------------------
     def add(self, t: object, b: object, *, support: object | None = None,
-            temperature: tuple[object, object] | None = None) -> list[EngineWindow]:
+            temperature: tuple[object, object] | None = None,
+            gauges: dict[str, tuple[object, object]] | None = None) -> list[EngineWindow]:
         """Feed samples; returns the windows they complete, in order.
 
         t : (n,) s relative to ``origin_ns``, increasing; b : (n, Γ); support : (n,) support
         displacement (m) on the same times, or None; temperature : (times (m,) s relative to the
-        origin, values (m,) °C) or None (temperature samples may run ahead of b)."""
+        origin, values (m,) °C) or None (temperature samples may run ahead of b); gauges : measured
+        strain by gauge name, (times s relative to the origin, values m/m), for the loads' band."""
+        for name, (gt, gv) in (gauges or {}).items():
+            tt = as_signal(f"gauge {name} times", gt, min_len=1, ndim=(1,))
+            tv = np.asarray(gv, dtype=float).reshape(-1)
+            if tt.size != tv.size:
+                raise ValueError(f"gauge {name} has {tt.size} times and {tv.size} values")
+            self.gauges.setdefault(name, _Series()).add(tt, tv[:, None])
         if temperature is not None:
             tt = as_signal("temperature times", temperature[0], min_len=1, ndim=(1,))
             tv = as_signal("temperature values", temperature[1], min_len=1, ndim=(1,))
@@ -225,6 +234,8 @@ class MonitoringEngine:
         keep = self._rel(self.next_start_ns)
         self.b.trim(keep - 2.0 / self.fs)
         self.temperature.trim(keep - 600.0)
+        for series in self.gauges.values():
+            series.trim(keep - 2.0 / self.fs)
         return out
 
     def _skip_gap(self, start_ns: int, start: float) -> bool:
@@ -282,11 +293,22 @@ class MonitoringEngine:
         if self.loads is not None:
             n_step = min(self.n, int(round(self.step_ns * self.fs / _NS)))
             try:
-                loads = self.loads.process_window(float(times[0]), B[:n_step], self.fs, T)
+                measured = self._gauges_on(start, grid[:n_step]) if self.loads.gauges else None
+                loads = self.loads.process_window(float(times[0]), B[:n_step], self.fs, T, measured)
                 events = tuple(self.loads.events)
             except ValueError:
                 self.loads_errors += 1
         return EngineWindow(res, start_ns, B, d, loads, events)
+
+    def _gauges_on(self, start: float, grid: np.ndarray) -> dict[str, np.ndarray]:
+        """The measured strain of each gauge that covers the grid (s after ``start``), interpolated onto it."""
+        out = {}
+        for name, series in self.gauges.items():
+            span = series.span(start - 2.0 / self.fs, start + grid[-1] + 2.0 / self.fs)
+            if span is None or len(span[0]) < 2 or span[0][0] > start + 1.0 / self.fs or span[0][-1] < start + grid[-1] - 1.0 / self.fs:
+                continue
+            out[name] = np.interp(grid, span[0] - start, span[1][:, 0])
+        return out
 
     # -- persistence ---------------------------------------------------------------------------
     def reset(self, monitor: ModalMonitor) -> None:

@@ -167,6 +167,7 @@ class HotSpotFatigue:
             except (KeyError, TypeError, ValueError) as exc:
                 raise ValueError(f"hot-spot fatigue state is malformed: {exc}") from None
         self._counter = RainflowCounter(residue)
+        self.last_closed = Cycles.empty()
 
     def state_dict(self) -> dict[str, Any]:
         return {"residue": self._counter.residue.as_dict(), "closed_damage": self.closed_damage,
@@ -180,6 +181,7 @@ class HotSpotFatigue:
         x = np.asarray(stress_pa, dtype=float)
         duration_s = _positive("duration_s", duration_s)
         closed = self._counter.push(x, name="stress_pa")
+        self.last_closed = closed  # the cycles this window closed (the damage band scales their ranges)
         increment = self.detail.damage(closed)
         self.closed_damage += increment
         self._recent.append((increment, duration_s))

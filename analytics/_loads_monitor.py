@@ -12,6 +12,10 @@ line (1 = the warning line; the alarm line and the clear line are multiples of i
 * ``del``: the window's DEL (m = the first exponent) against its baseline, the median of the first
   ``baseline_windows`` windows: score (ratio − 1)/(del_warning_ratio − 1).
 * ``consumed``: D / consumed_warning (alarm at consumed_alarm / consumed_warning).
+
+With strain gauges (``GaugeSpec``) and their measured strain in a window, each hot spot's DELs
+and damage increment carry a band, the modal truncation seen at the gauges
+(:func:`analytics.truncation_band`, the same as ``shm loads``), with the method stated.
 """
 
 from __future__ import annotations
@@ -22,13 +26,14 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from contract import ChartDocument, HotSpotLoadsDocument, LoadsWindowDocument, chart_name
+from contract import ChartDocument, HotSpotLoadsDocument, LoadsWindowDocument, StationLoadsDocument, chart_name
 
 from ._alarms import AlarmEvent, AlarmLogic
 from ._fatigue import FatigueDetail, HotSpotFatigue
+from ._loads import truncation_band
 from ._rainflow import HalfCyclePolicy
 
-__all__ = ["HotSpotSpec", "LoadsConfig", "LoadsMonitor"]
+__all__ = ["GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor"]
 
 
 class LoadsConfig(BaseModel):
@@ -49,6 +54,8 @@ class LoadsConfig(BaseModel):
     raise_windows: int = Field(3, ge=1)
     clear_windows: int = Field(3, ge=1)
     clear_fraction: float = Field(0.8, gt=0.0, lt=1.0, description="clear below this fraction of the warning line")
+    envelope_stations: int = Field(16, ge=0, le=400, description="stations of the strain envelope along the beam "
+                                   "(evenly spaced from the support, the free end left out: its curvature is zero)")
 
     @model_validator(mode="after")
     def _ordered(self) -> "LoadsConfig":
@@ -72,6 +79,17 @@ class HotSpotSpec:
     fibre_distance_m: float
 
 
+@dataclass(frozen=True)
+class GaugeSpec:
+    """A strain gauge as the band needs it: where, s'' there (Γ,) (1/m), c (m), and whether it aided the estimate."""
+
+    name: str
+    position_m: float
+    curvature_shape: np.ndarray
+    fibre_distance_m: float
+    in_sample: bool
+
+
 class LoadsMonitor:
     """Per-window loads of the hot spots (see the module docstring).
 
@@ -84,7 +102,8 @@ class LoadsMonitor:
 
     def __init__(self, hot_spots: list[HotSpotSpec], *, youngs_modulus: float, temperature_coefficient: float = 0.0,
                  reference_temperature: float = 20.0, design_life_years: float | None = None, config: LoadsConfig | None = None,
-                 state: dict[str, Any] | None = None) -> None:
+                 state: dict[str, Any] | None = None, stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                 gauges: list[GaugeSpec] | None = None) -> None:
         if not hot_spots:
             raise ValueError("hot_spots is empty: the rig description names no hot spot")
         names = [h.name for h in hot_spots]
@@ -109,11 +128,26 @@ class LoadsMonitor:
         self.alarms = AlarmLogic(raise_windows=c.raise_windows, clear_windows=c.clear_windows, clear_sigma=c.clear_fraction,
                                  state=state.get("alarms"))
         self.events: list[AlarmEvent] = []
+        # the strain envelope's stations: (η (S,), s'' (S, Γ), c (S,)), or None
+        self.stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        if stations is not None:
+            eta, shapes, fibre = (np.asarray(a, dtype=float) for a in stations)
+            if eta.ndim != 1 or shapes.shape[0] != eta.size or fibre.shape != eta.shape or np.any(fibre <= 0):
+                raise ValueError(f"stations must be η (S,), s'' (S, Γ) and c (S,) > 0; got {eta.shape}, {shapes.shape}, {fibre.shape}")
+            self.stations = (eta, shapes, fibre)
+        #: when a list, each window's input is appended to it as the arguments of :meth:`process_stress`
+        #: (start_s, stress (n, hot spots) Pa at the reference E, duration_s, temperature_c, stations):
+        #: ``shm reprocess`` chains the files of an archive through one monitor with it
+        self.tap: list[tuple] | None = None
+        self.gauges = list(gauges or [])
 
     @classmethod
-    def from_rig(cls, rig: Any, curvature_at: Any, *, config: LoadsConfig | None = None, state: dict[str, Any] | None = None) -> "LoadsMonitor":
+    def from_rig(cls, rig: Any, curvature_at: Any, *, config: LoadsConfig | None = None, state: dict[str, Any] | None = None,
+                 gauges_in_sample: tuple[str, ...] | None = None) -> "LoadsMonitor":
         """The monitor of a rig description's ``hot_spots`` (contract.RigDescription); ``curvature_at(η)`` gives the
-        unit deformations' s'' at positions η (len(η), Γ) (``estimator.UnitDeformations.curvature``)."""
+        unit deformations' s'' at positions η (len(η), Γ) (``estimator.UnitDeformations.curvature``).
+        The rig's strain gauges judge the band; ``gauges_in_sample`` names those that aided the estimate
+        (None: unknown, all of them are taken as in-sample: the wider band)."""
         from ._sn_curves import sn_curve
 
         beam = rig.beam
@@ -128,44 +162,104 @@ class LoadsMonitor:
         spots = [HotSpotSpec(h.name, float(h.position), FatigueDetail(sn_curve(h.curve), h.scf, h.gamma_Ff, h.gamma_Mf), shapes[i],
                              float(c[i])) for i, h in enumerate(rig.hot_spots)]
         design = rig.fatigue.design_life_years if rig.fatigue is not None else None
+        n = (config or LoadsConfig()).envelope_stations
+        stations = None
+        if n:
+            grid = np.linspace(0.0, beam.length, n + 1)[:-1]
+            stations = (grid, np.asarray(curvature_at(grid), dtype=float), np.asarray(beam.fibre_distance(grid), dtype=float))
+        gauges = []
+        sensors = list(rig.sensors_of("strain"))
+        if sensors:
+            at = np.array([g.position for g in sensors], dtype=float)
+            g_shapes, g_c = np.asarray(curvature_at(at), dtype=float), np.asarray(beam.fibre_distance(at), dtype=float)
+            gauges = [GaugeSpec(g.name, float(g.position), g_shapes[k], float(g_c[k]),
+                                gauges_in_sample is None or g.name in gauges_in_sample) for k, g in enumerate(sensors)]
         return cls(spots, youngs_modulus=beam.youngs_modulus, temperature_coefficient=beam.youngs_modulus_temperature_coefficient,
-                   reference_temperature=beam.reference_temperature, design_life_years=design, config=config, state=state)
+                   reference_temperature=beam.reference_temperature, design_life_years=design, config=config, state=state,
+                   stations=stations, gauges=gauges)
 
     def state_dict(self) -> dict[str, Any]:
-        return {"spots": {k: f.state_dict() for k, f in self.fatigue.items()}, "del_history": dict(self.del_history),
-                "alarms": self.alarms.state_dict()}
+        # copies: a window's state may be serialised after later windows ran (a commit waiting for the database)
+        return {"spots": {k: f.state_dict() for k, f in self.fatigue.items()},
+                "del_history": {k: list(v) for k, v in self.del_history.items()}, "alarms": self.alarms.state_dict()}
 
     def _chart(self, spot: str, condition: str, score: float | None, warning: float, alarm: float) -> ChartDocument:
         level = "ok" if score is None or score < warning else ("alarm" if score >= alarm else "warning")
         return ChartDocument(name=chart_name("fatigue", hot_spot=spot, condition=condition), kind="fatigue", level=level,
                              score_sigma=score, warning_sigma=warning, alarm_sigma=alarm)
 
-    def process_window(self, start_s: float, b: object, fs: float, temperature_c: float | None) -> LoadsWindowDocument:
-        """Count one window's new samples b (n, Γ) at ``fs`` Hz (the part no earlier window counted)."""
+    def process_window(self, start_s: float, b: object, fs: float, temperature_c: float | None,
+                       measured: dict[str, np.ndarray] | None = None) -> LoadsWindowDocument:
+        """Count one window's new samples b (n, Γ) at ``fs`` Hz (the part no earlier window counted);
+        ``measured``: the gauges' strain on the same samples (name → (n,)), for the band."""
         B = np.asarray(b, dtype=float)
         if B.ndim != 2 or B.shape[0] < 1:
             raise ValueError(f"b must be (n, Γ) with n >= 1, got shape {B.shape}")
         if not np.all(np.isfinite(B)):
             raise ValueError("b contains NaN or inf")
-        duration = B.shape[0] / float(fs)
+        # nominal stress at the reference E: σ = −c E (b · s''); E(T) is applied per window
+        stress = np.column_stack([-h.fibre_distance_m * (B @ h.curvature_shape) * self.youngs_modulus for h in self.hot_spots])
+        stations = None
+        if self.stations is not None:
+            eta, shapes, c = self.stations
+            strain = -(B @ shapes.T) * c
+            stations = (eta, np.sqrt(np.mean(strain**2, axis=0)), np.ptp(strain, axis=0))
+        band = self._band(B, measured, B.shape[0] / float(fs))
+        return self.process_stress(start_s, stress, B.shape[0] / float(fs), temperature_c, stations=stations, band=band)
+
+    def _band(self, B: np.ndarray, measured: dict[str, np.ndarray] | None, duration: float) -> tuple[float, float, str] | None:
+        """(low, high, method) of the window's DEL band from the gauges measured over all of it, else None."""
+        if not measured or not self.gauges:
+            return None
+        pairs = []
+        for g in self.gauges:
+            m = measured.get(g.name)
+            if m is None or len(m) != B.shape[0] or not np.all(np.isfinite(m)):
+                continue
+            pairs.append((g.name, g.position_m, -g.fibre_distance_m * (B @ g.curvature_shape), np.asarray(m, dtype=float)))
+        if not pairs:
+            return None
+        in_sample = tuple(g.name for g in self.gauges if g.in_sample)
+        found, _rows = truncation_band(pairs, exponents=self.config.exponents, n_eq=self.config.n_eq_per_s * duration,
+                                       in_sample=in_sample, half_cycles=self.config.half_cycles)
+        return None if found is None else (found.low, found.high, found.method)
+
+    def process_stress(self, start_s: float, stress: object, duration_s: float, temperature_c: float | None, *,
+                       stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                       band: tuple[float, float, str] | None = None) -> LoadsWindowDocument:
+        """Count one window's hot-spot stress (n, hot spots) in Pa at the reference E, lasting ``duration_s``;
+        ``stations``: (η, strain RMS, strain range) of the window's envelope, or None; ``band``: (low, high,
+        method) of the DELs relative to their value, or None."""
+        S = np.asarray(stress, dtype=float)
+        if S.ndim != 2 or S.shape[1] != len(self.hot_spots) or S.shape[0] < 1:
+            raise ValueError(f"stress must be (n, {len(self.hot_spots)}) with n >= 1, got shape {S.shape}")
+        if self.tap is not None:
+            self.tap.append((float(start_s), S.copy(), float(duration_s), temperature_c, stations, band))
+        duration = float(duration_s)
         factor = 1.0
         if temperature_c is not None:
             factor = 1.0 + self.temperature_coefficient * (temperature_c - self.reference_temperature)
         c = self.config
         docs, charts = [], []
         m0 = str(int(c.exponents[0])) if float(c.exponents[0]).is_integer() else str(c.exponents[0])
-        for h in self.hot_spots:
-            stress = -h.fibre_distance_m * (B @ h.curvature_shape) * self.youngs_modulus * factor
-            w = self.fatigue[h.name].push(stress, duration, start_s=start_s)
+        for k, h in enumerate(self.hot_spots):
+            w = self.fatigue[h.name].push(S[:, k] * factor, duration, start_s=start_s)
             life = self.fatigue[h.name].life(self.design_life_years)
             dels = {(str(int(m)) if float(m).is_integer() else str(m)): v for m, v in w.del_pa.items()}
+            banded: dict[str, Any] = {}
+            if band is not None:
+                low, high, method = band
+                fatigue = self.fatigue[h.name]
+                banded = {"del_band_pa": {k: [v * low, v * high] for k, v in dels.items()}, "band_method": method,
+                          "damage_band": [fatigue.detail.damage(fatigue.last_closed, low),
+                                          fatigue.detail.damage(fatigue.last_closed, high)]}
             docs.append(HotSpotLoadsDocument(
                 name=h.name, position_m=h.position_m, curve=h.detail.curve.name, del_pa=dels, n_eq=c.n_eq_per_s * duration,
                 max_range_pa=w.max_range_pa, damage_increment=w.damage_increment, consumed=w.consumed,
                 rate_per_year=life.rate_per_year, rate_band_per_year=None if life.rate_band_per_year is None else list(life.rate_band_per_year),
                 remaining_years=life.remaining_years,
                 remaining_band_years=None if life.remaining_band_years is None else list(life.remaining_band_years),
-                verdict=life.verdict, design_life_years=self.design_life_years))
+                verdict=life.verdict, design_life_years=self.design_life_years, **banded))
             # DEL against its baseline (the median of the first windows)
             history = self.del_history.setdefault(h.name, [])
             score_del = None
@@ -181,4 +275,10 @@ class LoadsMonitor:
                 usage = None if life.rate_per_year is None else life.rate_per_year * self.design_life_years
                 charts.append(self._chart(h.name, "rate", usage, 1.0, c.rate_alarm_usage))
         self.events = self.alarms.update(charts, start_s + duration)
-        return LoadsWindowDocument(start_s=start_s, duration_s=duration, temperature_c=temperature_c, hot_spots=docs, charts=charts)
+        envelope = []
+        if stations is not None:
+            e_t = self.youngs_modulus * factor
+            envelope = [StationLoadsDocument(position_m=float(x), strain_rms=float(r), strain_range_max=float(p),
+                                             stress_range_max_pa=float(p * e_t)) for x, r, p in zip(*stations)]
+        return LoadsWindowDocument(start_s=start_s, duration_s=duration, temperature_c=temperature_c, hot_spots=docs, charts=charts,
+                                   stations=envelope)

@@ -14,14 +14,14 @@ from contract import CURVATURE_CHART, ChartDocument, chart_name
 from ._alarms import AlarmEvent, AlarmLogic
 from ._chart import EwmaChart
 from ._config import AnalysisConfig
-from ._curvature import CurvatureChange, curvature_change, curvature_shape
+from ._curvature import CurvatureChange, CurvatureStatistic, curvature_change, curvature_statistic, mode_shape_curvature
 from ._damping import _moving
 from ._frf import ExcitationClass, classify_excitation
 from ._location import DamageLocation, locate_damage
 from ._oma import IdentifiedMode, ModalIdentification, OmaConfig, identify_modes
 from ._peaks import Peak, find_peaks
 from ._tracks import ModeTracker
-from ._spectrum import Spectrum, amplitude_spectrum, cross_spectra
+from ._spectrum import Spectrum, amplitude_spectrum
 from ._ssi import modal_assurance
 from ._validate import as_signal, as_times, check_fs
 
@@ -108,13 +108,18 @@ class BaselineMode:
 class Baseline:
     """A healthy baseline; ``to_dict``/``from_dict`` give a JSON-safe round trip for storage.
 
-    modes : per mode the temperature model; curvature_shapes : (modes, len(η)) normalised
-    operational curvature shapes (dimensionless); curvature_index_mean/std : the curvature
-    statistic's healthy mean and std (1 and √(2/p) of the χ²/p statistic, p its degrees of
-    freedom); curvature_index_rho : lag-1 correlation of successive windows' shape deviations;
-    curvature_shape_std : (modes,) 1σ of one window's unit-RMS shape per station (pooled over
-    η); curvature_windows : windows behind the baseline shapes; start_s/end_s : the learnt period
-    (s); trusted_windows, window_s : the trusted windows it was learnt from and their length (s).
+    modes : per mode the temperature model; curvature_shapes : (modes, len(η)) the modes'
+    mode-shape curvatures (:func:`analytics.mode_shape_curvature` of the identified shapes,
+    averaged over the baseline's windows; unit RMS, dimensionless; a zero row for a mode without
+    one); curvature_covariance : (modes, len(η), len(η)) covariance of one window's curvature
+    shape about that average (dimensionless², learnt from the baseline's windows; None for a
+    baseline stored before the index was built from mode shapes: no curvature chart);
+    curvature_mode_windows : (modes,) windows behind each mode's curvature;
+    curvature_index_mean/std : the curvature statistic's healthy mean (1) and std for a settled
+    average; curvature_index_rho : lag-1 correlation of successive windows' shape deviations;
+    curvature_shape_std : (modes,) 1σ of one window's unit-RMS curvature shape per station (pooled
+    over η); curvature_windows : windows with at least one mode's shape; start_s/end_s : the learnt
+    period (s); trusted_windows, window_s : the trusted windows it was learnt from and their length (s).
     """
 
     modes: tuple[BaselineMode, ...]
@@ -128,6 +133,8 @@ class Baseline:
     curvature_windows: int = 0
     trusted_windows: int = 0
     window_s: float = 0.0
+    curvature_covariance: np.ndarray | None = None
+    curvature_mode_windows: tuple[int, ...] = ()
 
     def to_dict(self) -> dict:
         return {
@@ -142,6 +149,9 @@ class Baseline:
             "curvature_windows": self.curvature_windows,
             "trusted_windows": self.trusted_windows,
             "window_s": self.window_s,
+            "curvature_index": "mode_shape",
+            "curvature_covariance": None if self.curvature_covariance is None else np.asarray(self.curvature_covariance).tolist(),
+            "curvature_mode_windows": list(self.curvature_mode_windows),
         }
 
     @classmethod
@@ -150,6 +160,9 @@ class Baseline:
             raise ValueError(f"baseline must be a dict, got {type(d).__name__}")
         try:
             modes = tuple(BaselineMode(**{**m, "shape": tuple(float(v) for v in m.get("shape", ()))}) for m in d["modes"])
+            # a baseline stored before the index was built from identified mode shapes holds
+            # operational-deflection shapes: it arms the frequency charts only
+            mode_shape = d.get("curvature_index") == "mode_shape" and d.get("curvature_covariance") is not None
             return cls(
                 modes,
                 np.asarray(d["curvature_shapes"], dtype=float),
@@ -162,6 +175,8 @@ class Baseline:
                 int(d.get("curvature_windows", 0)),
                 int(d.get("trusted_windows", 0)),
                 float(d.get("window_s", 0.0)),
+                np.asarray(d["curvature_covariance"], dtype=float) if mode_shape else None,
+                tuple(int(x) for x in d.get("curvature_mode_windows", ())) if mode_shape else (),
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"baseline dict is malformed: {exc}") from exc
@@ -323,12 +338,17 @@ class ModalMonitor:
     and clustering, the support acceleration as a measured input for the FRF cross-check), the
     subspace modes assigned to the tracked modes by frequency and shape (MAC against the baseline's
     shapes once there is one) and cross-checked against the Hamming-windowed, zero-padded
-    amplitude spectra of b. Curvature shapes come from the cross spectra at the tracked
-    frequencies averaged over ``config.curvature_memory_windows`` ambient windows. The curvature
-    chart watches Q = mean over modes and stations of (Δshape/σ)², Δshape the averaged shapes'
-    change against the baseline's, σ its healthy scatter (a delete-one jackknife over the
-    baseline's windows, scaled to the average's memory, floored by ``config.curvature_min_std``):
-    Q ~ χ²_p/p for a healthy structure, charted as (Q − 1)/√(2/p) without further smoothing. The
+    amplitude spectra of b. The curvature (damage-location) index is built from the identified
+    mode shapes, not from operational deflection shapes (whose estimator error shifts with the
+    excitation's balance): each window's subspace shape of a mode, over the unit deformations,
+    gives its mode-shape curvature κ = Σ φ_χ s''_χ (Pandey et al. 1991; unit RMS, signed against
+    the baseline's), used when its MAC with the baseline shape reaches
+    ``config.curvature_mac_min`` and averaged over ``config.curvature_memory_windows`` windows.
+    The curvature chart watches Q = mean over modes and stations of (Δκ/σ)², Δκ the averages'
+    change against the baseline's, σ² the average's healthy variance (one window's covariance
+    learnt from the baseline's windows, scaled to the average) plus ``config.curvature_min_std``²
+    (what the baseline cannot show); Q has mean 1 and its std from the same covariance
+    (:func:`analytics.curvature_statistic`), charted as (Q − 1)/std without further smoothing. The
     charts' levels become alarms in :class:`analytics.AlarmLogic` (the one alarm path).
     """
 
@@ -383,13 +403,16 @@ class ModalMonitor:
         self.tracker = ModeTracker()
         self._first_trusted: float | None = None
         self._trusted = 0  # trusted windows seen while learning
-        self._cross = None  # (modes, Γ) complex EWMA of cross spectra
-        self._cross_sum = None
-        self._cross_windows = 0  # ambient windows in the EWMA (its scatter settles after the memory)
-        # (modes,) Σ w_k²·p_k over the EWMA's weights w_k and the windows' powers p_k of the mode on
-        # its carrying unit: the average's scatter (see _shape_change_std)
-        self._cross_w2p = None
-        self._ci_hist: list = []
+        # per mode the EWMA of the windows' mode-shape curvatures (unit RMS), the EWMA's Σ w² (the
+        # share of one window's scatter the average keeps) and the windows in it
+        self._kappa: np.ndarray | None = None  # (modes, len(η))
+        self._kappa_share: np.ndarray | None = None  # (modes,)
+        self._kappa_n: np.ndarray | None = None  # (modes,) int
+        # (modes, len(η)) EWMA of one window's squared deviation from the average before it: the
+        # present scatter of a window's shape (the excitation's balance sets it, not the baseline's)
+        self._kappa_var: np.ndarray | None = None
+        # stations where some unit deformation bends (a free end's curvature is zero by construction)
+        self._bending = np.max(np.abs(self.S), axis=1) > 1e-9 * float(np.max(np.abs(self.S)))
         self._charts: list[EwmaChart] = []
         self._ci_chart: EwmaChart | None = None
         c = self.config
@@ -432,9 +455,17 @@ class ModalMonitor:
             self.f0 = [m.f_ref_hz for m in baseline.modes]
             self.ref = list(self.f0)
         self._charts = [self._chart(math.sqrt((1 + m.rho) / (1 - m.rho))) for m in baseline.modes]
-        # the statistic already averages (cross spectra over curvature_memory_windows): no second EWMA
-        warning, alarm = self.config.chart_levels("curvature")
-        self._ci_chart = EwmaChart(1.0, warning, alarm, 1.0)
+        self._ci_chart = None
+        if any(self._curvature_charted(i) for i in range(len(baseline.modes))):
+            # the statistic already averages (shapes over curvature_memory_windows): no second EWMA
+            warning, alarm = self.config.chart_levels("curvature")
+            self._ci_chart = EwmaChart(1.0, warning, alarm, 1.0)
+
+    def _curvature_charted(self, i: int) -> bool:
+        """Mode i (0-based) has a curvature baseline learnt from enough windows."""
+        bl = self.baseline
+        return (bl is not None and bl.curvature_covariance is not None and i < len(bl.curvature_mode_windows)
+                and bl.curvature_mode_windows[i] >= self.config.baseline_min_windows)
 
     def _init_modes(self, spec) -> None:
         for u in range(self.gamma):
@@ -604,22 +635,7 @@ class ModalMonitor:
         for i, e in enumerate(est):
             if e.frequency_hz is not None and e.confidence >= c.min_confidence:
                 self.ref[i] += c.track_gain * (e.frequency_hz - self.ref[i])
-        # curvature cross spectra at the tracked frequencies, from stationary (ambient) windows
-        # only: a free decay's modal mix and amplitude change within the window
         change = None
-        G = None
-        if kind == "ambient" and self.ref:
-            C = cross_spectra(B, self.fs, self.ref, window=c.window)  # (modes, Γ)
-            G = np.array([C[i] * np.conj(C[i, self.units[i]]) for i in range(self.n_modes)])
-            a = 1.0 / c.curvature_memory_windows
-            power = np.array([G[i, self.units[i]].real for i in range(self.n_modes)])
-            if self._cross is None:
-                self._cross, self._cross_w2p = G, power
-            else:
-                self._cross = (1 - a) * self._cross + a * G
-                self._cross_w2p = None if self._cross_w2p is None else (1 - a) ** 2 * self._cross_w2p + a * a * power
-            self._cross_sum = G if self._cross_sum is None else self._cross_sum + G
-            self._cross_windows += 1
         location = None
         scores: list[float | None] = [None] * self.n_modes
         ci_score = None
@@ -633,33 +649,23 @@ class ModalMonitor:
             self._records.append(_Record(tmid, T, [e.frequency_hz if ok else None for e, ok in zip(est, charted)],
                                          [e.confidence for e in est], [e.shape if ok else None for e, ok in zip(est, charted)],
                                          [e.frequency_std_hz if ok else None for e, ok in zip(est, charted)]))
-            if G is not None:
-                self._ci_hist.append(G.copy())
             if self.learn == "period" and t1 - self._first_trusted >= c.baseline_s:
                 self.baseline = self._fit_baseline(t1)
                 if self.baseline is not None:
                     self._arm(self.baseline)
         elif self.baseline is not None and trusted:
             bl = self.baseline
-            shapes = self._shapes(self._cross) if kind == "ambient" else None
             delta = dsd = None
-            if shapes is not None:
-                change = curvature_change(shapes, bl.curvature_shapes, self.eta, self.length)
-                sign = np.sign(np.sum(shapes * bl.curvature_shapes, axis=1, keepdims=True))
-                sign[sign == 0] = 1
-                delta = shapes * sign - bl.curvature_shapes
-                dsd = self._shape_change_std()
-                # The baseline's scatter is that of a settled average: with a baseline given from
-                # another record, the first windows' average is noisier and would look like change.
-                if dsd is not None and self._cross_windows >= c.curvature_memory_windows:
-                    q = float(np.mean((delta / dsd[:, None]) ** 2))
-                    # One-sided: less shape change than in the healthy period is no damage.
-                    z = max((q - bl.curvature_index_mean) / bl.curvature_index_std, 0.0)
-                    ci_score, lvl = self._ci_chart.update(z)
-                    levels[CURVATURE_CHART] = lvl
-                    warning, alarm = c.chart_levels("curvature")
-                    charts.append(ChartDocument(name=CURVATURE_CHART, kind="curvature", level=lvl, score_sigma=ci_score,
-                                                warning_sigma=warning, alarm_sigma=alarm))
+            curv = self._curvature_window(est) if self._ci_chart is not None else None
+            if curv is not None:
+                change, delta, stat = curv
+                dsd = stat.sigma
+                # One-sided: less shape change than in the healthy period is no damage.
+                ci_score, lvl = self._ci_chart.update(max(stat.score, 0.0))
+                levels[CURVATURE_CHART] = lvl
+                warning, alarm = c.chart_levels("curvature")
+                charts.append(ChartDocument(name=CURVATURE_CHART, kind="curvature", level=lvl, score_sigma=ci_score,
+                                            warning_sigma=warning, alarm_sigma=alarm))
             warning, alarm = c.chart_levels("frequency")
             for i, (e, m) in enumerate(zip(est, bl.modes)):
                 if e.frequency_hz is None or e.method != "ssi" or e.confidence < c.min_confidence or m.windows < c.baseline_min_windows:
@@ -680,14 +686,6 @@ class ModalMonitor:
                             excitation, tuple(charts), tuple(events), spec, identified)
 
 
-    def _shapes(self, G: np.ndarray | None) -> np.ndarray | None:
-        if G is None:
-            return None
-        try:
-            return np.array([curvature_shape(G[i], self.units[i], self.S) for i in range(self.n_modes)])
-        except ValueError:
-            return None
-
     def _model_slope(self, i: int) -> float | None:
         sig = self.signatures
         slope = None if sig is None else (sig.get("temperature_slope") if isinstance(sig, dict) else getattr(sig, "temperature_slope", None))
@@ -695,34 +693,69 @@ class ModalMonitor:
             return None
         return float(slope[i])
 
-    def _shape_change_std(self) -> np.ndarray | None:
-        """1σ per mode of (averaged shape − baseline shape) per station for a healthy structure.
+    def _curvature_window(self, est: list[ModeEstimate]) -> tuple[CurvatureChange, np.ndarray, CurvatureStatistic] | None:
+        """This window's identified shapes into the modes' curvature averages, and the averages'
+        change against the baseline: (change index, Δκ (modes, len(η)), the chart's statistic), or
+        None while no mode has a shape.
 
-        A window's shape comes from its cross spectra at the mode, whose noise (the other modes'
-        off-resonant response, the estimator's noise) does not grow with the mode's own random
-        amplitude in the window: the shape's variance is σ²·p̄/p for a window of power p (the mode
-        on its carrying unit; p̄ the mean power), as the healthy records show (log-slope −1 of
-        the squared shape error against log p). The averages are power-weighted sums of the
-        windows' cross spectra, so the average's variance is σ²·Σ w²p / Σ w p for weights w
-        (Σ w = 1): the EWMA's actual weights, the first window's (1 − a)^(n−1) share included,
-        and a strong window counting more than a weak one. σ (one window at mean power) is the
-        baseline's jackknife, its own sum's variance σ²/n."""
-        bl = self.baseline
-        if bl.curvature_windows < 1:  # a baseline stored before this statistic existed
+        A mode's shape enters when the subspace identification found it (confidence at least
+        ``min_confidence``) and its MAC with the baseline's shape reaches ``curvature_mac_min`` (a
+        different mode, or a spurious pole, is no evidence of a changed shape). Its mode-shape
+        curvature (unit RMS, signed against the baseline's) is averaged with an EWMA of
+        ``curvature_memory_windows`` windows, and judged once it holds that many. The average's
+        healthy covariance is the baseline's one-window covariance C, scaled up by the present
+        scatter of a window's shape when that is larger (a weaker mode, a storm's broadband error:
+        an EWMA of each window's squared deviation from the average before it), times the EWMA's
+        Σ w², inflated for successive windows' correlation, plus the baseline average's own
+        C/n_eff; :func:`analytics.curvature_statistic` adds the tolerance ``curvature_min_std`` per
+        station."""
+        bl, c = self.baseline, self.config
+        if bl.curvature_covariance is None:  # a stored state whose baseline predates the index
             return None
-        # too few baseline windows for a jackknife: the floor alone (a very short baseline)
-        own = bl.curvature_shape_std if len(bl.curvature_shape_std) == self.n_modes else (0.0,) * self.n_modes
-        a = 1.0 / self.config.curvature_memory_windows
+        K = np.asarray(bl.curvature_shapes, dtype=float)
+        C = np.asarray(bl.curvature_covariance, dtype=float)
+        m = K.shape[0]
+        base_var = np.einsum("ijj->ij", C)
+        if self._kappa is None or self._kappa.shape != K.shape:
+            self._kappa, self._kappa_share, self._kappa_n = np.zeros_like(K), np.ones(m), np.zeros(m, dtype=int)
+        if self._kappa_var is None or self._kappa_var.shape != K.shape:
+            self._kappa_var = base_var.copy()
+        a = 1.0 / c.curvature_memory_windows
         r = min(max(bl.curvature_index_rho, 0.0), 0.95)
         corr = (1 + r * (1 - a)) / (1 - r * (1 - a))  # successive windows' correlation, in an EWMA
-        share = np.full(self.n_modes, a / (2 - a))  # the settled EWMA's, for a state stored before the weights were tracked
-        if self._cross_w2p is not None and self._cross is not None:
-            power = np.array([self._cross[i, self.units[i]].real for i in range(self.n_modes)])
-            ok = power > 0
-            share[ok] = np.clip(self._cross_w2p[ok] / power[ok], 0.0, 1.0)
-        n_eff = max(1.0, bl.curvature_windows * (1 - r) / (1 + r))
-        std = np.maximum(np.asarray(own, dtype=float), self.config.curvature_min_std)
-        return std * np.sqrt(share * corr + 1.0 / n_eff)
+        for i, e in enumerate(est[:m]):
+            if not self._curvature_charted(i) or e.method != "ssi" or e.shape is None or e.confidence < c.min_confidence:
+                continue
+            if e.mac is None or e.mac < c.curvature_mac_min:
+                continue
+            try:
+                k = mode_shape_curvature([e.shape], self.S, K[i][None])[0]
+            except ValueError:
+                continue
+            if self._kappa_n[i] == 0:
+                self._kappa[i], self._kappa_share[i] = k, 1.0
+            else:
+                # E[(κ_k − κ̄_{k−1})²] = σ²(1 + share·corr) for a healthy window: its σ² estimate
+                self._kappa_var[i] = (1 - a) * self._kappa_var[i] + a * (k - self._kappa[i]) ** 2 / (1 + self._kappa_share[i] * corr)
+                self._kappa[i] = (1 - a) * self._kappa[i] + a * k
+                self._kappa_share[i] = (1 - a) ** 2 * self._kappa_share[i] + a * a
+            self._kappa_n[i] += 1
+        # a mode is judged once its average has settled over the memory: its first windows say
+        # little of the present scatter, and one window's outlier would weigh as an average
+        have = self._kappa_n >= math.ceil(c.curvature_memory_windows)
+        if not have.any():
+            return None
+        n_eff = np.maximum(1.0, np.asarray(bl.curvature_mode_windows[:m], dtype=float) * (1 - r) / (1 + r))
+        # a window's scatter now, against the baseline's (its correlation over η kept): a weaker
+        # mode or a stronger broadband error (a storm) scatters the shapes more, never less
+        bend = self._bending
+        ratio = np.sum(self._kappa_var[:, bend], axis=1) / np.maximum(np.sum(base_var[:, bend], axis=1), 1e-300)
+        gain = np.maximum(1.0, ratio)
+        cov = C * (self._kappa_share * corr * gain + 1.0 / n_eff)[:, None, None]
+        delta = np.where(have[:, None], self._kappa - K, 0.0)
+        stat = curvature_statistic(delta, cov, c.curvature_min_std, have[:, None] & self._bending[None, :])
+        change = curvature_change(self._kappa[have], K[have], self.eta, self.length)
+        return change, delta, stat
 
     def _locate(self, delta: np.ndarray | None, dsd: np.ndarray | None) -> DamageLocation | None:
         """Model-assisted location of the present change (EWMA of the charts) against the signatures."""
@@ -776,7 +809,7 @@ class ModalMonitor:
 
     def fit_baseline(self) -> Baseline | None:
         """The baseline of every trusted window seen so far (``learn="record"``), without arming it;
-        None if no window held the curvature cross spectra (no ambient window)."""
+        None before the first trusted window."""
         if self._first_trusted is None:
             return None
         end = self._records[-1].t_mid if self._records else self._first_trusted
@@ -818,66 +851,73 @@ class ModalMonitor:
             stated = [s[3] / s[0] for s in sel if s[3] is not None and math.isfinite(s[3]) and s[3] > 0]
             sig = max(sig, float(np.median(stated)) if stated else 0.0, c.min_sigma_rel)
             modes.append(BaselineMode(i + 1, self.units[i], fref0 * (1 + a), tm, slope, sig, _lag1(res), len(sel), shape))
-        base_shapes = self._shapes(self._cross_sum)
-        if base_shapes is None:
-            return None
-        # the baseline shape is the normalised sum of n windows' cross spectra: its scatter comes
-        # from a delete-one jackknife over those windows, expressed per window (× n)
-        hist = list(self._ci_hist)
-        n = len(hist)
-        shape_std, rho = (), 0.0
-        q_std = None
-        if n >= 3:
-            total = np.sum(hist, axis=0)
-            jack = []
-            for G in hist:
-                sh = self._shapes(total - G)
-                if sh is None:
-                    jack = []
-                    break
-                sign = np.sign(np.sum(sh * base_shapes, axis=1, keepdims=True))
-                sign[sign == 0] = 1
-                jack.append(sh * sign)
-            if jack:
-                J = np.array(jack)  # (n, modes, η)
-                var_mean = (n - 1) / n * np.sum((J - J.mean(axis=0)) ** 2, axis=0)  # variance of the n-window shape
-                shape_std = tuple(float(x) for x in np.sqrt(n * np.mean(var_mean, axis=1)))
-                # Q pools each mode's stations under one σ, but their errors are neither equally large
-                # nor independent (a normalised shape spans Γ − 1 directions over len(η) stations):
-                # its std is √(2·Σ tr(C²))/(modes·len(η)), C a mode's error covariance over η
-                # normalised to a unit mean variance (the jackknife's); χ²_p/p only if C is diagonal
-                D = J - J.mean(axis=0)
-                trace2 = 0.0
-                for i in range(self.n_modes):
-                    C = D[:, i, :].T @ D[:, i, :]
-                    scale = float(np.trace(C)) / C.shape[0]
-                    if scale > 0:
-                        trace2 += float(np.sum((C / scale) ** 2))
-                if trace2 > 0:
-                    q_std = math.sqrt(2.0 * trace2) / (self.n_modes * self.eta.size)
-                x = (J - J.mean(axis=0)).reshape(n, -1)  # influence of each window (sign flipped)
-                den = float(np.sum(x[:-1] ** 2))
-                rho = float(np.clip(np.sum(x[:-1] * x[1:]) / den, 0.0, 0.95)) if den > 0 else 0.0
-        # Q = mean (Δ/σ)² is ~χ²_p/p; p: the shape of a mode spans Γ − 1 directions once normalised
-        p = max(1, self.n_modes * min(self.gamma - 1, self.eta.size))
-        if q_std is None:
-            q_std = math.sqrt(2.0 / p)
-        return Baseline(tuple(modes), base_shapes, 1.0, q_std, rho, float(self._first_trusted), float(t_end), shape_std, n,
-                        self._trusted, float(c.window_s))
+        K, C, counts, rho, shape_std, q_std, with_shape = self._fit_curvature(modes)
+        return Baseline(tuple(modes), K, 1.0, q_std, rho, float(self._first_trusted), float(t_end), shape_std, with_shape,
+                        self._trusted, float(c.window_s), C, counts)
+
+    def _fit_curvature(self, modes: list[BaselineMode]) -> tuple:
+        """The curvature baseline from the learnt windows' identified shapes: per mode the average
+        mode-shape curvature (signed by its own unit deformation, as ``estimator.damage_signatures``),
+        one window's covariance about it over the stations (windows whose shape's MAC with the
+        baseline shape is below ``curvature_mac_min`` left out), the windows behind it; the pooled
+        lag-1 correlation of successive windows' deviations, each mode's pooled 1σ, the
+        statistic's healthy std for a settled average, and the windows with any shape."""
+        c = self.config
+        n_eta = self.eta.size
+        K, C = np.zeros((self.n_modes, n_eta)), np.zeros((self.n_modes, n_eta, n_eta))
+        counts, shape_std = [0] * self.n_modes, [0.0] * self.n_modes
+        num = den = 0.0
+        seen: set[int] = set()
+        for i, bm in enumerate(modes):
+            if len(bm.shape) != self.gamma:
+                continue
+            mean = np.asarray(bm.shape, dtype=float)
+            rows = [(k, np.asarray(r.shapes[i], dtype=float)) for k, r in enumerate(self._records)
+                    if r.freqs[i] is not None and r.confs[i] >= c.min_confidence and i < len(r.shapes) and r.shapes[i] is not None
+                    and len(r.shapes[i]) == self.gamma]
+            rows = [(k, p) for k, p in rows if float(modal_assurance(p[None], mean[None])[0, 0]) >= c.curvature_mac_min]
+            if len(rows) < 2:
+                continue
+            try:
+                k0 = mode_shape_curvature(mean[None], self.S, np.array([self.units[i]]))
+                Kw = mode_shape_curvature(np.array([p for _, p in rows]), self.S, np.repeat(k0, len(rows), axis=0))
+            except ValueError:
+                continue
+            kbar = Kw.mean(axis=0)
+            kbar /= float(np.sqrt(np.mean(kbar**2)))
+            D = Kw - kbar
+            K[i], C[i], counts[i] = kbar, D.T @ D / (len(rows) - 1), len(rows)
+            shape_std[i] = float(np.sqrt(np.mean(np.diag(C[i]))))
+            seen.update(k for k, _ in rows)
+            idx = [k for k, _ in rows]
+            for j in range(len(rows) - 1):  # successive windows' deviations (the same mode, adjacent windows)
+                if idx[j + 1] == idx[j] + 1:
+                    num += float(D[j] @ D[j + 1])
+                    den += float(D[j] @ D[j])
+        rho = float(np.clip(num / den, 0.0, 0.95)) if den > 0 else 0.0
+        ok = np.array([n >= c.baseline_min_windows for n in counts])
+        q_std = 0.0
+        if ok.any():
+            a = 1.0 / c.curvature_memory_windows
+            corr = (1 + rho * (1 - a)) / (1 - rho * (1 - a))
+            n_eff = np.maximum(1.0, np.asarray(counts, dtype=float) * (1 - rho) / (1 + rho))
+            cov = C * (a / (2 - a) * corr + 1.0 / n_eff)[:, None, None]
+            q_std = curvature_statistic(np.zeros_like(K), cov, c.curvature_min_std, ok[:, None] & self._bending[None, :]).q_std
+        return K, C, tuple(counts), rho, tuple(shape_std), q_std, len(seen)
 
     # -- persistence -----------------------------------------------------------------------
     def state_dict(self) -> dict:
         """JSON-safe state for a restart (tracker, baseline or its learning data, charts, alarms)."""
-        cx = lambda G: None if G is None else {"re": np.real(G).tolist(), "im": np.imag(G).tolist()}  # noqa: E731
         return {
             "fs": self.fs, "config": self.config.model_dump(), "curvature_shapes": self.S.tolist(), "stations_eta": self.eta.tolist(),
             "length": self.length, "units": self.units, "f0": self.f0, "ref": self.ref, "learn": self.learn,
             "baseline": None if self.baseline is None else self.baseline.to_dict(),
             "records": [{**vars(r), "shapes": [None if s is None else list(s) for s in r.shapes]} for r in self._records],
             "first_trusted": self._first_trusted, "trusted": self._trusted,
-            "cross": cx(self._cross), "cross_sum": cx(self._cross_sum), "cross_windows": self._cross_windows,
-            "cross_w2p": None if self._cross_w2p is None else self._cross_w2p.tolist(),
-            "ci_hist": [cx(G) for G in self._ci_hist],
+            "kappa": None if self._kappa is None else self._kappa.tolist(),
+            "kappa_share": None if self._kappa_share is None else self._kappa_share.tolist(),
+            "kappa_n": None if self._kappa_n is None else self._kappa_n.tolist(),
+            "kappa_var": None if self._kappa_var is None else self._kappa_var.tolist(),
             "power": None if self._power is None else self._power.tolist(),
             "charts": [ch.state_dict() for ch in self._charts],
             "ci_chart": None if self._ci_chart is None else self._ci_chart.state_dict(),
@@ -889,7 +929,6 @@ class ModalMonitor:
     def from_state_dict(cls, d: dict) -> "ModalMonitor":
         if not isinstance(d, dict):
             raise ValueError(f"state must be a dict, got {type(d).__name__}")
-        ux = lambda g: None if g is None else np.asarray(g["re"]) + 1j * np.asarray(g["im"])  # noqa: E731
         try:
             m = cls(None, d["curvature_shapes"], d["stations_eta"], fs=d["fs"], config=AnalysisConfig(**d["config"]), beam_length=d["length"],
                     learn=d.get("learn", "period"))
@@ -899,11 +938,12 @@ class ModalMonitor:
                                   [None if s is None else tuple(s) for s in r.get("shapes", [])], list(r.get("stds", []))) for r in d["records"]]
             m._first_trusted = d["first_trusted"]
             m._trusted = int(d.get("trusted", len(m._records)))
-            m._cross, m._cross_sum = ux(d["cross"]), ux(d["cross_sum"])
-            # States stored before the counter existed had a settled average.
-            m._cross_windows = int(d.get("cross_windows", m.config.curvature_memory_windows))
-            m._cross_w2p = None if d.get("cross_w2p") is None else np.asarray(d["cross_w2p"], dtype=float)
-            m._ci_hist = [ux(g) for g in d["ci_hist"]]
+            # a state stored before the curvature index was built from mode shapes starts its averages afresh
+            if d.get("kappa") is not None and d.get("kappa_share") is not None and d.get("kappa_n") is not None:
+                m._kappa = np.asarray(d["kappa"], dtype=float)
+                m._kappa_share = np.asarray(d["kappa_share"], dtype=float)
+                m._kappa_n = np.asarray(d["kappa_n"], dtype=int)
+                m._kappa_var = None if d.get("kappa_var") is None else np.asarray(d["kappa_var"], dtype=float)
             m._power = None if d.get("power") is None else np.asarray(d["power"], dtype=float)
             m._charts = [EwmaChart.from_state_dict(c) for c in d["charts"]]
             m._ci_chart = None if d["ci_chart"] is None else EwmaChart.from_state_dict(d["ci_chart"])

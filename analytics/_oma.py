@@ -14,6 +14,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -23,7 +24,7 @@ from ._damping import DampingEstimate
 from ._moving import subwindow_frequencies
 from ._tracks import ModeTrack, ModeTracker
 from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
-from ._ssi import SsiModel, modal_assurance, ssi_poles, toeplitz_from_data
+from ._ssi import PoleSet, SsiModel, modal_assurance, ssi_poles, toeplitz_from_data
 from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, stabilisation_diagram
 from ._validate import as_signal, check_fs, positive
 
@@ -71,6 +72,10 @@ class OmaConfig(BaseModel):
     resolution_cycles: float = Field(2.0, ge=0, le=10, description="poles of one shape closer than resolution_cycles/T to a stronger mode are that mode, unresolved by a window of T s (the half-width of a Hann window's main lobe) [2]")
     min_share: float = Field(0.01, ge=0, le=1, description="a mode carries at least this share of the response in some channel [0.01]")
     moving_modes: bool = Field(True, description="follow each mode through sub-windows; one that moves is listed once with its start and end frequency [True]")
+    uncertainty: Literal["jackknife", "batch"] = Field(
+        "jackknife", description="statistical 1σ of a pole: the first-order segment jackknife (one window), or batch means: the "
+                                 "spread of the segments' own poles over √segments, widened by Student's t to a 68.3 % interval "
+                                 "(a long record, whose slow modes the linearised jackknife underrates) [jackknife]")
 
     @model_validator(mode="after")
     def _band(self) -> "OmaConfig":
@@ -349,6 +354,7 @@ def identify_modes(
     jack = _jackknife(model, Tm, Tsegs) if segs >= 3 else None
     modes, kept, rejected = [], [], []
     orders_cache: dict = {}
+    batch_cache: dict = {}
     lam_c, amp_c = _residues(model, clusters, orders_cache)
     tot_c = float(np.linalg.norm(amp_c, axis=1).sum()) if len(clusters) else 0.0
     contrib = [float(np.linalg.norm(a)) / tot_c if tot_c > 0 else 0.0 for a in amp_c]
@@ -390,9 +396,20 @@ def identify_modes(
             rejected.append((f, f"buried: {100 * vis:.0f} % of the modelled response at its frequency, under the mode at "
                                 f"{clusters[j].frequency_hz:.3f} Hz ({100 * contrib[j]:.0f} % of the response)"))
             continue
-        sf, sz = _pole_std(model, c, jack, orders_cache) if jack is not None else (float("nan"), float("nan"))
+        if jack is None:
+            sf, sz = float("nan"), float("nan")
+        elif cfg.uncertainty == "batch":
+            if not batch_cache:  # each segment identified once, at the orders of the clusters' representatives
+                batch_cache["poles"] = _segment_poles(Tsegs, model, sorted({int(model.poles.order[x.representative]) for x in clusters}))
+            sf, sz = _batch_std(model, c, batch_cache["poles"], [x.frequency_hz for x in clusters if x is not c])
+        else:
+            sf, sz = _pole_std(model, c, jack, orders_cache)
         spread_f = c.frequency_spread_hz if c.orders > 1 else 0.0
         spread_z = c.damping_spread if c.orders > 1 else 0.0
+        if cfg.uncertainty == "batch" and c.orders > 2:
+            # a record's many orders: their scatter measured robustly, so one unconverged low order does not set it
+            spread_f = _robust_scale(model.poles.frequency_hz[c.members])
+            spread_z = _robust_scale(model.poles.damping_ratio[c.members])
         fstd = math.hypot(sf, spread_f) if math.isfinite(sf) else spread_f
         zstd = math.hypot(sz, spread_z) if math.isfinite(sz) else spread_z
         shape_c = model.poles.shapes[c.representative] * scale
@@ -619,6 +636,55 @@ def _pole_std(model: SsiModel, c: PoleCluster, jack: _Jackknife, cache: dict) ->
     var_f = (S - 1) / S * np.sum((fj - fj.mean()) ** 2)
     var_z = (S - 1) / S * np.sum((zj - zj.mean()) ** 2)
     return float(np.sqrt(var_f)), float(np.sqrt(var_z))
+
+
+def _robust_scale(x: np.ndarray) -> float:
+    """The normal-consistent median absolute deviation of x (its standard deviation when x is normal)."""
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+def _segment_poles(Ts: np.ndarray, model: SsiModel, orders: list[int]) -> list[PoleSet | None]:
+    """The poles of each segment's own Toeplitz matrix at ``orders`` (None where it fails)."""
+    out: list[PoleSet | None] = []
+    for T in Ts:
+        try:
+            out.append(ssi_poles(T, model.channels, model.fs_hz, orders).poles)
+        except (ValueError, np.linalg.LinAlgError):
+            out.append(None)
+    return out
+
+
+def _batch_std(model: SsiModel, c: PoleCluster, segment_poles: list[PoleSet | None], others_hz: list[float]) -> tuple[float, float]:
+    """Batch-means 1σ of the representative pole's frequency (Hz) and damping ratio: each
+    segment's Toeplitz matrix identified on its own (:func:`_segment_poles`), at the pole's order
+    the segment pole of the same shape nearest in frequency (within half the distance to any other
+    mode) taken, and the spread of those over √(segments found), widened by Student's t so the
+    ±1σ interval holds 68.3 % for few segments. Unlike the first-order jackknife it holds when a
+    segment moves the pole beyond the linear regime (a slow mode, a few tens of its cycles per segment)."""
+    n = int(model.poles.order[c.representative])
+    f0 = float(model.poles.frequency_hz[c.representative])
+    shape0 = model.poles.shapes[c.representative]
+    gap = min((abs(math.log(f / f0)) for f in others_hz if f > 0), default=math.inf)
+    reach = min(0.1, 0.5 * gap)
+    fs_j, zs_j = [], []
+    for seg in segment_poles:
+        if seg is None:
+            continue
+        poles = seg.take(seg.order == n)
+        if len(poles) == 0:
+            continue
+        dev = np.abs(np.log(np.maximum(poles.frequency_hz, 1e-12) / f0))
+        mac = modal_assurance(poles.shapes, shape0[None])[:, 0]
+        ok = (dev <= reach) & (mac >= 0.8) & (poles.damping_ratio > -0.05) & (poles.damping_ratio < 0.5)
+        if ok.any():
+            k = int(np.argmin(np.where(ok, dev + (1 - mac), np.inf)))
+            fs_j.append(float(poles.frequency_hz[k]))
+            zs_j.append(float(poles.damping_ratio[k]))
+    K = len(fs_j)
+    if K < 3:
+        return float("nan"), float("nan")
+    widen = float(stats.t.ppf(0.5 + 0.6826894921370859 / 2, K - 1)) / math.sqrt(K)
+    return widen * float(np.std(fs_j, ddof=1)), widen * float(np.std(zs_j, ddof=1))
 
 
 def _residues(model: SsiModel, clusters: tuple[PoleCluster, ...], cache: dict) -> tuple[np.ndarray, np.ndarray]:

@@ -10,7 +10,14 @@ its truth (``shm simulate --ideal --duration 300``), EST its estimate (``shm est
 per truth station the strain RMS error and the DEL errors (m = 3, 5) against the truth's curvature
 (ε_true = −c κ_true), and whether the true DEL lies in the band ``shm loads`` gives.
 
-Run: PYTHONPATH=. .venv/bin/python benchmarks/bench_loads.py [--quick] [--accuracy RAW EST]
+With ``--replay RECORDING RIG`` it measures what the loads add to the service: the recording
+replayed through ``shm serve``'s pipeline (in process, ``--speed max``) with RIG's hot spots and
+again with a copy of RIG without them, the CPU time of each (the acceptance: at most 10 % more).
+
+Without options it also checks the counting's acceptance items: the ASTM E1049 example through
+``shm loads`` on a one-column CSV, and a 30-minute record counted whole and in 1 s batches.
+
+Run: PYTHONPATH=. .venv/bin/python benchmarks/bench_loads.py [--quick] [--accuracy RAW EST] [--replay RECORDING RIG]
 """
 
 from __future__ import annotations
@@ -70,12 +77,87 @@ def accuracy(raw_path: str, est_path: str) -> None:
     print(f"  true DEL inside the band at {inside[0]} (m=3) and {inside[1]} (m=5) of {len(stations)} stations")
 
 
+def counting_acceptance() -> None:
+    """The ASTM E1049-85 example through ``shm loads`` (a one-column CSV) and a 30-minute record
+    counted whole and in 1 s batches (issue 21's acceptance)."""
+    import contextlib
+    import io
+    import json
+    import tempfile
+    from pathlib import Path
+
+    from shm_service.cli import main as shm
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "astm.csv"
+        path.write_text("strain\n" + "\n".join(str(v) for v in (-2, 1, -3, 5, -1, 3, -4, 4, -2)) + "\n")
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            code = shm(["loads", str(path), "--fs", "1", "--json"])
+        doc = json.loads(out.getvalue())
+    pairs = doc["channels"][0]["cycles_by_range"]
+    expected = [[3.0, 0.5], [4.0, 1.5], [6.0, 0.5], [8.0, 1.0], [9.0, 0.5]]
+    print(f"ASTM E1049-85 example through `shm loads` (one-column CSV, exit {code}): cycles_by_range {pairs} "
+          f"{'= the standard' if pairs == expected else '!= the standard ' + str(expected)}")
+    x = _signal(1800.0, 99)
+    detail = FatigueDetail(sn_curve("EN1993-1-9:71"), gamma_mf=1.35)
+    whole = detail.damage(rainflow_cycles(x))
+    spot = HotSpotFatigue(detail)
+    step = int(FS)
+    for k in range(0, x.size, step):
+        spot.push(x[k:k + step], 1.0)
+    print(f"30-minute record at {FS:.0f} Hz, counted whole and in 1 s batches: D = {whole:.6e} and {spot.consumed:.6e}, "
+          f"relative difference {abs(spot.consumed / whole - 1):.1e}")
+
+
+def replay_overhead(recording: str, rig_path: str) -> None:
+    """CPU time of a replay through the service's pipeline with and without the rig's hot spots."""
+    import json
+    import resource
+    import subprocess
+    import tempfile
+    from pathlib import Path
+
+    rig = json.loads(Path(rig_path).read_text())
+    if not rig.get("hot_spots"):
+        raise SystemExit(f"{rig_path} names no hot spots: nothing to compare")
+    script = (
+        "import sys, time; from shm_service.service._config import load_settings;"
+        "from shm_service.service._service import MonitoringService;"
+        "s = load_settings(None, {'db': sys.argv[1], 'source': {'spec': 'replay:' + sys.argv[2], 'rig': sys.argv[3], 'speed': 'max'},"
+        " 'archive': {'enabled': False}, 'dashboard': {'enabled': False}, 'server': {'port': 0},"
+        " 'estimator': {'peripheral': 'gyro', 'modes': 4, 'imus': 4, 'tofs': 0, 'gauges': 4}});"
+        "svc = MonitoringService(s, environ={}); svc.start(); svc.wait(); st = svc.status(); svc.stop(drain_s=0);"
+        "print(st.pipeline.windows_committed, st.service.pipeline_errors)")
+    with tempfile.TemporaryDirectory() as tmp:
+        bare = dict(rig, hot_spots=[], fatigue=None)
+        plain = Path(tmp) / "rig_without_hot_spots.json"
+        plain.write_text(json.dumps(bare))
+        cpu = {}
+        for label, path in (("loads off", str(plain)), ("loads on", rig_path), ("loads off", str(plain)), ("loads on", rig_path)):
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            done = subprocess.run([sys.executable, "-c", script, str(Path(tmp) / f"{label}-{len(cpu)}.sqlite"), recording, path],
+                                  capture_output=True, text=True, check=True)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            used = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+            cpu.setdefault(label, []).append(used)
+            print(f"  {label}: {used:7.1f} s CPU, windows committed and pipeline errors: {done.stdout.strip()}")
+    off, on = min(cpu["loads off"]), min(cpu["loads on"])
+    print(f"replay of {recording} (--speed max, in-process service): loads add {100 * (on / off - 1):+.1f} % CPU "
+          f"(best of two each: {on:.1f} s with, {off:.1f} s without)")
+
+
 def main(argv: list[str] | None = None) -> None:
     args = list(sys.argv[1:] if argv is None else argv)
     if "--accuracy" in args:
         i = args.index("--accuracy")
         accuracy(args[i + 1], args[i + 2])
         return
+    if "--replay" in args:
+        i = args.index("--replay")
+        replay_overhead(args[i + 1], args[i + 2])
+        return
+    counting_acceptance()
     seconds = 600.0 if "--quick" in args else 3600.0
     window = int(10 * FS)
     signals = [_signal(seconds, seed) for seed in range(HOT_SPOTS)]

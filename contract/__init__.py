@@ -10,8 +10,10 @@ from ._network import is_loopback
 from ._documents import (
     CURVATURE_CHART,
     FATIGUE_CONDITIONS,
+    FatigueDocument,
     HotSpotLoadsDocument,
     LoadsWindowDocument,
+    StationLoadsDocument,
     SENSOR_STATES,
     AidingChannelDocument,
     AlarmCountsDocument,
@@ -102,12 +104,12 @@ from ._rig import (
     parse_rig,
 )
 from ._state import Peripheral, StateIndex, StateLayout
-from ._ports import ServicePort, StructureModel, StructurePort
+from ._ports import MAX_PAGE, Page, ServicePort, StructureModel, StructurePort
 
 __all__ = [
     "is_loopback",
     # the runtime's ports (the HTTP routers and the dashboard are typed against them)
-    "ServicePort", "StructureModel", "StructurePort",
+    "MAX_PAGE", "Page", "ServicePort", "StructureModel", "StructurePort",
     # rig.json
     "Beam", "Orientation", "PointMass", "RigDescription",
     "DNV_RP_C203_CURVE_NAMES", "DNV_RP_C203_ENVIRONMENTS", "EN1993_DETAIL_CATEGORIES", "EN1993_SHEAR_CATEGORIES",
@@ -122,7 +124,7 @@ __all__ = [
     "CURVATURE_CHART", "SENSOR_STATES", "AidingChannelDocument", "AlarmCountsDocument", "AlarmDocument",
     "AlarmEvent", "AlarmEventDocument", "AlarmLevel", "AlarmsDocument", "ArchiveStatusDocument", "BaselineModeDocument",
     "BaselineRequestDocument", "BaselineStatusDocument", "ChartDocument", "ChartKind", "ChartLevelsDocument",
-    "FATIGUE_CONDITIONS", "HotSpotLoadsDocument", "LoadsWindowDocument",
+    "FATIGUE_CONDITIONS", "FatigueDocument", "HotSpotLoadsDocument", "LoadsWindowDocument", "StationLoadsDocument",
     "CurvatureDocument", "DegradedImuDocument", "ErrorDocument", "EstimateDocument", "EstimatorStatusDocument", "FlagDocument",
     "HealthDocument", "IngestErrorDocument", "IngestResultDocument", "LastEstimateDocument", "LiveEstimatesDocument", "Level", "LocationDocument", "ModeDocument",
     "ModelDocument", "NotificationStatusDocument", "PipelineStatusDocument", "RestCalibrationDocument", "SensorState",

@@ -43,8 +43,10 @@ __all__ = [
     "EstimateDocument",
     "ErrorDocument",
     "FATIGUE_CONDITIONS",
+    "FatigueDocument",
     "HotSpotLoadsDocument",
     "LoadsWindowDocument",
+    "StationLoadsDocument",
     "EstimatorStatusDocument",
     "FlagDocument",
     "HealthDocument",
@@ -319,12 +321,15 @@ class TrendRow(_Document):
 
 
 class TrendsDocument(_Document):
-    """Trend rows in window order; ``truncated``: more rows match than ``limit`` returned (ask again
-    with ``from`` at the last row's window start for the rest)."""
+    """Trend rows in window order (window start, source, mode): one page of ``total`` rows that
+    match. ``truncated``: rows come after this page; ask again with ``cursor=next_cursor`` for
+    them (the ``Link: <...>; rel="next"`` header holds that URL)."""
 
     rows: list[TrendRow]
-    count: Count
-    truncated: bool = False
+    count: Count = Field(description="rows in this page")
+    total: Count = Field(0, description="rows that match the query, on every page (with the rows before the cursor)")
+    truncated: bool = Field(False, description="more rows follow this page")
+    next_cursor: str | None = Field(None, description="pass as cursor= for the next page (null: this is the last)")
 
 
 class SpectrumDocument(_Document):
@@ -411,8 +416,13 @@ class AlarmDocument(_Document):
 
 
 class AlarmsDocument(_Document):
+    """Alarms, newest first: one page of ``total`` (paged as ``TrendsDocument``)."""
+
     alarms: list[AlarmDocument]
-    count: Count
+    count: Count = Field(description="alarms in this page")
+    total: Count = Field(0, description="alarms that match the query, on every page")
+    truncated: bool = Field(False, description="more alarms follow this page")
+    next_cursor: str | None = Field(None, description="pass as cursor= for the next page (null: this is the last)")
 
 
 AlarmEvent = Literal["raised", "escalated", "cleared", "acknowledged", "repeated", "stale"]
@@ -535,6 +545,33 @@ class EstimatorStatusDocument(_Document):
     degraded_imus: list[DegradedImuDocument] = Field(default_factory=list)
 
 
+class HotSpotLoadsDocument(_Document):
+    """One hot spot in one analysis window: the window's loads and the hot spot's life so far.
+
+    Stresses are nominal (before the SCF) in Pa; damage is Miner's sum with the SCF and partial factors.
+    """
+
+    name: str
+    position_m: Finite
+    curve: str
+    del_pa: dict[str, Num] = Field(description="damage-equivalent stress range of the window per Wöhler exponent m ('3', '5'), Pa")
+    n_eq: Finite = Field(description="equivalent cycles of the DELs")
+    max_range_pa: Num
+    damage_increment: Num = Field(description="Miner damage of the cycles the window closed")
+    consumed: Num = Field(description="consumed life D so far (closed cycles plus the open residue as half cycles)")
+    rate_per_year: Num = None
+    rate_band_per_year: list[Num] | None = None
+    remaining_years: Num = Field(None, description="(1 − D)/rate; None when nothing is consumed (below the cut-off) or no rate yet")
+    remaining_band_years: list[Num] | None = None
+    verdict: Literal["finite", "no_damage_below_cutoff", "exhausted", "no_data"]
+    design_life_years: Num = None
+    del_band_pa: dict[str, list[Num]] | None = Field(None, description="[low, high] of each DEL: where the true DEL lies "
+                                                     "(None: no measured strain gauge to judge the virtual strain by)")
+    damage_band: list[Num] | None = Field(None, description="[low, high] of the damage increment, the closed cycles' ranges "
+                                          "scaled by the DEL band's ends")
+    band_method: str | None = Field(None, description="how the band was found")
+
+
 class PipelineStatusDocument(_Document):
     queue_depth: Count
     queue_capacity: Count
@@ -555,6 +592,8 @@ class PipelineStatusDocument(_Document):
     pipeline_latency_s: Finite
     busy_fraction: Finite
     active_alarms: dict[str, AlarmLevel]
+    hot_spots: list[HotSpotLoadsDocument] = Field(default_factory=list,
+                                                description="the hot spots' loads and life after the last committed window (issue 21)")
 
 
 class BaselineModeDocument(_Document):
@@ -676,9 +715,14 @@ class StructureSummaryDocument(_Document):
 
 
 class StructuresDocument(_Document):
-    """``GET /api/structures``."""
+    """``GET /api/structures``: the structures in their configured order, one page of ``total``
+    (paged as ``TrendsDocument``; a document of the whole fleet has every structure)."""
 
     structures: list[StructureSummaryDocument]
+    count: Count | None = Field(None, description="structures in this page (null: all of them)")
+    total: Count | None = Field(None, description="structures of the service, on every page (null: as many as listed)")
+    truncated: bool = Field(False, description="more structures follow this page")
+    next_cursor: str | None = Field(None, description="pass as cursor= for the next page (null: this is the last)")
 
 
 class LiveEstimatesDocument(_Document):
@@ -694,6 +738,14 @@ class LiveEstimatesDocument(_Document):
     x: list[list[Finite]] = Field(default_factory=list, description="the state vector of each estimate")
     sensors: dict[str, SensorState] = Field(default_factory=dict, description="topic -> state, now")
     watch_s: Finite = Field(description="how long the structure keeps estimates after this read, s")
+    # virtual loads of each estimate (issue 21): the hot spots, then a grid from the support
+    loads_stations_m: list[Finite] = Field(default_factory=list, description="stations of strain, stress and moment, m")
+    loads_station_names: list[str] = Field(default_factory=list, description="the hot spot at each station, '' for a grid station")
+    strain: list[list[Finite]] = Field(default_factory=list, description="bending strain ε = −c κ per estimate and station, m/m")
+    stress_pa: list[list[Finite]] | None = Field(None, description="nominal stress E ε per estimate and station, Pa, at the "
+                                                               "reference temperature's E (None: a beam of table sections has no E)")
+    moment_nm: list[list[Finite]] = Field(default_factory=list, description="bending moment EI κ per estimate and station, N·m")
+    root_moment_nm: list[Finite] | None = Field(None, description="the root bending moment per estimate, N·m (clamped support only)")
 
 
 class ErrorDocument(_Document):
@@ -719,26 +771,14 @@ class IngestResultDocument(_Document):
 # -- loads and fatigue (issue 21) ------------------------------------------------------------
 
 
-class HotSpotLoadsDocument(_Document):
-    """One hot spot in one analysis window: the window's loads and the hot spot's life so far.
+class StationLoadsDocument(_Document):
+    """Virtual strain and stress at one station along the beam (ε = −c κ on the +ζ face, σ = E(T) ε)
+    over a span: a window's, or (``FatigueDocument.envelope``) the windows' envelope."""
 
-    Stresses are nominal (before the SCF) in Pa; damage is Miner's sum with the SCF and partial factors.
-    """
-
-    name: str
     position_m: Finite
-    curve: str
-    del_pa: dict[str, Num] = Field(description="damage-equivalent stress range of the window per Wöhler exponent m ('3', '5'), Pa")
-    n_eq: Finite = Field(description="equivalent cycles of the DELs")
-    max_range_pa: Num
-    damage_increment: Num = Field(description="Miner damage of the cycles the window closed")
-    consumed: Num = Field(description="consumed life D so far (closed cycles plus the open residue as half cycles)")
-    rate_per_year: Num = None
-    rate_band_per_year: list[Num] | None = None
-    remaining_years: Num = Field(None, description="(1 − D)/rate; None when nothing is consumed (below the cut-off) or no rate yet")
-    remaining_band_years: list[Num] | None = None
-    verdict: Literal["finite", "no_damage_below_cutoff", "exhausted", "no_data"]
-    design_life_years: Num = None
+    strain_rms: Num = Field(description="RMS of the bending strain, m/m")
+    strain_range_max: Num = Field(description="largest peak-to-peak strain range, m/m")
+    stress_range_max_pa: Num = Field(description="largest peak-to-peak nominal stress range, Pa")
 
 
 class LoadsWindowDocument(_Document):
@@ -749,3 +789,21 @@ class LoadsWindowDocument(_Document):
     temperature_c: Num = None
     hot_spots: list[HotSpotLoadsDocument]
     charts: list[ChartDocument] = Field(default_factory=list, description="the hot spots' fatigue charts judged in this window")
+    stations: list[StationLoadsDocument] = Field(default_factory=list, description="virtual strain along the beam in the window")
+
+
+class FatigueDocument(_Document):
+    """``GET /api/fatigue`` and ``GET /api/structures/{id}/fatigue``: a structure's loads and life.
+
+    ``hot_spots``: each hot spot's state after the newest window of the period (consumed life D,
+    damage rate, remaining life, verdict); ``windows``: the per-window trend, oldest first (DEL per
+    Wöhler exponent, maximum range, damage increment); ``envelope``: along the beam, the period's
+    largest strain and stress ranges and its strain RMS. Stresses are nominal (before the SCF), Pa."""
+
+    structure_id: str
+    design_life_years: Num = None
+    hot_spots: list[HotSpotLoadsDocument]
+    windows: list[LoadsWindowDocument]
+    envelope: list[StationLoadsDocument]
+    total: Count = Field(description="windows of the period stored")
+    truncated: bool = Field(False, description="more windows than ``limit`` returned: ask again from the last one's start")

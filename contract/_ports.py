@@ -13,14 +13,16 @@ raises ``PermissionError``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any, Generic, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
 from ._documents import (
     AlarmDocument,
     BaselineRequestDocument,
+    FatigueDocument,
     HealthDocument,
     IngestResultDocument,
     LiveEstimatesDocument,
@@ -32,7 +34,35 @@ from ._documents import (
 from ._rig import RigDescription
 from ._state import StateLayout
 
-__all__ = ["ServicePort", "StructureModel", "StructurePort"]
+__all__ = ["MAX_PAGE", "Page", "ServicePort", "StructureModel", "StructurePort"]
+
+T = TypeVar("T")
+
+#: The most rows one page of a list route holds (``limit``; the default is 1000). A page is
+#: streamed, so even the largest one costs the server a bounded amount of memory.
+MAX_PAGE = 1_000_000
+
+
+@dataclass
+class Page(Generic[T]):
+    """One page of a list (trend rows, alarms, ...), the paging convention of every list route.
+
+    ``items`` is lazy (a page of a million rows is read from the database while it is sent) and
+    may be iterated once; whoever does not exhaust it calls ``close()``. ``count`` items follow;
+    ``total`` match the query on all pages; ``truncated``: more follow this page, from
+    ``next_cursor`` (an opaque string: pass it back as ``cursor``). A cursor this service did not
+    issue raises ``ValueError`` naming it."""
+
+    items: Iterator[T]
+    count: int
+    total: int
+    truncated: bool
+    next_cursor: str | None
+    close: Callable[[], None] = field(default=lambda: None, repr=False)
+
+    def __iter__(self) -> Iterator[T]:
+        return self.items
+
 
 
 @dataclass(frozen=True)
@@ -63,6 +93,22 @@ class StructurePort(Protocol):
 
     def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
         """Its alarms, newest first."""
+        ...
+
+    def structure_fatigue(self, structure_id: str, from_s: float | None = None, to_s: float | None = None,
+                          limit: int = 100_000) -> FatigueDocument:
+        """Its hot spots' loads and life, the per-window trend with ``from_s <= start_s < to_s``
+        (UNIX s; None: open) and the strain envelope of those windows."""
+        ...
+
+    def structure_trends_page(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
+                              *, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        """A page of its trend rows (``GET /api/structures/{id}/trends``), after ``cursor``."""
+        ...
+
+    def structure_alarms_page(self, structure_id: str, state: str | None = None, *, limit: int = 1000,
+                              cursor: str | None = None) -> Page[AlarmDocument]:
+        """A page of its alarms, newest first, after ``cursor``."""
         ...
 
     def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
@@ -117,6 +163,21 @@ class ServicePort(StructurePort, Protocol):
                limit: int = 100_000) -> list[TrendRow]: ...
 
     def alarms(self, state: str | None = None) -> list[AlarmDocument]: ...
+
+    def fatigue(self, structure_id: str | None = None, from_s: float | None = None, to_s: float | None = None,
+                limit: int = 100_000) -> FatigueDocument:
+        """As ``structure_fatigue`` of ``structure_id``; None: the service's one structure (a fleet
+        raises ``LookupError`` as ``status(None)`` does: ask per structure)."""
+        ...
+
+    def trends_page(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+                    *, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        """A page of the trend rows of all structures (``GET /api/trends``), after ``cursor``."""
+        ...
+
+    def alarms_page(self, state: str | None = None, *, limit: int = 1000, cursor: str | None = None) -> Page[AlarmDocument]:
+        """A page of the alarms of all structures, newest first (``GET /api/alarms``)."""
+        ...
 
     def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         """Acknowledge an alarm as ``by``; ``KeyError`` when it does not exist."""

@@ -324,8 +324,10 @@ def build_model(
         raise ValueError(f"support={rig.support!r} must be 'pinned' or 'clamped'")
     if not any(s.kind == "imu" and s.name == "D" for s in rig.sensors):
         others = ", ".join(s.name for s in rig.sensors_of("imu")) or "none"
-        raise ValueError(f"rig.json has no IMU named 'D' at the bearing: the IMMS needs it (the IMU on the support at "
-                         f"position 0, its reference for the rigid motion); the rig's IMUs: {others}")
+        raise ValueError(f"rig.json has no IMU named 'D' at the bearing (key 'sensors': {{\"name\": \"D\", \"kind\": \"imu\", "
+                         f"\"position\": 0.0}}): the IMMS needs it, on a support fixed to the ground too (the IMU on the support, "
+                         f"its reference for the rigid motion); the rig's IMUs: {others}. Without it the rig serves shm import, "
+                         f"inspect, oma and loads, not the estimator")
     if residual_modes is None:
         residual_modes = 1 if rig.support == "clamped" else 0
     if isinstance(residual_modes, bool) or not isinstance(residual_modes, (int, np.integer)) or not 0 <= residual_modes <= 3:

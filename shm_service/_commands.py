@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 
-__all__ = ["DEFAULT_SENSOR_COUNT", "CliError"]
+__all__ = ["DEFAULT_SENSOR_COUNT", "CliError", "add_model_arguments"]
 
 
 class CliError(Exception):
@@ -37,6 +37,23 @@ def _count_or_names(text: str | None, default: int) -> int | tuple[str, ...]:
     if not names:
         raise CliError(f"sensor list {text!r} is empty")
     return names
+
+
+def add_model_arguments(p: argparse.ArgumentParser, *, aided: bool = True) -> None:
+    """The estimator model's options, one definition for ``shm estimate``, ``analyze``, ``reprocess``,
+    ``baseline learn`` and ``loads``: --rig, --peripheral, --modes, --imus, --tofs, --gauges and
+    (``aided``: where the command builds the model with it) --aided."""
+    from ._argtypes import number
+
+    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
+    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
+    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
+    p.add_argument("--imus", default=None,
+                   help="peripheral IMUs: a count Γ..(the rig's) chosen by EfI, or names s1,s2,... (default 4, or all if fewer)")
+    p.add_argument("--tofs", default=None, help="ToFs: a count 0..(the rig's) or names (default 4, or all if fewer)")
+    p.add_argument("--gauges", default=None, help="strain gauges: a count 0..(the rig's) or names (default 4, or all if fewer)")
+    if aided:
+        p.add_argument("--aided", default=None, help="unit deformations aided by the gauges, e.g. 2,3,4 (Eq. 22)")
 
 
 def _model_from_args(rig, args: argparse.Namespace):

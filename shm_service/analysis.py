@@ -70,17 +70,19 @@ def _kwargs(rig, data: DeformationRecord, config: AnalysisConfig | None, warmup_
 
 def analyze_deformations(rig, data: DeformationRecord, *, config: AnalysisConfig | None = None, baseline: Baseline | None = None,
                          warmup_s: float | None = DEFAULT_WARMUP_S, not_before_s: float | None = None,
-                         signatures=None) -> AnalysisResult:
+                         signatures=None, loads_tap: list | None = None) -> AnalysisResult:
     """The engine over a deformation record (b(t), the support displacement, temperature) of ``rig``.
 
     Windows starting before ``not_before_s`` (s after the recording's first message; default the
-    rest phase's end plus ``warmup_s``, when the record knows it) are not analysed, as in ``shm serve``."""
+    rest phase's end plus ``warmup_s``, when the record knows it) are not analysed, as in ``shm serve``.
+    ``loads_tap``: a list that receives each window's loads input (``LoadsMonitor.tap``)."""
     kw = _kwargs(rig, data, config, warmup_s, not_before_s, signatures)
     loads = None
     if rig.hot_spots:  # the hot spots' loads and fatigue in the same engine (issue 21)
         from analytics import LoadsMonitor
 
         loads = LoadsMonitor.from_rig(rig, data.units.curvature)
+        loads.tap = loads_tap
     return analyze(data.times, data.b, data.units.curvature(data.stations), data.stations, baseline=baseline, loads=loads, **kw)
 
 

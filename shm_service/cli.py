@@ -25,6 +25,7 @@ from ._commands import (  # noqa: F401  (the commands' shared parts; reprocess, 
     _print_json,
     _recording_problems,
     _sensor_counts,
+    add_model_arguments,
 )
 
 __all__ = ["main"]
@@ -422,12 +423,7 @@ def _cmd_baseline_learn(args: argparse.Namespace) -> int:
 
 def _add_analysis_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=None, help="a `shm serve` configuration (TOML): the same analytics, alarm hysteresis and warm-up")
-    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
-    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
-    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
-    p.add_argument("--imus", default=None, help="as for estimate")
-    p.add_argument("--tofs", default=None, help="as for estimate")
-    p.add_argument("--gauges", default=None, help="as for estimate")
+    add_model_arguments(p, aided=False)
 
 
 def _add_cluster_arguments(p: argparse.ArgumentParser) -> None:
@@ -652,14 +648,7 @@ def _add_simulate_parser(sub: Any) -> None:
 def _add_estimate_parser(sub: Any) -> None:
     p = sub.add_parser("estimate", help="run the IMMS estimator over a recording")
     p.add_argument("recording")
-    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
-    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
-    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
-    p.add_argument("--imus", default=None,
-                   help="peripheral IMUs: a count Γ..(the rig's) chosen by EfI, or names s1,s2,... (default 4, or all if fewer)")
-    p.add_argument("--tofs", default=None, help="ToFs: a count 0..(the rig's) or names (default 4, or all if fewer)")
-    p.add_argument("--gauges", default=None, help="strain gauges: a count 0..(the rig's) or names (default 4, or all if fewer)")
-    p.add_argument("--aided", default=None, help="unit deformations aided by the gauges, e.g. 2,3,4 (Eq. 22)")
+    add_model_arguments(p)
     p.add_argument("--out", type=output_path, help="write the estimates to this .mcap (its directory must exist)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_estimate)
@@ -796,12 +785,47 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help (0) or an argument error (2, already printed)
         return exc.code if isinstance(exc.code, int) else 2
     try:
-        return args.func(args)
+        code = args.func(args)
+        sys.stdout.flush()  # a reader that went away (``| head``) answers here, not in the flush at exit
+        return code
+    except BrokenPipeError:
+        if not _stdout_closed():
+            raise  # another pipe of the command's: its own error
+        return _stdout_gone()
     except Exception as exc:
         if not isinstance(exc, _user_errors()):
             raise
         print(f"shm {args.command}: error: {exc}", file=sys.stderr)
         return 2
+
+
+#: The exit status of a writer whose reader closed the pipe (the shell's 128 + SIGPIPE).
+EXIT_BROKEN_PIPE = 141
+
+
+def _stdout_closed() -> bool:
+    """Whether stdout is a pipe whose reader has gone (poll reports an error on its write end)."""
+    import select
+
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poller.poll(0))
+    except (AttributeError, OSError, ValueError):
+        return True  # no file descriptor to ask: the error was raised writing to it
+
+
+def _stdout_gone() -> int:
+    """What Python's documentation advises for SIGPIPE: stdout pointed at devnull, so the flush at
+    exit does not raise again, and a quiet exit with the shell's status of a closed pipe."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (AttributeError, OSError, ValueError):
+        pass
+    return EXIT_BROKEN_PIPE
 
 
 if __name__ == "__main__":

@@ -56,9 +56,9 @@ def write_faulted_csv(path: Path, clean: np.ndarray, fs: float, *, cells: dict[t
             stamps[r] = stamps[r - 1]
             out.rows.add(r)
     for r in backwards_times:
-        # not just before a repeated row: that row copied this one's true stamp, which then looks valid
-        # after this one is rejected (an off-grid stamp between valid rows: a case the campaign does not mean)
-        if 3 <= r < n and r not in out.rows and (r - 1) not in out.rows and (r + 1) not in out.rows:
+        # just before a repeated row, that row carries this one's true stamp: one step early between
+        # valid rows, off the clock, which the reader rejects as that row's time (expected here too)
+        if 3 <= r < n and r not in out.rows and (r - 1) not in out.rows:
             stamps[r] = repr(float(time[r - 3]))
             out.rows.add(r)
     sep = ";" if decimal_comma else ","

@@ -25,17 +25,16 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from analytics import BAND_FLOOR, IN_SAMPLE_FACTOR  # noqa: F401  (the band's constants: one definition, in analytics)
+
 from ._argtypes import number
+from ._commands import add_model_arguments
 
 if TYPE_CHECKING:
     import numpy as np
 
 __all__ = ["BAND_FLOOR", "add_loads_parser", "loads_of_recording", "loads_of_table", "parse_stations"]
 
-#: Smallest half-width of a virtual station's DEL band (the estimate's own resolution).
-BAND_FLOOR = 0.02
-#: The gauges pulled the estimate towards themselves: their in-sample discrepancy is scaled by this.
-IN_SAMPLE_FACTOR = 2.0
 #: Young's modulus for plain strain channels without a rig (structural steel, Pa).
 STEEL_YOUNGS_MODULUS = 2.1e11
 
@@ -124,29 +123,10 @@ def _time_span(times: np.ndarray, start: float) -> tuple[np.ndarray, float, floa
 
 def gauge_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, exponents: tuple[float, ...], n_eq: float,
                in_sample: tuple[str, ...], half_cycles: str = "half"):
-    """The band of the virtual stations from the gauges' (name, position, virtual, measured) strains;
-    ``in_sample`` names the gauges that aided the estimate. Returns (DelBand or None, per-gauge discrepancies)."""
-    import numpy as np
+    """The band of the virtual stations from the gauges (``analytics.truncation_band``, the engine's too)."""
+    from analytics import truncation_band
 
-    from analytics import DelBand, signal_loads
-
-    if not gauges:
-        return None, []
-    worst, rows = 0.0, []
-    for name, position, virtual, measured in gauges:
-        v = signal_loads(virtual, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"virtual strain at {name}")
-        g = signal_loads(measured, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain gauge {name}")
-        rel = {m: (dv / dg - 1.0) if dg > 0 else 0.0 for (m, _, dv), (_, _, dg) in zip(v.dels, g.dels)}
-        rms = float(np.sqrt(np.mean((virtual - measured) ** 2)) / max(g.rms, 1e-300))
-        aided = name in in_sample
-        rows.append({"name": name, "position_m": position, "aided_the_estimate": aided,
-                     "del_discrepancy": [{"m": m, "relative": r} for m, r in rel.items()], "strain_rms_discrepancy": rms})
-        worst = max(worst, (IN_SAMPLE_FACTOR if aided else 1.0) * max(abs(r) for r in rel.values()))
-    a = max(BAND_FLOOR, worst)
-    method = (f"modal truncation seen at the strain gauges ({', '.join(r['name'] for r in rows)}): largest relative DEL "
-              f"discrepancy of the virtual against the measured strain, x{IN_SAMPLE_FACTOR:g} at a gauge that aided the estimate, "
-              f"at least {BAND_FLOOR:.0%}; band [DEL/(1+a), DEL*(1+a)] with a = {a:.4f}")
-    return DelBand(1.0 / (1.0 + a), 1.0 + a, method), rows
+    return truncation_band(gauges, exponents=exponents, n_eq=n_eq, in_sample=in_sample, half_cycles=half_cycles)
 
 
 def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[float, ...] | None, curve: Any, exponents: tuple[float, ...],
@@ -428,13 +408,6 @@ def add_loads_parser(sub) -> None:
                    help="also per window of S s (a contract recording): each station's DEL with its window's band")
     p.add_argument("--start", type=number(low=0, unit="s"), default=None, metavar="S",
                    help="count from S seconds into the record (default: the estimator's rest-phase end, else 0)")
-    # shm estimate's options, for raw recordings
-    p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
-    p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
-    p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
-    p.add_argument("--imus", default=None, help="peripheral IMUs: a count or names (as shm estimate)")
-    p.add_argument("--tofs", default=None, help="ToFs: a count or names (as shm estimate)")
-    p.add_argument("--gauges", default=None, help="strain gauges: a count or names (as shm estimate)")
-    p.add_argument("--aided", default=None, help="unit deformations aided by the gauges, e.g. 2,3,4 (Eq. 22)")
+    add_model_arguments(p)  # shm estimate's options, for raw recordings
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_loads)

@@ -118,13 +118,64 @@ def analyse_file(path: str, options: AnalysisOptions, source: str) -> dict[str, 
     rec, data = options.deformations(path)
     offset = data.origin_ns / 1e9
     window_s = (config or AnalysisConfig()).window_s
+    loads = None
+    if rec.rig.hot_spots:
+        from analytics import LoadsMonitor
+
+        loads = LoadsMonitor.from_rig(rec.rig, data.units.curvature)  # a fresh one: the chain's (``_LoadsChain``)
     if data.times.size == 0 or data.times[-1] - data.times[0] < window_s:
         # shorter than one analysis window: nothing to analyse, which is not a failure
-        return {"windows": 0, "rows": [], "start_s": rec.start_ns / 1e9, "end_s": rec.end_ns / 1e9}
-    result = analyze_deformations(rec.rig, data, config=config, warmup_s=warmup)
+        return {"windows": 0, "rows": [], "start_s": rec.start_ns / 1e9, "end_s": rec.end_ns / 1e9, "loads": loads, "tap": []}
+    tap: list = []
+    result = analyze_deformations(rec.rig, data, config=config, warmup_s=warmup, loads_tap=tap)
     rows = [row.model_dump() for w in result.windows
             for row in trend_rows(source, w, offset + w.start_s, offset + w.end_s)]
-    return {"windows": len(result.windows), "rows": rows, "start_s": rec.start_ns / 1e9, "end_s": rec.end_ns / 1e9}
+    # each window's counted hot-spot stress, in UNIX s: this process chains them across the files
+    tap = [(offset + start, *rest) for start, *rest in tap]
+    return {"windows": len(result.windows), "rows": rows, "start_s": rec.start_ns / 1e9, "end_s": rec.end_ns / 1e9,
+            "loads": loads, "tap": tap}
+
+
+class _LoadsChain:
+    """The hot spots' count of one source across the files of a run, in data-time order: the live
+    service counts its archive's files as one record (the residue of open reversals goes on from
+    file to file), and so does ``shm reprocess``. A file is committed once every file of its source
+    that starts earlier is (committed or failed); its windows' loads are counted by one
+    ``LoadsMonitor`` fed with the windows' stress that the file's task counted (``LoadsMonitor.tap``)."""
+
+    def __init__(self, order: list[int]) -> None:
+        self.order = list(order)  # the source's files (indices) by their recording's start
+        self.position = 0
+        self.monitor: Any = None
+
+    def ready(self, finished: set[int]) -> list[int]:
+        """The next files that may be committed now (their predecessors finished)."""
+        out = []
+        while self.position < len(self.order) and self.order[self.position] in finished:
+            out.append(self.order[self.position])
+            self.position += 1
+        return out
+
+    def count(self, result: dict[str, Any]) -> list:
+        """The file's windows' loads (contract.LoadsWindowDocument), continuing the chain."""
+        if result.get("loads") is None:
+            return []
+        if self.monitor is None:
+            self.monitor = result["loads"]
+        return [self.monitor.process_stress(start, stress, duration, temperature, stations=stations, band=band)
+                for start, stress, duration, temperature, stations, band in result["tap"]]
+
+
+def recording_start_ns(path: str) -> int | None:
+    """The recording's first message time (its summary; None when it has none: the file's task says why)."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+        return None if summary is None or summary.statistics is None else int(summary.statistics.message_start_time)
+    except Exception:  # noqa: BLE001 - a damaged file fails in its task, with the reason
+        return None
 
 
 @contextmanager
@@ -186,22 +237,37 @@ def reprocess(paths: list[str], db: str | Path, *, workers: int | None = None, s
                 outcomes[i] = FileOutcome(paths[i], "skipped", None, None)
             else:
                 todo[key] = i
+        # the files of each source in data-time order: the hot spots' count runs through them as one record
+        starts = dict(zip(todo.values(), client.gather(client.map(recording_start_ns, [paths[i] for i in todo.values()],
+                                                                  pure=False))))
+        chains = {src: _LoadsChain(sorted((i for i in todo.values() if sources[i] == src),
+                                          key=lambda i: (starts[i] is None, starts[i] or 0, paths[i])))
+                  for src in {sources[i] for i in todo.values()}}
         futures = {client.submit(analyse_file, paths[i], options, sources[i], key=f"reprocess-{key}", pure=False): (key, i)
                    for key, i in todo.items()}
         bar = _progress(len(paths), "reprocess", progress)
         bar.update(len(outcomes))
+        results: dict[int, Any] = {}  # a finished file's result (or its exception) until its turn to be committed
         for future in as_completed(futures):
             key, i = futures[future]
             try:
-                out = future.result()
-                storage.commit_reprocessed(
-                    key=key, path=str(Path(paths[i]).resolve()), source=sources[i], content_sha256=digests[i],
-                    configuration=configurations[i], windows=out["windows"], start_s=out["start_s"], end_s=out["end_s"],
-                    rows=[TrendRow.model_validate(r) for r in out["rows"]])
-                outcomes[i] = FileOutcome(paths[i], "done", out["windows"], None)
+                results[i] = (key, future.result())
             except Exception as exc:  # noqa: BLE001 - one file's failure never stops the others
-                outcomes[i] = FileOutcome(paths[i], "failed", None, _error(exc))
-            bar.update(1)
+                results[i] = (key, exc)
+            chain = chains[sources[i]]
+            for j in chain.ready(set(results)):
+                key_j, out = results.pop(j)
+                try:
+                    if isinstance(out, Exception):
+                        raise out
+                    storage.commit_reprocessed(
+                        key=key_j, path=str(Path(paths[j]).resolve()), source=sources[j], content_sha256=digests[j],
+                        configuration=configurations[j], windows=out["windows"], start_s=out["start_s"], end_s=out["end_s"],
+                        rows=[TrendRow.model_validate(r) for r in out["rows"]], loads=chain.count(out))
+                    outcomes[j] = FileOutcome(paths[j], "done", out["windows"], None)
+                except Exception as exc:  # noqa: BLE001 - one file's failure never stops the others
+                    outcomes[j] = FileOutcome(paths[j], "failed", None, _error(exc))
+                bar.update(1)
         bar.close()
     return [outcomes[i] for i in range(len(paths))]
 

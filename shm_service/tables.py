@@ -100,11 +100,14 @@ def _is_time(name: str) -> bool:
     return base in TIME_NAMES
 
 
-def _rate_from_time(t: np.ndarray, where: str, name: str | None = None) -> tuple[float, float]:
-    """Sample rate and first time of a time column whose rejected rows are NaN.
+def _rate_from_time(t: np.ndarray, where: str, name: str | None = None) -> tuple[float, float, np.ndarray]:
+    """Sample rate, first time and the rows whose stamp is off the clock, of a time column whose
+    rejected rows are NaN.
 
     A step between two valid rows may span the rows rejected between them (a missing or repeated
-    stamp): ``j`` steps with ``1 <= j <=`` the rows' distance. A longer step is a jump of the clock
+    stamp): ``j`` steps with ``1 <= j <=`` the rows' distance. Stamps off the clock between rows
+    that are on it (the clock comes back: the stamps were wrong, not the samples' times) cost
+    their rows, returned for a ``time`` rejection. A clock that does not come back is a jump
     (samples missing without rows) and refused, naming the rows."""
     column = "the time column" if name is None else f"the time column {name!r}"
     rows = np.flatnonzero(np.isfinite(t))
@@ -119,11 +122,55 @@ def _rate_from_time(t: np.ndarray, where: str, name: str | None = None) -> tuple
         raise TableError(f"{where}: {column} does not increase (median step {step!r} s)")
     multiple = np.rint(dt / step)
     bad = (np.abs(dt - multiple * step) > _CLOCK_TOLERANCE * step) | (multiple < 1) | (multiple > span)
+    off = np.zeros(t.size, bool)
     if bad.any():
-        k = int(np.argmax(bad))
-        raise TableError(f"{where}: {column} is not a uniform clock (step {float(dt[k])!r} s from sample {int(rows[k])} to "
-                         f"{int(rows[k + 1])}, median {step!r} s)")
-    return 1.0 / step, float(tv[0])
+        keep = _on_the_clock(rows, tv, step)
+        if isinstance(keep, tuple):
+            a, b = keep
+            raise TableError(f"{where}: {column} is not a uniform clock (step {float(tv[b] - tv[a])!r} s from sample {int(rows[a])} to "
+                             f"{int(rows[b])}, median {step!r} s)")
+        off[rows[~keep]] = True
+        tv = tv[keep]
+    return 1.0 / step, float(tv[0]), off
+
+
+#: Valid rows looked ahead for the clock to come back after an off-grid stamp.
+_CLOCK_LOOKAHEAD = 64
+
+
+def _on_the_clock(rows: np.ndarray, tv: np.ndarray, step: float) -> np.ndarray | tuple[int, int]:
+    """Which valid rows (stamps ``tv`` at ``rows``) to keep so every step between kept rows is
+    consistent: the fewest rows dropped, each between kept rows (the first and the last valid
+    row are never dropped: there a wrong stamp and a jump of the clock look alike). Returns the
+    keep mask, or the (indices into ``rows`` of the) step where the clock jumps and does not come back."""
+
+    def fits(a: int, b: int) -> bool:
+        d = tv[b] - tv[a]
+        m = round(d / step)
+        return abs(d - m * step) <= _CLOCK_TOLERANCE * step and 1 <= m <= rows[b] - rows[a]
+
+    n = rows.size
+    keep = np.ones(n, bool)
+    kept = [0]  # indices into rows of the kept rows so far
+    j = 1
+    while j < n:
+        p = kept[-1]
+        if fits(p, j):
+            kept.append(j)
+            j += 1
+            continue
+        # the last kept row's stamp was the wrong one: its predecessor and j agree (and j goes on)
+        if len(kept) >= 2 and fits(kept[-2], j) and (j + 1 >= n or fits(j, j + 1)):
+            keep[kept.pop()] = False
+            continue
+        # rows j … q-1 off the clock, which comes back at q (never past the last valid row)
+        q = next((q for q in range(j + 1, min(n, j + 1 + _CLOCK_LOOKAHEAD)) if fits(p, q) and (q + 1 >= n or fits(q, q + 1))), None)
+        if q is None:
+            return int(p), int(j)
+        keep[j:q] = False
+        kept.append(q)
+        j = q + 1
+    return keep
 
 
 def _reject_time_rows(time: np.ndarray, codes: np.ndarray) -> np.ndarray:
@@ -182,7 +229,9 @@ def _finish(data: np.ndarray, names: list[str], units: list[str] | None, opts: _
     units = None if units is None else [units[i] for i in keep]
     if time is not None:
         time = _reject_time_rows(np.asarray(time, dtype=float) * opts.time_scale, codes)
-        rate, start = _rate_from_time(time, where, time_name)
+        rate, start, off = _rate_from_time(time, where, time_name)
+        time[off] = np.nan
+        codes[off, :] = _CODE["time"]
         if fs is not None and abs(rate / fs - 1) > _CLOCK_TOLERANCE:
             raise TableError(f"{where}: the given sample rate {fs} Hz disagrees with the time column's {rate:.6g} Hz")
         fs = rate if fs is None else fs

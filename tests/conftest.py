@@ -39,6 +39,7 @@ E2E = {
     "shm_service/service/test_retention.py",
     "shm_service/service/test_group_commit.py",
     "shm_service/service/test_inputs.py",
+    "shm_service/service/test_export_streaming.py",
     "docs/test_documentation.py",
 }
 

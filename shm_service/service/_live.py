@@ -9,6 +9,9 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
 from contract import LiveEstimatesDocument
@@ -26,7 +29,7 @@ class LiveRing:
     """The newest estimates of one structure (thread-safe: the pipeline adds, the API reads)."""
 
     def __init__(self, source_id: str, state_names: list[str], *, hz: float = LIVE_HZ, capacity: int = LIVE_CAPACITY,
-                 watch_s: float = WATCH_S) -> None:
+                 watch_s: float = WATCH_S, loads: tuple[Any, Callable[[np.ndarray], np.ndarray]] | None = None) -> None:
         if not (hz > 0 and capacity >= 1 and watch_s > 0):
             raise ValueError(f"{hz=} must be > 0, {capacity=} >= 1 and {watch_s=} > 0")
         self.source_id = source_id
@@ -38,6 +41,8 @@ class LiveRing:
         self._last_tick = -np.inf
         self._watch_until = -np.inf  # monotonic s
         self._lock = threading.Lock()
+        # (analytics.VirtualLoads, b of states): each estimate's strain, stress and moment at the stations
+        self.loads = loads
 
     @property
     def watched(self) -> bool:
@@ -74,5 +79,12 @@ class LiveRing:
 
     def document(self, after: int, sensors: dict[str, str]) -> LiveEstimatesDocument:
         seq, times, states = self.read(after)
+        extra: dict[str, Any] = {}
+        if self.loads is not None:
+            virtual, b_of = self.loads
+            extra = {"loads_stations_m": virtual.positions.tolist(), "loads_station_names": list(virtual.names)}
+            if states:
+                out = virtual(b_of(np.asarray(states, dtype=float)))
+                extra.update({k: None if v is None else v.tolist() for k, v in out.items()})
         return LiveEstimatesDocument(source=self.source_id, seq=seq, state_names=self.state_names, t_s=times, x=states,
-                                     sensors=sensors, watch_s=self.watch_s)
+                                     sensors=sensors, watch_s=self.watch_s, **extra)

@@ -162,7 +162,7 @@ class Pipeline:
         # one alarm path: the engine's (the service's [alarms] hysteresis is in it: ServiceSettings.engine_config)
         baseline = None if blob.get("monitor") else storage.active_baseline(source_id)
         self.analytics = AnalysisStage(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id,
-                                       baseline=baseline)
+                                       baseline=baseline, loads_state=blob.get("loads"))
         self.outputs = OutputStage(model, source_id, storage, outputs, archive=archive, sink=sink, sink_guard=sink_guard)
         self.commits = CommitStage(storage, source_id, self.analytics.active(), commits, on_written=self.outputs.written)
         # the analysis lane (None: analysed inline, within ``process``)
@@ -229,9 +229,20 @@ class Pipeline:
         layout = self.model.state_layout
         self.latest_x = out.x[-1]
         self.outputs.estimates(step.epoch_ns, t_abs, out)
-        # b(t) and the support displacement d(t), the measured input of the identification
+        # b(t) and the support displacement d(t), the measured input of the identification; the
+        # gauges' samples for the loads' band
         self._to_analysis(("chunk", (step.epoch_ns, out.t, layout.b_of(out.x), out.x[:, layout.d], step.temperature,
-                                     float(t_abs[0]))))
+                                     float(t_abs[0]), self._gauges(released, step.epoch_ns))))
+
+    def _gauges(self, released: dict, epoch_ns: int) -> dict | None:
+        """The released strain gauge samples by gauge name (times s after ``epoch_ns``, values): the
+        loads' band (issue 21)."""
+        loads = self.analytics.loads
+        if loads is None or not loads.gauges:
+            return None
+        topics = {f"/strain/{g.name}": g.name for g in loads.gauges}
+        return {topics[k]: ((v[0] - epoch_ns) * 1e-9, v[1][:, 0]) for k, v in released.items()
+                if k in topics and len(v[0])} or None
 
     def finish(self) -> None:
         """The source ended: release everything, flush the filter, analyse what is left, close the recording."""
@@ -278,17 +289,18 @@ class Pipeline:
         return not self.commits.pending or self._guarded(self.commits.flush)
 
     def _analyse(self, epoch: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None, temperature,
-                 first_s: float | None) -> None:
+                 first_s: float | None, gauges: dict | None = None) -> None:
         if self.commits.pending and self.lane_started:
             self.commits.flush()
         if first_s is not None and self._reset_requested:
             self._reset_requested = False
             self.analytics.reset()
             nxt = self.analytics.next_start
-            self.commits.clear_for_new_baseline(first_s, nxt - self.analytics.step_s if nxt else first_s)
-        for window in self.analytics.add(epoch, t, b, d, temperature):
+            self.commits.clear_for_new_baseline(first_s, nxt - self.analytics.step_s if nxt else first_s,
+                                                self.analytics.state())
+        for window in self.analytics.add(epoch, t, b, d, temperature, gauges):
             monitor = self.analytics.monitor
-            self.commits.add(window, monitor_state={"monitor": monitor.state_dict()}, raised=self.analytics.active(),
+            self.commits.add(window, monitor_state=self.analytics.state(), raised=self.analytics.active(),
                              baseline=monitor.baseline.to_dict() if window.new_baseline else None,
                              calibration=self.estimate.new_calibration())
 
@@ -420,4 +432,5 @@ class Pipeline:
             realtime_factor=None if span is None else round(span / elapsed, 2),
             pipeline_latency_s=round(self.latency_s, 4), busy_fraction=round(self.busy_s / elapsed, 3),
             active_alarms=dict(self.committed_alarms),
+            hot_spots=[] if self.commits.last_loads is None else list(self.commits.last_loads.hot_spots),
         )

@@ -15,7 +15,7 @@ class ApiServer:
     """Serves an ASGI app on ``host:port`` (0: a free port) in a daemon thread."""
 
     def __init__(self, app: Any, host: str, port: int, *, log_level: str = "warning") -> None:
-        config = uvicorn.Config(app, host=host, port=port, log_level=log_level, lifespan="off", access_log=False,
+        config = uvicorn.Config(app, host=host, port=port, log_level=log_level, lifespan="on", access_log=False,
                                 timeout_graceful_shutdown=2)
         self.server = uvicorn.Server(config)
         self.host = host

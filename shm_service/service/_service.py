@@ -15,9 +15,11 @@ from typing import Any
 from contract import (
     AlarmDocument,
     BaselineRequestDocument,
+    FatigueDocument,
     HealthDocument,
     IngestResultDocument,
     LiveEstimatesDocument,
+    Page,
     RigDescription,
     SpectrumDocument,
     StatusDocument,
@@ -34,6 +36,8 @@ from ._scheduler import Scheduler, SchedulerSettings
 from ._sinks import SinkGuard
 from ._sources import IngestSource
 from ._storage import Storage, is_transient
+from ._store_fatigue import fatigue_document
+from ._store_writer import open_storage
 from ._status import service_state, status_of
 from ._structure import (
     SingleStructureView,
@@ -71,12 +75,44 @@ class _StoredRows:
         self._known(structure_id)
         return self.storage.trends(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit)
 
+    def trends_page(self, from_s: float | None, to_s: float | None, mode: int | None = None, source: str | None = None,
+                    *, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        return self.storage.trends_page(from_s=from_s, to_s=to_s, mode=mode, source=source, limit=limit, cursor=cursor)
+
+    def structure_trends_page(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
+                              *, limit: int = 1000, cursor: str | None = None) -> Page[TrendRow]:
+        self._known(structure_id)
+        return self.storage.trends_page(from_s=from_s, to_s=to_s, mode=mode, source=structure_id, limit=limit, cursor=cursor)
+
+    def alarms_page(self, state: str | None = None, *, limit: int = 1000, cursor: str | None = None) -> Page[AlarmDocument]:
+        return self.storage.alarms_page(state=state, limit=limit, cursor=cursor)
+
+    def structure_alarms_page(self, structure_id: str, state: str | None = None, *, limit: int = 1000,
+                              cursor: str | None = None) -> Page[AlarmDocument]:
+        self._known(structure_id)
+        return self.storage.alarms_page(state=state, source=structure_id, limit=limit, cursor=cursor)
+
     def alarms(self, state: str | None = None) -> list[AlarmDocument]:
         return self.storage.alarms(state=state)
 
     def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
         self._known(structure_id)
         return self.storage.alarms(state=state, source=structure_id)
+
+    def structure_fatigue(self, structure_id: str, from_s: float | None = None, to_s: float | None = None,
+                          limit: int = 100_000) -> FatigueDocument:
+        """Its hot spots' loads and life from the stored windows (issue 21; ``_store_fatigue``)."""
+        self._known(structure_id)
+        return fatigue_document(structure_id, *self.storage.fatigue_windows(structure_id, from_s=from_s, to_s=to_s, limit=limit))
+
+    def fatigue(self, structure_id: str | None = None, from_s: float | None = None, to_s: float | None = None,
+                limit: int = 100_000) -> FatigueDocument:
+        """As ``structure_fatigue``; None: the single structure (NotSingleStructure for a fleet)."""
+        if structure_id is None:
+            if getattr(self, "fleet", False):
+                raise NotSingleStructure("this service monitors a fleet ([[structures]]): use /api/structures/{id}/fatigue")
+            structure_id = next(iter(self.structures))  # type: ignore[attr-defined]
+        return self.structure_fatigue(structure_id, from_s, to_s, limit)
 
 
 class MonitoringService(_StoredRows, SingleStructureView):
@@ -113,10 +149,11 @@ class MonitoringService(_StoredRows, SingleStructureView):
                     # One structure's bad file or rig must not keep the others from monitoring.
                     log.error("structure %s cannot start: %s", st.id, exc)
                     self.structures[st.id] = _FailedStructure(st.id, st.source.partition(":")[0], str(exc))
-        self.storage = Storage(settings.db, notify_targets=notify_targets(settings.notify),
-                               notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
-                               notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
-                               alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
+        # a worker of a fleet writes through its front (one writer per database: _store_writer)
+        self.storage = open_storage(settings.db, notify_targets=notify_targets(settings.notify),
+                                    notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
+                                    notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
+                                    alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
         self.dashboard = None
         self.dashboard_guard = SinkGuard("dashboard", log)
         shown = next((s for s in self.structures.values() if isinstance(s, Structure)), None)

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analytics import AnalysisConfig, Baseline, EngineWindow, ModalMonitor, MonitoringEngine, WindowResult
-from contract import SpectrumDocument, TrendRow
+from analytics import AnalysisConfig, Baseline, EngineWindow, LoadsMonitor, ModalMonitor, MonitoringEngine, WindowResult
+from contract import LoadsWindowDocument, SpectrumDocument, TrendRow
 from estimator import ImmsModel, damage_signatures
 
 from ..analysis import trend_rows
@@ -50,6 +50,7 @@ class WindowOutput:
     start_s: float
     new_baseline: bool
     alarm_changes: list[AlarmChange]
+    loads: LoadsWindowDocument | None = None  # the hot spots' loads of the window (issue 21)
 
 
 def _monitor_stations(model) -> np.ndarray:
@@ -67,7 +68,7 @@ class AnalysisStage:
     time, so replaying a period gives the same windows (and the unique key of the trend rows holds)."""
 
     def __init__(self, model: ImmsModel, config: AnalysisConfig, monitor_state: dict | None, last_window_start: float | None,
-                 source_id: str, min_coverage: float = 0.8, baseline: dict | None = None) -> None:
+                 source_id: str, min_coverage: float = 0.8, baseline: dict | None = None, loads_state: dict | None = None) -> None:
         self.model = model
         self.config = config
         self.source_id = source_id
@@ -77,6 +78,9 @@ class AnalysisStage:
         self.min_coverage = min_coverage
         self.signatures = None
         self.monitor = self._monitor(monitor_state, baseline)
+        # the hot spots' loads in the same engine (issue 21); its state (the rainflow residue, the
+        # damage) is committed with every window, so a restart continues the count exactly
+        self.loads = self._loads(loads_state) if model.rig.hot_spots else None
         self.engine: MonitoringEngine | None = None
         self._next_start_ns = None if last_window_start is None else int(round(last_window_start * _NS)) + int(round(self.step_s * _NS))
         self.not_before_ns: int | None = None  # windows starting earlier are not analysed (filter converging)
@@ -114,6 +118,28 @@ class AnalysisStage:
             log.warning("stored baseline does not fit the model (%s); learning a new one", exc)
             return self._monitor(None)
 
+    def _loads(self, state: dict | None) -> LoadsMonitor:
+        units = self.model.units
+        try:
+            return LoadsMonitor.from_rig(self.model.rig, units.curvature, state=state, gauges_in_sample=self._aiding_gauges())
+        except ValueError as exc:
+            if state is None:
+                raise
+            # never silently: the consumed life starts again from zero
+            log.error("%s: stored loads state unusable (%s); the hot spots' damage is counted from zero", self.source_id, exc)
+            return LoadsMonitor.from_rig(self.model.rig, units.curvature, gauges_in_sample=self._aiding_gauges())
+
+    def _aiding_gauges(self) -> tuple[str, ...]:
+        """The strain gauges the estimator uses (their discrepancy is in-sample: the band doubles it)."""
+        return tuple(getattr(getattr(self.model, "selection", None), "gauges", ()) or ())
+
+    def state(self) -> dict:
+        """The engine state a window's commit persists: the monitor's and the loads' (the residue)."""
+        out: dict = {"monitor": self.monitor.state_dict()}
+        if self.loads is not None:
+            out["loads"] = self.loads.state_dict()
+        return out
+
     @property
     def latest_spectrum(self) -> SpectrumDocument | None:
         latest = self._latest_spectrum
@@ -138,7 +164,10 @@ class AnalysisStage:
         return None if ns is None else ns / _NS
 
     def active(self) -> dict[str, str]:
-        return self.monitor.alarms.raised()
+        raised = self.monitor.alarms.raised()
+        if self.loads is not None:
+            raised.update(self.loads.alarms.raised())
+        return raised
 
     def set_not_before(self, ns: int) -> None:
         self.not_before_ns = int(ns)
@@ -154,7 +183,7 @@ class AnalysisStage:
 
     # -- data ---------------------------------------------------------------------------------
     def add(self, epoch_ns: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None,
-            temperature: tuple[np.ndarray, np.ndarray] | None) -> list[WindowOutput]:
+            temperature: tuple[np.ndarray, np.ndarray] | None, gauges: dict | None = None) -> list[WindowOutput]:
         """b (n, Γ) and the support displacement d (n,) at t (n,) s after ``epoch_ns``; temperature
         (times s after epoch_ns, °C) or None."""
         if self.engine is None:
@@ -163,7 +192,7 @@ class AnalysisStage:
             if not len(t):
                 return []
             self.engine = MonitoringEngine(self.monitor, origin_ns=epoch_ns, time_zero_ns=0, not_before_ns=self.not_before_ns,
-                                           next_start_ns=self._next_start_ns, min_coverage=self.min_coverage)
+                                           next_start_ns=self._next_start_ns, min_coverage=self.min_coverage, loads=self.loads)
             for tt, tv in self._temperature:  # the current chunk's temperature is among them
                 self.engine.add([], np.zeros((0, self.gamma)), temperature=(tt, tv))
             self._temperature = []
@@ -176,7 +205,7 @@ class AnalysisStage:
                 self.engine.add([], np.zeros((0, self.gamma)), temperature=temperature_now)
             return out
         had = self.monitor.baseline is not None
-        for w in self.engine.add(t, b, support=d, temperature=temperature_now):
+        for w in self.engine.add(t, b, support=d, temperature=temperature_now, gauges=gauges):
             out.append(self._output(w, had))
             had = self.monitor.baseline is not None
         return out
@@ -201,4 +230,4 @@ class AnalysisStage:
             baseline_hz=None if baseline is None else self._per_unit([m.f_ref_hz for m in baseline.modes]),
         )
         return WindowOutput(res, rows, spectrum, start, baseline is not None and not had_baseline,
-                            alarm_changes(res.alarm_events))
+                            alarm_changes([*res.alarm_events, *w.loads_events]), w.loads)

@@ -18,6 +18,7 @@ from contract import (
     ChartDocument,
     CurvatureDocument,
     FlagDocument,
+    LoadsWindowDocument,
     LocationDocument,
     ModeDocument,
     TrendRow,
@@ -73,6 +74,7 @@ class CommitStage:
         self.trend_rows_dropped = 0  # rows of waiting windows dropped beyond max_pending (their alarms kept)
         self.windows_committed = 0
         self.last_window: WindowDocument | None = None
+        self.last_loads: LoadsWindowDocument | None = None  # of the newest written window (issue 21)
 
     def add(self, window: WindowOutput, *, monitor_state: dict, raised: dict[str, str], baseline: dict | None,
             calibration: dict | None) -> None:
@@ -83,6 +85,7 @@ class CommitStage:
         commit = WindowCommit(
             source=self.source_id, window_start_s=window.start_s, data_time_s=res.end_s, rows=window.rows,
             monitor_state=monitor_state, calibration=calibration, alarm_changes=window.alarm_changes, baseline=baseline,
+            loads=window.loads,
         )
         self.pending.append(PendingCommit(commit, raised, document, window.spectrum))
         if len(self.pending) > self.settings.max_pending:
@@ -91,19 +94,23 @@ class CommitStage:
             oldest.commit.rows = []
         self.flush()
 
-    def clear_for_new_baseline(self, at_s: float, window_start_s: float) -> None:
+    def clear_for_new_baseline(self, at_s: float, window_start_s: float, state: dict) -> None:
         """A new baseline: every chart starts over and every active alarm of the source clears
-        (those stored and those raised by windows still waiting for the database)."""
-        active = {a.chart: a for a in self.storage.alarms(state="active") if a.source == self.source_id}
+        (those stored and those raised by windows still waiting for the database); ``state`` is
+        the engine state to store with it (the monitor's None: it starts over)."""
+        # the fatigue alarms stay: a new modal baseline does not change what the hot spots consumed
+        active = {a.chart: a for a in self.storage.alarms(state="active") if a.source == self.source_id and a.kind != "fatigue"}
         for pending in self.pending:
             for c in pending.commit.alarm_changes:
+                if c.kind == "fatigue":
+                    continue
                 if c.action == "raise":
                     active[c.chart] = AlarmDocument(id=1, source=self.source_id, chart=c.chart, kind=c.kind, mode=c.mode,
                                                     level=c.level, state="active", raised_at_s=c.at_s, message=c.message)
                 elif c.action == "clear":
                     active.pop(c.chart, None)
         changes = clear_changes(active.values(), at_s)
-        commit = WindowCommit(self.source_id, window_start_s, at_s, [], {"monitor": None}, None, changes)
+        commit = WindowCommit(self.source_id, window_start_s, at_s, [], {**state, "monitor": None}, None, changes)
         self.pending.append(PendingCommit(commit, {}))
         self.flush()
 
@@ -132,6 +139,8 @@ class CommitStage:
             if pending.document is not None:
                 self.windows_committed += 1
                 self.last_window = pending.document
+            if pending.commit.loads is not None:
+                self.last_loads = pending.commit.loads
             if self.on_written is not None:
                 self.on_written(pending)
         self.storage_error = None
@@ -151,7 +160,7 @@ def window_document(source: str, res: WindowResult, rows: list[TrendRow] | tuple
             mode=e.mode, unit=e.unit, frequency_hz=e.frequency_hz, amplitude=e.amplitude, confidence=round(e.confidence, 4),
             damping_ratio=damping.get(e.mode, e.damping_ratio), score_sigma=res.frequency_scores[i] if i < len(res.frequency_scores) else None,
             level=None if chart is None else chart.level, frequency_std_hz=e.frequency_std_hz, damping_std=e.damping_std,
-            mpc=e.mpc, mac=e.mac, method=e.method,
+            mpc=e.mpc, mac=e.mac, method=e.method, track=e.track,
         ))
     curvature = None
     if res.curvature is not None:

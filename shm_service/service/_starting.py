@@ -46,6 +46,7 @@ class StartingService:
         raise ServiceStarting(f"the service is starting: {self.waiting_for}")
 
     status = trends = alarms = acknowledge = request_baseline = spectra = ingest = _starting
+    trends_page = alarms_page = structure_trends_page = structure_alarms_page = _starting
 
 
 class ServiceSlot:

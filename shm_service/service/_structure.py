@@ -198,7 +198,8 @@ class Structure:
                                             unit_modes=[list(g) for g in m.mode_map.unit_modes])
         self.pipeline: Pipeline | None = None
         self.archive: Archive | None = None
-        self.live = LiveRing(self.id, list(m.state_layout.names))  # its estimates for a live view, kept while watched
+        # its estimates for a live view, kept while watched, with their virtual strain, stress and moment (issue 21)
+        self.live = LiveRing(self.id, list(m.state_layout.names), loads=_virtual_loads(self.rig, m))
 
     def attach(self, storage: Storage, sink: Any, sink_guard: SinkGuard) -> None:
         """Create the pipeline on the shared ``storage`` (after the source, so a bad source fails first)."""
@@ -454,6 +455,17 @@ class _FailedStructure:
 
     def summary(self) -> StructureSummaryDocument:
         return StructureSummaryDocument(id=self.id, kind=self.kind, state="failed", error=self.error)
+
+
+def _virtual_loads(rig: RigDescription, model: Any) -> tuple[Any, Any] | None:
+    """(analytics.VirtualLoads of the rig's hot spots and a 16-station grid, b of states) for the live view."""
+    from analytics import VirtualLoads
+
+    try:
+        return VirtualLoads.from_rig(rig, model.units.curvature), model.state_layout.b_of
+    except ValueError as exc:  # never stops the service: the live view goes without loads
+        log.warning("no virtual loads in the live view: %s", exc)
+        return None
 
 
 def _check_sensor_counts(rig: RigDescription, est: Any) -> None:

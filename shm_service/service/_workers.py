@@ -4,7 +4,8 @@ every N-th structure on the one shared database, and serves one API over them. T
 processes run the sources, pipelines, retention and housekeeping of their structures; this front
 process delivers the notifications of all (one deliverer per outbox) and answers the API: the
 database's rows (trends, alarms, acknowledgements) itself, a structure's live state (status,
-spectra, ingest, baseline) from the worker that hosts it."""
+spectra, ingest, baseline) from the worker that hosts it. It is the database's one writer: the
+workers hand it their window commits and other writes (``_store_writer``) and only read it."""
 
 from __future__ import annotations
 
@@ -42,6 +43,7 @@ from ._notify import Notifier, notify_targets
 from ._processes import StaleWorkers, record_workers, stop_stale_workers
 from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable, _ModelCache, _StoredRows
 from ._storage import Storage
+from ._store_writer import WriterServer
 
 __all__ = ["WorkerFleet", "part_of"]
 
@@ -98,6 +100,7 @@ class WorkerFleet(_StoredRows):
         self.dashboard: Any = None
         self._models = _ModelCache()
         self._structure_models: dict[str, StructureModel] = {}
+        self.writer: WriterServer | None = None
 
     # -- running ----------------------------------------------------------------------------
 
@@ -114,6 +117,9 @@ class WorkerFleet(_StoredRows):
         if ended:
             log.warning("ended %d workers of an earlier front on %s (pids %s)", len(ended), self.settings.db, ended)
         config.write_text(render_toml(self.settings), encoding="utf-8")
+        # this process is the database's one writer: the workers hand it their writes
+        self.writer = WriterServer(self.storage)
+        environ = {**self._environ, **self.writer.environ()}
         self._starting = True
         launched: list[tuple[int, list[str], ServeProcess]] = []
         try:
@@ -126,7 +132,7 @@ class WorkerFleet(_StoredRows):
                         "--no-dashboard"]  # the front's dashboard reads each structure from its worker
                 if self._json:
                     args.append("--json")
-                launched.append((i, ids, start_serve(args, env=self._environ, stdout=subprocess.PIPE,
+                launched.append((i, ids, start_serve(args, env=environ, stdout=subprocess.PIPE,
                                                      ready_file=directory / f"fleet-worker-{i}.ready.json", timeout=None)))
             record_workers(self.settings.db, [started.pid for _, _, started in launched])
             pending = [(_Worker(i, started.process, "", ids), started) for i, ids, started in launched]
@@ -156,12 +162,13 @@ class WorkerFleet(_StoredRows):
             self.dashboard = start_dashboard(self, self.settings, None, self.token)
 
     def _drain(self, worker: _Worker) -> None:
-        for line in worker.process.stdout:  # type: ignore[union-attr]
-            line = line.strip()
-            if line:
-                worker.summary = line
-                if not self._json:
-                    print(line, flush=True)
+        with worker.process.stdout:  # type: ignore[union-attr]  (closed at its end: no pipe left to the GC)
+            for line in worker.process.stdout:  # type: ignore[union-attr]
+                line = line.strip()
+                if line:
+                    worker.summary = line
+                    if not self._json:
+                        print(line, flush=True)
 
     def _watch(self) -> None:
         for worker in self.workers:
@@ -194,7 +201,9 @@ class WorkerFleet(_StoredRows):
                 self.dashboard.stop()
             except Exception as exc:
                 log.warning("dashboard stop failed: %s", exc)
-        self._terminate(wait_s=60.0)
+        self._terminate(wait_s=60.0)  # the workers' last windows are written before the writer stops
+        if self.writer is not None:
+            self.writer.stop()
         self.notifier.stop(drain_s=drain_s)
         self._client.close()
         self.storage.close()
@@ -317,23 +326,7 @@ class WorkerFleet(_StoredRows):
     def fleet_metrics(self) -> str:
         """``/metrics``: the workers' expositions merged (each structure's samples as its worker gives
         them, the processes' counters summed); the notifications are the front's (it delivers them)."""
-        texts = []
-        headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
-        for worker in self.workers:
-            if worker.process.poll() is not None:
-                continue
-            try:
-                r = self._client.get(f"{worker.url}/metrics", headers=headers)
-                r.raise_for_status()
-                texts.append(r.text)
-            except httpx.HTTPError as exc:
-                log.warning("worker %d: /metrics failed: %s", worker.index, exc)
-        outcomes, _ = self.notifier.snapshot()
-        overrides = {"shm_notifications_total": [({"outcome": k}, float(outcomes.get(k, 0)))
-                                                 for k in ("sent", "retry", "permanent", "given_up")],
-                     "shm_uptime_seconds": [({}, round(time.time() - self.started_at, 1))]}
-        # the structures as the front lists them (a worker that died: its structures failed)
-        return merge_expositions(texts, overrides, front=fleet_metrics(self.structures_document(), {}))
+        return _fleet_exposition(self)
 
     # -- the dashboard's port (FleetDashboardService) ---------------------------------------
 
@@ -369,3 +362,24 @@ class WorkerFleet(_StoredRows):
         found = StructureModel(id=structure_id, rig=rig, units=model.units, layout=model.state_layout, stations=model.stations)
         self._structure_models[structure_id] = found
         return found
+
+
+def _fleet_exposition(fleet: WorkerFleet) -> str:
+    """The merged exposition of ``WorkerFleet.fleet_metrics``."""
+    texts = []
+    headers = {"Authorization": f"Bearer {fleet.token}"} if fleet.token else {}
+    for worker in fleet.workers:
+        if worker.process.poll() is not None:
+            continue
+        try:
+            r = fleet._client.get(f"{worker.url}/metrics", headers=headers)
+            r.raise_for_status()
+            texts.append(r.text)
+        except httpx.HTTPError as exc:
+            log.warning("worker %d: /metrics failed: %s", worker.index, exc)
+    outcomes, _ = fleet.notifier.snapshot()
+    overrides = {"shm_notifications_total": [({"outcome": k}, float(outcomes.get(k, 0)))
+                                             for k in ("sent", "retry", "permanent", "given_up")],
+                 "shm_uptime_seconds": [({}, round(time.time() - fleet.started_at, 1))]}
+    # the structures as the front lists them (a worker that died: its structures failed)
+    return merge_expositions(texts, overrides, front=fleet_metrics(fleet.structures_document(), {}))

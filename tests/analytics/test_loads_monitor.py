@@ -128,3 +128,63 @@ def test_analyze_carries_the_loads_of_the_same_engine():
     assert len(doc["loads"]) == len(result.windows) == len(live)
     assert doc["loads"][-1]["hot_spots"][0]["consumed"] == pytest.approx(live[-1].loads.hot_spots[0].consumed, rel=1e-12)
     assert "loads" not in analyze(t, b, S2, ETA, fs=FS, expected_hz=EXPECTED, time_origin_ns=ORIGIN_NS).as_dict()
+
+
+def test_the_band_of_each_window_from_the_gauges_through_the_engine():
+    """Gauges measuring exactly the virtual strain: the band is the 2 % floor; a gauge whose DEL the
+    virtual strain's exceeds by 10 % (it reads 1/1.1 of it: DELs scale with the strain) widens it to
+    10 % when it did not aid the estimate, to 20 % when it did; without gauges no band is claimed."""
+    from analytics import GaugeSpec
+
+    shape = np.array([0.8, 0.2, 0.1])
+    b = _b(200.0)
+    t = np.arange(b.shape[0]) / FS
+    virtual = -0.005 * (b @ shape)
+
+    def run(scale: float, in_sample: bool, with_gauges: bool = True):
+        mon = ModalMonitor(EXPECTED, S2, ETA, fs=FS)
+        gauge = GaugeSpec("g1", 1.5, shape, 0.005, in_sample)
+        loads = LoadsMonitor(_spots(), youngs_modulus=E, gauges=[gauge] if with_gauges else None)
+        engine = MonitoringEngine(mon, origin_ns=ORIGIN_NS, time_zero_ns=ORIGIN_NS, loads=loads)
+        return [w.loads for w in engine.add(t, b, gauges={"g1": (t, scale * virtual)})]
+
+    exact = run(1.0, False)
+    assert exact
+    for doc in exact:
+        for h in doc.hot_spots:
+            for m, (low, high) in h.del_band_pa.items():
+                assert high == pytest.approx(1.02 * h.del_pa[m], rel=1e-12) and low == pytest.approx(h.del_pa[m] / 1.02, rel=1e-12)
+            assert "modal truncation seen at the strain gauges (g1)" in h.band_method
+    high = run(1 / 1.10, False)[0].hot_spots[0]
+    assert high.del_band_pa["3"][1] / high.del_pa["3"] == pytest.approx(1.10, rel=1e-9)
+    aided = run(1 / 1.10, True)[0].hot_spots[0]
+    assert aided.del_band_pa["3"][1] / aided.del_pa["3"] == pytest.approx(1.20, rel=1e-9)
+    assert aided.damage_band[0] <= aided.damage_increment <= aided.damage_band[1]
+    assert all(h.del_band_pa is None and h.band_method is None for h in run(1.0, False, with_gauges=False)[0].hot_spots)
+
+
+def test_virtual_loads_by_hand_and_bad_input():
+    from analytics import VirtualLoads
+
+    class Beam:
+        youngs_modulus = 2.0e11
+
+        def youngs_modulus_at(self, t):
+            return 2.0e11 if t is None else 2.0e11 * (1 - 3e-4 * (t - 20.0))
+
+        def bending_stiffness(self, eta, t=None):
+            return np.full(np.shape(eta), 1000.0) if np.ndim(eta) else 1000.0
+
+    v = VirtualLoads([0.0, 1.0], ["root", ""], [[1.0, 0.0], [0.0, 2.0]], [0.01, 0.02], Beam(), root_shape=[1.0, 0.0])
+    out = v([[1e-4, 1e-4]])
+    np.testing.assert_allclose(out["strain"], [[-1e-6, -4e-6]], rtol=1e-12)
+    np.testing.assert_allclose(out["stress_pa"], [[-2e5, -8e5]], rtol=1e-12)
+    np.testing.assert_allclose(out["moment_nm"], [[0.1, 0.2]], rtol=1e-12)  # EI κ
+    np.testing.assert_allclose(out["root_moment_nm"], [0.1], rtol=1e-12)
+    np.testing.assert_allclose(v([[1e-4, 1e-4]], 30.0)["stress_pa"], [[-2e5 * 0.997, -8e5 * 0.997]], rtol=1e-12)
+    with pytest.raises(ValueError, match="unit deformations"):
+        v([[1.0, 2.0, 3.0]])
+    with pytest.raises(ValueError, match="must agree"):
+        VirtualLoads([0.0], ["a", "b"], [[1.0]], [0.01], Beam())
+    with pytest.raises(ValueError, match="fibre_distance"):
+        VirtualLoads([0.0], ["a"], [[1.0]], [-0.01], Beam())

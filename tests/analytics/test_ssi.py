@@ -70,10 +70,12 @@ def test_identify_modes_lists_the_three_modes_and_nothing_else():
 
 
 @pytest.mark.slow
-def test_standard_deviations_cover_the_errors_at_their_stated_rate():
-    """Over seeded runs, |error| ≤ 1σ about 68 % of the time and ≤ 2σ about 95 %."""
+@pytest.mark.parametrize("uncertainty", ["jackknife", "batch"])
+def test_standard_deviations_cover_the_errors_at_their_stated_rate(uncertainty):
+    """Over seeded runs, |error| ≤ 1σ about 68 % of the time and ≤ 2σ about 95 %: the segment
+    jackknife of a window and the batch means of a record (each segment identified on its own)."""
     s = three_dof()
-    cfg = OmaConfig(fmin_hz=1.0, fmax_hz=15.0)
+    cfg = OmaConfig(fmin_hz=1.0, fmax_hz=15.0, uncertainty=uncertainty)
     zf, zz = [], []
     for seed in range(40):
         y = ambient_response(s, FS, 6_000, seed=100 + seed, noise_rel=0.2)
@@ -152,6 +154,7 @@ def test_stabilisation_flags_and_clusters_by_hand():
     (lambda: identify_windows(np.random.default_rng(0).standard_normal(200), 50.0, 10.0, 5.0), "window_s=10.0"),
     (lambda: OmaConfig(fmin_hz=5.0, fmax_hz=2.0), "fmax_hz"),
     (lambda: OmaConfig(unknown=1), "unknown"),
+    (lambda: OmaConfig(uncertainty="bootstrap"), "uncertainty"),
     (lambda: ssi_poles(np.eye(6), 4, 10.0, [2]), "channels=4"),
     (lambda: ssi_poles(np.eye(6), 2, 10.0, [8]), "orders"),
     (lambda: block_toeplitz(np.zeros((3, 1, 1)), 2), "block_rows=2"),

@@ -241,3 +241,36 @@ def test_modes_calibration_reports_what_table1_determines(capsys):
     assert code == 0 and "board_rotary_inertia" in out and "not determined by the frequencies" in out
     code, _, err = run(capsys, "modes", "--calibration", "--layout", "dense")
     assert code == 2 and "benchmark layout" in err
+
+
+# -- a reader that goes away (``shm … --json | head -1``) -----------------------------------------
+def test_a_closed_pipe_ends_the_command_quietly_with_the_shells_status():
+    """The reader closes the pipe before the command writes: no traceback, exit 141 (128 + SIGPIPE)."""
+    import os
+
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    proc = subprocess.Popen([sys.executable, "-c", "import sys; from shm_service.cli import main; sys.exit(main())", "modes", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # as head does after its first line
+    with proc.stderr:
+        err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141, err
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
+
+
+def test_a_closed_pipe_in_process_returns_141_and_writes_nothing_more(monkeypatch):
+    import io
+    import os
+
+    r, w = os.pipe()
+    os.close(r)
+    stdout = io.TextIOWrapper(io.FileIO(w, "w"), encoding="utf-8")
+    monkeypatch.setattr(sys, "stdout", stdout)
+    try:
+        assert main(["modes", "--json"]) == 141
+        stdout.write("more")  # the descriptor now points at devnull: later writes and the exit flush pass
+        stdout.flush()
+    finally:
+        monkeypatch.undo()
+        stdout.close()

@@ -218,6 +218,29 @@ def test_a_one_row_file_says_so(tmp_path):
         read_table(tmp_path / "one.csv")
 
 
+def test_an_off_grid_stamp_between_valid_rows_costs_its_row_only(tmp_path):
+    d = _channels(400)
+    d["time"][150] += 0.4 / FS  # off the clock, which comes back at the next row
+    d["time"][300] = d["time"][299]  # a backwards stamp followed by a row carrying its true stamp:
+    d["time"][299] = d["time"][296]  # row 300 is stamped one step early, between valid rows
+    table = read_table(_write_csv(tmp_path / "off.csv", d), nonfinite="keep")
+    assert table.rejections.by_reason() == {"time": 3 * N_CH}
+    lost = np.flatnonzero(np.isnan(table.data).any(axis=1))
+    assert lost.tolist() == [150, 299, 300]
+    kept = np.ones(400, bool)
+    kept[lost] = False
+    for j in range(N_CH):
+        np.testing.assert_array_equal(table.data[kept, j], d[f"a{j}"][kept])
+    assert table.time is not None and np.isnan(table.time[lost]).all() and table.start_s == 0.0
+
+
+def test_a_clock_that_does_not_come_back_is_refused_naming_the_step(tmp_path):
+    d = _channels(400)
+    d["time"][150:] += 2.5 / FS  # samples missing without rows: every later row off the first rows' clock
+    with pytest.raises(TableError, match=r"not a uniform clock \(step 0.017\d* s from sample 149 to 150"):
+        read_table(_write_csv(tmp_path / "jump.csv", d), nonfinite="keep")
+
+
 # -- property: any mix of faults costs exactly the faulted samples ------------------------------
 _ROWS, _COLS = 300, 4
 

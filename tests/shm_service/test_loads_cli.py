@@ -164,3 +164,22 @@ def test_channels_in_volts_are_counted_with_a_warning(capsys):
     assert doc["warnings"] == ["channel 'SG_300_a' is in 'Voltage (unscaled)', not m/m: the figures are in that unit; "
                                "scale it first (shm import's channel map has scale and offset)"]
     assert doc["channels"][0]["cycles"] > 1000
+
+
+def test_estimate_analyze_and_loads_take_one_definition_of_the_model_options():
+    """`shm loads` and `shm analyze` take `shm estimate`'s model options as it defines them (one
+    ``add_model_arguments``), with the same defaults, choices and help."""
+    from shm_service.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
+
+    def options(command: str) -> dict:
+        return {a.dest: (a.option_strings, a.default, a.choices, a.help) for a in sub.choices[command]._actions
+                if a.dest in ("rig", "peripheral", "modes", "imus", "tofs", "gauges", "aided")}
+
+    estimate = options("estimate")
+    assert set(estimate) == {"rig", "peripheral", "modes", "imus", "tofs", "gauges", "aided"}
+    assert options("loads") == estimate
+    analyze = options("analyze")
+    assert analyze == {k: v for k, v in estimate.items() if k != "aided"}  # analyze builds no aided model
+    assert options("reprocess") == analyze

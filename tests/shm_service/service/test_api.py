@@ -41,12 +41,13 @@ def test_read_endpoints_and_validation(running):
         assert c.get("/healthz").json()["status"] == "ok"
         st = c.get("/api/status").json()
         assert st["sources"][0]["kind"] == "ingest" and "degraded_sensors" in st
-        assert c.get("/api/trends").json() == {"rows": [], "count": 0, "truncated": False}
+        assert c.get("/api/trends").json() == {"rows": [], "count": 0, "total": 0, "truncated": False, "next_cursor": None}
         csv = c.get("/api/trends", params={"format": "csv"})
         assert csv.headers["content-type"].startswith("text/csv") and csv.text.startswith("source,window_start_s")
         assert c.get("/api/trends", params={"from": "2026-01-01T00:00:00Z", "to": "1767312000"}).status_code == 200
         for bad in ({"from": "yesterday"}, {"mode": 0}, {"format": "xml"}, {"from": "10", "to": "5"},
-                    {"from": "2026-01-01T00:00:00"}, {"limit": -1}):
+                    {"from": "2026-01-01T00:00:00"}, {"limit": -1}, {"limit": 1_000_001}, {"cursor": "not-ours"},
+                    {"cursor": "WyJhbGFybXMiLDVd"}):  # an alarms cursor is not a trends one
             r = c.get("/api/trends", params=bad)
             assert r.status_code == 422 and r.json()["detail"], bad
         assert c.get("/api/alarms").json()["count"] == 0

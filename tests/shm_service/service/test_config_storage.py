@@ -77,7 +77,7 @@ def test_migrations_and_idempotent_windows(tmp_path):
 
 def test_version_1_database_keeps_its_acknowledgements(tmp_path):
     """Schema 2 spells the acknowledgement time like the alarm's other times (acknowledged_at_s)."""
-    from shm_service.service._storage import _MIGRATIONS
+    from shm_service.service._store_schema import _MIGRATIONS
 
     db = tmp_path / "v1.sqlite"
     con = sqlite3.connect(db)
@@ -93,7 +93,8 @@ def test_version_1_database_keeps_its_acknowledgements(tmp_path):
     con.commit()
     con.close()
     st = Storage(db)
-    assert st.schema_version == SCHEMA_VERSION == 4  # 3: event sequence numbers and UUIDs; 4: the ledger of shm reprocess
+    assert st.schema_version == SCHEMA_VERSION == 5  # 3: event sequence numbers and UUIDs; 4: the ledger of shm reprocess; 5: fatigue rows
+    assert st.fatigue_windows("src") == ([], 0, None)  # 5: the fatigue tables exist, empty
     (alarm,) = st.alarms()
     assert alarm.acknowledged_at_s == 12.5 and alarm.acknowledged_by == "op" and alarm.acknowledged and not alarm.stale
     # schema 3: the events got their per-alarm sequence numbers and distinct UUIDs, the outbox its alarm

@@ -19,8 +19,8 @@ def _row_commit(source: str, k: int, changes=()) -> WindowCommit:
 
 def _wait_queued(st: Storage, n: int, timeout_s: float = 10.0) -> None:
     deadline = time.monotonic() + timeout_s
-    while len(st._queued) < n:
-        assert time.monotonic() < deadline, f"only {len(st._queued)} of {n} windows queued"
+    while len(st.windows._queued) < n:
+        assert time.monotonic() < deadline, f"only {len(st.windows._queued)} of {n} windows queued"
         time.sleep(0.005)
 
 
@@ -38,7 +38,7 @@ def _commit_in_threads(st: Storage, commits: list[WindowCommit]) -> tuple[list[t
     threads = [threading.Thread(target=one, args=(c,)) for c in commits]
     threads[0].start()
     deadline = time.monotonic() + 10
-    while not st._leading:
+    while not st.windows._leading:
         assert time.monotonic() < deadline
         time.sleep(0.005)
     for t in threads[1:]:
@@ -59,7 +59,7 @@ def test_windows_of_many_threads_are_written_in_one_transaction(tmp_path):
     assert (st.groups, st.grouped_windows) == (2, 12)
     stored = {r["source"]: r["data_time_s"] for r in st._read(lambda db: db.execute("SELECT * FROM monitor_state").fetchall())}
     assert stored == {c.source: c.data_time_s for c in commits}
-    assert st.integrity_check() == "ok" and not st._leading and st._queued == []
+    assert st.integrity_check() == "ok" and not st.windows._leading and st.windows._queued == []
 
 
 def test_a_bad_window_fails_alone_in_its_group(tmp_path):
@@ -96,7 +96,7 @@ def test_a_locked_database_fails_the_whole_group_and_keeps_nothing(tmp_path):
         other.close()
     assert st._read(lambda db: db.execute("SELECT COUNT(*) FROM monitor_state").fetchone()[0]) == 0
     assert st.commit_window(commits[0]) == []  # the lock is free: the next window is written
-    assert not st._leading and st._queued == []
+    assert not st.windows._leading and st.windows._queued == []
 
 
 def test_a_commit_of_another_source_row_is_refused_before_the_group(tmp_path):
@@ -106,7 +106,7 @@ def test_a_commit_of_another_source_row_is_refused_before_the_group(tmp_path):
     row = TrendRow(source="x", window_start_s=0.0, window_end_s=60.0, mode=1, unit=1, kind="ambient")
     with pytest.raises(ValueError, match="source 'x' in a commit of source 'y'"):
         st.commit_window(WindowCommit("y", 0.0, 60.0, [row], None, None))
-    assert st._queued == [] and st.groups == 0
+    assert st.windows._queued == [] and st.groups == 0
 
 
 def _contents(st: Storage) -> dict:
@@ -149,7 +149,7 @@ def test_plain_windows_in_one_statement_store_what_a_transaction_each_stores(tmp
     one._db.set_trace_callback(None)
 
     each = Storage(tmp_path / "each.sqlite")
-    monkeypatch.setattr(each, "_write_plain", lambda batch: False)  # every window in a transaction of its own
+    monkeypatch.setattr(each.windows, "_write_plain", lambda batch: False)  # every window in a transaction of its own
     for c in _sequence():
         each.commit_window(c)
     each.touch_source("b", "sim", "", 0.0)

@@ -32,14 +32,16 @@ def served(tmp_path_factory, short_recording):
     service.start()
     assert service.wait(180)
     status = service.status()
+    (structure,) = service.structures.values()
+    last_window = structure.pipeline.last_window  # the document the dashboard was sent last
     service.stop(drain_s=0)
     assert status.service.pipeline_errors == 0
     (path,) = sorted((tmp / "recordings").glob("*.mcap"))
-    return tmp, toml, status, path, settings
+    return tmp, toml, status, path, settings, last_window
 
 
 def test_serve_and_analyze_run_the_same_windows_and_raise_the_same_alarms(served, capsys):
-    tmp, toml, status, archive, settings = served
+    tmp, toml, status, archive, settings, last_window = served
     rec = read_recording(archive)
     epoch = rec.start_ns - rec.start_ns % 1_000_000_000  # the service's estimator epoch: the first second
     rest_end = status.pipeline.estimator.rest_calibration.rest_end_s
@@ -79,3 +81,8 @@ def test_serve_and_analyze_run_the_same_windows_and_raise_the_same_alarms(served
     in_alarm = {f["kind"] if f["kind"] == "curvature" else f"mode{f['mode']}" for f in analysed[-1]["flags"]}
     assert in_alarm == {k for k, v in status.pipeline.active_alarms.items() if v == "alarm"}
     assert np.isfinite([m["frequency_hz"] for m in doc["modes"] if m["frequency_hz"] is not None]).all()
+    # the served window documents carry each mode's track as shm analyze's windows do (one tracker)
+    last = next(w for w in analysed if round(zero + w["start_s"], 6) == round(last_window.start_s, 6))
+    served_tracks = [(m.mode, m.track) for m in last_window.modes]
+    assert served_tracks == [(m["mode"], m["track"]) for m in last["modes"]]
+    assert any(track is not None for _, track in served_tracks), served_tracks
