@@ -158,8 +158,7 @@ def _spans(windows: tuple[WindowResult, ...], times: np.ndarray, zero_s: float) 
     return out
 
 
-#: Cycles of the slowest tracked mode in each segment of the record's batch-means uncertainty:
-#: enough for each segment's own estimate of it to be near the linear regime.
+#: Cycles of the slowest tracked mode in each segment of the record's jackknife.
 _SEGMENT_CYCLES = 40.0
 #: SVD budget of the record's identification (block rows × channels).
 _RECORD_SVD_BUDGET = 480
@@ -171,10 +170,11 @@ def _record_identification(B: np.ndarray, fs: float, spans: list[tuple[int, int]
 
     The correlation lags span a full period of the slowest tracked mode (``slowest_hz``; else half
     a period of the band's lower edge) within an SVD budget of i·l ≤ 480: a record has far more
-    samples than a window and affords the lags a slow mode needs. Each frequency's 1σ is a batch
-    mean over segments of the record holding ≥ 40 cycles of the slowest mode each (3 … 12
-    segments), widened by Student's t: the spread of independent estimates, which holds for the
-    slow modes where the first-order jackknife of a window underrates it."""
+    samples than a window and affords the lags a slow mode needs. Each frequency's 1σ is the
+    delete-one jackknife over segments of the record holding ≥ 40 cycles of the slowest mode each
+    (3 … 12 segments), each left-out record identified anew (not to first order), widened by
+    Student's t: it holds for the slow modes where the first-order jackknife of a window underrates
+    the scatter, and unlike batch means of the segments' own estimates it does not overrate it."""
     parts = []
     fsb = fs
     for s, e in spans:
@@ -193,7 +193,7 @@ def _record_identification(B: np.ndarray, fs: float, spans: list[tuple[int, int]
         # the record's estimate is the mean over its trusted spans: a mode drifting with the
         # temperature over the record is followed by the windows, not split here
         return identify_modes(y, fsb, config=cfg.model_copy(update={"block_rows": rows, "moving_modes": False, "segments": segments,
-                                                                    "uncertainty": "batch"}), band_ready=True), y
+                                                                    "uncertainty": "delete-one"}), band_ready=True), y
     except (ValueError, np.linalg.LinAlgError):
         return None, None
 

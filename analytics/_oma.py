@@ -72,10 +72,12 @@ class OmaConfig(BaseModel):
     resolution_cycles: float = Field(2.0, ge=0, le=10, description="poles of one shape closer than resolution_cycles/T to a stronger mode are that mode, unresolved by a window of T s (the half-width of a Hann window's main lobe) [2]")
     min_share: float = Field(0.01, ge=0, le=1, description="a mode carries at least this share of the response in some channel [0.01]")
     moving_modes: bool = Field(True, description="follow each mode through sub-windows; one that moves is listed once with its start and end frequency [True]")
-    uncertainty: Literal["jackknife", "batch"] = Field(
-        "jackknife", description="statistical 1σ of a pole: the first-order segment jackknife (one window), or batch means: the "
-                                 "spread of the segments' own poles over √segments, widened by Student's t to a 68.3 % interval "
-                                 "(a long record, whose slow modes the linearised jackknife underrates) [jackknife]")
+    uncertainty: Literal["jackknife", "batch", "delete-one"] = Field(
+        "jackknife", description="statistical 1σ of a pole: 'jackknife', the first-order segment jackknife (a window); 'batch', "
+                                 "batch means of the segments' own poles (the spread over √segments); 'delete-one', the "
+                                 "jackknife with each left-out record identified anew (a long record, whose slow modes the "
+                                 "first-order jackknife underrates); the last two widened by Student's t to a 68.3 % interval "
+                                 "[jackknife]")
 
     @model_validator(mode="after")
     def _band(self) -> "OmaConfig":
@@ -398,15 +400,18 @@ def identify_modes(
             continue
         if jack is None:
             sf, sz = float("nan"), float("nan")
-        elif cfg.uncertainty == "batch":
+        elif cfg.uncertainty in ("batch", "delete-one"):
             if not batch_cache:  # each segment identified once, at the orders of the clusters' representatives
-                batch_cache["poles"] = _segment_poles(Tsegs, model, sorted({int(model.poles.order[x.representative]) for x in clusters}))
-            sf, sz = _batch_std(model, c, batch_cache["poles"], [x.frequency_hz for x in clusters if x is not c])
+                loo = cfg.uncertainty == "delete-one"
+                mats = (Tsegs.sum(axis=0)[None] - Tsegs) / (Tsegs.shape[0] - 1) if loo else Tsegs
+                batch_cache["poles"] = _segment_poles(mats, model, sorted({int(model.poles.order[x.representative]) for x in clusters}))
+            sf, sz = _batch_std(model, c, batch_cache["poles"], [x.frequency_hz for x in clusters if x is not c],
+                                delete_one=cfg.uncertainty == "delete-one")
         else:
             sf, sz = _pole_std(model, c, jack, orders_cache)
         spread_f = c.frequency_spread_hz if c.orders > 1 else 0.0
         spread_z = c.damping_spread if c.orders > 1 else 0.0
-        if cfg.uncertainty == "batch" and c.orders > 2:
+        if cfg.uncertainty != "jackknife" and c.orders > 2:
             # a record's many orders: their scatter measured robustly, so one unconverged low order does not set it
             spread_f = _robust_scale(model.poles.frequency_hz[c.members])
             spread_z = _robust_scale(model.poles.damping_ratio[c.members])
@@ -654,13 +659,16 @@ def _segment_poles(Ts: np.ndarray, model: SsiModel, orders: list[int]) -> list[P
     return out
 
 
-def _batch_std(model: SsiModel, c: PoleCluster, segment_poles: list[PoleSet | None], others_hz: list[float]) -> tuple[float, float]:
-    """Batch-means 1σ of the representative pole's frequency (Hz) and damping ratio: each
-    segment's Toeplitz matrix identified on its own (:func:`_segment_poles`), at the pole's order
-    the segment pole of the same shape nearest in frequency (within half the distance to any other
-    mode) taken, and the spread of those over √(segments found), widened by Student's t so the
-    ±1σ interval holds 68.3 % for few segments. Unlike the first-order jackknife it holds when a
-    segment moves the pole beyond the linear regime (a slow mode, a few tens of its cycles per segment)."""
+def _batch_std(model: SsiModel, c: PoleCluster, segment_poles: list[PoleSet | None], others_hz: list[float], *,
+               delete_one: bool = False) -> tuple[float, float]:
+    """1σ of the representative pole's frequency (Hz) and damping ratio from re-identified parts:
+    each segment's Toeplitz matrix (batch means) or each leave-one-segment-out matrix
+    (``delete_one``) identified on its own (:func:`_segment_poles`); at the pole's order the pole
+    of the same shape nearest in frequency (within half the distance to any other mode) taken; the
+    spread of those over √K (batch means) or times (K − 1)/√K (the jackknife), widened by
+    Student's t so the ±1σ interval holds 68.3 % for few segments. Unlike the first-order
+    jackknife it holds when a segment moves the pole beyond the linear regime (a slow mode, a few
+    tens of its cycles per segment)."""
     n = int(model.poles.order[c.representative])
     f0 = float(model.poles.frequency_hz[c.representative])
     shape0 = model.poles.shapes[c.representative]
@@ -683,8 +691,10 @@ def _batch_std(model: SsiModel, c: PoleCluster, segment_poles: list[PoleSet | No
     K = len(fs_j)
     if K < 3:
         return float("nan"), float("nan")
-    widen = float(stats.t.ppf(0.5 + 0.6826894921370859 / 2, K - 1)) / math.sqrt(K)
-    return widen * float(np.std(fs_j, ddof=1)), widen * float(np.std(zs_j, ddof=1))
+    widen = float(stats.t.ppf(0.5 + 0.6826894921370859 / 2, K - 1))
+    # batch means: the spread of K independent estimates over √K; delete-one: the jackknife's (K − 1)/√K
+    scale = widen * ((K - 1) / math.sqrt(K) if delete_one else 1 / math.sqrt(K))
+    return scale * float(np.std(fs_j, ddof=1)), scale * float(np.std(zs_j, ddof=1))
 
 
 def _residues(model: SsiModel, clusters: tuple[PoleCluster, ...], cache: dict) -> tuple[np.ndarray, np.ndarray]:

@@ -746,6 +746,9 @@ class LiveEstimatesDocument(_Document):
                                                                "reference temperature's E (None: a beam of table sections has no E)")
     moment_nm: list[list[Finite]] = Field(default_factory=list, description="bending moment EI κ per estimate and station, N·m")
     root_moment_nm: list[Finite] | None = Field(None, description="the root bending moment per estimate, N·m (clamped support only)")
+    truth_deflection: list[list[Finite] | None] | None = Field(
+        None, description="a simulated source only: the true deflection (m) at the structure's stations at each estimate "
+                          "(None where the simulation gave none near it); None for measured data")
 
 
 class ErrorDocument(_Document):

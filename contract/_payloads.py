@@ -14,6 +14,7 @@ from typing import Any, Final, Literal
 
 __all__ = [
     "BEARING_TOPIC",
+    "ESTIMATE_LOADS_TOPIC",
     "ESTIMATE_TOPIC",
     "IMU_PLANAR_COLUMNS",
     "NOMINAL_PERIOD_NS",
@@ -31,6 +32,8 @@ __all__ = [
 
 TRUTH_TOPIC: Final = "/truth/state"
 ESTIMATE_TOPIC: Final = "/estimate/state"
+#: The virtual loads of each estimate (issue 21) at the stations the recording's metadata "loads" names.
+ESTIMATE_LOADS_TOPIC: Final = "/estimate/loads"
 BEARING_TOPIC: Final = "/bearing/displacement"
 TEMPERATURE_TOPIC: Final = "/env/temperature"
 
@@ -106,6 +109,15 @@ SCHEMAS: Final[dict[str, dict[str, Any]]] = {
             "covariance_diagonal": _vector("diagonal of the state covariance (units of the state squared)"),
         },
     ),
+    "shm.EstimateLoads": _object(
+        "shm.EstimateLoads",
+        "virtual loads of an estimate at the stations of the recording's metadata 'loads' (stations_m, names)",
+        {
+            "strain": _vector("bending strain -c(eta) kappa(eta) on the +zeta face at the stations, m/m"),
+            "moment_nm": _vector("bending moment EI(eta) kappa(eta) at the stations (reference temperature), N m"),
+            "root_moment_nm": _number("bending moment at the support D, EI(0) kappa(0), N m (0 for a pinned support)"),
+        },
+    ),
 }
 
 FieldSize = int | Literal["stations", "free"]
@@ -137,6 +149,7 @@ PAYLOAD_FIELDS: Final[dict[str, tuple[FieldSpec, ...]]] = {
         FieldSpec("curvature", "stations"),
         FieldSpec("covariance_diagonal", "free"),
     ),
+    "shm.EstimateLoads": (FieldSpec("strain", "free"), FieldSpec("moment_nm", "free"), FieldSpec("root_moment_nm", 0)),
 }
 
 #: Nominal sample period (ns) of the kinds that have a fixed rate.
@@ -170,6 +183,7 @@ _FIXED_TOPICS: Final[dict[str, TopicInfo]] = {
     TEMPERATURE_TOPIC: TopicInfo("temperature", None, "shm.Temperature"),
     TRUTH_TOPIC: TopicInfo("truth", None, "shm.TruthState"),
     ESTIMATE_TOPIC: TopicInfo("estimate", None, "shm.EstimateState"),
+    ESTIMATE_LOADS_TOPIC: TopicInfo("estimate", None, "shm.EstimateLoads"),
 }
 
 

@@ -30,6 +30,7 @@ from ._documents import (
     StatusDocument,
     StructuresDocument,
     TrendRow,
+    WindowDocument,
 )
 from ._rig import RigDescription
 from ._state import StateLayout
@@ -113,6 +114,11 @@ class StructurePort(Protocol):
 
     def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
         """Its latest window's spectra (None before its first window)."""
+        ...
+
+    def structure_window(self, structure_id: str) -> WindowDocument | None:
+        """Its latest committed analysis window (modes, charts, curvature along the stations);
+        None before its first window."""
         ...
 
     def structure_rig(self, structure_id: str) -> RigDescription:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from contract import (
+    ESTIMATE_LOADS_TOPIC,
     BEARING_TOPIC,
     IMU_PLANAR_COLUMNS,
     TEMPERATURE_TOPIC,
@@ -167,6 +168,16 @@ def estimate_payloads(result: EstimateResult) -> list[bytes]:
     return [orjson.dumps(row) for row in rows]
 
 
+def _virtual_loads(rig, model):
+    """analytics.VirtualLoads of the rig's hot spots and a 16-station grid, or None (no station to give)."""
+    from analytics import VirtualLoads
+
+    try:
+        return VirtualLoads.from_rig(rig, model.units.curvature)
+    except ValueError:
+        return None
+
+
 def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metadata: dict[str, str] | None = None) -> int:
     """Write the estimates (with rig.json, the truth metadata and the temperature, bearing and strain
     gauge channels of the source) into a new recording; returns the number of estimate messages."""
@@ -183,6 +194,11 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
         **(extra_metadata or {}),
     }
     stamps = rec.start_ns + np.round(result.t * 1e9).astype(np.int64)
+    loads = _virtual_loads(rec.rig, result.model)
+    if loads is not None:
+        metadata["loads"] = {"stations_m": json.dumps(loads.positions.tolist()), "names": json.dumps(loads.names),
+                             "youngs_modulus_pa": json.dumps(rec.rig.beam.youngs_modulus),
+                             "note": "stress = youngs_modulus_pa x strain (reference temperature); moments at the reference temperature"}
     with RecordingWriter(path, rec.rig, metadata=metadata) as writer:
         # the strain gauges too: `shm loads` of an estimate sees the modal truncation at them
         gauge_topics = tuple(s.topic for s in rec.rig.sensors_of("strain"))
@@ -195,6 +211,11 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
                 writer.write(topic, lt, {key: value}, pt)
         for stamp, payload in zip(stamps.tolist(), estimate_payloads(result)):
             writer.write(ESTIMATE_TOPIC, stamp, payload)
+        if loads is not None:  # each estimate's strain and moments at the hot spots and the grid (issue 21)
+            out = loads(result.model.state_layout.b_of(result.x))
+            root = out["root_moment_nm"] if out["root_moment_nm"] is not None else np.zeros(len(stamps))
+            for stamp, strain, moment, m0 in zip(stamps.tolist(), out["strain"].tolist(), out["moment_nm"].tolist(), root.tolist()):
+                writer.write(ESTIMATE_LOADS_TOPIC, stamp, {"strain": strain, "moment_nm": moment, "root_moment_nm": m0})
     return len(stamps)
 
 

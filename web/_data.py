@@ -14,14 +14,24 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from contract import BaselineModeDocument, SpectrumDocument, ThresholdsDocument, TrendRow, WindowDocument
+from contract import (
+    BaselineModeDocument,
+    FatigueDocument,
+    HotSpotLoadsDocument,
+    SpectrumDocument,
+    ThresholdsDocument,
+    TrendRow,
+    WindowDocument,
+)
 
 __all__ = [
     "BAND_SIGMA",
+    "LoadsRecord",
     "SpectraRecord",
     "WindowRecord",
     "baseline_band",
     "frequencies_of",
+    "loads_record",
     "spectra_record",
     "spectrum_plot",
     "thresholds_of",
@@ -215,3 +225,63 @@ def spectrum_plot(
         return s
 
     return x, y, spike(tracked, top * 1.5), spike(baseline, top * 1.2)
+
+
+@dataclass(frozen=True)
+class LoadsRecord:
+    """A structure's fatigue as the Loads tab draws it (from a ``contract.FatigueDocument``).
+
+    hot_spots : each hot spot's latest state (consumed life, rate, remaining life and verdict).
+    positions_m, stress_range_max_pa, strain_range_max, strain_rms : the envelope along the beam
+        (NaN where the service gave none).
+    t_s : end of each counted window (UNIX s), oldest first.
+    dels_pa : per Wöhler exponent (``"3"``, ``"5"``) and hot spot name, the window's DEL (Pa, NaN: none).
+    consumed : per hot spot name, the consumed life D after each window.
+    windows, truncated : the windows counted, and whether older ones were left out.
+    """
+
+    design_life_years: float | None
+    hot_spots: tuple[HotSpotLoadsDocument, ...]
+    positions_m: np.ndarray
+    stress_range_max_pa: np.ndarray
+    strain_range_max: np.ndarray
+    strain_rms: np.ndarray
+    t_s: np.ndarray
+    dels_pa: dict[str, dict[str, np.ndarray]]
+    consumed: dict[str, np.ndarray]
+    windows: int
+    truncated: bool
+
+
+def _num(v: object) -> float:
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(float(v)) else math.nan
+
+
+def loads_record(doc: FatigueDocument) -> LoadsRecord:
+    """The Loads tab's record of a structure's ``contract.FatigueDocument`` (its envelope sorted
+    along the beam). Raises ValueError for anything else."""
+    if not isinstance(doc, FatigueDocument):
+        raise ValueError(f"fatigue must be a contract.FatigueDocument, got {type(doc).__name__}")
+    envelope = sorted(doc.envelope, key=lambda e: e.position_m)
+    windows, hot_spots = list(doc.windows), tuple(doc.hot_spots)
+    design, total, truncated = doc.design_life_years, doc.total, doc.truncated
+    names = [h.name for h in hot_spots]
+    exponents = sorted({m for w in windows for h in w.hot_spots for m in h.del_pa}, key=float)
+    dels = {m: {n: np.full(len(windows), math.nan) for n in names} for m in exponents}
+    consumed = {n: np.full(len(windows), math.nan) for n in names}
+    for k, w in enumerate(windows):
+        for h in w.hot_spots:
+            if h.name not in consumed:
+                continue
+            consumed[h.name][k] = _num(h.consumed)
+            for m, v in h.del_pa.items():
+                dels[m][h.name][k] = _num(v)
+    return LoadsRecord(
+        design_life_years=design, hot_spots=hot_spots,
+        positions_m=np.array([_num(e.position_m) for e in envelope]),
+        stress_range_max_pa=np.array([_num(e.stress_range_max_pa) for e in envelope]),
+        strain_range_max=np.array([_num(e.strain_range_max) for e in envelope]),
+        strain_rms=np.array([_num(e.strain_rms) for e in envelope]),
+        t_s=np.array([_num(w.start_s) + _num(w.duration_s) for w in windows]),
+        dels_pa=dels, consumed=consumed, windows=int(total), truncated=bool(truncated),
+    )

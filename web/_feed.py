@@ -1,10 +1,10 @@
 """One structure as the dashboard draws it: its rig and model (how to draw it) and its newest
-data (estimate, spectra, windows, alarms, status), kept under a lock for the render thread.
+data (estimate, spectra, windows, alarms, status, loads), kept under a lock for the render thread.
 
-A single structure's feed is pushed by the service (``push_*``). A fleet's feeds are filled by
-the dashboard's poller (``web._fleet``) from the service's port, only for the structures some
-browser shows; their estimates arrive a batch at a time and are played out at their data pace
-(``add_live``, ``play``), so the picture moves smoothly even with seconds-long batches.
+The feeds are filled by the dashboard's poller (``web._poller``) from the service's port, only for
+the structures some browser shows (a structure of one like a fleet's); their estimates arrive a
+batch at a time and are played out at their data pace (``add_live``, ``play``), so the picture
+moves smoothly even with seconds-long batches.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from contract import (
     WindowDocument,
 )
 
-from ._data import SpectraRecord, WindowRecord, baseline_band, spectra_record, thresholds_of, window_record
+from ._data import LoadsRecord, SpectraRecord, WindowRecord, baseline_band, spectra_record, thresholds_of, window_record
 from ._geometry import BeamState, parse_state
 
 __all__ = ["Estimate", "Snapshot", "StructureFeed"]
@@ -91,6 +91,9 @@ class Snapshot:
     # wall second, from the service's status over the last polls (None until two polls saw progress)
     filter_rate_hz: float | None = None
     realtime_factor: float | None = None
+    loads: LoadsRecord | None = None
+    loads_error: str | None = None
+    loads_version: int = 0
 
 
 class _Store:
@@ -111,13 +114,16 @@ class _Store:
         self.status_error: str | None = None
         self.status_version = 0
         self.notify: deque[AlarmDocument] = deque(maxlen=50)
-        self.push_times: deque[float] = deque(maxlen=50)
+        self.drawn_times: deque[float] = deque(maxlen=50)
         self.progress: deque[tuple[float, int, float]] = deque(maxlen=6)  # (monotonic s, estimates, processed data s)
+        self.loads: LoadsRecord | None = None
+        self.loads_error: str | None = None
+        self.loads_version = 0
 
     def snapshot(self) -> Snapshot:
         with self.lock:
-            if len(self.push_times) >= 2 and self.push_times[-1] > self.push_times[0]:
-                rate = (len(self.push_times) - 1) / (self.push_times[-1] - self.push_times[0])
+            if len(self.drawn_times) >= 2 and self.drawn_times[-1] > self.drawn_times[0]:
+                rate = (len(self.drawn_times) - 1) / (self.drawn_times[-1] - self.drawn_times[0])
             else:
                 rate = 0.0
             filter_rate = realtime = None
@@ -132,6 +138,7 @@ class _Store:
                 self.alarms_tuple, self.alarms_version,
                 self.status, self.status_error, self.status_version,
                 rate, filter_rate, realtime,
+                self.loads, self.loads_error, self.loads_version,
             )
 
     def upsert_alarm(self, rec: AlarmDocument) -> bool:
@@ -220,14 +227,12 @@ class StructureFeed:
         self.stations = stations.copy()
         self.sensor_topics = {s.topic: s for s in rig.sensors}
         self.store = _Store()
-        # a fleet's live estimates: (t_s, state) waiting for their turn, and the playout clock
-        self._pending: deque[tuple[float, BeamState]] = deque(maxlen=MAX_PENDING)
+        # live estimates: (t_s, state, true deflection) waiting for their turn, and the playout clock
+        self._pending: deque[tuple[float, BeamState, np.ndarray | None]] = deque(maxlen=MAX_PENDING)
         self._sensors: dict[str, str] = {}
         self._arrivals: deque[tuple[float, float]] = deque(maxlen=8)  # (monotonic s, newest data t)
         self._clock: tuple[float, float, float] | None = None  # (wall0, data0, data s per wall s)
         self._newest_t = -math.inf
-
-    # ------------------------------------------------------------------ pushes
 
     def width_at(self, eta: np.ndarray) -> np.ndarray:
         """The drawn width (m) at arc lengths ``eta``: the sheet's width, or the section's size across
@@ -244,21 +249,6 @@ class StructureFeed:
         span = positions[k] - positions[j]
         t = np.where(span > 0, (eta - positions[j]) / np.where(span > 0, span, 1.0), 0.0)
         return sizes[j] + np.clip(t, 0.0, 1.0) * (sizes[k] - sizes[j])
-    def push_estimate(self, t_s: float, x: np.ndarray, sensor_states: dict[str, str],
-                      truth_deflection: np.ndarray | None = None) -> None:
-        """The newest state estimate. Raises ValueError on malformed input."""
-        t = _finite("t_s", t_s)
-        state = parse_state(x, self.layout)
-        _check_sensor_states(sensor_states)
-        truth = None
-        if truth_deflection is not None:
-            truth = np.asarray(truth_deflection, dtype=float)
-            if truth.shape != self.stations.shape:
-                raise ValueError(f"truth_deflection must have shape {self.stations.shape} (one value per station), got {truth.shape}")
-            if not np.all(np.isfinite(truth)):
-                raise ValueError("truth_deflection has NaN or infinite values")
-        self._set_estimate(Estimate(t, state, dict(sensor_states), truth))
-
     def _set_estimate(self, est: Estimate) -> None:
         store = self.store
         with store.lock:
@@ -274,21 +264,43 @@ class StructureFeed:
                 )
             store.estimate = est
             store.estimate_version += 1
-            store.push_times.append(time.monotonic())
+            store.drawn_times.append(time.monotonic())
 
-    def push_spectra(self, spectrum: SpectrumDocument) -> None:
+    def set_spectra(self, spectrum: SpectrumDocument) -> None:
+        """The latest window's spectra. Raises ValueError for a spectrum of another Γ."""
         rec = spectra_record(spectrum, self.gamma)
         with self.store.lock:
             self.store.spectra = rec
             self.store.spectra_version += 1
 
-    def push_window(self, window: WindowDocument) -> None:
-        self.add_windows([window_record(window, n_stations=self.stations.size)])
+    def add_window(self, window: WindowDocument) -> None:
+        """A committed window's figures (its curvature profile along ``stations``): replaces the
+        record the trend rows gave of the same window. Raises ValueError naming what does not fit."""
+        rec = window_record(window, n_stations=self.stations.size)
+        with self.store.lock:
+            windows = self.store.windows
+            if windows and any(w.start_s == rec.start_s for w in windows):
+                kept = [rec if w.start_s == rec.start_s else w for w in windows]
+                windows.clear()
+                windows.extend(kept)
+                self.store.windows_tuple = tuple(windows)
+                self.store.windows_version += 1
+                return
+        self.add_windows([rec])
 
-    def push_alarm(self, alarm: AlarmDocument) -> None:
+    def upsert_alarm(self, alarm: AlarmDocument) -> bool:
+        """An alarm read (or acknowledged); True when it newly became active."""
         if not isinstance(alarm, AlarmDocument):
             raise ValueError(f"alarm must be a contract.AlarmDocument, got {type(alarm).__name__}")
-        self.store.upsert_alarm(alarm)
+        return self.store.upsert_alarm(alarm)
+
+    def set_loads(self, loads: LoadsRecord | None, error: str | None = None) -> None:
+        """The structure's fatigue (None with ``error``: it could not be read; the last one is kept)."""
+        with self.store.lock:
+            if loads is not None:
+                self.store.loads = loads
+            self.store.loads_error = error
+            self.store.loads_version += 1
 
     def add_windows(self, records: list[WindowRecord]) -> None:
         store = self.store
@@ -308,7 +320,7 @@ class StructureFeed:
         with self.store.lock:
             return max((w.start_s for w in self.store.windows), default=None)
 
-    # ------------------------------------------------------------------ a fleet's live estimates
+    # ------------------------------------------------------------------ live estimates
     def add_live(self, doc: LiveEstimatesDocument, now: float | None = None) -> None:
         """Estimates polled from the service (newest after the last seq): queued for ``play``.
         Raises ValueError when they are not in this feed's state layout."""
@@ -319,14 +331,21 @@ class StructureFeed:
         now = time.monotonic() if now is None else now
         with self.store.lock:
             self._sensors = dict(doc.sensors)
-            fresh = [(t, x) for t, x in zip(doc.t_s, doc.x) if t > self._newest_t]
-            for t, x in fresh:
-                self._pending.append((float(t), parse_state(np.asarray(x, dtype=float), self.layout)))
+            truths = doc.truth_deflection or [None] * len(doc.t_s)
+            fresh = [(t, x, true) for t, x, true in zip(doc.t_s, doc.x, truths) if t > self._newest_t]
+            for t, x, true in fresh:
+                self._pending.append((float(t), parse_state(np.asarray(x, dtype=float), self.layout), self._truth(true)))
             if not fresh:
                 return
             self._newest_t = fresh[-1][0]
             self._arrivals.append((now, self._newest_t))
             self._retime(now)
+
+    def _truth(self, values: list[float] | None) -> np.ndarray | None:
+        """A simulation's true deflection at the stations (None: none, or not one per station)."""
+        if values is None or len(values) != self.stations.size:
+            return None
+        return np.asarray(values, dtype=float)
 
     def _retime(self, now: float) -> None:
         """Play at the data's pace (data s per wall s, over the last arrivals), about one batch behind."""
@@ -360,7 +379,7 @@ class StructureFeed:
                 item = self._pending.popleft()
             sensors = self._sensors
         if item is not None:
-            self._set_estimate(Estimate(item[0], item[1], sensors, None))
+            self._set_estimate(Estimate(item[0], item[1], sensors, item[2]))
 
     # ------------------------------------------------------------------ reading
     def snapshot(self) -> Snapshot:
@@ -382,16 +401,6 @@ class StructureFeed:
     def thresholds(self, snap: Snapshot) -> dict[str, tuple[float, float]]:
         """(warning, alarm) σ of the frequency and curvature charts, as the service applies them."""
         return thresholds_of(None if snap.status is None else snap.status.thresholds, snap.windows)
-
-
-def _is_num(v: Any) -> bool:
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(float(v))
-
-
-def _finite(name: str, value: Any) -> float:
-    if not _is_num(value):
-        raise ValueError(f"{name}={value!r} must be a finite number")
-    return float(value)
 
 
 def _check_sensor_states(sensor_states: Any) -> None:

@@ -173,6 +173,12 @@ class TokenGate:
             self._loop.close()
 
     def stop(self) -> None:
-        if self._stopped is not None and not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(lambda: self._stopped.done() or self._stopped.set_result(None))
+        stopped = self._stopped
+        if stopped is not None and not self._loop.is_closed():
+
+            def release() -> None:
+                if not stopped.done():
+                    stopped.set_result(None)
+
+            self._loop.call_soon_threadsafe(release)
         self._thread.join(5.0)

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["DashboardService", "SENSOR_STATES", "ServeProcess", "ServeStartError", "read_ready", "start_serve"]
+__all__ = ["SENSOR_STATES", "ServeProcess", "ServeStartError", "read_ready", "start_serve"]
 
-_HOMES = {"DashboardService": "_dashboard_port", "SENSOR_STATES": "_dashboard_port", "ServeProcess": "_launch",
+_HOMES = {"SENSOR_STATES": "_dashboard_port", "ServeProcess": "_launch",
           "ServeStartError": "_launch", "start_serve": "_launch", "read_ready": "_processes"}
 
 

@@ -36,7 +36,8 @@ class LiveRing:
         self.state_names = list(state_names)
         self.hz = float(hz)
         self.watch_s = float(watch_s)
-        self._items: deque[tuple[int, float, np.ndarray]] = deque(maxlen=capacity)
+        self._items: deque[tuple[int, float, np.ndarray, list[float] | None]] = deque(maxlen=capacity)
+        self._truths = False  # a simulated source handed true deflections
         self._seq = 0
         self._last_tick = -np.inf
         self._watch_until = -np.inf  # monotonic s
@@ -48,8 +49,11 @@ class LiveRing:
     def watched(self) -> bool:
         return time.monotonic() < self._watch_until
 
-    def add(self, t_s: np.ndarray, x: np.ndarray) -> None:
-        """A batch's estimates (``t_s`` (n,) UNIX s, ``x`` (n, nx)): kept at ``hz`` while watched."""
+    def add(self, t_s: np.ndarray, x: np.ndarray,
+            truth: Callable[[np.ndarray], list[np.ndarray | None]] | None = None) -> None:
+        """A batch's estimates (``t_s`` (n,) UNIX s, ``x`` (n, nx)): kept at ``hz`` while watched.
+        ``truth`` (a simulated source): the true deflection at the stations for given times (asked
+        only for the estimates kept)."""
         if time.monotonic() >= self._watch_until:
             return
         t = np.asarray(t_s, dtype=float)
@@ -59,14 +63,22 @@ class LiveRing:
         with self._lock:
             # the first estimate of each new tick of data time (ticks of 1/hz s)
             keep = np.flatnonzero(np.diff(np.concatenate([[self._last_tick], tick])) > 0)
-            for k in keep:
+            truths = truth(t[keep]) if truth is not None and keep.size else [None] * keep.size
+            self._truths = self._truths or truth is not None
+            for k, true in zip(keep, truths):
                 self._seq += 1
-                self._items.append((self._seq, float(t[k]), np.array(x[k], dtype=float)))
+                self._items.append((self._seq, float(t[k]), np.array(x[k], dtype=float),
+                                    None if true is None else np.asarray(true, dtype=float).tolist()))
             if keep.size:
                 self._last_tick = float(tick[keep[-1]])
 
     def read(self, after: int = 0) -> tuple[int, list[float], list[list[float]]]:
         """(newest seq, times, states) of the estimates newer than ``after``; starts or extends the watch."""
+        seq, times, states, _ = self._read(after)
+        return seq, times, states
+
+    def _read(self, after: int) -> tuple[int, list[float], list[list[float]], list[list[float] | None] | None]:
+        """``read``, and the true deflections (None unless a simulated source handed them)."""
         if after < 0:
             raise ValueError(f"{after=} must be >= 0")
         with self._lock:
@@ -75,10 +87,11 @@ class LiveRing:
                 self._last_tick = -np.inf
             self._watch_until = time.monotonic() + self.watch_s
             items = [it for it in self._items if it[0] > after]
-            return self._seq, [it[1] for it in items], [it[2].tolist() for it in items]
+            truths = [it[3] for it in items] if self._truths else None
+            return self._seq, [it[1] for it in items], [it[2].tolist() for it in items], truths
 
     def document(self, after: int, sensors: dict[str, str]) -> LiveEstimatesDocument:
-        seq, times, states = self.read(after)
+        seq, times, states, truths = self._read(after)
         extra: dict[str, Any] = {}
         if self.loads is not None:
             virtual, b_of = self.loads
@@ -87,4 +100,4 @@ class LiveRing:
                 out = virtual(b_of(np.asarray(states, dtype=float)))
                 extra.update({k: None if v is None else v.tolist() for k, v in out.items()})
         return LiveEstimatesDocument(source=self.source_id, seq=seq, state_names=self.state_names, t_s=times, x=states,
-                                     sensors=sensors, watch_s=self.watch_s, **extra)
+                                     sensors=sensors, watch_s=self.watch_s, truth_deflection=truths, **extra)

@@ -14,6 +14,7 @@ from contract import (
     SpectrumDocument,
     StatusDocument,
     StructuresDocument,
+    WindowDocument,
 )
 
 from ._deps import require_token, service_port
@@ -75,6 +76,15 @@ def structure_spectra(structure_id: str = STRUCTURE_ID, port: ServicePort = Depe
     if spec is None:
         raise HTTPException(404, f"structure {structure_id!r} has no analysis window yet")
     return spec
+
+
+@router.get("/api/structures/{structure_id}/windows/latest", summary="the structure's latest committed analysis window",
+            response_model=WindowDocument, responses={**AUTH_RESPONSES, **UNKNOWN})
+def structure_window(structure_id: str = STRUCTURE_ID, port: ServicePort = Depends(service_port)) -> WindowDocument:
+    window = of_structure(port.structure_window, structure_id)
+    if window is None:
+        raise HTTPException(404, f"structure {structure_id!r} has no analysis window yet")
+    return window
 
 
 @router.get("/api/structures/{structure_id}/rig", summary="the rig the structure is monitored with (rig.json)",

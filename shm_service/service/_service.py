@@ -1,5 +1,5 @@
 """The monitoring service: wires a source, the pipeline, storage, notifications, the HTTP API
-and the dashboard, and implements the dashboard's ``DashboardService`` port."""
+and the dashboard, and implements the ``contract.ServicePort`` the API and the dashboard read."""
 
 from __future__ import annotations
 
@@ -46,7 +46,6 @@ from ._structure import (
     ServiceError,
     Structure,
     StructureUnavailable,
-    _DashboardSink,
     _FailedStructure,
     _ModelCache,
 )
@@ -158,12 +157,11 @@ class MonitoringService(_StoredRows, SingleStructureView):
         self.dashboard_guard = SinkGuard("dashboard", log)
         shown = next((s for s in self.structures.values() if isinstance(s, Structure)), None)
         if settings.dashboard.enabled and shown is not None:
-            # a fleet's dashboard reads the structure each browser selects through the port (live ring, status,
-            # rows, spectra); a single structure's is pushed its data
-            self.dashboard = self._start_dashboard(None if self.fleet else shown)
+            # the dashboard reads the structure each browser shows through the port (live ring, status, rows,
+            # latest window and spectra), one structure as a fleet: nothing is pushed into it
+            self.dashboard = start_dashboard(self, self.settings, self.token)
         for structure in self.running_structures():
-            sink = _DashboardSink(self.dashboard, self, structure) if self.dashboard is not None and not self.fleet else None
-            structure.attach(self.storage, sink, self.dashboard_guard)
+            structure.attach(self.storage, None, self.dashboard_guard)
         self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
         archives = [s.archive for s in self.running_structures() if s.archive is not None]
         self.retention = RetentionWorker(settings.retention, storage=self.storage,
@@ -201,10 +199,6 @@ class MonitoringService(_StoredRows, SingleStructureView):
         if isinstance(found, _FailedStructure):
             raise StructureUnavailable(f"structure {structure_id!r} failed to start: {found.error}")
         return found
-
-    def _start_dashboard(self, structure: Structure | None) -> Any:
-        """The dashboard of the single ``structure``, or of the fleet (``None``)."""
-        return start_dashboard(self, self.settings, structure, self.token)
 
     # -- running ----------------------------------------------------------------------------
 

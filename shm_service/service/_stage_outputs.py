@@ -8,7 +8,7 @@ import logging
 import math
 import time
 from collections import deque
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -38,9 +38,10 @@ class PipelineSink(Protocol):
 
 
 class LiveRingLike(Protocol):
-    """A structure's live ring (``_live.LiveRing``): takes every batch's estimates (``t_s`` (n,), ``x`` (n, nx))."""
+    """A structure's live ring (``_live.LiveRing``): takes every batch's estimates (``t_s`` (n,), ``x`` (n, nx))
+    and, from a simulated source, a lookup of the true deflection at given times."""
 
-    def add(self, t_s: np.ndarray, x: np.ndarray) -> None: ...
+    def add(self, t_s: np.ndarray, x: np.ndarray, truth: Any = None) -> None: ...
 
 
 class OutputSettings(BaseModel):
@@ -93,7 +94,7 @@ class OutputStage:
         if self.archive_estimates:
             self._archive_estimates(epoch_ns, out)
         if self.live is not None:  # the structure's live ring: keeps them (decimated) only while watched
-            self.sink_guard.call("live", self.live.add, t_abs, out.x)
+            self.sink_guard.call("live", self.live.add, t_abs, out.x, self._truth_at if self.truth else None)
         if self.sink is None:
             return
         now = time.monotonic()
@@ -108,6 +109,14 @@ class OutputStage:
             if abs(int(tt[k]) - target) < 50_000_000:
                 truth = defl[k]
         self.sink_guard.call("estimate", self.sink.estimate, float(t_abs[-1]), out.x[-1].copy(), truth)
+
+    def _truth_at(self, t_abs: np.ndarray) -> list[np.ndarray | None]:
+        """The simulation's true deflection at the stations nearest each time (UNIX s; None farther than 50 ms)."""
+        tt = np.concatenate([t for t, _ in self.truth])
+        defl = np.concatenate([d for _, d in self.truth])
+        target = np.round(np.asarray(t_abs, dtype=float) * 1e9).astype(np.int64)
+        k = np.clip(np.searchsorted(tt, target), 0, len(tt) - 1)
+        return [defl[j] if abs(int(tt[j]) - int(want)) < 50_000_000 else None for j, want in zip(k, target)]
 
     def _archive_estimates(self, epoch_ns: int, out: FilterOutput) -> None:
         k = self.settings.estimate_decimation

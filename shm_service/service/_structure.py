@@ -11,17 +11,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 
 from contract import (
-    AlarmDocument,
     ChartLevelsDocument,
     ModelDocument,
     RigDescription,
-    SpectrumDocument,
     StructureSummaryDocument,
     ThresholdsDocument,
-    WindowDocument,
     load_rig,
 )
 from estimator import build_model
@@ -96,35 +92,6 @@ class ServiceError(RuntimeError):
 
 class RigPending(ServiceError):
     """``follow:``: the file (or its rig.json) is not there yet; the service can be made once it is."""
-
-
-class _DashboardSink:
-    """Adapts a structure's pipeline pushes to ``web.Dashboard`` (the pipeline's ``SinkGuard``
-    counts and isolates what it raises). Nothing is pushed while every browser has paused."""
-
-    def __init__(self, dashboard: Any, service: "MonitoringService", structure: "Structure") -> None:
-        self.dashboard = dashboard
-        self.service = service
-        self.structure = structure
-
-    def estimate(self, t_s: float, x: np.ndarray, truth: np.ndarray | None) -> None:
-        if self.service.paused:
-            return
-        pipeline = self.structure.pipeline
-        states = pipeline.sensor_states() if pipeline is not None else {}
-        self.dashboard.push_estimate(t_s, x, states, truth)
-
-    def spectra(self, spectrum: SpectrumDocument) -> None:
-        if not self.service.paused:
-            self.dashboard.push_spectra(spectrum)
-
-    def window(self, window: WindowDocument) -> None:
-        if not self.service.paused:
-            self.dashboard.push_window(window)
-
-    def alarm(self, alarm: AlarmDocument) -> None:
-        # Alarms reach the dashboard while paused too: pausing freezes the picture, not the alarms.
-        self.dashboard.push_alarm(alarm)
 
 
 class StructureUnavailable(LookupError):

@@ -32,6 +32,7 @@ from contract import (
     StatusDocument,
     StructuresDocument,
     StructureSummaryDocument,
+    WindowDocument,
 )
 
 from ._config import ServiceSettings, render_toml, resolve_token
@@ -159,7 +160,7 @@ class WorkerFleet(_StoredRows):
         self.notifier.start()
         threading.Thread(target=self._watch, name="workers", daemon=True).start()
         if self.settings.dashboard.enabled:
-            self.dashboard = start_dashboard(self, self.settings, None, self.token)
+            self.dashboard = start_dashboard(self, self.settings, self.token)
 
     def _drain(self, worker: _Worker) -> None:
         with worker.process.stdout:  # type: ignore[union-attr]  (closed at its end: no pipe left to the GC)
@@ -218,7 +219,7 @@ class WorkerFleet(_StoredRows):
             r = self._client.request(method, f"{worker.url}/api/structures/{structure_id}/{path}", headers=headers, **kwargs)
         except httpx.HTTPError as exc:
             raise StructureUnavailable(f"structure {structure_id!r}: its worker process does not answer ({exc})") from None
-        if r.status_code == 404 and path != "spectra/latest":
+        if r.status_code == 404 and path not in ("spectra/latest", "windows/latest"):
             raise KeyError(r.json().get("detail", f"no structure {structure_id!r}"))
         if r.status_code == 409:
             raise StructureUnavailable(r.json().get("detail"))
@@ -243,16 +244,7 @@ class WorkerFleet(_StoredRows):
         MonitoringService.check_token(self, token)  # type: ignore[arg-type]
 
     def health(self) -> HealthDocument:
-        reasons: list[str] = []
-        for worker in self.workers:
-            try:
-                doc = self._client.get(f"{worker.url}/healthz",
-                                       headers={"Authorization": f"Bearer {self.token}"} if self.token else {}).json()
-                reasons.extend(doc.get("reasons", []))
-            except (httpx.HTTPError, ValueError) as exc:
-                reasons.append(f"worker process {worker.index} ({', '.join(worker.ids[:3])}, ...) does not answer: {exc}")
-        return HealthDocument(status="degraded" if reasons else "ok", uptime_s=round(time.time() - self.started_at, 1),
-                              reasons=reasons)
+        return _fleet_health(self)
 
     def status(self, structure_id: str | None = None) -> StatusDocument:
         if structure_id is None:
@@ -339,6 +331,13 @@ class WorkerFleet(_StoredRows):
     def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
         return self.spectra(structure_id)
 
+    def structure_window(self, structure_id: str) -> WindowDocument | None:
+        r = self._forward("GET", structure_id, "windows/latest")
+        if r.status_code == 404:
+            return None
+        r.raise_for_status()
+        return WindowDocument.model_validate(r.json())
+
     def structure_rig(self, structure_id: str) -> RigDescription:
         r = self._forward("GET", structure_id, "rig")
         r.raise_for_status()
@@ -383,3 +382,17 @@ def _fleet_exposition(fleet: WorkerFleet) -> str:
                  "shm_uptime_seconds": [({}, round(time.time() - fleet.started_at, 1))]}
     # the structures as the front lists them (a worker that died: its structures failed)
     return merge_expositions(texts, overrides, front=fleet_metrics(fleet.structures_document(), {}))
+
+
+def _fleet_health(fleet: WorkerFleet) -> HealthDocument:
+    """``WorkerFleet.health``: the reasons of every worker, or that it does not answer."""
+    reasons: list[str] = []
+    for worker in fleet.workers:
+        try:
+            doc = fleet._client.get(f"{worker.url}/healthz",
+                                    headers={"Authorization": f"Bearer {fleet.token}"} if fleet.token else {}).json()
+            reasons.extend(doc.get("reasons", []))
+        except (httpx.HTTPError, ValueError) as exc:
+            reasons.append(f"worker process {worker.index} ({', '.join(worker.ids[:3])}, ...) does not answer: {exc}")
+    return HealthDocument(status="degraded" if reasons else "ok", uptime_s=round(time.time() - fleet.started_at, 1),
+                          reasons=reasons)

@@ -70,10 +70,11 @@ def test_identify_modes_lists_the_three_modes_and_nothing_else():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("uncertainty", ["jackknife", "batch"])
+@pytest.mark.parametrize("uncertainty", ["jackknife", "batch", "delete-one"])
 def test_standard_deviations_cover_the_errors_at_their_stated_rate(uncertainty):
     """Over seeded runs, |error| ≤ 1σ about 68 % of the time and ≤ 2σ about 95 %: the segment
-    jackknife of a window and the batch means of a record (each segment identified on its own)."""
+    jackknife of a window, the batch means and the delete-one jackknife of a record (each part
+    identified anew)."""
     s = three_dof()
     cfg = OmaConfig(fmin_hz=1.0, fmax_hz=15.0, uncertainty=uncertainty)
     zf, zz = [], []

@@ -17,8 +17,6 @@ MAX_CLASS, MAX_FUNCTION = 300, 80
 DEBT = {
     ("shm_service/loads.py", "loads_of_recording"): 108,
     ("shm_service/recording/_reader.py", "_Reader"): 327,
-    ("web/_dashboard.py", "Dashboard"): 321,
-    ("web/_view.py", "ClientView"): 806,
 }
 
 

@@ -183,3 +183,31 @@ def test_estimate_analyze_and_loads_take_one_definition_of_the_model_options():
     analyze = options("analyze")
     assert analyze == {k: v for k, v in estimate.items() if k != "aided"}  # analyze builds no aided model
     assert options("reprocess") == analyze
+
+
+def test_the_estimate_recording_carries_each_estimates_virtual_loads(estimate_file):
+    """`shm estimate --out` writes /estimate/loads: per estimate the strain and bending moment at the
+    stations its metadata names (the rig's hot spots, then 16 stations from the support), and the
+    moment at the support; ε = −c Σ b s'' and M = EI κ of the estimate's own b (issue 21)."""
+    from contract import ESTIMATE_LOADS_TOPIC, ESTIMATE_TOPIC
+    from estimator import build_model
+    from shm_service.recording import read_recording
+
+    _, est = estimate_file
+    rec = read_recording(est)
+    meta = rec.metadata["loads"]
+    eta = np.array(json.loads(meta["stations_m"]))
+    assert json.loads(meta["names"]) == [""] * 16 and eta[0] == 0.0 and eta.size == 16  # the lab rig names no hot spot
+    assert json.loads(meta["youngs_modulus_pa"]) == rec.rig.beam.youngs_modulus
+    loads, state = rec.channels[ESTIMATE_LOADS_TOPIC], rec.channels[ESTIMATE_TOPIC]
+    assert np.array_equal(loads.log_time_ns, state.log_time_ns)
+    b = state.values[:, [k for k, f in enumerate(state.fields) if f.startswith("b[")]]
+    assert loads.fields[0] == "strain[0]" and loads.fields[-1] == "root_moment_nm"
+    units = build_model(rec.rig, modes=b.shape[1]).units
+    c, ei = rec.rig.beam.fibre_distance(eta), rec.rig.beam.bending_stiffness(eta)
+    kappa = b @ units.curvature(eta).T
+    strain, moment, root = loads.values[:, :16], loads.values[:, 16:32], loads.values[:, 32]
+    np.testing.assert_allclose(strain, -kappa * c, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(moment, kappa * ei, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(root, 0.0, atol=1e-9)  # the lab sheet's pinned bearing carries no moment
+    assert np.std(strain[:, 1]) > 1e-7

@@ -1,5 +1,7 @@
-"""A demo feeder for the dashboard: the virtual rig's truth as "estimates", simple spectra and
-analysis windows, and an in-memory DashboardService. No service needed (tests and development).
+"""A stand-in service for the dashboard: an in-memory ``contract.ServicePort`` of one structure
+that serves the virtual rig's truth as live "estimates" (10 per second, as the service's live ring
+keeps them), simple spectra, a window, stored trend rows and alarms. No service needed (tests of
+the dashboard's parts and development; the real service's tests use the real one).
 
 Run ``PYTHONPATH=. .venv/bin/python tests/web/dashboard_feeder.py`` to look at the dashboard.
 """
@@ -16,16 +18,21 @@ import estimator
 from contract import (
     AlarmDocument,
     BaselineModeDocument,
+    LiveEstimatesDocument,
     SpectrumDocument,
     StateLayout,
     StatusDocument,
     ThresholdsDocument,
+    StructureModel,
+    StructuresDocument,
     TrendRow,
+    WindowDocument,
 )
 from shm_service.rig_layouts import default_rig
 from shm_service.virtual_rig import SimulationSettings, VirtualRig
 
 TOKEN = "let-me-in"
+ID = "virtual-rig"
 #: The fake service's chart levels: not the analytics' defaults, so a test sees they are drawn from the service.
 THRESHOLDS = ThresholdsDocument(frequency={"warning_sigma": 2.5, "alarm_sigma": 4.0},
                                 curvature={"warning_sigma": 2.5, "alarm_sigma": 6.0}, clear_sigma=1.5)
@@ -68,37 +75,98 @@ def alarm(alarm_id: int, *, mode: int | None = 2, level: str = "alarm", state: s
                          mode=mode, level=level, state=state, raised_at_s=raised_at_s, value=-6.2, threshold=4.0, message=message)
 
 
-class FakeService:
-    """In-memory DashboardService with the HTTP API's acknowledge rules."""
+class FakePort:
+    """One structure (``ID``) behind an in-memory ``contract.ServicePort``, with the HTTP API's
+    acknowledge rules. Its live estimates replay ``states`` (a copy of each 20th sample, 10 per
+    wall second, looping) with data times that keep increasing; ``served`` counts them."""
 
-    def __init__(self, *, token: str | None = TOKEN, history: list[TrendRow] | None = None, sensors: dict[str, str] | None = None):
+    fleet = False
+
+    def __init__(self, model: StructureModel, times: np.ndarray, states: np.ndarray, truth: np.ndarray | None, *,
+                 token: str | None = TOKEN, history: list[TrendRow] | None = None, sensors: dict[str, str] | None = None,
+                 spectrum: SpectrumDocument | None = None, window: WindowDocument | None = None,
+                 fatigue: Any = None, live_hz: float = 10.0) -> None:
+        self.model, self.times, self.states, self.truth = model, times, states, truth
         self.token = token
         self.lock = threading.Lock()
-        self.paused_calls: list[bool] = []
-        self.paused = False
         self._alarms: dict[int, AlarmDocument] = {}
         self._history = list(history or [])
         self.sensors = dict(sensors or {})
+        self.spectrum, self.window, self.fatigue = spectrum, window, fatigue
+        self.live_hz = live_hz
         self.started = time.time()
+        self._t0 = time.monotonic()
+        self.served = 0
 
-    def status(self) -> StatusDocument:
+    def _check(self, structure_id: str) -> None:
+        if structure_id != self.model.id:
+            raise KeyError(f"no structure {structure_id!r}")
+
+    def structures_document(self) -> StructuresDocument:
         with self.lock:
-            return fake_status(started=self.started, paused=self.paused, sensors=self.sensors, alarms=list(self._alarms.values()),
-                               windows=len({r.window_start_s for r in self._history}))
+            active = {a.chart: a.level for a in self._alarms.values() if a.active}
+            windows = len({r.window_start_s for r in self._history}) + (self.window is not None)
+        return StructuresDocument(structures=[{"id": self.model.id, "kind": "sim", "state": "running", "lag_s": 0.1,
+                                               "windows": windows, "active_alarms": active}])
 
-    def trends(self, from_s: float | None, to_s: float | None) -> list[TrendRow]:
+    def structure_model(self, structure_id: str) -> StructureModel:
+        self._check(structure_id)
+        return self.model
+
+    def structure_status(self, structure_id: str) -> StatusDocument:
+        self._check(structure_id)
+        with self.lock:
+            return fake_status(started=self.started, paused=False, sensors=self.sensors, alarms=list(self._alarms.values()),
+                               windows=len({r.window_start_s for r in self._history}), layout=self.model.layout)
+
+    def structure_trends(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,
+                         limit: int = 100_000) -> list[TrendRow]:
+        self._check(structure_id)
         with self.lock:
             return [r for r in self._history
-                    if (from_s is None or r.window_start_s >= from_s) and (to_s is None or r.window_start_s < to_s)]
+                    if (from_s is None or r.window_start_s >= from_s) and (to_s is None or r.window_start_s < to_s)][:limit]
 
-    def alarms(self) -> list[AlarmDocument]:
+    def structure_alarms(self, structure_id: str, state: str | None = None) -> list[AlarmDocument]:
+        self._check(structure_id)
         with self.lock:
-            return sorted(self._alarms.values(), key=lambda a: -a.id)
+            return sorted((a for a in self._alarms.values() if state is None or a.state == state), key=lambda a: -a.id)
+
+    def structure_window(self, structure_id: str) -> WindowDocument | None:
+        self._check(structure_id)
+        return self.window
+
+    def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
+        self._check(structure_id)
+        return self.spectrum
+
+    def structure_fatigue(self, structure_id: str, from_s: float | None = None, to_s: float | None = None,
+                          limit: int = 100_000) -> Any:
+        self._check(structure_id)
+        if self.fatigue is None:
+            raise LookupError(f"structure {structure_id!r} has no hot spots")
+        return self.fatigue
+
+    def live(self, structure_id: str, after: int = 0) -> LiveEstimatesDocument:
+        self._check(structure_id)
+        newest = int((time.monotonic() - self._t0) * self.live_hz)
+        seqs = list(range(max(after + 1, newest - 59), newest + 1))
+        step = max(1, int(round(200.0 / self.live_hz)))
+        rows = [(2 * 200 + k * step) % len(self.times) for k in seqs]
+        with self.lock:
+            self.served += len(seqs)
+        return LiveEstimatesDocument(
+            source=structure_id, seq=newest, state_names=list(self.model.layout.names),
+            t_s=[1000.0 + k / self.live_hz for k in seqs], x=[self.states[r].tolist() for r in rows],
+            sensors=self.sensors, watch_s=20.0,
+            truth_deflection=None if self.truth is None else [self.truth[r].tolist() for r in rows])
 
     def add_alarm(self, alarm: AlarmDocument) -> AlarmDocument:
         with self.lock:
             self._alarms[alarm.id] = alarm
             return alarm
+
+    def alarms(self, state: str | None = None) -> list[AlarmDocument]:
+        return self.structure_alarms(self.model.id, state)
 
     def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         if self.token is None or not token or token != self.token:
@@ -110,10 +178,17 @@ class FakeService:
             self._alarms[alarm_id] = alarm
             return alarm
 
-    def set_paused(self, paused: bool) -> None:
-        with self.lock:
-            self.paused = paused
-            self.paused_calls.append(paused)
+
+def demo_spectrum(layout: StateLayout, units: Any, times: np.ndarray, states: np.ndarray, fs: float = 200.0) -> SpectrumDocument:
+    """The spectra of the last 20 s of ``states`` with the tracked peaks near the model's frequencies."""
+    gamma = layout.gamma
+    expected = [float(f[-1]) for f in units.frequencies_hz[:gamma]]
+    n = min(len(times), int(20 * fs))
+    freqs, spec = spectra_of(layout.b_of(states[-n:]), fs)
+    tracked = [[] if f is None else [f] for f in tracked_peaks(freqs, spec, expected)]
+    return SpectrumDocument.from_arrays(source=ID, window_start_s=float(times[-n]), window_end_s=float(times[-1]),
+                                        frequencies_hz=freqs, amplitudes=spec, tracked_hz=tracked,
+                                        baseline_hz=[[f] for f in expected])
 
 
 def simulated_estimates(seconds: float = 30.0, *, excitation: str = "ambient", seed: int = 1, gamma: int = 4,
@@ -176,73 +251,21 @@ def history_rows(n_windows: int, units: Any, *, t0: float = -600.0, window_s: fl
     return rows
 
 
-class DemoFeeder:
-    """Pushes the simulated run into a dashboard in real time (looping), in its own thread."""
-
-    def __init__(self, dashboard: Any, times: np.ndarray, states: np.ndarray, truth: np.ndarray,
-                 sensor_states: dict[str, str], *, rate_hz: float = 20.0, spectra_every_s: float = 2.0, fs: float = 200.0):
-        self.dashboard = dashboard
-        self.times, self.states, self.truth = times, states, truth
-        self.sensor_states = sensor_states
-        self.rate_hz = rate_hz
-        self.spectra_every_s = spectra_every_s
-        self.fs = fs
-        self.pushed = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="demo-feeder", daemon=True)
-        gamma = dashboard.gamma
-        self.expected = [float(f[-1]) for f in dashboard.units.frequencies_hz[:gamma]]
-
-    def push_spectra(self, upto: int) -> None:
-        n = min(upto, int(20 * self.fs))
-        b = self.dashboard.layout.b_of(self.states[upto - n : upto])
-        freqs, spec = spectra_of(b, self.fs)
-        tracked = [[] if f is None else [f] for f in tracked_peaks(freqs, spec, self.expected)]
-        self.dashboard.push_spectra(SpectrumDocument.from_arrays(
-            source="virtual-rig", window_start_s=float(self.times[upto - n]), window_end_s=float(self.times[upto - 1]),
-            frequencies_hz=freqs, amplitudes=spec, tracked_hz=tracked, baseline_hz=[[f] for f in self.expected]))
-
-    def push_one(self, i: int) -> None:
-        self.dashboard.push_estimate(float(self.times[i]), self.states[i], self.sensor_states, self.truth[i])
-        self.pushed += 1
-
-    def start(self) -> "DemoFeeder":
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
-
-    def _run(self) -> None:
-        step = max(1, int(round(self.fs / self.rate_hz)))
-        i, last_spec = int(2 * self.fs), -1e9
-        while not self._stop.is_set():
-            if i >= len(self.times):
-                i = int(2 * self.fs)
-            self.push_one(i)
-            if self.times[i] - last_spec >= self.spectra_every_s:
-                last_spec = self.times[i]
-                self.push_spectra(i)
-            i += step
-            self._stop.wait(1.0 / self.rate_hz)
-
-
 def main() -> None:  # pragma: no cover - manual demo
     from web import Dashboard
 
     rig, units, layout, stations, times, states, truth = simulated_estimates(60.0)
     states_by_topic = {s.topic: "ok" for s in rig.sensors}
     states_by_topic["/tof/s3"] = "degraded"
-    service = FakeService(history=history_rows(40, units), sensors=states_by_topic)
-    dash = Dashboard(host="127.0.0.1", port=8080, rig=rig, units=units, layout=layout, stations=stations, service=service)
+    model = StructureModel(id=ID, rig=rig, units=units, layout=layout, stations=stations)
+    service = FakePort(model, times, states, truth, history=history_rows(40, units), sensors=states_by_topic,
+                       spectrum=demo_spectrum(layout, units, times, states))
+    dash = Dashboard(host="127.0.0.1", port=8080, service=service)
     print("dashboard at", dash.url, flush=True)
-    feeder = DemoFeeder(dash, times, states, truth, states_by_topic).start()
     try:
         while True:
             time.sleep(1)
     except KeyboardInterrupt:
-        feeder.stop()
         dash.stop()
 
 

@@ -7,7 +7,7 @@ from urllib.parse import urlparse
 
 import pytest
 
-from test_dashboard_browser import CHROMIUM_ARGS, VIEWPORT, chromium  # noqa: F401  (the fixture that installs Debian's chromium)
+from browser_helpers import CHROMIUM_ARGS, VIEWPORT
 
 
 @pytest.fixture()
@@ -27,7 +27,7 @@ def api_url(tmp_path):
 
 
 @pytest.mark.timeout(180)
-def test_swagger_ui_and_redoc_render_offline(chromium, api_url, tmp_path):  # noqa: F811
+def test_swagger_ui_and_redoc_render_offline(chromium, api_url, tmp_path):
     from playwright.sync_api import sync_playwright
 
     local = urlparse(api_url).netloc

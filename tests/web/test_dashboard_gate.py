@@ -14,7 +14,7 @@ import viser
 from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus
 
-from test_dashboard_browser import CHROMIUM_ARGS, chromium  # noqa: F401  (the fixture that installs Debian's chromium when missing)
+from browser_helpers import CHROMIUM_ARGS
 from web._gate import COOKIE, TokenGate
 
 TOKEN = "dashboard-token-1"
@@ -70,12 +70,12 @@ def test_the_dashboard_refuses_to_listen_off_loopback_without_a_token():
     from web import Dashboard
 
     with pytest.raises(ValueError, match="not loopback: a token is required"):
-        Dashboard(host="0.0.0.0", port=0, rig=None, units=None, layout=None, stations=None, service=None)
+        Dashboard(host="0.0.0.0", port=0, service=None)
     with pytest.raises(ValueError, match="at least 8"):
         TokenGate(host="127.0.0.1", port=0, upstream_port=1, token="short")
 
 
-def test_a_browser_opens_the_gated_dashboard_with_the_token(chromium, tmp_path):  # noqa: F811
+def test_a_browser_opens_the_gated_dashboard_with_the_token(chromium, tmp_path):
     """Headless chromium: without the token the gate answers 401; with ``?token=`` once the
     page loads, its websocket passes the gate with the cookie and viser's GUI appears."""
     from playwright.sync_api import sync_playwright

@@ -8,14 +8,15 @@ import numpy as np
 import pytest
 
 import estimator
-from contract import SpectrumDocument, StateLayout, TrendRow, WindowDocument
+from contract import LiveEstimatesDocument, SpectrumDocument, StateLayout, StructureModel, TrendRow, WindowDocument
 from shm_service.rig_layouts import default_rig
-from web import BeamState, Dashboard, centreline, parse_state, ribbon, ribbon_faces, tangent_angle, tof_rays, to_world
+from web import (
+    BeamState, Dashboard, StructureFeed, centreline, nice_scale, parse_state, ribbon, ribbon_faces, spectrum_plot,
+    tangent_angle, thresholds_of, tof_rays, to_world, window_record, windows_from_trend_rows,
+)
 from web._geometry import CLAMP_GRIP, clamp_boxes, up_sign
-from web._data import spectrum_plot, thresholds_of, window_record, windows_from_trend_rows
-from web._view import _nice
 
-from dashboard_feeder import THRESHOLDS, FakeService, alarm
+from dashboard_feeder import ID, THRESHOLDS, FakePort, alarm
 
 
 class Parabola:
@@ -222,18 +223,7 @@ def test_spectrum_plot_marks_tracked_and_baseline_frequencies():
 
 
 def test_nice_overscale_steps():
-    assert [_nice(v) for v in (1.0, 3.7, 19.9, 20.0, 499.0)] == [1.0, 2.0, 10.0, 20.0, 200.0]
-
-
-@pytest.fixture(scope="module")
-def dashboard():
-    rig = default_rig()
-    units = estimator.unit_deformations(estimator.assemble_beam(rig), 3)
-    stations = np.asarray(rig.truth_stations, dtype=float)
-    dash = Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=StateLayout("gyro", 3, 4), stations=stations,
-                     service=FakeService())
-    yield dash
-    dash.stop()
+    assert [nice_scale(v) for v in (1.0, 3.7, 19.9, 20.0, 499.0)] == [1.0, 2.0, 10.0, 20.0, 200.0]
 
 
 def _spectrum(gamma, n=50, **extra):
@@ -243,35 +233,51 @@ def _spectrum(gamma, n=50, **extra):
     return SpectrumDocument.from_arrays(**{**doc, **extra})
 
 
-def test_dashboard_refuses_bad_pushes_with_clear_messages(dashboard):
-    dash = dashboard  # Γ = 3 with four peripheral gyroscopes: 5 + 3 + 4 + 1 = 13 states
-    assert dash.url == f"http://127.0.0.1:{dash.port}/" and dash.port > 0
+def _feed(gamma=3, **kw):
+    rig = kw.pop("rig", None) or default_rig()
+    units = estimator.unit_deformations(estimator.assemble_beam(rig), gamma)
+    stations = kw.pop("stations", None)
+    stations = np.asarray(rig.truth_stations, dtype=float) if stations is None else stations
+    return StructureFeed(rig=rig, units=units, layout=kw.pop("layout", StateLayout("gyro", gamma, 4)), stations=stations, **kw)
+
+
+def _live(feed, x, *, t=(1.0,), sensors=None, truth=None):
+    return LiveEstimatesDocument(source="s", seq=len(t), state_names=list(feed.layout.names), t_s=list(t),
+                                 x=[list(v) for v in x], sensors=sensors or {}, watch_s=20.0, truth_deflection=truth)
+
+
+def test_a_feed_refuses_what_it_cannot_draw_with_clear_messages():
+    feed = _feed()  # Γ = 3 with four peripheral gyroscopes: 5 + 3 + 4 + 1 = 13 states
     ok_x = np.zeros(13)
-    dash.push_estimate(1.0, ok_x, {"/imu/s1": "ok"})
-    with pytest.raises(ValueError, match="needs 13"):
-        dash.push_estimate(1.0, np.zeros(9), {})  # 5 + Γ + 1: the length the dashboard once assumed
-    with pytest.raises(ValueError, match="must be one of"):
-        dash.push_estimate(1.0, ok_x, {"/imu/s1": "broken"})
-    with pytest.raises(ValueError, match="t_s"):
-        dash.push_estimate(float("nan"), ok_x, {})
-    with pytest.raises(ValueError, match="truth_deflection must have shape"):
-        dash.push_estimate(1.0, ok_x, {}, truth_deflection=np.zeros(3))
-    dash.push_spectra(_spectrum(3))  # before a baseline: tracked frequencies only
-    assert dash.snapshot().spectra.baseline_hz == ((), (), ())
+    feed.add_live(_live(feed, [ok_x], sensors={"/imu/s1": "ok"}, truth=[[0.001] * feed.stations.size]), now=0.0)
+    feed.play(100.0)
+    snap = feed.snapshot()
+    assert snap.estimate.t_s == 1.0 and snap.estimate.truth_deflection.shape == feed.stations.shape
+    with pytest.raises(ValueError, match="needs 13"):  # 5 + Γ + 1: the length the dashboard once assumed
+        feed.add_live(_live(feed, [np.zeros(9)], t=(2.0,)), now=1.0)
+    with pytest.raises(ValueError, match="the model drawn has"):
+        feed.add_live(LiveEstimatesDocument(source="s", seq=1, state_names=["d"], t_s=[4.0], x=[[0.0]], watch_s=1.0))
+    feed.set_spectra(_spectrum(3))  # before a baseline: tracked frequencies only
+    assert feed.snapshot().spectra.baseline_hz == ((), (), ())
     with pytest.raises(ValueError, match=r"shape \(len\(frequencies_hz\), Γ\)"):
-        dash.push_spectra(_spectrum(4))
+        feed.set_spectra(_spectrum(4))
     with pytest.raises(ValueError, match="WindowDocument"):
-        dash.push_window({"kind": "ambient"})
+        feed.add_window({"kind": "ambient"})
     with pytest.raises(ValueError, match="AlarmDocument"):
-        dash.push_alarm({"id": 1, "level": "alarm"})
-    dash.push_window(_window(curvature=None))
-    dash.push_alarm(alarm(1, level="warning"))
-    snap = dash.snapshot()
-    assert snap.estimate.t_s == 1.0 and snap.alarms[0].id == 1 and snap.spectra.amplitudes.shape == (50, 3)
+        feed.upsert_alarm({"id": 1, "level": "alarm"})
+    with pytest.raises(ValueError, match="one per station"):
+        feed.add_window(_window(curvature={"index": [0.1, 0.2], "total": 0.1, "eta_m": 1.0, "third": "upper"}))
+    feed.add_window(_window(curvature=None))
+    feed.upsert_alarm(alarm(1, level="warning"))
+    snap = feed.snapshot()
+    assert snap.alarms[0].id == 1 and snap.spectra.amplitudes.shape == (50, 3)
     assert snap.windows[-1].frequency_hz[1] == 0.30
+    # the window's own record replaces the one its trend rows gave (same start): one record per window
+    feed.add_window(_window(curvature=None))
+    assert len(feed.snapshot().windows) == 1
 
 
-def test_dashboard_draws_a_standing_clamped_mast_with_its_labels():
+def test_a_standing_clamped_mast_is_read_through_its_layout():
     import json
 
     from contract import parse_rig
@@ -283,32 +289,34 @@ def test_dashboard_draws_a_standing_clamped_mast_with_its_labels():
     data["point_masses"] = [m for m in data["point_masses"] if m["position"] <= 1.5]
     data["truth_stations"] = [0.5, 1.0, 1.5]
     rig = parse_rig(data)
-    units = estimator.unit_deformations(estimator.assemble_beam(rig), 2)
-    assert units.modes == ((1,), (2,))
-    dash = Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=StateLayout("gyro", 2, 1, attitude=False),
-                     stations=np.array([0.5, 1.0, 1.5]), service=FakeService())
-    try:
-        assert dash.clamped and dash.standing
-        assert dash.mode_map.unit_label(1) == "b1 · mode 1" and dash.mode_map.mode_label(2) == "mode 2 (b2)"
-        dash.push_estimate(1.0, np.array([0.01, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0]), {})
-        assert dash.snapshot().estimate.state.phi == 0.0
-    finally:
-        dash.stop()
+    feed = _feed(2, rig=rig, layout=StateLayout("gyro", 2, 1, attitude=False), stations=np.array([0.5, 1.0, 1.5]))
+    assert feed.units.modes == ((1,), (2,))
+    assert feed.clamped and feed.standing
+    assert feed.mode_map.unit_label(1) == "b1 · mode 1" and feed.mode_map.mode_label(2) == "mode 2 (b2)"
+    feed.add_live(_live(feed, [[0.01, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0]]), now=0.0)
+    feed.play(100.0)
+    assert feed.snapshot().estimate.state.phi == 0.0
     hinged = type("Rig", (), {"beam": rig.beam, "reflector_distance": 0.5, "sensors": rig.sensors,
                               "orientation": "standing", "support": "hinged"})()
     with pytest.raises(ValueError, match="support='hinged' must be 'pinned' or 'clamped'"):
-        Dashboard(host="127.0.0.1", port=0, rig=hinged, units=units, layout=StateLayout("gyro", 2, 1, attitude=False),
-                  stations=np.array([0.5, 1.0]), service=FakeService())
+        StructureFeed(rig=hinged, units=feed.units, layout=StateLayout("gyro", 2, 1, attitude=False), stations=np.array([0.5, 1.0]))
 
 
-def test_dashboard_constructor_checks_its_arguments():
-    rig = default_rig()
-    units = estimator.unit_deformations(estimator.assemble_beam(rig), 2)
-    layout = StateLayout("gyro", 2, 4)
+def test_a_feed_checks_its_model():
     with pytest.raises(ValueError, match="stations"):
-        Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=layout, stations=np.array([0.5, 9.0]), service=FakeService())
-    with pytest.raises(TypeError, match="DashboardService"):
-        Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=layout, stations=np.array([1.0, 2.0]), service=object())
+        _feed(2, layout=StateLayout("gyro", 2, 4), stations=np.array([0.5, 9.0]))
     with pytest.raises(ValueError, match="Γ=3"):
-        Dashboard(host="127.0.0.1", port=0, rig=rig, units=units, layout=StateLayout("gyro", 3, 4), stations=np.array([1.0, 2.0]),
-                  service=FakeService())
+        _feed(2, layout=StateLayout("gyro", 3, 4), stations=np.array([1.0, 2.0]))
+
+
+def test_the_dashboard_needs_the_port():
+    with pytest.raises(TypeError, match=r"contract.ServicePort: missing structures_document\(\)"):
+        Dashboard(host="127.0.0.1", port=0, service=object())
+    with pytest.raises(ValueError, match="render_hz"):
+        Dashboard(host="127.0.0.1", port=0, service=_port(), render_hz=100.0)
+
+
+def _port() -> FakePort:
+    feed = _feed(2, layout=StateLayout("gyro", 2, 4))
+    model = StructureModel(id=ID, rig=feed.rig, units=feed.units, layout=feed.layout, stations=feed.stations)
+    return FakePort(model, np.zeros(1), np.zeros((1, feed.layout.size)), None)

@@ -10,17 +10,11 @@ from __future__ import annotations
 
 import os
 import re
-import signal
-import subprocess
 import time
-from pathlib import Path
 
 import pytest
 
-from shm_service.service import read_ready, start_serve
-from test_dashboard_browser import CHROMIUM_ARGS, VIEWPORT, _visible, _wait, chromium  # noqa: F401 (fixture)
-
-ROOT = Path(__file__).resolve().parents[2]
+from browser_helpers import CHROMIUM_ARGS, VIEWPORT, interrupt_group, save_failure, serve_urls, start_demo, visible, wait
 #: the issue's bound on this 2-core machine when quiet: live estimates this soon after the dashboard's
 #: port opens. Other processes' load stretches every wall-clock time, so the bound is stretched by the
 #: machine's load per core when that is above 1 (the test still fails when the kernels compile at the
@@ -36,7 +30,7 @@ PHASES = ("compiling the filter", "waiting for data", "calibrating at rest", "ca
 
 
 @pytest.mark.timeout(900)
-def test_the_first_demo_shows_its_header_and_counts_estimates_within_30_s(chromium, tmp_path):  # noqa: F811
+def test_the_first_demo_shows_its_header_and_counts_estimates_within_30_s(chromium, tmp_path):
     import httpx
     from playwright.sync_api import sync_playwright
 
@@ -50,28 +44,20 @@ def test_the_first_demo_shows_its_header_and_counts_estimates_within_30_s(chromi
         # the browser is up before the service starts: the times below are the service's, not Chromium's start
         browser = p.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
         page = browser.new_page(viewport=VIEWPORT)
-        with open(out, "w") as stdout:
-            demo = start_serve(args, command="demo", cwd=tmp_path, stdout=stdout, stderr=subprocess.STDOUT,
-                               start_new_session=True, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=None,
-                               ready_file=tmp_path / "ready.json")
+        demo = start_demo(args, tmp_path, out)
         proc = demo.process
         try:
-            def urls():
-                if proc.poll() is not None:
-                    raise AssertionError(f"shm demo ended early ({proc.returncode}):\n{out.read_text()[-3000:]}")
-                doc = read_ready(demo.ready_file)
-                return (doc["api"], doc["dashboard"]) if doc and doc.get("dashboard") else None
-
-            api_url, dash_url = _wait(urls, 240, "shm demo to say where its API and dashboard are", poll=0.05)
+            api_url, dash_url = wait(lambda: serve_urls(demo, out, "shm demo"), 240,
+                                     "shm demo to say where its API and dashboard are", poll=0.05)
             port_open = time.monotonic()
             load = _load_factor()
             with httpx.Client(base_url=api_url, timeout=10) as api:
                 page.goto(dash_url)
                 # the panel: its header (the label and the live badge), its tabs, and what the service does now
-                _visible(page, "IMMS structural health monitor").wait_for(timeout=30_000)
-                _visible(page, "LIVE", exact=False).wait_for(timeout=30_000)
+                visible(page, "IMMS structural health monitor").wait_for(timeout=30_000)
+                visible(page, "LIVE", exact=False).wait_for(timeout=30_000)
                 for tab in ("Spectra", "Trends", "Alarms", "Status"):
-                    _visible(page, tab, exact=True).wait_for(timeout=30_000)
+                    visible(page, tab, exact=True).wait_for(timeout=30_000)
                 header_s = time.monotonic() - port_open
                 phase = page.get_by_text(re.compile("|".join(re.escape(x) for x in PHASES))).filter(visible=True).first
                 phase.wait_for(timeout=30_000)
@@ -80,7 +66,7 @@ def test_the_first_demo_shows_its_header_and_counts_estimates_within_30_s(chromi
                     st = api.get("/api/status").json()
                     return st if st["pipeline"]["estimates"] > 0 else None
 
-                st = _wait(estimating, 120, "/api/status to count estimates", poll=0.25)
+                st = wait(estimating, 120, "/api/status to count estimates", poll=0.25)
                 first_estimates_s = time.monotonic() - port_open
                 print(f"header after {header_s:.1f} s, first estimates after {first_estimates_s:.1f} s "
                       f"of the dashboard's port opening (load per core {load:.2f}); progress: {st['service']['progress']!r}")
@@ -89,20 +75,13 @@ def test_the_first_demo_shows_its_header_and_counts_estimates_within_30_s(chromi
                     f"the first estimates came {first_estimates_s:.1f} s after the dashboard's port opened "
                     f"(bound {FIRST_ESTIMATES_S:g} s × the load per core {load:.2f})")
                 # the page follows: the header shows the live state (t = …) once estimates flow
-                _visible(page, "t = ", exact=False).wait_for(timeout=30_000)
+                visible(page, "t = ", exact=False).wait_for(timeout=30_000)
         except BaseException:
-            page.screenshot(path=str(tmp_path / "failure.png"))
-            print("failure screenshot:", tmp_path / "failure.png")
+            save_failure(page, tmp_path)
             raise
         finally:
             browser.close()
-            if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C
-                try:
-                    proc.wait(90)
-                except subprocess.TimeoutExpired:
-                    os.killpg(proc.pid, signal.SIGKILL)
-                    proc.wait(10)
+            interrupt_group(proc)  # Ctrl-C
     text = out.read_text()
     assert proc.returncode == 0, text[-3000:]
     assert "Traceback" not in text, text[-3000:]

@@ -17,11 +17,9 @@ import httpx
 import pytest
 
 from shm_service.service import start_serve
-from test_dashboard_browser import (  # noqa: F401  (chromium: the fixture)
-    CHROMIUM_ARGS, VIEWPORT, _image, _support_offset, _visible, _wait, chromium, serve_urls, stop_process,
+from browser_helpers import (
+    ROOT, browser_page, close_webgl_notice, scene_picture, serve_urls, stop_process, support_offset, visible, wait,
 )
-
-ROOT = Path(__file__).resolve().parents[2]
 # The README's picture of a fleet's dashboard: SHM_FLEET_SCREENSHOT=docs/fleet-dashboard.png (else a temporary file).
 SCREENSHOT = Path(os.environ.get("SHM_FLEET_SCREENSHOT", Path(tempfile.gettempdir()) / "shm-fleet-dashboard.png"))
 TOKEN = "fleet-dashboard-token"
@@ -87,7 +85,7 @@ def fleet(tmp_path_factory):
                             timeout=None, ready_file=tmp / "ready.json")
     proc = serve.process
     try:
-        yield _wait(lambda: serve_urls(serve, log), 120, "shm serve to say where its API and dashboard are")
+        yield wait(lambda: serve_urls(serve, log), 120, "shm serve to say where its API and dashboard are")
     finally:
         stop_process(proc)
     text = log.read_text()
@@ -96,13 +94,7 @@ def fleet(tmp_path_factory):
 
 def _scene(page):
     """The left part of the 3-D canvas as an image (the GUI panel on the right left out)."""
-    box = page.evaluate(
-        "() => { const c = [...document.querySelectorAll('canvas')]"
-        ".sort((a, b) => b.width * b.height - a.width * a.height)[0];"
-        " const r = c.getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; }"
-    )
-    x0, y0, w, h = (int(round(v)) for v in box)
-    return _image(page.screenshot(clip={"x": x0, "y": y0, "width": int(0.62 * w), "height": h}))
+    return scene_picture(page)[0]
 
 
 def _choose(page, structure_id: str) -> None:
@@ -113,64 +105,48 @@ def _choose(page, structure_id: str) -> None:
 
 @pytest.mark.timeout(240)
 def test_the_fleets_dashboard_switches_structure_in_chromium(chromium, fleet, tmp_path):
-    from playwright.sync_api import sync_playwright
-
     api_url, dash_url = fleet
-    with sync_playwright() as p:
-        context = p.chromium.launch_persistent_context(
-            str(tmp_path / "profile"), executable_path=chromium, headless=True, args=CHROMIUM_ARGS, viewport=VIEWPORT,
-        )
-        page = context.pages[0] if context.pages else context.new_page()
-        try:
-            t0 = time.monotonic()
-            page.goto(dash_url)
-            page.wait_for_selector("canvas", timeout=60_000)
-            # The overview: every structure with its state; the first one shown.
-            _visible(page, "3 structures", exact=False).wait_for(timeout=60_000)
-            for sid in IDS:
-                row = page.locator("tr", has=page.get_by_text(sid, exact=False)).filter(visible=True).first
-                row.wait_for(timeout=30_000)
-                assert re.search(r"(starting|running)", row.inner_text()), row.inner_text()
-            _visible(page, "Structure mast-01").wait_for(timeout=30_000)
-            _visible(page, "b1 · mode 1 (", exact=False).wait_for(timeout=30_000)  # the clamp: no combimode
-            assert page.get_by_text("mode 1+2", exact=False).filter(visible=True).count() == 0
-            assert page.get_by_text("b4 · mode", exact=False).filter(visible=True).count() == 0  # Γ = 3
-            print(f"first structure shown after {time.monotonic() - t0:.1f} s")
-            try:  # the browser's own notice about software WebGL only hides the picture
-                page.locator(".mantine-Notification-root", has_text="Software WebGL").locator("button").first.click(timeout=2_000)
-            except Exception:
-                pass
-            time.sleep(0.5)
-            offset = _support_offset(_scene(page))  # drawn at rest until its first estimates
-            assert offset > 0.1, f"the mast should stand above its clamp: support at {offset:+.2f}"
+    with browser_page(chromium, tmp_path) as page:
+        t0 = time.monotonic()
+        page.goto(dash_url)
+        page.wait_for_selector("canvas", timeout=60_000)
+        # The overview: every structure with its state; the first one shown.
+        visible(page, "3 structures", exact=False).wait_for(timeout=60_000)
+        for sid in IDS:
+            row = page.locator("tr", has=page.get_by_text(sid, exact=False)).filter(visible=True).first
+            row.wait_for(timeout=30_000)
+            assert re.search(r"(starting|running)", row.inner_text()), row.inner_text()
+        visible(page, "Structure mast-01").wait_for(timeout=30_000)
+        visible(page, "b1 · mode 1 (", exact=False).wait_for(timeout=30_000)  # the clamp: no combimode
+        assert page.get_by_text("mode 1+2", exact=False).filter(visible=True).count() == 0
+        assert page.get_by_text("b4 · mode", exact=False).filter(visible=True).count() == 0  # Γ = 3
+        print(f"first structure shown after {time.monotonic() - t0:.1f} s")
+        close_webgl_notice(page)
+        time.sleep(0.5)
+        offset = support_offset(_scene(page))  # drawn at rest until its first estimates
+        assert offset > 0.1, f"the mast should stand above its clamp: support at {offset:+.2f}"
 
-            # Switch: the pendulum's rig, labels, spectra and live estimates (from its worker, through the front).
-            _choose(page, "pendulum-02")
-            _visible(page, "Structure pendulum-02").wait_for(timeout=30_000)
-            _visible(page, "b1 · mode 1+2", exact=False).wait_for(timeout=30_000)  # the pin's combimode
-            _visible(page, "b4 · mode 5", exact=False).wait_for(timeout=30_000)  # Γ = 4
-            page.get_by_text(re.compile(r"φ = [+-]\d+\.\d+ mrad")).filter(visible=True).first.wait_for(timeout=90_000)
-            print(f"the pendulum's live estimates after {time.monotonic() - t0:.1f} s")
-            shot_a = _scene(page)
-            offset = _support_offset(shot_a)
-            assert offset < -0.1, f"the pendulum should hang below its pin: support at {offset:+.2f}"
-            time.sleep(1.0)
-            assert (abs(shot_a - _scene(page)) > 30).any(), "the pendulum does not move"
-            SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
-            SCREENSHOT.write_bytes(page.screenshot())
+        # Switch: the pendulum's rig, labels, spectra and live estimates (from its worker, through the front).
+        _choose(page, "pendulum-02")
+        visible(page, "Structure pendulum-02").wait_for(timeout=30_000)
+        visible(page, "b1 · mode 1+2", exact=False).wait_for(timeout=30_000)  # the pin's combimode
+        visible(page, "b4 · mode 5", exact=False).wait_for(timeout=30_000)  # Γ = 4
+        page.get_by_text(re.compile(r"φ = [+-]\d+\.\d+ mrad")).filter(visible=True).first.wait_for(timeout=90_000)
+        print(f"the pendulum's live estimates after {time.monotonic() - t0:.1f} s")
+        shot_a = _scene(page)
+        offset = support_offset(shot_a)
+        assert offset < -0.1, f"the pendulum should hang below its pin: support at {offset:+.2f}"
+        time.sleep(1.0)
+        assert (abs(shot_a - _scene(page)) > 30).any(), "the pendulum does not move"
+        SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+        SCREENSHOT.write_bytes(page.screenshot())
 
-            # Only the structures shown were read live: the third kept nothing.
-            with httpx.Client(base_url=api_url, timeout=30) as c:
-                untouched = c.get("/api/structures/pendulum-03/live").json()
-                shown = c.get("/api/structures/pendulum-02/live").json()
-            assert untouched["seq"] == 0 and untouched["t_s"] == []
-            assert shown["seq"] > 0 and shown["state_names"][:5] == ["d", "h", "d_rate", "h_rate", "phi"]
-        except BaseException:
-            page.screenshot(path=str(tmp_path / "failure.png"))
-            print("failure screenshot:", tmp_path / "failure.png")
-            raise
-        finally:
-            context.close()
+        # Only the structures shown were read live: the third kept nothing.
+        with httpx.Client(base_url=api_url, timeout=30) as c:
+            untouched = c.get("/api/structures/pendulum-03/live").json()
+            shown = c.get("/api/structures/pendulum-02/live").json()
+        assert untouched["seq"] == 0 and untouched["t_s"] == []
+        assert shown["seq"] > 0 and shown["state_names"][:5] == ["d", "h", "d_rate", "h_rate", "phi"]
 
 
 @pytest.mark.timeout(120)
@@ -178,7 +154,7 @@ def test_metrics_of_a_fleet_on_worker_processes(fleet):
     """``/metrics`` of the front: each structure's samples labelled ``structure``, from both workers."""
     api_url, _ = fleet
     with httpx.Client(base_url=api_url, timeout=30) as c:
-        _wait(lambda: all(s["data_time_s"] for s in c.get("/api/structures").json()["structures"]), 90, "data of all")
+        wait(lambda: all(s["data_time_s"] for s in c.get("/api/structures").json()["structures"]), 90, "data of all")
         r = c.get("/metrics")
         assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
         text = r.text

@@ -1,5 +1,5 @@
-"""A fleet's dashboard without a browser: a structure's live estimates played out at their data
-pace, the overview's order and marks, and the dashboard's checks of what it is given."""
+"""The dashboard's parts without a browser: a structure's live estimates played out at their data
+pace, the overview's order and marks, a sectioned mast's feed."""
 
 from __future__ import annotations
 
@@ -9,11 +9,7 @@ import pytest
 import estimator
 from contract import LiveEstimatesDocument, StateLayout, StructuresDocument, StructureSummaryDocument
 from shm_service.rig_layouts import default_rig
-from web import Dashboard
-from web._feed import StructureFeed
-from web._fleet import overview_html, severity
-
-from dashboard_feeder import FakeService
+from web import StructureFeed, overview_html, severity
 
 LAYOUT = StateLayout("gyro", 2, 0)  # d, h, d_rate, h_rate, phi, b1, b2, gyro_bias_D
 
@@ -78,15 +74,6 @@ def test_the_overview_lists_problems_first_and_marks_the_one_shown():
     assert "curvature: warning, mode1: alarm" in text and "title='file gone'" in text
     assert "Waiting for the fleet" in overview_html(None, None, None)
     assert "boom" in overview_html(None, "boom", None)
-
-
-def test_a_fleets_dashboard_takes_no_rig_and_needs_the_fleets_port(feed_args):
-    with pytest.raises(ValueError, match="must not be given"):
-        Dashboard(host="127.0.0.1", port=0, service=FakeService(), fleet=True, rig=feed_args["rig"])
-    with pytest.raises(TypeError, match="FleetDashboardService: missing structures_document"):
-        Dashboard(host="127.0.0.1", port=0, service=FakeService(), fleet=True)
-    with pytest.raises(ValueError, match="rig, units, layout and stations are required"):
-        Dashboard(host="127.0.0.1", port=0, service=FakeService())
 
 
 def test_a_feed_of_a_sectioned_mast_without_a_reflector():

@@ -12,7 +12,7 @@ import pytest
 import estimator
 from contract import StateLayout
 from estimator import load_rig
-from web._feed import StructureFeed
+from web import StructureFeed
 
 MAST = Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json"
 

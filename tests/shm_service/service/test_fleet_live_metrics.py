@@ -145,7 +145,7 @@ def test_the_dashboard_of_a_fleet_in_one_process_reads_only_the_structure_shown(
     service.start()
     try:
         dash = service.dashboard
-        assert dash is not None and dash.fleet and dash.primary is None
+        assert dash is not None and dash.fleet
         poller = dash.poller
         time.sleep(1.0)
         assert poller.polls == {}  # no browser, nothing asked for: the dashboard reads nothing
