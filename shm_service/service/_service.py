@@ -25,6 +25,7 @@ from contract import (
     StatusDocument,
     StructuresDocument,
     TrendRow,
+    WindowDocument,
 )
 
 from ._config import ServiceSettings, SettingsError, resolve_token
@@ -382,6 +383,10 @@ class MonitoringService(_StoredRows, SingleStructureView):
 
     def structure_spectra(self, structure_id: str) -> SpectrumDocument | None:
         return self.spectra(structure_id)
+
+    def structure_window(self, structure_id: str) -> WindowDocument | None:
+        """Its latest committed window (``GET /api/structures/{id}/windows/latest``)."""
+        return self.structure(structure_id).pipeline.last_window
 
     def structure_rig(self, structure_id: str) -> RigDescription:
         """The rig structure ``structure_id`` is monitored with (``GET /api/structures/{id}/rig``)."""
