@@ -78,6 +78,13 @@ class _Series:
     def oldest(self) -> float | None:
         return float(self.parts[0][0][0]) if self.parts else None
 
+    def next_time(self, lo: float) -> float | None:
+        """The first sample time at or after ``lo`` (None: none held)."""
+        for t, _ in self.parts:
+            if t[-1] >= lo:
+                return float(t[int(np.searchsorted(t, lo, side="left"))])
+        return None
+
 
 class MonitoringEngine:
     """Windows of ``monitor.config.window_s`` every ``window_s·(1 − overlap)``, aligned in data
@@ -215,6 +222,8 @@ class MonitoringEngine:
             last = start + (self.n - 1) / self.fs
             if newest < last:
                 break
+            if self._skip_gap(start_ns, start):
+                continue
             self.next_start_ns = start_ns + self.step_ns
             if self.not_before_ns is not None and start_ns < self.not_before_ns:
                 self.skipped_warmup += 1
@@ -228,6 +237,24 @@ class MonitoringEngine:
         for series in self.gauges.values():
             series.trim(keep - 2.0 / self.fs)
         return out
+
+    def _skip_gap(self, start_ns: int, start: float) -> bool:
+        """Skip at once the windows of a gap in the data (no sample in the window and its margins),
+        counted as one by one (warm-up, else incomplete): a clock that jumped years ahead costs
+        one step, not one per window of the years between."""
+        after = self.b.next_time(start - 2.0 / self.fs)
+        if after is None or after <= start + (self.n + 1) / self.fs:
+            return False
+        # windows j = 0, 1, ... whose end and margin lie before ``after`` hold no sample
+        room_ns = self.origin_ns + int(round((after - (self.n + 1) / self.fs) * _NS)) - start_ns
+        k = max(1, -(-room_ns // self.step_ns))
+        warm = 0
+        if self.not_before_ns is not None and start_ns < self.not_before_ns:
+            warm = min(k, -(-(self.not_before_ns - start_ns) // self.step_ns))
+        self.skipped_warmup += warm
+        self.skipped_incomplete += k - warm
+        self.next_start_ns = start_ns + k * self.step_ns
+        return True
 
     def _window(self, start_ns: int, start: float) -> EngineWindow | None:
         end = start + self.n / self.fs

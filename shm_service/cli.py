@@ -11,7 +11,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 from ._argtypes import number, output_path
 from ._commands import (  # noqa: F401  (the commands' shared parts; reprocess, loads and import call them)
@@ -436,6 +436,16 @@ def _add_cluster_arguments(p: argparse.ArgumentParser) -> None:
 
 # -- shm oma -----------------------------------------------------------------------------
 def _cmd_oma(args: argparse.Namespace) -> int:
+    table, clean, config, result = _oma_identify(args)
+    if args.json:
+        _print_json(_oma_document(table, clean, config, result))
+        return 0
+    _print_oma(table, clean, result)
+    return 0
+
+
+def _oma_identify(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
+    """Read, clean and identify (``shm oma``): the table, its cleaning, the configuration, the result."""
     from pydantic import ValidationError
 
     from analytics import OmaConfig, OperationalModalAnalysis
@@ -468,38 +478,44 @@ def _cmd_oma(args: argparse.Namespace) -> int:
         raise CliError(_pydantic_message(exc)) from None
     except (TableError, ValueError) as exc:
         raise CliError(str(exc)) from None
+    return table, clean, config, result
 
-    def modes(ident) -> list[dict]:
-        return [m.as_dict() for m in ident.modes]
 
-    def io(ident) -> dict:
-        if ident.excitation is None:
-            return {}
-        e = ident.excitation
-        return {"excitation": {"kind": e.kind, "line_hz": e.line_hz, "line_fraction": e.line_fraction, "nearest_mode_hz": e.nearest_mode_hz},
-                "frf_modes": [{"frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "frequency_std_hz": m.frequency_std_hz,
-                               "damping_std": m.damping_std, "coherence": m.coherence, "shape": list(m.shape)} for m in ident.frf_modes]}
+def _oma_modes(ident) -> list[dict]:
+    return [m.as_dict() for m in ident.modes]
 
+def _oma_io(ident) -> dict:
+    if ident.excitation is None:
+        return {}
+    e = ident.excitation
+    return {"excitation": {"kind": e.kind, "line_hz": e.line_hz, "line_fraction": e.line_fraction, "nearest_mode_hz": e.nearest_mode_hz},
+            "frf_modes": [{"frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "frequency_std_hz": m.frequency_std_hz,
+                           "damping_std": m.damping_std, "coherence": m.coherence, "shape": list(m.shape)} for m in ident.frf_modes]}
+
+
+def _oma_document(table: Any, clean: Any, config: Any, result: Any) -> dict:
+    """``shm oma --json``."""
     rec = result.record
-    doc = {
+    return {
         "fs_hz": table.fs_hz,
         "channels": list(table.channels),
         "format": table.format,
         "band_hz": [config.fmin_hz, config.fmax_hz if config.fmax_hz is not None else 0.4 * table.fs_hz],
         "analysed_fs_hz": rec.fs_hz,
-        "modes": modes(rec),
+        "modes": _oma_modes(rec),
         "rejected": [{"frequency_hz": f, "reason": why} for f, why in rec.rejected],
-        **io(rec),
-        "windows": [{"start_s": w.start_s, "end_s": w.end_s, "modes": modes(w.identification),
+        **_oma_io(rec),
+        "windows": [{"start_s": w.start_s, "end_s": w.end_s, "modes": _oma_modes(w.identification),
                      "rejected": [{"frequency_hz": f, "reason": why} for f, why in w.identification.rejected],
-                     **io(w.identification)} for w in result.windows],
+                     **_oma_io(w.identification)} for w in result.windows],
         "tracks": [t.as_dict() for t in result.tracks],
         **clean.as_dict(table.fs_hz),
         "recording_problems": list(table.problems),
     }
-    if args.json:
-        _print_json(doc)
-        return 0
+
+
+def _print_oma(table: Any, clean: Any, result: Any) -> None:
+    rec = result.record
     print(f"{table.path}: {table.data.shape[0]} samples of {len(table.channels)} channel(s) at {table.fs_hz:g} Hz "
           f"({table.format}); SSI-cov at {rec.fs_hz:g} Hz, {rec.block_rows} block rows, orders {rec.orders[0]}-{rec.orders[-1]}")
     print(f"{'f [Hz]':>10} {'± [Hz]':>8} {'zeta [%]':>9} {'± [%]':>7} {'MPC':>5} {'share':>6}  shape")
@@ -517,7 +533,6 @@ def _cmd_oma(args: argparse.Namespace) -> int:
                 f"#{m.track} {m.frequency_hz:.3f} Hz ({100 * m.damping_ratio:.2f} %)"
                 + (f" moving {m.start_hz:.2f} → {m.end_hz:.2f} Hz" if m.moving else "") for m in w.modes) or "-"))
         print("tracks: " + ", ".join(f"#{t.track} {t.min_hz:.2f}–{t.max_hz:.2f} Hz ({t.windows} windows)" for t in result.tracks))
-    return 0
 
 
 # -- shm inspect -------------------------------------------------------------------------
@@ -557,7 +572,26 @@ def _cmd_import(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="shm", description="Structural health monitoring by integrated motion measurement.")
     sub = parser.add_subparsers(dest="command", required=True)
+    _add_modes_parser(sub)
+    _add_simulate_parser(sub)
+    _add_estimate_parser(sub)
+    _add_study_parser(sub)
+    _add_analyze_parser(sub)
+    _add_reprocess_parser(sub)
+    _add_baseline_parser(sub)
+    _add_oma_parser(sub)
+    _add_inspect_parser(sub)
+    from .demo import add_demo_parser
+    from .loads import add_loads_parser  # shm loads (issue 21)
+    from .service._cli import add_serve_parser  # shm serve (issue 6)
+    add_serve_parser(sub)
+    add_demo_parser(sub)
+    add_loads_parser(sub)
+    _add_import_parser(sub)
+    return parser
 
+
+def _add_modes_parser(sub: Any) -> None:
     p = sub.add_parser("modes", help="eigenfrequencies of the rig model (against the paper's Table 1 when pinned and hanging)")
     p.add_argument("--rig", help="rig description (.json or .toml); default: the calibrated rig of --layout")
     p.add_argument("--layout", choices=("benchmark", "dense"), default="benchmark")
@@ -571,6 +605,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_modes)
 
+
+def _add_simulate_parser(sub: Any) -> None:
     p = sub.add_parser("simulate", help="simulate the virtual rig and write a recording")
     p.add_argument("--duration", type=number(low=0, low_open=True, high=7 * 24 * 3600, unit="s"), default=300.0,
                    help="s, up to a week (default 300)")
@@ -608,6 +644,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_simulate)
 
+
+def _add_estimate_parser(sub: Any) -> None:
     p = sub.add_parser("estimate", help="run the IMMS estimator over a recording")
     p.add_argument("recording")
     add_model_arguments(p)
@@ -615,6 +653,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_estimate)
 
+
+def _add_study_parser(sub: Any) -> None:
     p = sub.add_parser("study", help="the paper's sensor-configuration study; design mode with --target-*")
     p.add_argument("--out", default="study", help="output folder (default study/)")
     p.add_argument("--seeds", default=None, help="seeds, one simulated recording each (default 1,2,3)")
@@ -637,6 +677,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="design mode: RMSE target of e, m (0-4]")
     p.set_defaults(func=_cmd_study)
 
+
+def _add_analyze_parser(sub: Any) -> None:
     p = sub.add_parser("analyze", help="modal analytics of the deformation variables (runs the estimator on raw recordings)")
     p.add_argument("recording", help="an estimates recording (shm estimate --out, shm serve's archive) or a raw recording")
     p.add_argument("--baseline", help="a healthy recording to learn the baseline from (all of it; with or without a temperature swing)")
@@ -647,6 +689,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_analyze)
 
+
+def _add_reprocess_parser(sub: Any) -> None:
     p = sub.add_parser("reprocess", help="estimator and analysis over many recordings (dask.distributed) into a service database")
     p.add_argument("recordings", nargs="+", metavar="FILE", help="recordings (.mcap) of the contract")
     p.add_argument("--db", required=True, type=output_path, help="the service's SQLite database (created if missing)")
@@ -658,6 +702,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_reprocess)
 
+
+def _add_baseline_parser(sub: Any) -> None:
     p = sub.add_parser("baseline", help="baselines of the live service")
     baseline_sub = p.add_subparsers(dest="baseline_command", required=True)
     p = baseline_sub.add_parser("learn", help="learn a baseline from a healthy period spread over recordings and store "
@@ -674,6 +720,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_baseline_learn)
 
+
+def _add_oma_parser(sub: Any) -> None:
     p = sub.add_parser("oma", help="operational modal analysis (SSI-cov) of measured channels: .npy/.npz, CSV/TSV/text, .mat, HDF5, .mcap")
     p.add_argument("data", help="measured channels (see shm_service/tables.py for the formats)")
     p.add_argument("--fs", type=number(low=0, low_open=True, unit="Hz"), default=None,
@@ -696,6 +744,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_oma)
 
+
+def _add_inspect_parser(sub: Any) -> None:
     p = sub.add_parser("inspect", help="topics, counts, rates, gaps and problems of a recording")
     p.add_argument("recording")
     p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
@@ -703,14 +753,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--print-rig", action="store_true", help="print the recording's rig description (rig.json) and exit")
     p.set_defaults(func=_cmd_inspect)
 
-    from .demo import add_demo_parser
-    from .loads import add_loads_parser  # shm loads (issue 21)
-    from .service._cli import add_serve_parser  # shm serve (issue 6)
 
-    add_serve_parser(sub)
-    add_demo_parser(sub)
-    add_loads_parser(sub)
-
+def _add_import_parser(sub: Any) -> None:
     p = sub.add_parser(
         "import",
         help="measured channels of DAQ files (CSV/TSV/text, LabVIEW, .npy/.npz, .mat, HDF5) into a contract recording",
@@ -721,8 +765,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, type=output_path, help="the recording to write (.mcap; its directory must exist)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_import)
-
-    return parser
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:

@@ -471,6 +471,49 @@ def import_recording(
     RigError, FileNotFoundError
         For a bad rig description or a missing file.
     """
+    paths, rig, channel_map, map_text, source, out = _import_inputs(data, rig, channel_map, out)
+    plans = _topic_plans(channel_map, rig, source)
+    files = _resolve_files(channel_map, paths, source)
+
+    tables, times = _read_clocks(channel_map, plans, files, source)
+    # values per topic: SI = scale · value + offset; unfilled IMU fields 0.0; a sample is written
+    # when every column of its topic is valid (the table's rejections, then the kind's limits)
+    report_topics: dict[str, TopicImport] = {}
+    streams: list[tuple[str, np.ndarray, list[bytes]]] = []
+    axes_written: dict[str, list[str]] = {}
+    for topic, plan in sorted(plans.items()):
+        info, keep, values = _import_topic(plan, tables[plan.clock], channel_map.limits)
+        if plan.title == "shm.Imu":
+            axes_written[topic] = [a for a in _IMU_FIELDS if a not in info.zero_filled]
+        report_topics[topic] = info
+        streams.append((topic, times[plan.clock][keep], _payloads(plan, values[keep])))
+    rig_doc = _rig_document(rig, axes_written)
+    clocks_report = {
+        name: ClockImport(str(files[name]), tables[name].format, int(tables[name].data.shape[0]),
+                          float(tables[name].fs_hz or channel_map.clocks[name].rate_hz),
+                          channel_map.clocks[name].start_time_ns(), int(times[name][0]), int(times[name][-1]))
+        for name in channel_map.clocks
+    }
+    unused = _unused_columns(channel_map, plans, tables, files)
+    metadata = _import_metadata(paths, tables, channel_map, map_text, report_topics)
+
+    partial = out.with_name(out.name + ".part")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        with RecordingWriter(partial, rig_doc, metadata=metadata) as writer:
+            _write_merged(writer, streams)
+        os.replace(partial, out)
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+    declared = sorted(rig.sensor_by_topic())
+    return ImportReport(str(out), report_topics, clocks_report, unused, [t for t in declared if t not in plans])
+
+
+def _import_inputs(data: Sequence[str | Path], rig: RigDescription | str | Path, channel_map: ChannelMap | str | Path,
+                   out: str | Path) -> tuple[list[Path], RigDescription, ChannelMap, str | None, str, Path]:
+    """``import_recording``'s arguments checked and loaded: the files, rig, map (and its text, and
+    what to call it in messages) and the output path."""
     paths = [Path(p) for p in data]
     if not paths:
         raise MapError("no DATA file given")
@@ -488,10 +531,15 @@ def import_recording(
     out = Path(out)
     if any(out.resolve() == p.resolve() for p in paths):
         raise MapError(f"--out {out} is one of the DATA files")
-    plans = _topic_plans(channel_map, rig, source)
-    files = _resolve_files(channel_map, paths, source)
+    return paths, rig, channel_map, map_text, source, out
 
-    # read each clock's columns (a file read once per clock: other clocks' arrays may differ in length)
+
+_IMU_FIELDS = [f"{f}_{a}" for f in ("accel", "gyro") for a in _AXES]
+
+
+def _read_clocks(channel_map: ChannelMap, plans: dict, files: dict, source: str) -> tuple[dict[str, Table], dict[str, np.ndarray]]:
+    """Each clock's table of its columns and its log times (a file read once per clock: other
+    clocks' arrays may differ in length)."""
     tables: dict[str, Table] = {}
     times: dict[str, np.ndarray] = {}
     for name, clock in channel_map.clocks.items():
@@ -511,84 +559,84 @@ def import_recording(
             raise TableError(f"{where}: {exc}") from None
         tables[name] = table
         times[name] = _log_times(clock, table, where)
+    return tables, times
 
-    # values per topic: SI = scale · value + offset; unfilled IMU fields 0.0; a sample is written
-    # when every column of its topic is valid (the table's rejections, then the kind's limits)
-    report_topics: dict[str, TopicImport] = {}
-    streams: list[tuple[str, np.ndarray, list[bytes]]] = []
-    axes_written: dict[str, list[str]] = {}
-    for topic, plan in sorted(plans.items()):
-        table = tables[plan.clock]
-        n = table.data.shape[0]
-        values = np.zeros((n, plan.width))
-        bad = np.zeros(n, dtype=bool)
-        why = np.zeros(n, dtype=np.int8)  # the reason of a rejected sample: its first bad column's
-        first: tuple[int, str] | None = None
-        rejections = Rejections()
-        rejections.line_of = table.rejections.line_of
-        for slot in sorted(plan.slots, key=lambda s: s.offset):
-            raw = table.data[:, table.channels.index(slot.column)]
-            with np.errstate(over="ignore", invalid="ignore"):
-                values[:, slot.offset] = slot.scale * raw + slot.bias
-            column_bad = ~np.isfinite(raw)
-            scaled_nonfinite = np.isfinite(raw) & ~np.isfinite(values[:, slot.offset])
-            rejections.merge(table.rejections.only(slot.column), {slot.column: slot.key})
-            if scaled_nonfinite.any():
-                rejections.add(slot.key, "nonfinite", np.flatnonzero(scaled_nonfinite))
-            low, high, text = _limit_of(plan.kind, slot.axis, channel_map.limits)
-            with np.errstate(invalid="ignore"):
-                beyond = np.isfinite(values[:, slot.offset]) & ((values[:, slot.offset] < low) | (values[:, slot.offset] > high))
-            if beyond.any():
-                rejections.add(slot.key, "implausible", np.flatnonzero(beyond), limit=text)
-            column_bad |= scaled_nonfinite | beyond
-            codes = table.codes[:, table.channels.index(slot.column)].copy() if table.codes is not None else np.zeros(n, np.int8)
-            codes[scaled_nonfinite] = REASONS.index("nonfinite") + 1
-            codes[beyond] = REASONS.index("implausible") + 1
-            why = np.where((why == 0) & column_bad, codes, why)
-            if column_bad.any():
-                row = int(np.argmax(column_bad))
-                if first is None or row < first[0]:
-                    first = (row, slot.column)
-                bad |= column_bad
-        info = TopicImport(plan.clock, [s.key for s in plan.slots])
-        if plan.title == "shm.Imu":
-            mapped = {s.axis for s in plan.slots}
-            every = [f"{f}_{a}" for f in ("accel", "gyro") for a in _AXES]
-            info.zero_filled = [a for a in every if a not in mapped]
-            axes_written[topic] = [a for a in every if a in mapped]
-        keep = ~bad
-        info.messages = int(keep.sum())
-        info.rejected = int(bad.sum())
-        summary = rejections.as_dict()
-        counts = np.bincount(why[bad], minlength=len(REASONS) + 1)
-        info.reasons = {REASONS[c - 1]: int(counts[c]) for c in range(1, len(REASONS) + 1) if counts[c]}
-        info.by_column = summary["channels"]
-        if first is not None:
-            info.first_rejected_row, info.first_rejected_column = first
-        report_topics[topic] = info
-        streams.append((topic, times[plan.clock][keep], _payloads(plan, values[keep])))
 
-    # the rig as given (its own keys only), with the axes of every partly filled IMU
+def _import_topic(plan: Any, table: Table, limits: Any) -> tuple[TopicImport, np.ndarray, np.ndarray]:
+    """One topic's values (n, width) in SI from its columns, which samples to keep (every column
+    valid: the table's rejections, then the kind's limits) and its report."""
+    n = table.data.shape[0]
+    values = np.zeros((n, plan.width))
+    bad = np.zeros(n, dtype=bool)
+    why = np.zeros(n, dtype=np.int8)  # the reason of a rejected sample: its first bad column's
+    first: tuple[int, str] | None = None
+    rejections = Rejections()
+    rejections.line_of = table.rejections.line_of
+    for slot in sorted(plan.slots, key=lambda s: s.offset):
+        raw = table.data[:, table.channels.index(slot.column)]
+        with np.errstate(over="ignore", invalid="ignore"):
+            values[:, slot.offset] = slot.scale * raw + slot.bias
+        column_bad = ~np.isfinite(raw)
+        scaled_nonfinite = np.isfinite(raw) & ~np.isfinite(values[:, slot.offset])
+        rejections.merge(table.rejections.only(slot.column), {slot.column: slot.key})
+        if scaled_nonfinite.any():
+            rejections.add(slot.key, "nonfinite", np.flatnonzero(scaled_nonfinite))
+        low, high, text = _limit_of(plan.kind, slot.axis, limits)
+        with np.errstate(invalid="ignore"):
+            beyond = np.isfinite(values[:, slot.offset]) & ((values[:, slot.offset] < low) | (values[:, slot.offset] > high))
+        if beyond.any():
+            rejections.add(slot.key, "implausible", np.flatnonzero(beyond), limit=text)
+        column_bad |= scaled_nonfinite | beyond
+        codes = table.codes[:, table.channels.index(slot.column)].copy() if table.codes is not None else np.zeros(n, np.int8)
+        codes[scaled_nonfinite] = REASONS.index("nonfinite") + 1
+        codes[beyond] = REASONS.index("implausible") + 1
+        why = np.where((why == 0) & column_bad, codes, why)
+        if column_bad.any():
+            row = int(np.argmax(column_bad))
+            if first is None or row < first[0]:
+                first = (row, slot.column)
+            bad |= column_bad
+    info = TopicImport(plan.clock, [s.key for s in plan.slots])
+    if plan.title == "shm.Imu":
+        mapped = {s.axis for s in plan.slots}
+        info.zero_filled = [a for a in _IMU_FIELDS if a not in mapped]
+    keep = ~bad
+    info.messages = int(keep.sum())
+    info.rejected = int(bad.sum())
+    counts = np.bincount(why[bad], minlength=len(REASONS) + 1)
+    info.reasons = {REASONS[c - 1]: int(counts[c]) for c in range(1, len(REASONS) + 1) if counts[c]}
+    info.by_column = rejections.as_dict()["channels"]
+    if first is not None:
+        info.first_rejected_row, info.first_rejected_column = first
+    return info, keep, values
+
+
+def _rig_document(rig: RigDescription, axes_written: dict[str, list[str]]) -> dict:
+    """The rig as given (its own keys only), with the axes of every partly filled IMU."""
     rig_doc = rig.model_dump(mode="json", exclude_unset=True)
     for sensor in rig_doc["sensors"]:
         topic = f"/imu/{sensor['name']}" if sensor["kind"] == "imu" else None
         if topic in axes_written and "axes" not in sensor and len(axes_written[topic]) < 6:
             sensor["axes"] = axes_written[topic]
-    clocks_report = {
-        name: ClockImport(str(files[name]), tables[name].format, int(tables[name].data.shape[0]),
-                          float(tables[name].fs_hz or channel_map.clocks[name].rate_hz),
-                          channel_map.clocks[name].start_time_ns(), int(times[name][0]), int(times[name][-1]))
-        for name in channel_map.clocks
-    }
+    return rig_doc
+
+
+def _unused_columns(channel_map: ChannelMap, plans: dict, tables: dict[str, Table], files: dict) -> dict[str, list[str]]:
+    """Per file, its numeric columns that no topic and no clock reads."""
     used = {s.column for p in plans.values() for s in p.slots}
+    clock_columns = {c.column for c in channel_map.clocks.values() if c.column}
     unused: dict[str, list[str]] = {}
     for name, table in tables.items():
-        clock_columns = {c.column for c in channel_map.clocks.values() if c.column}
         left = [c for c in table.other_channels if c not in used and c not in clock_columns]
         if left:
             unused.setdefault(str(files[name]), [])
             unused[str(files[name])] += [c for c in left if c not in unused[str(files[name])]]
-    metadata = {"import": {
+    return unused
+
+
+def _import_metadata(paths: list[Path], tables: dict[str, Table], channel_map: ChannelMap, map_text: str | None,
+                     report_topics: dict[str, TopicImport]) -> dict:
+    return {"import": {
         "tool": "shm import",
         "files": json.dumps([str(p.name) for p in paths]),
         "formats": json.dumps({name: t.format for name, t in tables.items()}),
@@ -599,18 +647,6 @@ def import_recording(
         # the readers judge the recording's values by these (the map's [limits])
         "limits": channel_map.limits.model_dump_json(),
     }}
-
-    partial = out.with_name(out.name + ".part")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        with RecordingWriter(partial, rig_doc, metadata=metadata) as writer:
-            _write_merged(writer, streams)
-        os.replace(partial, out)
-    except BaseException:
-        partial.unlink(missing_ok=True)
-        raise
-    declared = sorted(rig.sensor_by_topic())
-    return ImportReport(str(out), report_topics, clocks_report, unused, [t for t in declared if t not in plans])
 
 
 def _write_merged(writer: RecordingWriter, streams: list[tuple[str, np.ndarray, list[bytes]]]) -> None:

@@ -309,7 +309,6 @@ def learn_baseline(paths: list[str], db: str | Path, structure: str, period: tup
     --baseline`` learns one), which learns from every trusted window of the period. Returns a
     summary; raises ValueError when no baseline can be learnt (saying what was missing)."""
     import numpy as np
-    from distributed import as_completed
 
     from analytics import AnalysisConfig
     from analytics import learn_baseline as engine_baseline
@@ -322,49 +321,17 @@ def learn_baseline(paths: list[str], db: str | Path, structure: str, period: tup
     lo, hi = period
     if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
         raise ValueError(f"period={period!r} must be (start, end) in UNIX s with end after start")
-    parts, failures = [], []
-    with _client(workers, scheduler) as client:
-        futures = {client.submit(deformation_task, p, options, (lo, hi), pure=False): p for p in paths}
-        bar = _progress(len(paths), "baseline", progress)
-        for future in as_completed(futures):
-            try:
-                part = future.result()
-                if part is not None:
-                    parts.append(part)
-            except Exception as exc:  # noqa: BLE001
-                failures.append({"path": futures[future], "error": _error(exc)})
-            bar.update(1)
-        bar.close()
+    parts, failures = _estimate_parts(paths, options, (lo, hi), workers, scheduler, progress)
     if not parts:
         raise ValueError(f"no samples of {len(paths)} file(s) within the period {lo:.0f}..{hi:.0f} s"
                          + (f" ({len(failures)} failed: {failures[0]['error']})" if failures else ""))
-    parts.sort(key=lambda p: float(p["t"][0]))
-    # overlapping files (the same period twice) keep the earlier file's samples
-    kept, newest = [], -math.inf
-    for p in parts:
-        m = p["t"] > newest
-        if m.any():
-            kept.append({**p, "t": p["t"][m], "b": p["b"][m], "support": None if p["support"] is None else p["support"][m]})
-            newest = float(p["t"][m][-1])
+    kept = _without_overlaps(parts)
     rec = read_recording(kept[0]["path"], rig=options.rig, kinds=())
     model = build_model(rec.rig, peripheral=options.peripheral, modes=options.modes,
                         **_sensor_counts(rec.rig, options.namespace()))
     config, _ = options.settings()
     config = config or AnalysisConfig()
-    origin_ns = int(math.floor(float(kept[0]["t"][0]))) * 1_000_000_000
-    t = np.concatenate([p["t"] for p in kept]) - origin_ns / 1e9
-    b = np.concatenate([p["b"] for p in kept])
-    with_support = all(p["support"] is not None for p in kept)
-    support = np.concatenate([p["support"] for p in kept]) if with_support else None
-    temps = [p["temperature"] for p in kept if p["temperature"] is not None]
-    temperature = None
-    if temps:
-        tt = np.concatenate([x[0] for x in temps]) - origin_ns / 1e9
-        tv = np.concatenate([x[1] for x in temps])
-        order = np.argsort(tt, kind="stable")
-        tt, tv = tt[order], tv[order]
-        first = np.concatenate([[True], np.diff(tt) > 0])
-        temperature = (tt[first], tv[first])
+    origin_ns, t, b, support, temperature = _joined(kept)
     try:
         baseline = engine_baseline(
             t, b, model.units.curvature(model.stations), model.stations, temperature=temperature, bearing=support,
@@ -388,3 +355,57 @@ def learn_baseline(paths: list[str], db: str | Path, structure: str, period: tup
         "samples": int(t.size),
         "mean_temperature_c": None if temperature is None else float(np.mean(temperature[1])),
     }
+
+
+def _estimate_parts(paths: list[str], options: AnalysisOptions, period: tuple[float, float], workers: int | None,
+                    scheduler: str | None, progress: bool) -> tuple[list[dict[str, Any]], list[dict[str, str]]]:
+    """The files' b(t) within ``period``, estimated in parallel (``deformation_task``), and the failures."""
+    from distributed import as_completed
+
+    parts, failures = [], []
+    with _client(workers, scheduler) as client:
+        futures = {client.submit(deformation_task, p, options, period, pure=False): p for p in paths}
+        bar = _progress(len(paths), "baseline", progress)
+        for future in as_completed(futures):
+            try:
+                part = future.result()
+                if part is not None:
+                    parts.append(part)
+            except Exception as exc:  # noqa: BLE001
+                failures.append({"path": futures[future], "error": _error(exc)})
+            bar.update(1)
+        bar.close()
+    return parts, failures
+
+
+def _without_overlaps(parts: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The parts in time order; overlapping files (the same period twice) keep the earlier file's samples."""
+    kept, newest = [], -math.inf
+    for p in sorted(parts, key=lambda p: float(p["t"][0])):
+        m = p["t"] > newest
+        if m.any():
+            kept.append({**p, "t": p["t"][m], "b": p["b"][m], "support": None if p["support"] is None else p["support"][m]})
+            newest = float(p["t"][m][-1])
+    return kept
+
+
+def _joined(kept: list[dict[str, Any]]) -> tuple[int, Any, Any, Any, Any]:
+    """The parts as one record: origin (whole UNIX s, ns), t (s after it), b, the support's d (None
+    unless every part has it) and the temperature (times s after the origin, °C; None: none)."""
+    import numpy as np
+
+    origin_ns = int(math.floor(float(kept[0]["t"][0]))) * 1_000_000_000
+    t = np.concatenate([p["t"] for p in kept]) - origin_ns / 1e9
+    b = np.concatenate([p["b"] for p in kept])
+    with_support = all(p["support"] is not None for p in kept)
+    support = np.concatenate([p["support"] for p in kept]) if with_support else None
+    temps = [p["temperature"] for p in kept if p["temperature"] is not None]
+    temperature = None
+    if temps:
+        tt = np.concatenate([x[0] for x in temps]) - origin_ns / 1e9
+        tv = np.concatenate([x[1] for x in temps])
+        order = np.argsort(tt, kind="stable")
+        tt, tv = tt[order], tv[order]
+        first = np.concatenate([[True], np.diff(tt) > 0])
+        temperature = (tt[first], tv[first])
+    return origin_ns, t, b, support, temperature

@@ -100,14 +100,7 @@ class RecordingWriter:
             raise ValueError(f"compression={compression!r} is not one of {COMPRESSIONS}")
         if chunk_size <= 0:
             raise ValueError(f"chunk_size={chunk_size} must be positive")
-        if isinstance(rig, RigDescription):
-            rig_json = rig.to_json().encode()
-        elif isinstance(rig, (bytes, str)):
-            parse_rig(rig)
-            rig_json = rig.encode() if isinstance(rig, str) else bytes(rig)
-        else:
-            rig_json = json.dumps(rig, indent=2).encode()
-            parse_rig(rig_json)
+        rig_json = _rig_json(rig)
         self._pending_metadata = {name: _checked_metadata(name, data) for name, data in (metadata or {}).items()}
         self._compression = compression
         self._compressor = zstandard.ZstdCompressor() if compression == "zstd" else None
@@ -322,50 +315,10 @@ class RecordingWriter:
     def _finish_chunk(self) -> None:
         if self._chunk_message_count == 0:
             return
-        data = bytes(self._chunk)
         active = [state for state in self._channels.values() if state.times]
-        start = min(min(state.times) for state in active)
-        end = max(max(state.times) for state in active)
-        if self._compression == "zstd":
-            assert self._compressor is not None
-            compressed, name = self._compressor.compress(data), "zstd"
-        elif self._compression == "lz4":
-            compressed, name = lz4.frame.compress(data), "lz4"
-        else:
-            compressed, name = data, ""
-        chunk_offset = self._out.tell()
-        head = struct.pack("<QQQII", start, end, len(data), zlib.crc32(data), len(name)) + name.encode()
-        body_length = len(head) + 8 + len(compressed)
-        self._out.write(struct.pack("<BQ", Opcode.CHUNK, body_length) + head + struct.pack("<Q", len(compressed)))
-        self._out.write(compressed)
-        chunk_length = 9 + body_length
-        index_start = self._out.tell()
-        index_offsets: dict[int, int] = {}
-        for state in active:
-            entries = np.empty((len(state.times), 2), dtype="<u8")
-            entries[:, 0] = state.times
-            entries[:, 1] = state.offsets
-            record = entries.tobytes()
-            index_offsets[state.channel.id] = self._out.tell()
-            self._out.write(
-                struct.pack("<BQHI", Opcode.MESSAGE_INDEX, 6 + len(record), state.channel.id, len(record)) + record
-            )
-            state.message_count += len(state.times)
-            state.times.clear()
-            state.offsets.clear()
-        self._chunk_indexes.append(
-            ChunkIndex(
-                message_start_time=start,
-                message_end_time=end,
-                chunk_start_offset=chunk_offset,
-                chunk_length=chunk_length,
-                message_index_offsets=index_offsets,
-                message_index_length=self._out.tell() - index_start,
-                compression=name,
-                compressed_size=len(compressed),
-                uncompressed_size=len(data),
-            )
-        )
+        index = _write_chunk(self._out, bytes(self._chunk), active, self._compression, self._compressor)
+        self._chunk_indexes.append(index)
+        start, end = index.message_start_time, index.message_end_time
         self._message_start = start if self._message_count == 0 else min(self._message_start, start)
         self._message_end = max(self._message_end, end)
         self._message_count += self._chunk_message_count
@@ -411,6 +364,59 @@ class RecordingWriter:
         self._out.write(summary)
         self._write_record(Footer(summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc))
         self._out.write(MAGIC)
+
+
+def _rig_json(rig: RigDescription | bytes | str | Mapping[str, Any]) -> bytes:
+    """The ``rig.json`` attachment's bytes: a parsed description's JSON, given JSON text unchanged
+    (after validation), or a mapping's JSON."""
+    if isinstance(rig, RigDescription):
+        return rig.to_json().encode()
+    if isinstance(rig, (bytes, str)):
+        parse_rig(rig)
+        return rig.encode() if isinstance(rig, str) else bytes(rig)
+    rig_json = json.dumps(rig, indent=2).encode()
+    parse_rig(rig_json)
+    return rig_json
+
+
+def _write_chunk(out: IO[bytes], data: bytes, active: list[_ChannelState], compression: str,
+                 compressor: Any) -> ChunkIndex:
+    """Write one chunk of ``data`` (the messages of the ``active`` channels) and its message
+    indexes at ``out``'s position; the channels' pending times go to their counts. Returns the
+    chunk's index record."""
+    start = min(min(state.times) for state in active)
+    end = max(max(state.times) for state in active)
+    if compression == "zstd":
+        assert compressor is not None
+        compressed, name = compressor.compress(data), "zstd"
+    elif compression == "lz4":
+        compressed, name = lz4.frame.compress(data), "lz4"
+    elif compression == "none":
+        compressed, name = data, ""
+    else:
+        raise ValueError(f"compression={compression!r} is not one of {COMPRESSIONS}")
+    chunk_offset = out.tell()
+    head = struct.pack("<QQQII", start, end, len(data), zlib.crc32(data), len(name)) + name.encode()
+    body_length = len(head) + 8 + len(compressed)
+    out.write(struct.pack("<BQ", Opcode.CHUNK, body_length) + head + struct.pack("<Q", len(compressed)))
+    out.write(compressed)
+    index_start = out.tell()
+    index_offsets: dict[int, int] = {}
+    for state in active:
+        entries = np.empty((len(state.times), 2), dtype="<u8")
+        entries[:, 0] = state.times
+        entries[:, 1] = state.offsets
+        record = entries.tobytes()
+        index_offsets[state.channel.id] = out.tell()
+        out.write(struct.pack("<BQHI", Opcode.MESSAGE_INDEX, 6 + len(record), state.channel.id, len(record)) + record)
+        state.message_count += len(state.times)
+        state.times.clear()
+        state.offsets.clear()
+    return ChunkIndex(
+        message_start_time=start, message_end_time=end, chunk_start_offset=chunk_offset, chunk_length=9 + body_length,
+        message_index_offsets=index_offsets, message_index_length=out.tell() - index_start, compression=name,
+        compressed_size=len(compressed), uncompressed_size=len(data),
+    )
 
 
 def _checked_metadata(name: str, data: Mapping[str, str]) -> dict[str, str]:

@@ -120,10 +120,47 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         lock.release()
 
 
+def _worker_part(settings: Any, worker_of: str) -> tuple[Any, Any] | None:
+    """A worker's part of the fleet (``--worker-of I/N``) and its worker lock (held for the
+    process's life: a later front knows this worker still runs on the database); None: bad value."""
+    from ._processes import hold_worker_lock
+    from ._workers import part_of
+
+    try:
+        index, count = (int(x) for x in worker_of.split("/"))
+        settings = part_of(settings, index, count)
+    except ValueError as exc:
+        print(f"shm serve: error: --worker-of {worker_of!r}: {exc}", file=sys.stderr)
+        return None
+    return settings, hold_worker_lock(settings.db)
+
+
+def _wait_for_rig(args: argparse.Namespace, settings: Any, slot: Any, api: Any, stop: threading.Event, *,
+                  environ: Mapping[str, str] | None, deliver: bool) -> Any:
+    """follow: the API serves (healthz degraded, the rest 503 "starting") until the file's rig.json
+    is readable; returns the service, or the exit code (0 stopped meanwhile, 2 an error)."""
+    from ._config import SettingsError
+    from ._service import MonitoringService, RigPending, ServiceError
+
+    if getattr(args, "worker_of", None) is None:
+        print(f"shm serve: API at {api.url}; {slot.waiting_for}", flush=True)
+    _ready(args, state="waiting", api=api.url, docs=f"{api.url}/docs", dashboard=None, waiting_for=slot.waiting_for)
+    logging.getLogger("shm.serve").info("%s", slot.waiting_for)
+    while True:
+        if stop.wait(settings.source.follow_poll_s):
+            return 0
+        try:
+            return MonitoringService(settings, environ=environ, deliver=deliver)
+        except RigPending:
+            continue
+        except (ServiceError, SettingsError, OSError) as exc:
+            print(f"shm serve: error: {exc}", file=sys.stderr)
+            return 2
+
+
 def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
     from ._api import create_app
     from ._config import SettingsError, load_settings, render_toml
-    from ._progress import ProgressLog, compile_first
     from ._server import ApiServer
     from ._service import MonitoringService, RigPending, ServiceError
     from ._starting import ServiceSlot, StartingService
@@ -138,23 +175,14 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
         return 0
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s",
                         stream=sys.stderr)
-    log = logging.getLogger("shm.serve")
     worker_of = getattr(args, "worker_of", None)
     if settings.worker_count > 1 and worker_of is None:
         return _run_workers(settings, args, environ)
     if worker_of is not None:
-        from ._workers import part_of
-
-        try:
-            index, count = (int(x) for x in worker_of.split("/"))
-            settings = part_of(settings, index, count)
-        except ValueError as exc:
-            print(f"shm serve: error: --worker-of {worker_of!r}: {exc}", file=sys.stderr)
+        part = _worker_part(settings, worker_of)
+        if part is None:
             return 2
-        from ._processes import hold_worker_lock
-
-        # held for this process's life: a later front knows this worker still runs on the database
-        worker_lock = hold_worker_lock(settings.db)  # noqa: F841
+        settings, worker_lock = part  # the lock is held for this process's life  # noqa: F841
     deliver = worker_of is None  # worker processes leave the notifications to the front process
     stop = threading.Event()
 
@@ -188,31 +216,31 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
             service.stop()
         return 2
     if service is None:
-        if worker_of is None:
-            print(f"shm serve: API at {api.url}; {slot.waiting_for}", flush=True)
-        _ready(args, state="waiting", api=api.url, docs=f"{api.url}/docs", dashboard=None, waiting_for=slot.waiting_for)
-        log.info("%s", slot.waiting_for)
-        while service is None:
-            if stop.wait(settings.source.follow_poll_s):
-                api.stop()
-                return 0
-            try:
-                service = MonitoringService(settings, environ=environ, deliver=deliver)
-            except RigPending:
-                continue
-            except (ServiceError, SettingsError, OSError) as exc:
-                print(f"shm serve: error: {exc}", file=sys.stderr)
-                api.stop()
-                return 2
+        service = _wait_for_rig(args, settings, slot, api, stop, environ=environ, deliver=deliver)
+        if not isinstance(service, MonitoringService):
+            api.stop()
+            return service
         slot.current = service
+    if worker_of is None:  # a worker's front says where things are
+        _print_where(service, settings, api)
+    return _serve_until_stopped(args, settings, service, api, stop)
+
+
+def _print_where(service: Any, settings: Any, api: Any) -> None:
     what = (f"{len(service.structures)} structures" if service.fleet
             else f"source {settings.source.spec} as '{service.source.id}'")
-    if worker_of is None:  # a worker's front says where things are
-        print(f"shm serve: API at {api.url} (docs {api.url}/docs); {what}; "
-              f"data in {settings.data_dir} (db {settings.db}, recordings "
-              f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
-        if service.dashboard is not None:
-            print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
+    print(f"shm serve: API at {api.url} (docs {api.url}/docs); {what}; "
+          f"data in {settings.data_dir} (db {settings.db}, recordings "
+          f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
+    if service.dashboard is not None:
+        print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
+
+
+def _serve_until_stopped(args: argparse.Namespace, settings: Any, service: Any, api: Any, stop: threading.Event) -> int:
+    """Start the service (after compiling the filter's kernels), say it is ready, serve until it is
+    done or stopped (SIGTERM, SIGINT, the parent's end), stop it and print its summary."""
+    from ._progress import ProgressLog, compile_first
+
     started = time.monotonic()
     progress = ProgressLog(service)
     if compile_first(service, stop):
@@ -228,7 +256,7 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
     finally:
         elapsed = time.monotonic() - started
         if not service.done:
-            log.info("stopping")
+            logging.getLogger("shm.serve").info("stopping")
         if service.fleet:
             fleet = _fleet_summary(service, elapsed)
         else:

@@ -389,6 +389,13 @@ class ServiceSettings(_Closed):
     storage_retry_s: float = Field(
         10.0, ge=0, le=3600, description="how long a write is retried on a transient database error (locked by another "
         "process, disk full, I/O error) before the window waits in memory for the next attempt, s")
+    pipeline_threads: int = Field(
+        3, ge=1, le=64, description="threads of a (worker) process that step its structures' pipelines, round-robin "
+        "(each structure's data and analysis lanes; its source has a thread of its own)")
+    stop_drain_s: float = Field(
+        4.0, ge=0, le=600, description="on stop (SIGTERM), how long a structure goes on estimating and analysing its "
+        "backlog; what is left then is not analysed (its raw samples are in the recording when it records them), so a "
+        "stop under a backlog ends within seconds, s")
     queue_batches: int = Field(8, ge=2, le=10_000, description="bounded queue between source and pipeline, batches (a batch is at most ~10 s of data or 2 MB of a file)")
     log_level: Literal["debug", "info", "warning", "error"] = Field("info", description="log level")
     workers: Annotated[int, Field(ge=1, le=64)] | Literal["auto"] = Field(

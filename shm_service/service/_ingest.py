@@ -133,17 +133,19 @@ class IngestValidator:
         for index, message in enumerate(messages):
             try:
                 topic, log_ns, pub_ns, row, payload = self._message(message)
+                previous = last.get(topic)
+                if previous is not None and log_ns <= previous and (
+                        log_ns == previous or (topic in self.recent and log_ns in self.recent[topic])):
+                    # accepted before (a re-sent batch), however far behind the clock it now lies
+                    raise _Reject("duplicate", f"{topic}: log_time_ns {log_ns} was accepted before")
                 code = judge.judge(topic, log_ns)
                 if code:
                     reason = "implausible_time" if code == 1 else "ahead_of_source"
                     off_clock.setdefault((topic, reason), []).append(log_ns)
                     raise _Reject(reason, f"{topic}: log_time_ns {log_ns} is {clock.offset_s(topic, log_ns, mono):+.3g} s "
                                           f"off the source's clock ({_REASONS[reason]})")
-                previous = last.get(topic)
                 if previous is not None and log_ns <= previous:
-                    seen = log_ns == previous or (topic in self.recent and log_ns in self.recent[topic])
-                    reason = "duplicate" if seen else "backwards"
-                    raise _Reject(reason, f"{topic}: log_time_ns {log_ns} is not after the previous sample's {previous}")
+                    raise _Reject("backwards", f"{topic}: log_time_ns {log_ns} is not after the previous sample's {previous}")
             except _Reject as exc:
                 result.rejected[exc.reason] += 1
                 if isinstance(message, dict) and message.get("topic") in self.sensors:

@@ -7,7 +7,7 @@ a fleet's worker processes merges its workers' expositions (``merge_expositions`
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -211,19 +211,25 @@ def _families(st: StatusDocument) -> list[_Family]:
            [({"sink": name, "kind": kind}, v) for name, sink in st.sinks.items() for kind, v in sink.errors_by_kind.items()],
            service=("*",))
     metric("shm_trend_rows", "gauge", "trend rows stored", [({}, st.storage.trend_rows)], service=("*",))
-    spots = p.hot_spots  # the hot spots after the last committed window (issue 21)
-    if spots:
-        metric("shm_fatigue_consumed_ratio", "gauge", "consumed fatigue life D of a hot spot (Palmgren-Miner; 1 = exhausted)",
-               [({"hot_spot": h.name}, h.consumed) for h in spots])
-        metric("shm_fatigue_del_pascals", "gauge", "damage-equivalent nominal stress range of the last window, per Woehler exponent m",
-               [({"hot_spot": h.name, "m": m}, v) for h in spots for m, v in sorted(h.del_pa.items())])
-        metric("shm_fatigue_max_range_pascals", "gauge", "largest nominal stress range of the last window",
-               [({"hot_spot": h.name}, h.max_range_pa) for h in spots])
-        metric("shm_fatigue_damage_rate_per_year", "gauge", "damage per year over the trailing windows",
-               [({"hot_spot": h.name}, h.rate_per_year) for h in spots])
-        metric("shm_fatigue_remaining_life_years", "gauge", "remaining life (1 - D)/rate; absent while nothing is consumed "
-               "(below the S-N curve's cut-off) or no rate is known", [({"hot_spot": h.name}, h.remaining_years) for h in spots])
+    _fatigue_families(metric, p.hot_spots)  # the hot spots after the last committed window (issue 21)
     return out
+
+
+
+def _fatigue_families(metric: Callable[..., None], spots: list[Any]) -> None:
+    """The hot spots' fatigue families (issue 21); none without hot spots."""
+    if not spots:
+        return
+    metric("shm_fatigue_consumed_ratio", "gauge", "consumed fatigue life D of a hot spot (Palmgren-Miner; 1 = exhausted)",
+           [({"hot_spot": h.name}, h.consumed) for h in spots])
+    metric("shm_fatigue_del_pascals", "gauge", "damage-equivalent nominal stress range of the last window, per Woehler exponent m",
+           [({"hot_spot": h.name, "m": m}, v) for h in spots for m, v in sorted(h.del_pa.items())])
+    metric("shm_fatigue_max_range_pascals", "gauge", "largest nominal stress range of the last window",
+           [({"hot_spot": h.name}, h.max_range_pa) for h in spots])
+    metric("shm_fatigue_damage_rate_per_year", "gauge", "damage per year over the trailing windows",
+           [({"hot_spot": h.name}, h.rate_per_year) for h in spots])
+    metric("shm_fatigue_remaining_life_years", "gauge", "remaining life (1 - D)/rate; absent while nothing is consumed "
+           "(below the S-N curve's cut-off) or no rate is known", [({"hot_spot": h.name}, h.remaining_years) for h in spots])
 
 
 def _without(text: str, names: set[str]) -> str:

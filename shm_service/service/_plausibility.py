@@ -15,7 +15,11 @@ runs on with the wall clock while the source is silent. A stamp is rejected when
   others (a file's chunk, a client's batch) runs on without a jump and is taken.
 
 A stamp of a live source within ``future_tolerance_s`` of the wall clock is never ``ahead`` (the
-wall clock is the better reference: a device whose clock was just corrected is on time). When
+wall clock is the better reference: a device whose clock was just corrected is on time) — while
+the source's clock is itself near the wall clock (within ``window_s``). In a backfill (the source
+delivers data of 1970, or of last year), a stamp of the present is far from its stream's time: it
+is a clock jump of its sensor, rejected like any other, and never its channel's new reference
+(else every later sample of that channel would be "backwards"). When
 most topics of a batch jump together (a recording resumed after a pause, a source's clock
 stepped), the batch is taken and the jump reported: the source's clock moved, not one sensor's.
 Rejected stamps never move the clock, so the valid data that follow are processed.
@@ -245,7 +249,7 @@ class SourceClock:
         if self.live:
             wall = time.time_ns() if wall_ns is None else wall_ns
             code[t > wall + self.tolerance_ns] = 1
-            live = np.abs(t - wall) <= self.tolerance_ns
+            live = (np.abs(t - wall) <= self.tolerance_ns) & self._near_wall(wall, mono)
         else:
             live = np.zeros(len(t), dtype=bool)
         if self.last and not whole_source:
@@ -260,6 +264,12 @@ class SourceClock:
                     # ahead of the others: a jump only if the topic's own stamps stepped there
                     code[self._jumped(t, suspect, own)] = 2
         return code == 0, code
+
+    def _near_wall(self, wall_ns: int, mono: float) -> bool:
+        """Whether the source's clock runs near the wall clock (within ``window_s``), so that a stamp
+        near the wall clock is on time whatever its topic's past (not so in a backfill)."""
+        current = self.current(mono)
+        return current is None or abs(current - wall_ns) <= self.window_ns
 
     def _all_taken(self, topic: str, t: np.ndarray, wall_ns: int | None, mono: float, whole_source: bool) -> bool:
         """Whether every stamp of ``t`` passes ``judge``, decided from its first and last (the
@@ -293,11 +303,8 @@ class SourceClock:
     def judge_one(self, topic: str, stamp: int, *, wall_ns: int, mono: float, whole_source: bool = False) -> int:
         """``judge`` of one stamp (the ingest validator's per-message path): 0 taken, 1
         implausible_time, 2 ahead_of_source."""
-        if self.live:
-            if stamp > wall_ns + self.tolerance_ns:
-                return 1
-            if abs(stamp - wall_ns) <= self.tolerance_ns:
-                return 0
+        if self.live and stamp > wall_ns + self.tolerance_ns:
+            return 1
         if not self.last or whole_source:
             return 0
         newest = current = ref = None
@@ -307,6 +314,8 @@ class SourceClock:
             current = now if current is None else max(current, now)
             if other != topic:
                 ref = now if ref is None else max(ref, now)
+        if self.live and abs(stamp - wall_ns) <= self.tolerance_ns and abs(current - wall_ns) <= self.window_ns:
+            return 0  # the source runs on the wall clock: a stamp near it is on time
         if stamp < newest - self.window_ns or stamp > current + self.window_ns:
             return 1
         own = self.last.get(topic)
@@ -390,6 +399,8 @@ class StampJudge:
         self.now = {t: last + (int(max(mono - clock.seen[t], 0.0) * _NS) if live else 0) for t, last in clock.last.items()}
         self.newest = max(clock.last.values()) if clock.last else None
         self._rank()
+        # the source runs near the wall clock (not a backfill): a stamp near the wall clock is on time
+        self.near_wall = self.first is None or abs(self.first[1] - wall_ns) <= clock.window_ns
 
     def _rank(self) -> None:
         best = sorted(self.now.items(), key=lambda kv: kv[1], reverse=True)[:2]
@@ -402,7 +413,7 @@ class StampJudge:
         if c.live:
             if stamp > self.wall_ns + c.tolerance_ns:
                 return 1
-            if abs(stamp - self.wall_ns) <= c.tolerance_ns:
+            if self.near_wall and abs(stamp - self.wall_ns) <= c.tolerance_ns:
                 return 0
         if self.first is None or self.whole:
             return 0

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hmac
 import logging
-import queue
 import threading
 import time
 from collections.abc import Mapping
@@ -14,374 +13,47 @@ from typing import Any
 
 
 from contract import (
-    AlarmCountsDocument,
     AlarmDocument,
-    BaselineModeDocument,
     BaselineRequestDocument,
-    BaselineStatusDocument,
-    ChartLevelsDocument,
     FatigueDocument,
     HealthDocument,
     IngestResultDocument,
     LiveEstimatesDocument,
-    ModelDocument,
-    NotificationStatusDocument,
     Page,
     RigDescription,
-    ServiceStatusDocument,
-    SourceStatusDocument,
     SpectrumDocument,
     StatusDocument,
-    StorageStatusDocument,
     StructuresDocument,
-    StructureSummaryDocument,
-    ThresholdsDocument,
     TrendRow,
     WindowDocument,
-    load_rig,
 )
-from estimator import build_model
 
-from ..recording import RecordingError
-from ._archive import Archive
 from ._config import ServiceSettings, SettingsError, resolve_token
 from ._dashboard_port import StructureModel, start_dashboard
-from ._progress import describe_progress
-from ._live import LiveRing
 from ._metrics import fleet_metrics
 from ._notify import Notifier, notify_targets
-from ._pipeline import Pipeline
-from ._plausibility import SourceClock
 from ._retention import RetentionWorker
+from ._scheduler import Scheduler, SchedulerSettings
 from ._sinks import SinkGuard
-from ._sources import END, FileSource, IngestSource, SimSource, Source
+from ._sources import IngestSource
 from ._storage import Storage, is_transient
 from ._store_fatigue import fatigue_document
 from ._store_writer import open_storage
+from ._status import service_state, status_of
+from ._structure import (
+    SingleStructureView,
+    NotSingleStructure,
+    RigPending,
+    ServiceError,
+    Structure,
+    StructureUnavailable,
+    _FailedStructure,
+    _ModelCache,
+)
 
-__all__ = ["MonitoringService", "NotSingleStructure", "ServiceError", "Structure", "StructureUnavailable"]
+__all__ = ["MonitoringService", "NotSingleStructure", "RigPending", "ServiceError", "Structure", "StructureUnavailable"]
 
 log = logging.getLogger("shm.serve")
-VERSION = "0.1.0"
-
-
-class ServiceError(RuntimeError):
-    """The service cannot start (the message says why)."""
-
-
-class RigPending(ServiceError):
-    """``follow:``: the file (or its rig.json) is not there yet; the service can be made once it is."""
-
-
-class StructureUnavailable(LookupError):
-    """The structure exists but cannot answer (its start failed: the message says why)."""
-
-
-class NotSingleStructure(LookupError):
-    """A single-structure request to a fleet (the message names the fleet's routes)."""
-
-
-class _ModelCache:
-    """``build_model`` once per distinct rig and estimator settings: identical structures of a
-    fleet share one (immutable) model, its FE matrices and unit deformations."""
-
-    def __init__(self) -> None:
-        self._models: dict[str, Any] = {}
-        self._lock = threading.Lock()
-
-    def get(self, rig: RigDescription, est: Any) -> Any:
-        key = rig.model_dump_json() + "|" + est.model_dump_json(include={"peripheral", "modes", "imus", "tofs", "gauges"})
-        with self._lock:
-            model = self._models.get(key)
-            if model is None:
-                model = build_model(rig, peripheral=est.peripheral, modes=est.modes, imus=est.imus, tofs=est.tofs,
-                                    gauges=est.gauges)
-                self._models[key] = model
-            return model
-
-
-class Structure:
-    """One monitored structure: its source, bounded queue, model, pipeline and pipeline thread,
-    with its own errors and state. A service of one structure holds one; a fleet many, each
-    isolated from the others (its own threads; what it raises is caught and shown on it)."""
-
-    def __init__(self, service: "MonitoringService", settings: ServiceSettings, *, models: _ModelCache | None = None) -> None:
-        self.service = service
-        self.settings = settings
-        src = settings.source
-        self.kind = src.kind
-        self.queue: queue.Queue = queue.Queue(maxsize=settings.queue_batches)
-        self.source = self._make_source()
-        self.id = self.source.id
-        self.rig: RigDescription = self.source.rig  # type: ignore[assignment]
-        est = settings.estimator
-        _check_sensor_counts(self.rig, est)
-        try:
-            self.model = (models or _ModelCache()).get(self.rig, est)
-        except ValueError as exc:
-            raise ServiceError(f"estimator model: {exc}") from None
-        speed = src.speed
-        self.speed = None if speed == "max" or self.kind in ("follow", "ingest") else float(speed)
-        self.started_wall: float | None = None
-        self.first_data_ns: int | None = None
-        self.pipeline_error: str | None = None  # the last batch's error; None once a batch succeeds again
-        self.pipeline_errors = 0
-        self.last_pipeline_error: str | None = None
-        self._touched_samples = 0
-        self._done = threading.Event()
-        self._thread: threading.Thread | None = None
-        a = settings.analytics
-        self.thresholds = ThresholdsDocument(
-            frequency=ChartLevelsDocument(**dict(zip(("warning_sigma", "alarm_sigma"), a.chart_levels("frequency")))),
-            curvature=ChartLevelsDocument(**dict(zip(("warning_sigma", "alarm_sigma"), a.chart_levels("curvature")))),
-            clear_sigma=a.clear_sigma,
-        )
-        m = self.model
-        self.model_document = ModelDocument(peripheral=m.selection.peripheral, support=m.rig.support, gamma=m.gamma,
-                                            state_names=list(m.state_layout.names),
-                                            unit_modes=[list(g) for g in m.mode_map.unit_modes])
-        self.pipeline: Pipeline | None = None
-        self.archive: Archive | None = None
-        # its estimates for a live view, kept while watched, with their virtual strain, stress and moment (issue 21)
-        self.live = LiveRing(self.id, list(m.state_layout.names), loads=_virtual_loads(self.rig, m))
-
-    def attach(self, storage: Storage, sink: Any, sink_guard: SinkGuard) -> None:
-        """Create the pipeline on the shared ``storage`` (after the source, so a bad source fails first)."""
-        settings, src, est = self.settings, self.settings.source, self.settings.estimator
-        storage.touch_source(self.id, self.source.kind, src.spec, time.time())
-        if settings.archive.enabled:
-            self.archive = Archive(settings.archive, self.rig, self.id, getattr(self.source, "metadata", None))
-        raw = settings.archive.raw == "always" or (settings.archive.raw == "auto" and self.source.kind in ("sim", "ingest"))
-        self.pipeline = Pipeline(
-            # the alarm hysteresis of [alarms] is in the engine's configuration (one place: engine_config)
-            model=self.model, source_id=self.id, storage=storage, analysis=settings.engine_config(),
-            calibration_s=est.calibration_s, chunk_s=est.chunk_s, lateness_s=src.lateness_s,
-            silent_after_s=src.silent_after_s, archive=self.archive, archive_raw=raw,
-            archive_estimates=settings.archive.estimates, estimate_decimation=settings.archive.estimate_decimation,
-            sink=sink, sink_guard=sink_guard, sink_estimate_hz=settings.dashboard.estimate_hz, warmup_s=est.warmup_s,
-            commit_retry_s=settings.storage_retry_s,
-            # ingest is judged per message by its validator (its response says what was refused)
-            clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits,
-            stuck_after_s=src.stuck_after_s, analysis_thread=True,
-        )
-        self.pipeline.live = self.live
-
-    # -- construction -----------------------------------------------------------------------
-
-    def _make_source(self) -> Source:
-        s = self.settings
-        src = s.source
-        kind = src.kind
-        truth = s.dashboard.enabled and not self.service.fleet  # the truth shape is drawn for one structure only
-        rig_override = None
-        if src.rig:
-            try:
-                rig_override = load_rig(src.rig)
-            except (OSError, ValueError) as exc:
-                raise ServiceError(f"source.rig: {exc}") from None
-        try:
-            if kind == "sim":
-                return SimSource(src.id or "sim", self.queue, s, raw=s.archive.enabled and s.archive.raw != "never", truth=truth,
-                                 rig=rig_override)
-            if kind in ("replay", "follow"):
-                path = Path(src.path or "")
-                source = FileSource(src.id or path.stem, self.queue, s, follow=kind == "follow", rig=rig_override, truth=truth)
-                if source.rig is None:
-                    if kind == "follow":
-                        # The model needs the rig: without source.rig, wait for the file's rig.json
-                        # (``shm serve`` serves the API meanwhile and retries; see RigPending).
-                        if source.wait_for_rig(timeout=self.service._rig_wait_s) is None:
-                            raise RigPending(f"follow: waiting for {path} and its rig.json "
-                                             "(or give the rig with source.rig)")
-                    else:
-                        raise ServiceError(f"{path}: no rig.json")
-                return source
-            if kind == "ingest":
-                from ..rig_layouts import default_rig
-
-                rig = rig_override or default_rig(src.layout)
-                return IngestSource(src.id or "ingest", self.queue, rig, max_messages=s.server.max_ingest_messages,
-                                    wait_s=s.server.ingest_wait_s, raw=s.archive.enabled and s.archive.raw != "never",
-                                    clock=self._clock(live=True), limits=src.limits)
-        except (RecordingError, FileNotFoundError, ValueError) as exc:
-            raise ServiceError(str(exc)) from None
-        raise ServiceError(f"unknown source {src.spec!r}")
-
-    def _clock(self, *, live: bool) -> SourceClock:
-        src = self.settings.source
-        return SourceClock(window_s=src.time_window_s, max_ahead_s=src.max_ahead_s or src.lateness_s, live=live,
-                           future_tolerance_s=src.future_tolerance_s)
-
-    # -- running ----------------------------------------------------------------------------
-
-    def start(self) -> None:
-        # the windows are analysed and committed in a thread of their own: the estimator keeps pace meanwhile
-        self.pipeline.start_analysis(on_error=lambda exc: self._batch_failed(exc, what="analysis error; the chunk's windows skipped"),
-                                     name=f"analysis-{self.id}")
-        self._thread = threading.Thread(target=self._pipeline_loop, name=f"pipeline-{self.id}", daemon=True)
-        self._thread.start()
-        self.source.start()
-
-    def _pipeline_loop(self) -> None:
-        pipeline = self.pipeline
-        assert pipeline is not None
-        try:
-            while True:
-                try:
-                    item = self.queue.get(timeout=1.0)
-                except queue.Empty:
-                    # No data: windows that wait for the database are tried again meanwhile
-                    # (by the analysis thread when there is one).
-                    if pipeline.pending_commits and not pipeline.analysis_threaded:
-                        try:
-                            pipeline.flush_commits()
-                        except Exception as exc:
-                            self._batch_failed(exc, what="pipeline error writing a window")
-                        self.pipeline_error = pipeline.storage_error
-                        self.service.notifier.wake()
-                    continue
-                if item is END:
-                    break
-                try:
-                    pipeline.process(item)
-                except Exception as exc:
-                    self._batch_failed(exc)
-                else:
-                    # None once a batch succeeds and nothing waits for the database
-                    self.pipeline_error = pipeline.storage_error
-                if self.first_data_ns is None and pipeline.newest_ns is not None:
-                    # the pace's origin: the first batch, as the source's pacer holds it (the
-                    # start-up before the first data, compiling and building models, is not lag)
-                    self.first_data_ns, self.started_wall = pipeline.newest_ns, time.time()
-                self.service.notifier.wake()
-            pipeline.finish()
-            self.pipeline_error = pipeline.storage_error
-        except Exception as exc:
-            self._batch_failed(exc, what="pipeline failed at the end of the source")
-        finally:
-            self.service.notifier.wake()
-            self._done.set()
-
-    def _batch_failed(self, exc: Exception, what: str = "pipeline error on a batch; batch skipped") -> None:
-        text = f"{type(exc).__name__}: {exc}"
-        self.pipeline_errors += 1
-        self.pipeline_error = self.last_pipeline_error = text
-        # The same error on every batch would flood the log: its first time with the traceback.
-        if self.pipeline_errors <= 3:
-            log.exception("%s%s", f"structure {self.id}: " if self.service.fleet else "", what)
-        else:
-            log.error("%s%s: %s (%d batches failed so far)", f"structure {self.id}: " if self.service.fleet else "", what,
-                      text, self.pipeline_errors)
-
-    def untouched(self) -> tuple[int, tuple[str, str, str]] | None:
-        """(samples, (id, kind, spec)) when the source delivered since it was last noted in the
-        database (``Storage.touch_sources``, then ``touched(samples)``), else None."""
-        samples = sum(self.pipeline.samples.values())
-        if samples == self._touched_samples:
-            return None
-        return samples, (self.id, self.source.kind, self.settings.source.spec)
-
-    def touched(self, samples: int) -> None:
-        self._touched_samples = samples
-
-    def wait(self, timeout: float | None = None) -> bool:
-        return self._done.wait(timeout)
-
-    def skip(self) -> None:
-        """The service stopped before this structure started: it is done without running."""
-        self.source.state = "stopped"
-        self._done.set()
-
-    @property
-    def done(self) -> bool:
-        return self._done.is_set()
-
-    @property
-    def started(self) -> bool:
-        return self._thread is not None
-
-    def stop_source(self) -> None:
-        self.source.stop()
-
-    # -- what it reports --------------------------------------------------------------------
-
-    def health_reasons(self) -> list[str]:
-        reasons: list[str] = []
-        if self.pipeline_error is not None:
-            reasons.append(f"pipeline: {self.pipeline_error}")
-        if self.pipeline.storage_error is not None and self.pipeline.storage_error != self.pipeline_error:
-            reasons.append(self.pipeline.storage_error)
-        if self.pipeline.analysis_error is not None and self.pipeline.analysis_error != self.pipeline_error:
-            reasons.append(f"analysis: {self.pipeline.analysis_error}")
-        reasons.extend(self.pipeline.health_problems())
-        src = self.source
-        if src.state == "failed":
-            reasons.append(f"source {src.id} failed: {src.error}")
-        reasons.extend(src.health_problems())
-        return reasons
-
-    def lag_s(self, now: float | None = None) -> float | None:
-        """How far the processed data is behind its pace (see ``StructureSummaryDocument.lag_s``)."""
-        newest = self.pipeline.newest_ns
-        if newest is None:
-            return None
-        now = time.time() if now is None else now
-        if self.kind in ("follow", "ingest"):
-            return round(now - newest / 1e9, 3)
-        if self.speed is None or self.started_wall is None or self.first_data_ns is None:
-            return None
-        if self.done:  # the source ended: nothing more is due
-            return 0.0
-        return round(self.speed * (now - self.started_wall) - (newest - self.first_data_ns) / 1e9, 3)
-
-    def state(self) -> tuple[str, str | None]:
-        src = self.source
-        if src.state == "failed":
-            return "failed", src.error
-        reasons = self.health_reasons()
-        if self.done:
-            # what was wrong with the data (a damaged file read up to the damage) stays shown
-            problems = reasons or list(src.problems)
-            return ("finished" if src.state == "finished" else "stopped"), problems[-1] if problems else None
-        if src.state in ("starting", "waiting for the file"):
-            return "starting", reasons[0] if reasons else None
-        if reasons:
-            return "degraded", reasons[0]
-        return "running", None
-
-    def summary(self) -> StructureSummaryDocument:
-        state, error = self.state()
-        return StructureSummaryDocument(id=self.id, kind=self.source.kind, state=state, error=error,
-                                        data_time_s=None if self.pipeline.newest_ns is None else self.pipeline.newest_ns / 1e9,
-                                        lag_s=self.lag_s(), windows=self.pipeline.windows_committed,
-                                        active_alarms=dict(self.pipeline.committed_alarms))
-
-
-class _FailedStructure:
-    """A structure of a fleet whose start failed (a missing file, a bad rig): listed with its
-    error; the others run."""
-
-    def __init__(self, structure_id: str, kind: str, error: str) -> None:
-        self.id = structure_id
-        self.kind = kind
-        self.error = error
-        self.done = True
-        self.started = False
-
-    def start(self) -> None:
-        pass
-
-    def stop_source(self) -> None:
-        pass
-
-    def wait(self, timeout: float | None = None) -> bool:
-        return True
-
-    def health_reasons(self) -> list[str]:
-        return [f"failed to start: {self.error}"]
-
-    def summary(self) -> StructureSummaryDocument:
-        return StructureSummaryDocument(id=self.id, kind=self.kind, state="failed", error=self.error)
 
 
 class _StoredRows:
@@ -443,7 +115,7 @@ class _StoredRows:
         return self.structure_fatigue(structure_id, from_s, to_s, limit)
 
 
-class MonitoringService(_StoredRows):
+class MonitoringService(_StoredRows, SingleStructureView):
     """One running ``shm serve``: one structure (``[source]``), or a fleet (``[[structures]]``)
     sharing one database, notifier, retention and API. ``environ`` is the environment the token
     is read from (default ``os.environ``; tests pass a dict)."""
@@ -479,9 +151,9 @@ class MonitoringService(_StoredRows):
                     self.structures[st.id] = _FailedStructure(st.id, st.source.partition(":")[0], str(exc))
         # a worker of a fleet writes through its front (one writer per database: _store_writer)
         self.storage = open_storage(settings.db, notify_targets=notify_targets(settings.notify),
-                               notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
-                               notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
-                               alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
+                                    notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
+                                    notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
+                                    alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
         self.dashboard = None
         self.dashboard_guard = SinkGuard("dashboard", log)
         shown = next((s for s in self.structures.values() if isinstance(s, Structure)), None)
@@ -497,6 +169,8 @@ class MonitoringService(_StoredRows):
                                          directory=archives[0].directory if archives else None,
                                          current=lambda: [a.current for a in archives if a.current is not None])
         self.housekeeping_guard = SinkGuard("housekeeping", log)
+        # the structures' pipelines run on a small pool of threads (not three threads per structure)
+        self.scheduler = Scheduler(SchedulerSettings(threads=settings.pipeline_threads), name="pipelines")
         self._lock = threading.Lock()
         self._done = threading.Event()
         self._stopping = threading.Event()
@@ -516,46 +190,6 @@ class MonitoringService(_StoredRows):
                                      "/api/structures/{id}/...")
         return next(iter(self.structures.values()))  # type: ignore[return-value]
 
-    @property
-    def source(self) -> Source:
-        return self.primary.source
-
-    @property
-    def pipeline(self) -> Pipeline:
-        return self.primary.pipeline  # type: ignore[return-value]
-
-    @property
-    def queue(self) -> queue.Queue:
-        return self.primary.queue
-
-    @property
-    def model(self) -> Any:
-        return self.primary.model
-
-    @property
-    def rig(self) -> RigDescription:
-        return self.primary.rig
-
-    @property
-    def thresholds(self) -> ThresholdsDocument:
-        return self.primary.thresholds
-
-    @property
-    def model_document(self) -> ModelDocument:
-        return self.primary.model_document
-
-    @property
-    def pipeline_error(self) -> str | None:
-        return self.primary.pipeline_error
-
-    @property
-    def pipeline_errors(self) -> int:
-        return self.primary.pipeline_errors
-
-    @property
-    def last_pipeline_error(self) -> str | None:
-        return self.primary.last_pipeline_error
-
     def structure(self, structure_id: str) -> Structure:
         """The running structure ``structure_id`` (KeyError naming it when there is none,
         StructureUnavailable when its start failed)."""
@@ -566,7 +200,6 @@ class MonitoringService(_StoredRows):
         if isinstance(found, _FailedStructure):
             raise StructureUnavailable(f"structure {structure_id!r} failed to start: {found.error}")
         return found
-
 
     # -- running ----------------------------------------------------------------------------
 
@@ -666,6 +299,7 @@ class MonitoringService(_StoredRows):
         for structure in self.structures.values():
             if structure.started:
                 structure.wait(max(0.0, deadline - time.monotonic()))
+        self.scheduler.stop()
         self.notifier.stop(drain_s=drain_s)
         self.retention.stop()
         if self.dashboard is not None:
@@ -698,90 +332,20 @@ class MonitoringService(_StoredRows):
     def status(self, structure_id: str | None = None) -> StatusDocument:
         """The status of the single structure, or of ``structure_id`` of a fleet."""
         structure = self.primary if structure_id is None else self.structure(structure_id)
-        return self._status_of(structure, self._service_state())
-
-    def _service_state(self) -> dict[str, Any]:
-        """What every structure's status shares: the database's counts and the notifier's (read once
-        for all structures of ``/metrics``)."""
-        return {"active": self.storage.alarms(state="active"), "outbox": self.storage.outbox_counts(),
-                "trend_rows": self.storage.count("trends"), "notifier": self.notifier.snapshot()}
+        return status_of(self, structure, service_state(self))
 
     def statuses(self) -> dict[str, StatusDocument]:
         """The status of every running structure (the database read once)."""
-        shared = self._service_state()
-        return {s.id: self._status_of(s, shared) for s in self.running_structures()}
+        shared = service_state(self)
+        return {s.id: status_of(self, s, shared) for s in self.running_structures()}
 
     def fleet_metrics(self) -> str:
         """``/metrics`` of a fleet: every structure's samples labelled ``structure``."""
         return fleet_metrics(self.structures_document(), self.statuses())
 
-    def _status_of(self, structure: Structure, shared: dict[str, Any]) -> StatusDocument:
-        pipeline = structure.pipeline
-        p = pipeline.status(queue_depth=structure.queue.qsize(), queue_capacity=structure.queue.maxsize)
-        src = structure.source.status()
-        src["dropped"] = src["dropped"] + p.late_samples + p.estimator.dropped_samples
-        if pipeline.rejected:  # judged by the pipeline (off the clock, implausible values)
-            by_reason = dict(src["rejected_by_reason"])
-            for reason, n in pipeline.rejected.items():
-                by_reason[reason] = by_reason.get(reason, 0) + n
-            src["rejected_by_reason"] = by_reason
-            src["rejected"] = sum(by_reason.values())
-        src["problems"] = src["problems"] + pipeline.health_problems()
-        src["clock_jumps"] = src.get("clock_jumps", 0) + (pipeline.clock.jump_count if pipeline.clock else 0)
-        src["latency_s"] = p.pipeline_latency_s
-        states = pipeline.sensor_states()
-        counts = {"warning": 0, "alarm": 0}
-        for a in shared["active"]:
-            if not self.fleet or a.source == structure.id:
-                counts[a.level] += 1
-        outcomes, notifier_sink = shared["notifier"]
-        return StatusDocument(
-            service=ServiceStatusDocument(
-                version=VERSION, started_at=self.started_at, uptime_s=round(time.time() - self.started_at, 1),
-                paused=self.paused, done=structure.done if self.fleet else self.done,
-                pipeline_error=structure.pipeline_error, pipeline_errors=structure.pipeline_errors,
-                last_pipeline_error=structure.last_pipeline_error,
-                progress=self._progress(structure, p)),
-            sources=[SourceStatusDocument(**src)],
-            pipeline=p,
-            degraded_sensors=sorted(t for t, s in states.items() if s != "ok"),
-            sensors=states,
-            baseline=BaselineStatusDocument(state=p.baseline, modes=self._baseline_modes(structure)),
-            alarms=AlarmCountsDocument(active=counts),
-            notifications=NotificationStatusDocument(**shared["outbox"], sent_this_run=outcomes["sent"],
-                                                     failed_attempts_this_run=outcomes["retry"] + outcomes["permanent"]
-                                                     + outcomes["given_up"],
-                                                     outcomes_this_run=dict(outcomes),
-                                                     last_error=self.notifier.last_error),
-            storage=StorageStatusDocument(db=str(self.settings.db), schema_version=self.storage.schema_version,
-                                          trend_rows=shared["trend_rows"],
-                                          archive=None if pipeline.archive is None else pipeline.archive.status(),
-                                          write_retries=self.storage.retries, write_failures=self.storage.failures,
-                                          windows_waiting=pipeline.pending_commits, last_error=self.storage.last_error),
-            sinks={"dashboard": self.dashboard_guard.status(), "notifier": notifier_sink,
-                   "housekeeping": self.housekeeping_guard.status()},
-            thresholds=structure.thresholds,
-            model=structure.model_document,
-        )
-
-    def _progress(self, structure: Structure, p: Any) -> str | None:
-        """What ``structure`` is doing now (``_progress``); never breaks the status."""
-        try:
-            return describe_progress(structure, p, getattr(self, "compiling_since", None))
-        except Exception as exc:
-            log.debug("progress of %s: %s", structure.id, exc)
-            return None
-
     def structures_document(self) -> StructuresDocument:
         """``GET /api/structures``: every structure's state, lag, windows and active alarms."""
         return StructuresDocument(structures=[s.summary() for s in self.structures.values()])
-
-    def _baseline_modes(self, structure: Structure | None = None) -> list[BaselineModeDocument] | None:
-        bl = (structure or self.primary).pipeline.analytics.monitor.baseline
-        if bl is None:
-            return None
-        return [BaselineModeDocument(mode=m.mode, unit=m.unit + 1, f_ref_hz=m.f_ref_hz, temperature_ref_c=m.temperature_ref_c,
-                                     slope_per_k=m.slope_per_k, sigma_rel=m.sigma_rel) for m in bl.modes]
 
     def _known(self, structure_id: str) -> None:
         """KeyError naming ``structure_id`` unless the service has such a structure (a failed
@@ -845,28 +409,6 @@ class MonitoringService(_StoredRows):
             raise LookupError(f"{what} is {structure.source.kind}, not ingest")
         result = structure.source.submit(document)
         return None if result is None else IngestResultDocument(**result.as_dict())
-
-
-def _virtual_loads(rig: RigDescription, model: Any) -> tuple[Any, Any] | None:
-    """(analytics.VirtualLoads of the rig's hot spots and a 16-station grid, b of states) for the live view."""
-    from analytics import VirtualLoads
-
-    try:
-        return VirtualLoads.from_rig(rig, model.units.curvature), model.state_layout.b_of
-    except ValueError as exc:  # never stops the service: the live view goes without loads
-        log.warning("no virtual loads in the live view: %s", exc)
-        return None
-
-
-def _check_sensor_counts(rig: RigDescription, est: Any) -> None:
-    """A count set in the configuration must exist on the rig (the defaults are capped to it)."""
-    from ..estimation import sensor_count_problem
-
-    for kind in ("imus", "tofs", "gauges"):
-        if kind in est.model_fields_set:
-            problem = sensor_count_problem(rig, kind, getattr(est, kind), modes=est.modes)
-            if problem:
-                raise ServiceError(f"estimator.{kind} = {getattr(est, kind)}: {problem}")
 
 
 def _check(settings: ServiceSettings) -> None:

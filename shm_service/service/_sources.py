@@ -178,6 +178,16 @@ class _Pacer:
         if delay > 0:
             self.stop.wait(delay)
 
+    def due_in(self, data_ns: int) -> float:
+        """Seconds until ``data_ns`` is due (<= 0: now); the first call sets the origin."""
+        if self.speed is None:
+            return 0.0
+        if self.origin is None:
+            self.origin = (time.monotonic(), data_ns)
+            return 0.0
+        wall0, data0 = self.origin
+        return wall0 + (data_ns - data0) / _NS / self.speed - time.monotonic()
+
 
 def simulation_settings(settings: ServiceSettings):
     """The virtual rig's settings for ``--source sim`` (``sim`` section of the service settings)."""
@@ -277,6 +287,11 @@ class SimSource(Source):
                 truth = (start_ns + np.round(block.times * _NS).astype(np.int64), block.truth["deflection"])
             yield Batch(blocks, raw, truth)
 
+    def start_on(self, scheduler: Any) -> None:
+        """Run on ``scheduler``'s pool (a ``SourceLane``) instead of a thread of its own."""
+        self.state = "running"
+        scheduler.add(SourceLane(self))
+
     def run(self) -> None:
         start_ns = self.settings.start_time_ns
         pacer = _Pacer(self.speed, self._stop)
@@ -291,6 +306,65 @@ class SimSource(Source):
             if not self._put(batch):
                 self.state = "stopped"
                 return
+
+
+class SourceLane:
+    """A simulated source stepped by the scheduler instead of a thread of its own: each step makes
+    the next batch, or hands it on once it is due (paced) and the queue has room. Ready only then,
+    so a pool thread never waits for the pace or for room."""
+
+    def __init__(self, source: SimSource) -> None:
+        self.source, self.name, self.finished = source, f"source-{source.id}", False
+        self.pacer = _Pacer(source.speed, source._stop)
+        block_s = source.block_s if source.speed is not None else max(source.block_s, 10.0)  # bigger blocks at max speed
+        self._batches = iter(source.batches(block_s))
+        self._next: Batch | None = None
+        self._newest = source.settings.start_time_ns
+        self._ending = False
+
+    def ready(self) -> bool:
+        src = self.source
+        if self._ending or src._stop.is_set():
+            return not src.out.full()
+        if self._next is None:
+            return True
+        return not src.out.full() and self.pacer.due_in(self._newest) <= 0
+
+    def step(self) -> None:
+        src = self.source
+        if src._stop.is_set() and not self._ending:
+            src.state, self._ending = "stopped", True
+        if self._ending:
+            self._end()
+            return
+        if self._next is None:
+            try:
+                batch = next(self._batches, None)
+            except Exception as exc:  # a source failing must not take the service down
+                log.exception("source %s failed", src.id)
+                src.state, src.error, self._ending = "failed", f"{type(exc).__name__}: {exc}", True
+                return
+            if batch is None:
+                src.state, self._ending = "finished", True
+                return
+            self._next = batch
+            self._newest = max((int(b.log_time_ns[-1]) for b in batch.blocks if len(b)), default=self._newest)
+            return
+        if self.pacer.due_in(self._newest) > 0:
+            return
+        src._count(self._next.blocks)
+        try:
+            src.out.put_nowait(self._next)
+        except queue.Full:
+            return
+        self._next = None
+
+    def _end(self) -> None:
+        try:
+            self.source.out.put_nowait(END)
+        except queue.Full:
+            return  # once the pipeline made room
+        self.finished = True
 
 
 class FileSource(Source):
@@ -499,7 +573,8 @@ class IngestSource(Source):
         self.state = "running"
 
     def stop(self) -> None:
-        super().stop()
+        with self._lock:  # a request putting its batch now completes first; later ones are refused
+            super().stop()
         if self.state == "running":
             self.state = "finished"
             try:
@@ -511,6 +586,9 @@ class IngestSource(Source):
         """Validate and enqueue; returns the result, or None when the pipeline had no room
         within ``wait_s`` (nothing of the request was taken: the client retries)."""
         with self._lock:  # one request at a time keeps each topic's time order
+            if self._stop.is_set():  # stopping: nothing more is taken (the client retries with the next service)
+                self.refused += 1
+                return None
             self.requests += 1
             result = self.validator.validate(document)
             batch = Batch(result.blocks, result.raw if self.raw else None, refused=dict(result.refused_by_topic))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -202,15 +203,33 @@ _LABEL = {"phi_deg": "Δφ_rmse [°]", "e_m": "Δe_rmse [mm]", "b3": "Δb3_rmse 
 
 
 def make_study_figures(result: StudyResult, out: Path) -> list[Path]:
+    """The paper's Figs. 15–22 of the study ``result``, written to ``out``; returns the files."""
     s = result.settings
     ex = example_tofs(s)
-    written: list[Path] = []
     bench = result.benchmark_series
     duration = float(bench["t"][-1])
     window = _dynamic_window(bench, 30.0 if duration >= 200 else 15.0)
     peripherals = [p for p in ("acc", "gyro") if p in s.peripherals]
     no_gauges = [_no_gauges(p, min(s.tofs)) for p in peripherals]
+    extra = [_no_gauges(p, ex) for p in peripherals]
+    written = [
+        _fig15(result, out, no_gauges, bench, duration),
+        _fig_b(result, out / "fig16_b_without_gauges.png", no_gauges, window,
+               "Deformation variables without strain gauges (cf. paper Fig. 16)"),
+        _fig17(result, out, peripherals),
+        _fig18(result, out, extra, ex),
+        _fig_b(result, out / "fig19_b_extra_tofs.png", extra, window,
+               f"Deformation variables with additional ToFs (ν_ρ = {ex}) (cf. paper Fig. 19)"),
+    ]
+    if s.reduced_gauges:
+        styles = {g: ls for g, ls in zip(sorted(s.reduced_gauges), ("-", "--", ":"))}
+        written.append(_fig20(result, out, peripherals, ex, styles))
+        written.append(_fig21(result, out, peripherals, styles))
+        written += _fig22(result, out, ex, window)
+    return written
 
+
+def _fig15(result: StudyResult, out: Path, no_gauges: list, bench: dict, duration: float) -> Path:
     # Fig. 15: drift of φ and e without gauges, and the overscaled beams at one instant.
     fig = Figure(figsize=(13, 9), layout="constrained")
     grid = fig.add_gridspec(4, 3)
@@ -222,14 +241,19 @@ def make_study_figures(result: StudyResult, out: Path) -> list[Path]:
         ax.axvline(at, color="0.6", lw=0.6)
     _beam_snapshot(fig.add_subplot(grid[:, 2]), result, no_gauges, at)
     fig.suptitle("Without strain gauges (ν_ε = 0) against the benchmark (cf. paper Fig. 15)")
-    written.append(_save(fig, out / "fig15_drift_without_gauges.png"))
+    return _save(fig, out / "fig15_drift_without_gauges.png")
 
-    # Fig. 16: b without gauges in the interval of high dynamics.
+
+def _fig_b(result: StudyResult, path: Path, configs: list, window: Any, title: str) -> Path:
+    """b of ``configs`` in the interval of high dynamics (Figs. 16, 19)."""
     fig = Figure(figsize=(10, 8), layout="constrained")
-    _plot_b([fig.add_subplot(GAMMA, 1, k) for k in range(1, GAMMA + 1)], result, no_gauges, list(range(1, GAMMA + 1)), window)
-    fig.suptitle("Deformation variables without strain gauges (cf. paper Fig. 16)")
-    written.append(_save(fig, out / "fig16_b_without_gauges.png"))
+    _plot_b([fig.add_subplot(GAMMA, 1, k) for k in range(1, GAMMA + 1)], result, configs, list(range(1, GAMMA + 1)), window)
+    fig.suptitle(title)
+    return _save(fig, path)
 
+
+def _fig17(result: StudyResult, out: Path, peripherals: list[str]) -> Path:
+    s = result.settings
     # Fig. 17: RMSE against ν_ρ without gauges, ν_s = 4, 5.
     fig = Figure(figsize=(11, 7), layout="constrained")
     axes = fig.subplots(2, 2)
@@ -256,90 +280,93 @@ def make_study_figures(result: StudyResult, out: Path) -> list[Path]:
     axes[0, 0].legend(fontsize=7)
     axes[1, 0].legend(fontsize=7)
     fig.suptitle("RMSE with additional ToFs, no strain gauges; mean ± std over seeds (cf. paper Fig. 17)")
-    written.append(_save(fig, out / "fig17_rmse_vs_tofs.png"))
+    return _save(fig, out / "fig17_rmse_vs_tofs.png")
 
-    extra = [_no_gauges(p, ex) for p in peripherals]
+
+def _fig18(result: StudyResult, out: Path, extra: list, ex: int) -> Path:
     fig = Figure(figsize=(11, 8), layout="constrained")
     axes = fig.subplots(4, 1, sharex=True)
     _plot_phi_e(axes[:2], result, extra)
     _plot_deviation(axes[2:], result, extra)
     fig.suptitle(f"With additional ToFs (ν_ρ = {ex}, ν_ε = 0) (cf. paper Fig. 18)")
-    written.append(_save(fig, out / "fig18_extra_tofs.png"))
+    return _save(fig, out / "fig18_extra_tofs.png")
 
-    fig = Figure(figsize=(10, 8), layout="constrained")
-    _plot_b([fig.add_subplot(GAMMA, 1, k) for k in range(1, GAMMA + 1)], result, extra, list(range(1, GAMMA + 1)), window)
-    fig.suptitle(f"Deformation variables with additional ToFs (ν_ρ = {ex}) (cf. paper Fig. 19)")
-    written.append(_save(fig, out / "fig19_b_extra_tofs.png"))
 
-    if s.reduced_gauges:
-        # Fig. 20: RMSE of φ and e with reduced gauges, against ν_ρ and against ν_ε.
-        fig = Figure(figsize=(11, 7), layout="constrained")
-        axes = fig.subplots(2, 2)
-        ref = result.find(_no_gauges("gyro", ex))
-        styles = {g: ls for g, ls in zip(sorted(s.reduced_gauges), ("-", "--", ":"))}
-        for col, key in enumerate(("phi_deg", "e_m")):
-            ax = axes[0, col]
-            for p in peripherals:
-                for g in s.reduced_gauges:
-                    rows = _rows(result, peripheral=p, imus=4, gauges=g)
-                    mean, std = zip(*(_metric(r, "benchmark", key) for r in rows))
-                    _errorbar(ax, [r.config.tofs for r in rows], mean, std, color=COLORS[p], ls=styles[g], label=f"{p} ν_ε={g}")
-            if ref is not None:
-                ax.axhline(_metric(ref, "benchmark", key)[0], color="black", ls="-.", lw=1, label=f"gyro ν_ρ={ex}, ν_ε=0")
-            ax.set_xlabel("ν_ρ (ToFs)")
-            ax.set_ylabel(_LABEL[key])
-            ax.set_title("against the benchmark (Eq. 21)", fontsize=9)
-            ax.grid(alpha=0.3)
-            ax.set_ylim(bottom=0)
-            ax = axes[1, col]
-            for p in peripherals:
-                rows = [result.find(_no_gauges(p, ex))] + [result.find(Configuration(peripheral=p, imus=4, tofs=ex, gauges=g))
-                                                           for g in sorted(s.reduced_gauges)]
-                rows = [r for r in rows if r is not None]
-                mean, std = zip(*(_metric(r, "truth", key) for r in rows))
-                _errorbar(ax, [r.config.gauges for r in rows], mean, std, color=COLORS[p], label=f"{p} ν_ρ={ex}")
-                r4 = result.find(Configuration(peripheral=p, imus=4, tofs=4, gauges=4))
-                if r4 is not None:
-                    m4, s4 = _metric(r4, "truth", key)
-                    ax.errorbar([GAMMA], [m4], yerr=[s4], marker="s", color=COLORS[p], capsize=2, ls="none",
-                                label=f"{p} ν_ρ=4, ν_ε=4")
-            ax.set_xlabel("ν_ε (strain gauges)")
-            ax.set_ylabel(_LABEL[key])
-            ax.set_title("against the simulator truth", fontsize=9)
-            ax.grid(alpha=0.3)
-            ax.set_ylim(bottom=0)
-        axes[0, 0].legend(fontsize=7)
-        axes[1, 0].legend(fontsize=7)
-        fig.suptitle("RMSE with a reduced number of strain gauges (restricted aiding, Eq. 22) (cf. paper Fig. 20)")
-        written.append(_save(fig, out / "fig20_rmse_vs_gauges.png"))
+def _fig20(result: StudyResult, out: Path, peripherals: list[str], ex: int, styles: dict) -> Path:
+    s = result.settings
+    # Fig. 20: RMSE of φ and e with reduced gauges, against ν_ρ and against ν_ε.
+    fig = Figure(figsize=(11, 7), layout="constrained")
+    axes = fig.subplots(2, 2)
+    ref = result.find(_no_gauges("gyro", ex))
+    for col, key in enumerate(("phi_deg", "e_m")):
+        ax = axes[0, col]
+        for p in peripherals:
+            for g in s.reduced_gauges:
+                rows = _rows(result, peripheral=p, imus=4, gauges=g)
+                mean, std = zip(*(_metric(r, "benchmark", key) for r in rows))
+                _errorbar(ax, [r.config.tofs for r in rows], mean, std, color=COLORS[p], ls=styles[g], label=f"{p} ν_ε={g}")
+        if ref is not None:
+            ax.axhline(_metric(ref, "benchmark", key)[0], color="black", ls="-.", lw=1, label=f"gyro ν_ρ={ex}, ν_ε=0")
+        ax.set_xlabel("ν_ρ (ToFs)")
+        ax.set_ylabel(_LABEL[key])
+        ax.set_title("against the benchmark (Eq. 21)", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.set_ylim(bottom=0)
+        ax = axes[1, col]
+        for p in peripherals:
+            rows = [result.find(_no_gauges(p, ex))] + [result.find(Configuration(peripheral=p, imus=4, tofs=ex, gauges=g))
+                                                       for g in sorted(s.reduced_gauges)]
+            rows = [r for r in rows if r is not None]
+            mean, std = zip(*(_metric(r, "truth", key) for r in rows))
+            _errorbar(ax, [r.config.gauges for r in rows], mean, std, color=COLORS[p], label=f"{p} ν_ρ={ex}")
+            r4 = result.find(Configuration(peripheral=p, imus=4, tofs=4, gauges=4))
+            if r4 is not None:
+                m4, s4 = _metric(r4, "truth", key)
+                ax.errorbar([GAMMA], [m4], yerr=[s4], marker="s", color=COLORS[p], capsize=2, ls="none",
+                            label=f"{p} ν_ρ=4, ν_ε=4")
+        ax.set_xlabel("ν_ε (strain gauges)")
+        ax.set_ylabel(_LABEL[key])
+        ax.set_title("against the simulator truth", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.set_ylim(bottom=0)
+    axes[0, 0].legend(fontsize=7)
+    axes[1, 0].legend(fontsize=7)
+    fig.suptitle("RMSE with a reduced number of strain gauges (restricted aiding, Eq. 22) (cf. paper Fig. 20)")
+    return _save(fig, out / "fig20_rmse_vs_gauges.png")
 
-        # Fig. 21: RMSE of b3 and b4.
-        fig = Figure(figsize=(11, 4), layout="constrained")
-        axes = fig.subplots(1, 2)
-        for ax, key in zip(axes, ("b3", "b4")):
-            for p in peripherals:
-                for g in s.reduced_gauges:
-                    rows = _rows(result, peripheral=p, imus=4, gauges=g)
-                    mean, std = zip(*(_metric(r, "benchmark", key) for r in rows))
-                    _errorbar(ax, [r.config.tofs for r in rows], mean, std, color=COLORS[p], ls=styles[g], label=f"{p} ν_ε={g}")
-            ax.set_xlabel("ν_ρ (ToFs)")
-            ax.set_ylabel(_LABEL[key] + " against bm")
-            ax.grid(alpha=0.3)
-            ax.set_ylim(bottom=0)
-        axes[0].legend(fontsize=7)
-        fig.suptitle("RMSE of b3 and b4 with a reduced number of strain gauges (cf. paper Fig. 21)")
-        written.append(_save(fig, out / "fig21_rmse_b3_b4.png"))
 
-        # Fig. 22: b3, b4 of acc with two gauges and gyro with one (or what the study has).
-        pair = [Configuration(peripheral="acc", imus=4, tofs=ex, gauges=max(s.reduced_gauges) if 2 not in s.reduced_gauges else 2),
-                Configuration(peripheral="gyro", imus=4, tofs=ex, gauges=min(s.reduced_gauges))]
-        pair = [c for c in pair if c in result.series]
-        if pair:
-            fig = Figure(figsize=(10, 5), layout="constrained")
-            _plot_b(fig.subplots(2, 1, sharex=True), result, pair, [3, 4], window)
-            fig.suptitle("b3 and b4 with reduced strain gauges (cf. paper Fig. 22)")
-            written.append(_save(fig, out / "fig22_b3_b4_reduced_gauges.png"))
-    return written
+def _fig21(result: StudyResult, out: Path, peripherals: list[str], styles: dict) -> Path:
+    s = result.settings
+    # Fig. 21: RMSE of b3 and b4.
+    fig = Figure(figsize=(11, 4), layout="constrained")
+    axes = fig.subplots(1, 2)
+    for ax, key in zip(axes, ("b3", "b4")):
+        for p in peripherals:
+            for g in s.reduced_gauges:
+                rows = _rows(result, peripheral=p, imus=4, gauges=g)
+                mean, std = zip(*(_metric(r, "benchmark", key) for r in rows))
+                _errorbar(ax, [r.config.tofs for r in rows], mean, std, color=COLORS[p], ls=styles[g], label=f"{p} ν_ε={g}")
+        ax.set_xlabel("ν_ρ (ToFs)")
+        ax.set_ylabel(_LABEL[key] + " against bm")
+        ax.grid(alpha=0.3)
+        ax.set_ylim(bottom=0)
+    axes[0].legend(fontsize=7)
+    fig.suptitle("RMSE of b3 and b4 with a reduced number of strain gauges (cf. paper Fig. 21)")
+    return _save(fig, out / "fig21_rmse_b3_b4.png")
+
+
+def _fig22(result: StudyResult, out: Path, ex: int, window: Any) -> list[Path]:
+    s = result.settings
+    # Fig. 22: b3, b4 of acc with two gauges and gyro with one (or what the study has).
+    pair = [Configuration(peripheral="acc", imus=4, tofs=ex, gauges=max(s.reduced_gauges) if 2 not in s.reduced_gauges else 2),
+            Configuration(peripheral="gyro", imus=4, tofs=ex, gauges=min(s.reduced_gauges))]
+    pair = [c for c in pair if c in result.series]
+    if pair:
+        fig = Figure(figsize=(10, 5), layout="constrained")
+        _plot_b(fig.subplots(2, 1, sharex=True), result, pair, [3, 4], window)
+        fig.suptitle("b3 and b4 with reduced strain gauges (cf. paper Fig. 22)")
+        return [_save(fig, out / "fig22_b3_b4_reduced_gauges.png")]
+    return []
 
 
 def make_design_figure(result: StudyResult, row: ConfigurationResult, rank: int, out: Path) -> Path:

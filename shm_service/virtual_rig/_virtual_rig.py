@@ -144,6 +144,25 @@ class VirtualRig:
                     raise ValueError(f"damage position {x} m is outside the beam [0, {self.nominal_rig.beam.length}]")
         # The described rig first: a standing beam that buckles is refused with the FE's figures.
         nominal_model = assemble_beam(self.nominal_rig)
+        self._build_plants()
+        nominal_freqs = natural_modes(nominal_model, 6).frequencies_hz
+        op = settings.operational
+        self.wind_correlation_m, self.wind_load_rms = self._wind_load()
+        self.excitation: Excitation = make_excitation(
+            settings.excitation, settings.duration, self._rng_excitation,
+            eigenfrequencies_hz=nominal_freqs, rest_s=settings.rest, ambient_force_std=settings.plant.ambient_force,
+            # A fixed support does not move: the operational excitation is then the wind load alone.
+            operational=OperationalExcitation(0.0 if self.fixed_support else op.support_rms, tuple(op.support_band),
+                                              self.wind_load_rms, self.wind_correlation_m, tuple(op.load_band), op.ramp),
+        )
+        self._ambient_loads()
+        self._sensor_setup()
+        self._state = (np.zeros(self.plants[0].size), np.zeros(self.plants[0].size))
+        self._next_sample = 0
+
+    def _build_plants(self) -> None:
+        """The structure as built (and damaged): its plants in one modal basis, the RK4 substeps."""
+        settings = self.settings
         self.plant_rig = _perturbed_rig(self.nominal_rig, settings, self._rng_plant)
         damage_nodes = [x for d in settings.damage for x in d.nodes]
         healthy_model = _plant_model(self.plant_rig, damage_nodes, "the simulated plant (E and board masses drawn off the nominal)")
@@ -153,7 +172,7 @@ class VirtualRig:
             models.append(_plant_model(self.damaged_rig, damage_nodes, "the damaged plant"))
         else:
             self.damaged_rig = None
-        self._refuse_buckling_over_the_temperature_range(models)
+        _refuse_buckling_over_the_temperature_range(settings, self.plant_rig, models)
         basis = clamped_basis(models, settings.plant.modes)
         friction = 0.0 if settings.ideal else settings.plant.friction_torque
         self._critical_load_factor = float(healthy_model.critical_load_factor)
@@ -168,16 +187,9 @@ class VirtualRig:
         self.damage_sample = (
             None if not settings.damage else int(round((settings.damage_at or 0.0) * SAMPLE_RATE_HZ))
         )
-        nominal_freqs = natural_modes(nominal_model, 6).frequencies_hz
-        op = settings.operational
-        self.wind_correlation_m, self.wind_load_rms = self._wind_load()
-        self.excitation: Excitation = make_excitation(
-            settings.excitation, settings.duration, self._rng_excitation,
-            eigenfrequencies_hz=nominal_freqs, rest_s=settings.rest, ambient_force_std=settings.plant.ambient_force,
-            # A fixed support does not move: the operational excitation is then the wind load alone.
-            operational=OperationalExcitation(0.0 if self.fixed_support else op.support_rms, tuple(op.support_band),
-                                              self.wind_load_rms, self.wind_correlation_m, tuple(op.load_band), op.ramp),
-        )
+
+    def _ambient_loads(self) -> None:
+        settings, basis, op = self.settings, self.basis, self.settings.operational
         # Ambient loads act on the lateral DOF of every node beyond D (below it hanging, above it standing).
         n_nodes = len(basis.nodes)
         rigid = np.zeros((2 * n_nodes,))
@@ -196,9 +208,6 @@ class VirtualRig:
                 start_s=self.excitation.rest_s, ramp_s=op.ramp,
                 storm=None if settings.wind_storm is None else (settings.wind_storm.start_s, settings.wind_storm.end_s,
                                                                 settings.wind_storm.peak))
-        self._sensor_setup()
-        self._state = (np.zeros(self.plants[0].size), np.zeros(self.plants[0].size))
-        self._next_sample = 0
 
     def _wind_load(self) -> tuple[float, float]:
         """(correlation length m, RMS N/m) of the wind load: as set, the operational settings' for the
@@ -223,21 +232,6 @@ class VirtualRig:
             t = np.asarray(t, dtype=float)
             return np.zeros_like(t), np.zeros_like(t), np.zeros_like(t)
         return self.excitation.bearing(t)
-
-    def _refuse_buckling_over_the_temperature_range(self, models) -> None:
-        """The critical load scales with E: a mast that stands at the reference temperature may
-        buckle when the swing softens it (the linear plant would then diverge)."""
-        s = self.settings
-        beam = self.plant_rig.beam
-        coldest, warmest = s.temperature_mean - 0.5 * s.temperature_swing, s.temperature_mean + 0.5 * s.temperature_swing
-        softest = min(1 + beam.youngs_modulus_temperature_coefficient * (t - beam.reference_temperature) for t in (coldest, warmest))
-        for model in models:
-            factor = model.critical_load_factor * softest
-            if factor <= 1.0:
-                raise BucklingError(
-                    f"the standing beam buckles when the temperature swing softens it: its critical load factor "
-                    f"falls to λ_cr = {factor:.4g} between {coldest:g} and {warmest:g} °C",
-                    critical_load_factor=factor, bare_critical_length=float("nan"))
 
     # -- sensors -------------------------------------------------------------------------
     def _sensor_setup(self) -> None:
@@ -265,35 +259,7 @@ class VirtualRig:
 
     def truth_metadata(self) -> dict[str, str]:
         """The ``truth`` metadata record: the plant's exact modal figures and what was simulated."""
-        healthy = self.plants[0]
-        meta = {
-            "eigenfrequencies_hz": json.dumps(healthy.linear_frequencies_hz[:8].round(6).tolist()),
-            "modal_damping_ratios": json.dumps(healthy.modal_damping[:8].round(6).tolist()),
-            "reference_temperature_c": json.dumps(self.plant_rig.beam.reference_temperature),
-            "excitation": self.settings.excitation,
-            "rest_s": json.dumps(self.excitation.rest_s),
-            "still_phases_s": json.dumps([[round(a, 3), round(b, 3)] for a, b in self.excitation.still_phases]),
-            "ideal": json.dumps(self.settings.ideal),
-            "friction_torque_nm": json.dumps(healthy.friction_torque),
-            "support": self.plant_rig.support,
-            "orientation": self.plant_rig.orientation,
-            "critical_load_factor": json.dumps(
-                None if not np.isfinite(self._critical_load_factor) else round(self._critical_load_factor, 6)),
-            "plant_rig": self.plant_rig.model_dump_json(),
-        }
-        if self.settings.excitation == "operational":
-            meta["operational"] = self.settings.operational.model_dump_json()
-        meta["fixed_support"] = json.dumps(self.fixed_support)
-        if self._distributed_load is not None:
-            meta["wind_load"] = json.dumps({"rms_n_per_m": round(self.wind_load_rms, 9),
-                                            "correlation_m": round(self.wind_correlation_m, 6)})
-            if self.settings.wind_storm is not None:
-                meta["wind_storm"] = self.settings.wind_storm.model_dump_json()
-        if self.damaged_rig is not None:
-            meta["eigenfrequencies_after_damage_hz"] = json.dumps(self.plants[1].linear_frequencies_hz[:8].round(6).tolist())
-            meta["damage_time_s"] = json.dumps((self.damage_sample or 0) / SAMPLE_RATE_HZ)
-            meta["damage"] = json.dumps([d.model_dump(mode="json", exclude_none=True) for d in self.settings.damage])
-        return meta
+        return _truth_metadata(self)
 
     def temperature(self, t: np.ndarray) -> np.ndarray:
         s = self.settings
@@ -348,17 +314,23 @@ class VirtualRig:
         index = k0 + np.arange(n)
         t = index * self.dt
         d, _, d_acc = self.support_motion(t)
-        rig = self.nominal_rig
-        e = self.settings.errors
-        rng = self._rng_sensors
-        plant_g = self.plants[0].gravity
         meas: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         delays: dict[str, np.ndarray] = {}
 
+        self._fast_sensors(t, y, yd, ydd, d, d_acc, meas, delays)
+        self._slow_sensors(index, t, y, yd, ydd, d, d_acc, meas, delays)
+        return SampleBlock(times=t, measurements=meas, truth=self._truth(y, d), delays=delays)
+
+    def _fast_sensors(self, t, y, yd, ydd, d, d_acc, meas: dict, delays: dict) -> None:
+        """The IMUs and strain gauges at the sample rate."""
+        n = len(t)
+        e = self.settings.errors
+        rng = self._rng_sensors
         accel_wander = self._accel_wander.next(n)
         gyro_wander = self._gyro_wander.next(n)
         # every sensor's kinematics in one pass (fields (n, sensors)), its own column taken below
-        fast = points_motion(self.basis, [s.position for s in (*self.imus, *self.gauges)], y, yd, ydd, d, d_acc, plant_g)
+        fast = points_motion(self.basis, [s.position for s in (*self.imus, *self.gauges)], y, yd, ydd, d, d_acc,
+                             self.plants[0].gravity)
         for i, imu in enumerate(self.imus):
             fx, fy = fast.specific_force_x[:, i], fast.specific_force_y[:, i]
             mis = self._misalignment[i]
@@ -376,6 +348,14 @@ class VirtualRig:
             meas[gauge.topic] = (t, strain[:, None])
             delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
 
+
+    def _slow_sensors(self, index, t, y, yd, ydd, d, d_acc, meas: dict, delays: dict) -> None:
+        """The ToFs, the bearing sensor (every ``SLOW_DIVIDER``-th sample) and the temperature."""
+        n = len(t)
+        rig = self.nominal_rig
+        e = self.settings.errors
+        rng = self._rng_sensors
+        plant_g = self.plants[0].gravity
         slow = index % SLOW_DIVIDER == 0
         t_slow = t[slow]
         y_slow, yd_slow, ydd_slow = y[slow], yd[slow], ydd[slow]
@@ -410,11 +390,14 @@ class VirtualRig:
             meas["/env/temperature"] = (t[every], temp[:, None])
             delays["/env/temperature"] = np.full(int(every.sum()), 0.01)
 
+    def _truth(self, y, d) -> dict[str, np.ndarray]:
+        rig = self.nominal_rig
+        n = len(d)
         stations = np.asarray(rig.truth_stations, dtype=float)
         deflection = self.basis.evaluate(stations, 0)
         curvature = self.basis.evaluate(stations, 2)
         q = y[:, 1:]
-        truth = {
+        return {
             "d": d,
             "h": np.zeros(n),
             "phi": y[:, 0],
@@ -422,4 +405,51 @@ class VirtualRig:
             "deflection": q @ deflection.T,
             "curvature": q @ curvature.T,
         }
-        return SampleBlock(times=t, measurements=meas, truth=truth, delays=delays)
+
+
+def _truth_metadata(self: VirtualRig) -> dict[str, str]:
+    """The ``truth`` metadata record: the plant's exact modal figures and what was simulated."""
+    healthy = self.plants[0]
+    meta = {
+        "eigenfrequencies_hz": json.dumps(healthy.linear_frequencies_hz[:8].round(6).tolist()),
+        "modal_damping_ratios": json.dumps(healthy.modal_damping[:8].round(6).tolist()),
+        "reference_temperature_c": json.dumps(self.plant_rig.beam.reference_temperature),
+        "excitation": self.settings.excitation,
+        "rest_s": json.dumps(self.excitation.rest_s),
+        "still_phases_s": json.dumps([[round(a, 3), round(b, 3)] for a, b in self.excitation.still_phases]),
+        "ideal": json.dumps(self.settings.ideal),
+        "friction_torque_nm": json.dumps(healthy.friction_torque),
+        "support": self.plant_rig.support,
+        "orientation": self.plant_rig.orientation,
+        "critical_load_factor": json.dumps(
+            None if not np.isfinite(self._critical_load_factor) else round(self._critical_load_factor, 6)),
+        "plant_rig": self.plant_rig.model_dump_json(),
+    }
+    if self.settings.excitation == "operational":
+        meta["operational"] = self.settings.operational.model_dump_json()
+    meta["fixed_support"] = json.dumps(self.fixed_support)
+    if self._distributed_load is not None:
+        meta["wind_load"] = json.dumps({"rms_n_per_m": round(self.wind_load_rms, 9),
+                                        "correlation_m": round(self.wind_correlation_m, 6)})
+        if self.settings.wind_storm is not None:
+            meta["wind_storm"] = self.settings.wind_storm.model_dump_json()
+    if self.damaged_rig is not None:
+        meta["eigenfrequencies_after_damage_hz"] = json.dumps(self.plants[1].linear_frequencies_hz[:8].round(6).tolist())
+        meta["damage_time_s"] = json.dumps((self.damage_sample or 0) / SAMPLE_RATE_HZ)
+        meta["damage"] = json.dumps([d.model_dump(mode="json", exclude_none=True) for d in self.settings.damage])
+    return meta
+
+
+def _refuse_buckling_over_the_temperature_range(s: SimulationSettings, plant_rig: RigDescription, models: list) -> None:
+    """The critical load scales with E: a mast that stands at the reference temperature may
+    buckle when the swing softens it (the linear plant would then diverge)."""
+    beam = plant_rig.beam
+    coldest, warmest = s.temperature_mean - 0.5 * s.temperature_swing, s.temperature_mean + 0.5 * s.temperature_swing
+    softest = min(1 + beam.youngs_modulus_temperature_coefficient * (t - beam.reference_temperature) for t in (coldest, warmest))
+    for model in models:
+        factor = model.critical_load_factor * softest
+        if factor <= 1.0:
+            raise BucklingError(
+                f"the standing beam buckles when the temperature swing softens it: its critical load factor "
+                f"falls to λ_cr = {factor:.4g} between {coldest:g} and {warmest:g} °C",
+                critical_load_factor=factor, bare_critical_length=float("nan"))

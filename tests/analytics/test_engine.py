@@ -185,3 +185,29 @@ def test_when_no_baseline_can_be_learnt_the_error_names_the_modes_and_what_they_
 def test_bad_input_names_the_value(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_a_gap_of_years_is_skipped_in_one_step_with_the_same_windows_and_counts(operational, monkeypatch):
+    """A clock that jumped decades ahead (issue 26: a wall-clock stamp in a 1970 backfill) costs
+    one step, not one per window of the years between; a gap of minutes gives the same windows
+    and counts as the window-by-window loop."""
+    import time
+
+    t, b, d, _ = operational
+    half = t.size // 2
+
+    def run(gap_s: float, skip: bool, not_before_s: float = 100.0):
+        engine = MonitoringEngine(ModalMonitor(EXPECTED, S2, ETA, fs=FS), origin_ns=ORIGIN_NS, time_zero_ns=ORIGIN_NS,
+                                  not_before_ns=ORIGIN_NS + int(not_before_s * 1e9))
+        if not skip:
+            monkeypatch.setattr(engine, "_skip_gap", lambda *a: False)
+        got = engine.add(t[:half], b[:half], support=d[:half])
+        got += engine.add(t[half:] + gap_s, b[half:], support=d[half:])
+        return [g.result.start_s for g in got], engine.windows, engine.skipped_incomplete, engine.skipped_warmup
+
+    assert run(1234.5, True) == run(1234.5, False)
+    assert run(1234.5, True, not_before_s=900.0) == run(1234.5, False, not_before_s=900.0)
+    began = time.process_time()
+    starts, windows, incomplete, warmup = run(56 * 365.25 * 86400.0, True)
+    assert time.process_time() - began < 60.0  # the loop would take hours
+    assert windows == len(starts) >= 10 and incomplete > 56 * 365 * 86400 / 30 - 10

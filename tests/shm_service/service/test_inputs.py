@@ -150,8 +150,16 @@ def test_a_live_sources_clock_runs_on_with_the_wall_clock():
     clock.take("/tof/s1", wall - 3 * 3600 * S, mono=0.0)
     # two hours later (wall clock) it resumes where its clock stands now: not ahead, not off the window
     assert clock.judge_one("/imu/D", wall - 3600 * S, wall_ns=wall + 7200 * S, mono=7200.0) == 0
-    # its clock corrected to the wall clock: on time whatever its past
-    assert clock.judge_one("/imu/D", wall + 7200 * S, wall_ns=wall + 7200 * S, mono=7200.0) == 0
+    # one sensor's clock alone corrected to the wall clock while the source is three hours behind
+    # (a backfill, issue 26): far from its stream's time, a clock jump of that sensor
+    assert clock.judge_one("/imu/D", wall + 7200 * S, wall_ns=wall + 7200 * S, mono=7200.0) == 1
+    # a source running near the wall clock: a stamp near the wall clock is on time whatever its past
+    near = SourceClock(window_s=3600.0, max_ahead_s=1.0, live=True, future_tolerance_s=60.0)
+    near.take("/imu/D", wall - 300 * S, mono=0.0)
+    near.take("/tof/s1", wall - 300 * S, mono=0.0)
+    assert near.judge_one("/imu/D", wall, wall_ns=wall, mono=0.0) == 0
+    assert near.judge_stamps(wall_ns=wall, mono=0.0).judge("/imu/D", wall) == 0
+    assert near.judge("/imu/D", np.array([wall]), wall_ns=wall, mono=0.0)[1].tolist() == [0]
     # one sensor five minutes ahead of the others at once: its clock jumped
     assert clock.judge_one("/imu/D", wall - 3 * 3600 * S + 300 * S, wall_ns=wall, mono=0.0) == 2
 
@@ -228,3 +236,45 @@ def test_all_plausible_agrees_with_the_per_sample_judgement(kind, good, bad):
         assert not all_plausible(kind, spoilt, limits)
         assert implausible_values(kind, spoilt, limits)[17] or not np.isfinite(spoilt[17]).all()
     assert not all_plausible("sonar", block[:, :1], limits)  # an unknown kind is left to the per-sample path
+
+
+def _backfill(t0: int, n: int, topics=("/imu/D", "/tof/s1", "/strain/g1"), step=5_000_000) -> list[dict]:
+    payloads = {"/imu/D": _imu(1), "/tof/s1": {"distance": 0.5}, "/strain/g1": {"strain": 1e-5}}
+    return [{"topic": topic, "log_time_ns": t0 + k * step, "payload": payloads[topic]} for k in range(n) for topic in topics]
+
+
+def test_a_wall_clock_stamp_inside_a_backfill_is_a_clock_jump_not_the_channels_new_time():
+    """Issue 26 item 4: backfilling data stamped from 1970, one /strain/g1 sample stamped with the
+    present time is rejected (a clock jump, counted), and every later g1 sample is taken."""
+    wall = 1_767_225_600 * S
+    v = IngestValidator(default_rig("benchmark"), max_messages=10_000)
+    t0 = 1000 * S  # 1970
+    first = v.validate({"messages": _backfill(t0, 100)}, wall_ns=wall)
+    assert first.accepted == 300 and not first.rejected
+    v.commit(first)
+    batch = _backfill(t0 + 100 * 5_000_000, 100)
+    present = {"topic": "/strain/g1", "log_time_ns": wall, "payload": {"strain": 1e-5}}
+    r = v.validate({"messages": batch[:30] + [present] + batch[30:]}, wall_ns=wall)
+    assert r.accepted == 300 and dict(r.rejected) == {"implausible_time": 1}
+    v.commit(r)
+    assert v.last["/strain/g1"] == t0 + 199 * 5_000_000  # the channel's time is its stream's, not the jump's
+    assert v.clock.jump_count == 1 and any("clock jump" in p for p in v.clock.problems())
+    # the following g1 samples (alone in their request: the per-topic path) are accepted
+    later = v.validate({"messages": _backfill(t0 + 200 * 5_000_000, 50, topics=("/strain/g1",))}, wall_ns=wall)
+    assert later.accepted == 50 and not later.rejected
+
+
+def test_a_resent_accepted_batch_is_duplicate_not_backwards():
+    wall = 1_767_225_600 * S
+    v = IngestValidator(default_rig("benchmark"), max_messages=10_000)
+    batches = [_backfill(wall - 600 * S + k * S, 200) for k in range(3)]  # 1 s each
+    for b in batches:
+        r = v.validate({"messages": b}, wall_ns=wall)
+        assert r.accepted == 600
+        v.commit(r)
+    for b in batches:  # the first (two batches behind) as the last: every sample a duplicate
+        again = v.validate({"messages": b}, wall_ns=wall)
+        assert again.accepted == 0 and dict(again.rejected) == {"duplicate": 600}
+    # a batch of stamps never accepted, before the last: backwards
+    between = _backfill(wall - 600 * S + 2_500_000, 3)
+    assert dict(v.validate({"messages": between}, wall_ns=wall).rejected) == {"backwards": 9}

@@ -87,11 +87,11 @@ def test_reprocess_is_analyze_per_file_idempotent_and_feeds_the_service_baseline
     assert active is not None and [m["f_ref_hz"] for m in active["modes"]] == [m["frequency_hz"] for m in learnt["modes"]]
 
     from estimator import build_model
-    from shm_service.service._pipeline import _Analytics
+    from shm_service.service._stage_analysis import AnalysisStage
 
     model = build_model(read_recording(short_recording, kinds=()).rig)
     from shm_service.service._config import load_settings
 
-    live = _Analytics(model, load_settings(config).engine_config(), None, None, "mast-01", baseline=active)  # as the service starts
+    live = AnalysisStage(model, load_settings(config).engine_config(), None, None, "mast-01", baseline=active)  # as the service starts
     assert live.monitor.baseline is not None and not live.learning_baseline
     assert main(["baseline", "learn", files[0], "--structure", "x", "--db", str(db), "--from", "10", "--to", "5"]) == 2

@@ -51,7 +51,7 @@ def test_a_full_disk_while_an_alarm_is_raised_loses_no_alarm(tmp_path, short_rec
 
     def watch() -> None:
         while not service.done:
-            pending = list(pipeline._pending_commits)
+            pending = list(pipeline.commits.pending)
             stored = {a.chart for a in st.alarms(state="active")}
             ahead.extend(set(pipeline.committed_alarms) - stored)  # memory must never be ahead of the database
             if pending:

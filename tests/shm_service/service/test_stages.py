@@ -1,0 +1,216 @@
+"""The runtime's stages on their own (issue 23 item 2) and the scheduler that steps them (item 4):
+small inputs, exact expectations."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from shm_service.service._pipeline import AnalysisInbox
+from shm_service.service._scheduler import Scheduler, SchedulerSettings
+from shm_service.service._stage_commit import CommitSettings, CommitStage, PendingCommit
+from shm_service.service._stage_estimate import EstimateSettings, calibration_from_dict, calibration_to_dict
+from shm_service.service._stage_outputs import OutputSettings
+from shm_service.service._storage import StorageUnavailable, WindowCommit
+
+# -- the scheduler ------------------------------------------------------------------------------
+
+
+class _Lane:
+    """``work`` steps of ``cost_s`` each; records how many threads step it at once."""
+
+    def __init__(self, name: str, work: int, cost_s: float = 0.0, log: list | None = None) -> None:
+        self.name, self.work, self.cost_s, self.finished = name, work, cost_s, False
+        self.steps = 0
+        self.inside = 0
+        self.most_inside = 0
+        self.log = log
+        self.lock = threading.Lock()
+
+    def ready(self) -> bool:
+        return self.steps < self.work
+
+    def step(self) -> None:
+        with self.lock:
+            self.inside += 1
+            self.most_inside = max(self.most_inside, self.inside)
+        if self.cost_s:
+            time.sleep(self.cost_s)
+        self.steps += 1
+        if self.log is not None:
+            self.log.append(self.name)
+        with self.lock:
+            self.inside -= 1
+        if self.steps >= self.work:
+            self.finished = True
+
+
+def _wait(cond, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not cond():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.005)
+
+
+def test_the_scheduler_takes_the_lanes_round_robin():
+    log: list[str] = []
+    lanes = [_Lane(f"s{k}", work=3 + k % 2, log=log) for k in range(4)]
+    scheduler = Scheduler(SchedulerSettings(threads=1))
+    with scheduler._cv:  # added together: the first round sees them all
+        for lane in lanes:
+            scheduler._lanes.append(lane)
+    scheduler._start()
+    _wait(lambda: all(lane.finished for lane in lanes))
+    scheduler.stop()
+    assert log == ["s0", "s1", "s2", "s3"] * 3 + ["s1", "s3"]  # each in turn; a finished lane leaves the rotation
+    assert scheduler.lanes == 0 and scheduler.steps == 14
+
+
+def test_each_lane_is_stepped_by_one_thread_at_a_time():
+    lanes = [_Lane(f"s{k}", work=20, cost_s=0.001) for k in range(5)]
+    scheduler = Scheduler(SchedulerSettings(threads=3))
+    for lane in lanes:
+        scheduler.add(lane)
+    _wait(lambda: all(lane.finished for lane in lanes))
+    scheduler.stop()
+    assert [lane.steps for lane in lanes] == [20] * 5
+    assert max(lane.most_inside for lane in lanes) == 1  # a lane's steps never overlap: its data stay in order
+
+
+def test_a_slow_lane_holds_one_thread_and_the_others_go_on():
+    slow = _Lane("slow", work=1, cost_s=2.0)
+    fast = [_Lane(f"f{k}", work=50) for k in range(4)]
+    scheduler = Scheduler(SchedulerSettings(threads=2))
+    scheduler.add(slow)
+    time.sleep(0.05)
+    for lane in fast:
+        scheduler.add(lane)
+    _wait(lambda: all(lane.finished for lane in fast))
+    assert not slow.finished  # the fast lanes finished while the slow one was still in its step
+    _wait(lambda: slow.finished)
+    scheduler.stop()
+
+
+def test_a_lane_that_fails_is_logged_and_the_pool_goes_on(caplog):
+    class Bad(_Lane):
+        def step(self) -> None:
+            self.steps += 1
+            raise RuntimeError("boom")
+
+        def ready(self) -> bool:
+            return self.steps < 3
+
+    bad, good = Bad("bad", 3), _Lane("good", 10)
+    scheduler = Scheduler(SchedulerSettings(threads=1))
+    scheduler.add(bad)
+    scheduler.add(good)
+    _wait(lambda: good.finished and bad.steps == 3)
+    scheduler.stop()
+    assert "lane bad failed a step" in caplog.text
+
+
+def test_scheduler_settings_are_validated():
+    with pytest.raises(ValidationError, match="threads"):
+        SchedulerSettings(threads=0)
+    with pytest.raises(ValidationError, match="extra"):
+        SchedulerSettings(thread=2)
+
+
+# -- the analysis lane's inbox ----------------------------------------------------------------
+
+
+def test_the_inbox_handles_items_in_order_holds_the_data_back_when_full_and_retries_when_idle():
+    handled: list[int] = []
+    idles: list[float] = []
+    inbox = AnalysisInbox(lambda item: handled.append(item[1]), lambda: idles.append(time.monotonic()) or True,
+                          capacity=3, idle_s=0.05)
+    for k in range(4):
+        inbox.items.append(("chunk", k))
+    assert inbox.full and inbox.ready()
+    inbox.step()
+    assert handled == [0] and inbox.full  # 3 left: still full (capacity 3)
+    inbox.step()
+    assert not inbox.full
+    inbox.drain()
+    assert handled == [0, 1, 2, 3] and not idles
+    time.sleep(0.06)
+    assert inbox.ready()  # empty, and the idle retry is due
+    inbox.step()
+    assert len(idles) == 1 and not inbox.ready()
+
+
+# -- the commit stage ---------------------------------------------------------------------------
+
+
+class _Storage:
+    """Refuses ``fail`` commits (the database unavailable), then writes them in order."""
+
+    def __init__(self, fail: int) -> None:
+        self.fail = fail
+        self.written: list[float] = []
+
+    def commit_window(self, commit: WindowCommit, *, retry_s: float | None = None) -> list[int]:
+        if self.fail:
+            self.fail -= 1
+            raise StorageUnavailable("database is locked")
+        self.written.append(commit.window_start_s)
+        return []
+
+
+def _pending(start: float, raised: dict[str, str]) -> PendingCommit:
+    return PendingCommit(WindowCommit("s", start, start + 20.0, [], {"monitor": None}, None), raised)
+
+
+def test_windows_wait_for_the_database_in_order_and_their_alarms_count_once_written():
+    storage = _Storage(fail=2)
+    written: list[float] = []
+    stage = CommitStage(storage, "s", {}, CommitSettings(retry_s=0.0), on_written=lambda p: written.append(p.commit.window_start_s))
+    stage.pending.append(_pending(0.0, {"frequency-1": "warning"}))
+    assert stage.flush() is False and stage.storage_errors == 1 and "1 window(s) wait" in stage.storage_error
+    assert stage.committed_alarms == {}  # not written: not the database's state
+    stage.pending.append(_pending(10.0, {"frequency-1": "alarm"}))
+    assert stage.flush() is False and stage.storage_errors == 2
+    assert stage.flush() is True
+    assert storage.written == written == [0.0, 10.0] and stage.storage_error is None
+    assert stage.committed_alarms == {"frequency-1": "alarm"}
+
+
+def test_a_bad_transaction_is_dropped_and_raised_not_retried_forever():
+    class Broken(_Storage):
+        def commit_window(self, commit, *, retry_s=None):
+            raise ValueError("trend row of source 'x' in a commit of source 's'")
+
+    stage = CommitStage(Broken(0), "s", {})
+    stage.pending.append(_pending(0.0, {}))
+    with pytest.raises(ValueError, match="trend row"):
+        stage.flush()
+    assert not stage.pending
+
+
+def test_stage_settings_name_the_bad_value():
+    with pytest.raises(ValidationError, match="calibration_s"):
+        EstimateSettings(calibration_s=1.0)
+    with pytest.raises(ValidationError, match="max_pending"):
+        CommitSettings(max_pending=0)
+    with pytest.raises(ValidationError, match="estimate_decimation"):
+        OutputSettings(estimate_decimation=0)
+
+
+def test_a_calibration_survives_its_stored_form():
+    from estimator import RestCalibration
+
+    fields = RestCalibration.__dataclass_fields__
+    values = {}
+    for name in fields:
+        values[name] = np.arange(3.0) if name not in ("rest_end", "rested", "bearing_std") else None
+    values.update(rest_end=60.0, rested=True, bearing_std=float("nan"))
+    try:
+        cal = RestCalibration(**values)
+    except TypeError:
+        pytest.skip("RestCalibration needs other fields")
+    back = calibration_from_dict(calibration_to_dict(cal))
+    assert back.rest_end == 60.0 and back.rested is True and np.isnan(back.bearing_std)
