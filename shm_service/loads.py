@@ -168,47 +168,16 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     youngs = None if beam.youngs_modulus is None else beam.youngs_modulus * factor
     moment = bending_moment(kappa, beam.bending_stiffness(eta)) * factor[:, None]
 
-    # the gauges: measured strain against the virtual strain at their positions
-    gauges, gauge_masks = [], []
-    for sensor in rig.sensors_of("strain"):
-        channel = rec.channels.get(sensor.topic)
-        if channel is None or len(channel) < 2:
-            continue
-        tg = (channel.log_time_ns - rec.start_ns) * 1e-9
-        inside = (t >= tg[0]) & (t <= tg[-1])
-        if inside.sum() < 2:
-            continue
-        measured = np.interp(t[inside], tg, channel.values[:, 0])
-        virtual = virtual_strain(b[keep][inside], units.curvature(np.array([sensor.position])),
-                                 beam.fibre_distance([sensor.position]))[:, 0]
-        gauges.append((sensor.name, float(sensor.position), virtual, measured))
-        gauge_masks.append(inside)
+    gauges, gauge_masks = _gauge_comparisons(rec, t, b[keep], units, beam)
     used = _gauges_used(rec, record, model_args)
     band, gauge_rows = gauge_band(gauges, exponents=exponents, n_eq=n_eq_value, in_sample=used, half_cycles=half_cycles)
 
     default_detail = None if curve is None else _detail(curve)
     design = rig.fatigue.design_life_years if rig.fatigue is not None else None
-    out_stations = []
-    for j, pos in enumerate(positions):
-        spot = spots.get(pos)
-        detail = _detail(spot.curve, spot.scf, spot.gamma_Ff, spot.gamma_Mf) if spot is not None else default_detail
-        el = signal_loads(strain[:, j], exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name=f"strain at {pos} m")
-        doc = _signal_doc(el, to_stress=beam.youngs_modulus, band=band)
-        stress_rms = None
-        if youngs is not None:
-            # stress from its own count (E follows the temperature sample by sample)
-            sl = signal_loads(strain[:, j] * youngs, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, detail=detail,
-                              band=band, name=f"stress at {pos} m")
-            for entry, (_, _, s_del) in zip(doc["del"], sl.dels):
-                entry["stress_range_pa"] = s_del
-                if band is not None:
-                    entry["stress_band_pa"] = [s_del * band.low, s_del * band.high]
-            doc.update(damage=sl.damage, damage_band=None if sl.damage_band is None else list(sl.damage_band))
-            stress_rms = sl.rms
-        out_stations.append({"position_m": pos, "hot_spot": None if spot is None else spot.name,
-                             "curve": None if detail is None else detail.curve.name, **doc, **_life(doc["damage"], duration, design),
-                             "stress_rms_pa": stress_rms, "bending_moment_rms_nm": float(np.sqrt(np.mean(moment[:, j] ** 2))),
-                             "bending_moment_range_max_nm": float(np.ptp(moment[:, j]))})
+    stress_of = dict(youngs=youngs, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, band=band, duration=duration,
+                     design=design)
+    out_stations = [_station_doc(pos, spots.get(pos), strain[:, j], moment[:, j], beam, default_detail, **stress_of)
+                    for j, pos in enumerate(positions)]
 
     channels = []
     for name, position, _virtual, measured in gauges:
@@ -217,13 +186,7 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         gdoc = _signal_doc(gl, to_stress=beam.youngs_modulus)
         channels.append({"name": name, "position_m": position, **gdoc, **_life(gdoc["damage"], duration, design)})
 
-    root = None
-    if rig.support == "clamped":
-        k0 = b[keep] @ units.curvature(np.array([0.0])).T
-        m0 = bending_moment(k0, beam.bending_stiffness([0.0]))[:, 0] * factor
-        rl = signal_loads(m0, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name="root bending moment")
-        root = {"position_m": 0.0, "rms_nm": rl.rms, "range_max_nm": rl.range_max,
-                "del": [{"m": m, "n_eq": n, "moment_range_nm": v} for m, n, v in rl.dels]}
+    root = _root_moment(b[keep], units, beam, factor, exponents, n_eq_value, half_cycles) if rig.support == "clamped" else None
     return {
         "start_s": span_start, "duration_s": duration, "source": "virtual strain from the estimate" + (
             " (estimated here)" if record.estimated_here else ""),
@@ -237,6 +200,70 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         "windows": None if window_s is None else _windows(t, strain, gauges, gauge_masks, positions, window_s, exponents=exponents,
                                                           half_cycles=half_cycles, used=used, origin=float(times[0])),
     }
+
+
+def _gauge_comparisons(rec: Any, t: Any, b: Any, units: Any, beam: Any) -> tuple[list[tuple[str, float, Any, Any]], list[Any]]:
+    """The gauges' measured strain against the virtual strain at their positions, on the estimate's
+    times ``t`` (s) inside each gauge's span: ([(name, position, virtual, measured)], [masks of t])."""
+    import numpy as np
+
+    from analytics import virtual_strain
+
+    gauges, gauge_masks = [], []
+    for sensor in rec.rig.sensors_of("strain"):
+        channel = rec.channels.get(sensor.topic)
+        if channel is None or len(channel) < 2:
+            continue
+        tg = (channel.log_time_ns - rec.start_ns) * 1e-9
+        inside = (t >= tg[0]) & (t <= tg[-1])
+        if inside.sum() < 2:
+            continue
+        measured = np.interp(t[inside], tg, channel.values[:, 0])
+        virtual = virtual_strain(b[inside], units.curvature(np.array([sensor.position])),
+                                 beam.fibre_distance([sensor.position]))[:, 0]
+        gauges.append((sensor.name, float(sensor.position), virtual, measured))
+        gauge_masks.append(inside)
+    return gauges, gauge_masks
+
+
+def _station_doc(pos: float, spot: Any, strain: Any, moment: Any, beam: Any, default_detail: Any, *, youngs: Any, exponents: Any,
+                 n_eq: float, half_cycles: str, band: Any, duration: float, design: float | None) -> dict[str, Any]:
+    """One station's entry of the ``shm loads`` document: strain counted, and stress counted on its
+    own when the beam has an E (E follows the temperature sample by sample)."""
+    import numpy as np
+
+    from analytics import signal_loads
+
+    detail = _detail(spot.curve, spot.scf, spot.gamma_Ff, spot.gamma_Mf) if spot is not None else default_detail
+    el = signal_loads(strain, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain at {pos} m")
+    doc = _signal_doc(el, to_stress=beam.youngs_modulus, band=band)
+    stress_rms = None
+    if youngs is not None:
+        sl = signal_loads(strain * youngs, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, detail=detail,
+                          band=band, name=f"stress at {pos} m")
+        for entry, (_, _, s_del) in zip(doc["del"], sl.dels):
+            entry["stress_range_pa"] = s_del
+            if band is not None:
+                entry["stress_band_pa"] = [s_del * band.low, s_del * band.high]
+        doc.update(damage=sl.damage, damage_band=None if sl.damage_band is None else list(sl.damage_band))
+        stress_rms = sl.rms
+    return {"position_m": pos, "hot_spot": None if spot is None else spot.name,
+            "curve": None if detail is None else detail.curve.name, **doc, **_life(doc["damage"], duration, design),
+            "stress_rms_pa": stress_rms, "bending_moment_rms_nm": float(np.sqrt(np.mean(moment ** 2))),
+            "bending_moment_range_max_nm": float(np.ptp(moment))}
+
+
+def _root_moment(b: Any, units: Any, beam: Any, factor: Any, exponents: Any, n_eq: float, half_cycles: str) -> dict[str, Any]:
+    """The root bending moment of a clamped support, counted (N·m)."""
+    import numpy as np
+
+    from analytics import bending_moment, signal_loads
+
+    k0 = b @ units.curvature(np.array([0.0])).T
+    m0 = bending_moment(k0, beam.bending_stiffness([0.0]))[:, 0] * factor
+    rl = signal_loads(m0, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name="root bending moment")
+    return {"position_m": 0.0, "rms_nm": rl.rms, "range_max_nm": rl.range_max,
+            "del": [{"m": m, "n_eq": n, "moment_range_nm": v} for m, n, v in rl.dels]}
 
 
 def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, exponents, half_cycles: str, used, origin: float) -> list[dict[str, Any]]:

@@ -755,7 +755,7 @@ class _Reader:
                 f"{sum(skipped_counts.values())} message(s) on undefined channel ids {sorted(skipped_counts)} skipped"
             )
         for topic, channel in channels.items():
-            self._describe_topic(self.readers[topic], channel, start, end)
+            _describe_topic(report, self._limits(), self.readers[topic], channel, start, end)
         # an estimate file holds the estimator's output, not the rig's sensors: none is missing
         estimates_only = any(r.info.kind == "estimate" for r in self.readers.values()) and not any(
             r.info.kind not in ("estimate", "truth") for r in self.readers.values())
@@ -776,33 +776,35 @@ class _Reader:
         except ValueError:
             return _LIMITS
 
-    def _describe_topic(self, reader: _ChannelReader, channel: Channel, start: int, end: int) -> None:
-        r, problems, topic = reader.report, self.report.problems, channel.topic
-        if reader.first_malformed is not None:
-            time, reason = reader.first_malformed
-            problems.append(f"{topic}: {r.malformed} malformed message(s) skipped (first at log_time {time} ns: {reason})")
-        if reader.first_nonfinite is not None:
-            problems.append(
-                f"{topic}: {r.nonfinite} message(s) with NaN or infinite values skipped "
-                f"(first at log_time {reader.first_nonfinite} ns)"
-            )
-        if reader.first_implausible is not None:
-            problems.append(
-                f"{topic}: {r.implausible} message(s) with values beyond what a {channel.kind} sensor reads skipped "
-                f"(first at log_time {reader.first_implausible} ns; limits: {self._limits().model_dump()})"
-            )
-        if r.duplicate:
-            problems.append(f"{topic}: {r.duplicate} message(s) with a repeated time stamp skipped")
-        if r.backwards:
-            problems.append(f"{topic}: {r.backwards} message(s) stamped before the previous sample skipped")
-        period = NOMINAL_PERIOD_NS.get(channel.kind)
-        if r.gaps:
-            problems.append(f"{topic}: {r.gaps} gap(s), {r.missing_samples} sample(s) missing at {1e9 / period:.2f} Hz")
-        if r.messages and not r.accepted:
-            problems.append(f"{topic}: no valid sample")
-        elif period is not None and r.accepted and end - int(channel.log_time_ns[-1]) > SILENT_AFTER_NS:
-            r.silent_after_s = (int(channel.log_time_ns[-1]) - start) / 1e9
-            problems.append(
-                f"{topic}: silent after {r.silent_after_s:.3f} s "
-                f"({(end - int(channel.log_time_ns[-1])) / 1e9:.3f} s before the end of the recording)"
-            )
+
+def _describe_topic(report: Any, limits: ValueLimits, reader: _ChannelReader, channel: Channel, start: int, end: int) -> None:
+    """What went wrong on one topic, appended to ``report.problems``."""
+    r, problems, topic = reader.report, report.problems, channel.topic
+    if reader.first_malformed is not None:
+        time, reason = reader.first_malformed
+        problems.append(f"{topic}: {r.malformed} malformed message(s) skipped (first at log_time {time} ns: {reason})")
+    if reader.first_nonfinite is not None:
+        problems.append(
+            f"{topic}: {r.nonfinite} message(s) with NaN or infinite values skipped "
+            f"(first at log_time {reader.first_nonfinite} ns)"
+        )
+    if reader.first_implausible is not None:
+        problems.append(
+            f"{topic}: {r.implausible} message(s) with values beyond what a {channel.kind} sensor reads skipped "
+            f"(first at log_time {reader.first_implausible} ns; limits: {limits.model_dump()})"
+        )
+    if r.duplicate:
+        problems.append(f"{topic}: {r.duplicate} message(s) with a repeated time stamp skipped")
+    if r.backwards:
+        problems.append(f"{topic}: {r.backwards} message(s) stamped before the previous sample skipped")
+    period = NOMINAL_PERIOD_NS.get(channel.kind)
+    if r.gaps:
+        problems.append(f"{topic}: {r.gaps} gap(s), {r.missing_samples} sample(s) missing at {1e9 / period:.2f} Hz")
+    if r.messages and not r.accepted:
+        problems.append(f"{topic}: no valid sample")
+    elif period is not None and r.accepted and end - int(channel.log_time_ns[-1]) > SILENT_AFTER_NS:
+        r.silent_after_s = (int(channel.log_time_ns[-1]) - start) / 1e9
+        problems.append(
+            f"{topic}: silent after {r.silent_after_s:.3f} s "
+            f"({(end - int(channel.log_time_ns[-1])) / 1e9:.3f} s before the end of the recording)"
+        )
