@@ -25,15 +25,13 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from analytics import BAND_FLOOR, IN_SAMPLE_FACTOR  # noqa: F401  (the band's constants: one definition, in analytics)
-
 from ._argtypes import number
 from ._commands import add_model_arguments
 
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["BAND_FLOOR", "add_loads_parser", "loads_of_recording", "loads_of_table", "parse_stations"]
+__all__ = ["add_loads_parser", "loads_of_recording", "loads_of_table", "parse_stations"]
 
 #: Young's modulus for plain strain channels without a rig (structural steel, Pa).
 STEEL_YOUNGS_MODULUS = 2.1e11
