@@ -57,26 +57,36 @@ class SubwindowTrack:
         return abs(self.mean_hz - ref) > rel * ref
 
 
-def _best_frequency(x: np.ndarray, t: np.ndarray, w: np.ndarray, grid: np.ndarray) -> tuple[float, float]:
-    """Frequency on ``grid`` (refined by a parabola) and amplitude of the weighted LS sinusoid fit."""
+def _fit_basis(t: np.ndarray, w: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The sinusoids of ``grid`` at the sub-window's times and their weighted Gram terms: the
+    same for every sub-window of a track (same length, times and weights), so computed once."""
     ph = 2 * np.pi * grid[:, None] * t[None, :]
     c, s = np.cos(ph), np.sin(ph)
-    xw = x * w
-    xc, xs = c @ xw, s @ xw
     cc, ss, cs = (c * c) @ w, (s * s) @ w, (c * s) @ w
-    det = cc * ss - cs * cs
+    return c, s, cc, ss, cs, cc * ss - cs * cs
+
+
+def _best_frequencies(segs: np.ndarray, w: np.ndarray, grid: np.ndarray, basis: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Per sub-window (rows of ``segs``): frequency on ``grid`` (refined by a parabola) and
+    amplitude of the weighted LS sinusoid fit."""
+    c, s, cc, ss, cs, det = basis
+    xw = segs * w
+    xc, xs = xw @ c.T, xw @ s.T
     with np.errstate(invalid="ignore", divide="ignore"):
         a = (ss * xc - cs * xs) / det
         b = (cc * xs - cs * xc) / det
         e = np.where(det > 0, a * xc + b * xs, 0.0)
-    k = int(np.argmax(e))
-    f = float(grid[k])
-    if 0 < k < grid.size - 1:
-        y0, y1, y2 = e[k - 1], e[k], e[k + 1]
-        den = y0 - 2 * y1 + y2
-        if den < 0:
-            f += float(0.5 * (y0 - y2) / den * (grid[1] - grid[0]))
-    return f, float(math.hypot(a[k], b[k]))
+    fr, am = np.empty(len(segs)), np.empty(len(segs))
+    for j, ej in enumerate(e):
+        k = int(np.argmax(ej))
+        f = float(grid[k])
+        if 0 < k < grid.size - 1:
+            y0, y1, y2 = ej[k - 1], ej[k], ej[k + 1]
+            den = y0 - 2 * y1 + y2
+            if den < 0:
+                f += float(0.5 * (y0 - y2) / den * (grid[1] - grid[0]))
+        fr[j], am[j] = f, math.hypot(a[j, k], b[j, k])
+    return fr, am
 
 
 def subwindow_frequencies(x: object, fs: float, f0_hz: float, *, lo_hz: float, hi_hz: float, cycles: float = 3.0,
@@ -136,14 +146,9 @@ def subwindow_frequencies(x: object, fs: float, f0_hz: float, *, lo_hz: float, h
     grid = np.arange(lo_hz, hi_hz + res, res)
     t = np.arange(L) / fs
     w = np.hanning(L + 2)[1:-1]
-    fr, am, tm = [], [], []
-    for s in starts:
-        seg = a[s: s + L] - a[s: s + L].mean()
-        f, amp = _best_frequency(seg, t, w, grid)
-        fr.append(f)
-        am.append(amp)
-        tm.append((s + L / 2) / fs)
-    fr, am, tm = np.array(fr), np.array(am), np.array(tm)
+    segs = np.array([a[s: s + L] for s in starts])
+    fr, am = _best_frequencies(segs - segs.mean(axis=1, keepdims=True), w, grid, _fit_basis(t, w, grid))
+    tm = (np.array(starts) + L / 2) / fs
     # a sub-window where the mode has rung down into the noise says little about its frequency
     keep = am >= 0.3 * am.max() if am.max() > 0 else np.ones(am.size, bool)
     fk, tk = fr[keep], tm[keep]
