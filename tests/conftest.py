@@ -11,11 +11,21 @@ A module is put in a tier here by its path (one place to look), a test by its ow
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 _HERE = Path(__file__).resolve().parent
+
+# One BLAS/OpenMP thread per process, set before anything imports numpy (the xdist workers and the
+# services and demos the tests start inherit it). The suite runs a worker per core beside service
+# processes and Chromium: OpenBLAS's own threads on top of that oversubscribe the cores and spin,
+# and a small identification then takes ~8x its single-threaded time (measured with
+# analytics.identify_modes on 6000 samples, 2 cores under load: 11.1 s vs 1.4 s for 9 calls).
+# The results do not depend on it: the tests assert the physics, never a kernel's last bits.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 #: modules of end-to-end tests (relative to tests/)
 E2E = {
