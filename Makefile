@@ -31,12 +31,13 @@ types: $(STAMP)
 # The quick tier (under 2 minutes on 2 cores): lint, types and the unit tests; no browser, no service
 # processes, no long physics runs (the markers of tests/conftest.py).
 check: lint types
-	$(PY) -m pytest -q -n auto -m "not slow and not e2e and not browser"
+	$(PY) -m pytest -q -n auto --dist loadgroup --no-loadscope-reorder -m "not slow and not e2e and not browser"
 
-# Everything: lint, types and the whole suite. One worker per core, a test file per worker at a time
-# (module fixtures such as the quick study run once).
+# Everything: lint, types and the whole suite. One worker per core, single tests handed out as workers
+# free up (--dist loadgroup): the tests sharing a module fixture (the quick study, a served service)
+# go to one worker so it runs once; tests/conftest.py puts the long tiers first.
 test: lint types
-	$(PY) -m pytest -q -n auto --dist loadfile
+	$(PY) -m pytest -q -n auto --dist loadgroup --no-loadscope-reorder
 
 bench: $(STAMP)
 	$(PY) -m benchmarks

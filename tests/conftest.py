@@ -91,7 +91,19 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "e2e: a real service end to end, processes or a whole run (make test only)")
 
 
+#: the longest indivisible units (a module fixture shared by the module's tests, measured with
+#: --durations on a fresh clone): started first so no worker is left with one of them at the end
+LONGEST_FIRST = ("shm_service/test_study.py",)
+
+
+def _uses_module_fixture(item: pytest.Item) -> bool:
+    info = getattr(item, "_fixtureinfo", None)
+    return info is not None and any(defs and defs[-1].scope == "module" for defs in info.name2fixturedefs.values())
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's loadgroup reads the xdist_group marks
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    rank: dict[str, int] = {}
     for item in items:
         try:
             rel = Path(str(item.path)).resolve().relative_to(_HERE).as_posix()
@@ -103,3 +115,20 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.e2e)
         if rel in SLOW:
             item.add_marker(pytest.mark.slow)
+        # make test distributes single tests (--dist loadgroup); the tests that share a module
+        # fixture (a study, a served service, a recording) stay on one worker so it runs once
+        if _uses_module_fixture(item):
+            item.add_marker(pytest.mark.xdist_group(rel))
+        tier = (0 if rel in LONGEST_FIRST else 1 if item.get_closest_marker("browser") else 2 if item.get_closest_marker("e2e")
+                else 3 if item.get_closest_marker("slow") else 4)
+        rank[rel] = min(rank.get(rel, tier), tier)
+    # the long tiers first and the many short unit tests last, where they fill the workers' ends
+    # evenly (modules stay whole and in their own order; xdist keeps this order with
+    # --no-loadscope-reorder)
+    def key(item: pytest.Item) -> int:
+        try:
+            return rank.get(Path(str(item.path)).resolve().relative_to(_HERE).as_posix(), 4)
+        except ValueError:
+            return 4
+
+    items.sort(key=key)
