@@ -158,7 +158,7 @@ def test_alarm_raised_by_the_service_shows_on_the_page(chromium, tmp_path):
     simulate(SimulationSettings(duration=150.0, rest=10.0, excitation="ambient", seed=3,
                                 damage=("mass:0.126@4.0",), damage_at=90.0), recording)
     overrides = service_test_helpers().fast_overrides(tmp_path, **{
-        "source.spec": f"replay:{recording}", "source.speed": "2", "source.keep_running": True,
+        "source.spec": f"replay:{recording}", "source.speed": "4", "source.keep_running": True,
         "dashboard.enabled": True, "dashboard.port": 0,
     })
     service = MonitoringService(load_settings(None, overrides), environ={})

@@ -117,7 +117,7 @@ def test_sigkill_mid_run_loses_nothing_and_sends_no_duplicate(tmp_path, short_re
     db = tmp_path / "shm.sqlite"
     # --keep-running: on a loaded machine the replay may end before the first notification is
     # out; the kill must find the service alive either way (it comes mid-replay when not loaded).
-    proc = _serve(tmp_path, short_recording, receiver.url, "2", "--keep-running")
+    proc = _serve(tmp_path, short_recording, receiver.url, "4", "--keep-running")
     try:
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline:

@@ -56,11 +56,11 @@ def test_a_stop_under_a_backlog_ends_within_seconds_and_records_what_it_did_not_
                                                                "stop_drain_s": 0.2}))
     service = MonitoringService(settings, environ={"SHM_TOKEN": TOKEN})
     accepted = 0
-    for k in range(40):  # 240 s of data waiting before the pipeline runs: about a minute to estimate here
+    for k in range(16):  # 96 s of data waiting before the pipeline runs: far more than a stop at once estimates
         result = service.ingest({"messages": _messages(k, 6.0)})
         assert result is not None and result.rejected == 0
         accepted += result.accepted
-    assert service.queue.qsize() == 40
+    assert service.queue.qsize() == 16
     service.start()  # and the stop at once: a short drain, the backlog left set aside (however fast the machine)
     began = time.monotonic()
     service.stop(drain_s=0)
