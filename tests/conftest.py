@@ -91,11 +91,6 @@ SLOW = {
 }
 
 
-def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "browser: needs a real Chromium (make test only)")
-    config.addinivalue_line("markers", "e2e: a real service end to end, processes or a whole run (make test only)")
-
-
 #: the longest indivisible units (a module fixture shared by the module's tests, measured with
 #: --durations on a fresh clone): started first so no worker is left with one of them at the end
 LONGEST_FIRST = ("shm_service/test_study.py",)
@@ -137,3 +132,29 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             return 4
 
     items.sort(key=key)
+
+
+
+class _GroupSuffix:
+    """xdist's --dist loadgroup reads a test's group from a ``@group`` suffix of its node id, which
+    xdist 3.8 writes to ``item._nodeid``; pytest 9.2's nodes keep their id in ``item._id``, so the
+    suffix got lost and grouped tests were spread over the workers (their module fixture built on
+    each). Write it where pytest reads it, after xdist's own hook; a no-op once xdist's suffix
+    shows in the node id."""
+
+    @pytest.hookimpl(trylast=True)
+    def pytest_collection_modifyitems(self, config: pytest.Config, items: list[pytest.Item]) -> None:
+        if not getattr(config.option, "loadgroup", False):
+            return
+        for item in items:
+            mark = item.get_closest_marker("xdist_group")
+            node_id = getattr(item, "_id", None)
+            if mark is None or node_id is None or "@" in item.nodeid.rsplit("]", 1)[-1]:
+                continue
+            item._id = type(node_id).parse(f"{item.nodeid}@{mark.args[0]}")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "browser: needs a real Chromium (make test only)")
+    config.addinivalue_line("markers", "e2e: a real service end to end, processes or a whole run (make test only)")
+    config.pluginmanager.register(_GroupSuffix(), "shm-xdist-group-suffix")
