@@ -36,8 +36,11 @@ check: lint types
 # Everything: lint, types and the whole suite. One worker per core, single tests handed out as workers
 # free up (--dist loadgroup): the tests sharing a module fixture (the quick study, a served service)
 # go to one worker so it runs once; tests/conftest.py puts the long tiers first.
+# TEST_WORKERS: the xdist workers (default: one per core); the browser and service tests mostly wait
+# on paced replays, so a worker more than the cores may pay off: make test TEST_WORKERS=3.
+TEST_WORKERS ?= auto
 test: lint types
-	$(PY) -m pytest -q -n auto --dist loadgroup --no-loadscope-reorder
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder
 
 bench: $(STAMP)
 	$(PY) -m benchmarks
