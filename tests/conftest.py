@@ -134,7 +134,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     items.sort(key=key)
 
 
-
 class _GroupSuffix:
     """xdist's --dist loadgroup reads a test's group from a ``@group`` suffix of its node id, which
     xdist 3.8 writes to ``item._nodeid``; pytest 9.2's nodes keep their id in ``item._id``, so the
