@@ -162,7 +162,7 @@ class MonitoringService(_StoredRows, SingleStructureView):
             # latest window and spectra), one structure as a fleet: nothing is pushed into it
             self.dashboard = start_dashboard(self, self.settings, self.token)
         for structure in self.running_structures():
-            structure.attach(self.storage, None, self.dashboard_guard)
+            structure.attach(self.storage, self.dashboard_guard)
         self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
         archives = [s.archive for s in self.running_structures() if s.archive is not None]
         self.retention = RetentionWorker(settings.retention, storage=self.storage,

@@ -113,11 +113,33 @@ def test_a_lane_that_fails_is_logged_and_the_pool_goes_on(caplog):
     assert "lane bad failed a step" in caplog.text
 
 
+def test_background_lanes_wait_for_the_pace_lanes_and_take_at_most_their_threads():
+    log: list[str] = []
+
+    class Background(_Lane):
+        background = True
+
+    slow = [Background(f"a{k}", work=2, cost_s=0.2, log=log) for k in range(3)]
+    pace = [_Lane(f"d{k}", work=2, log=log) for k in range(2)]
+    scheduler = Scheduler(SchedulerSettings(threads=3, background_threads=1))
+    with scheduler._cv:  # added together, the background lanes first in the rotation
+        scheduler._lanes.extend([*slow, *pace])
+    scheduler._start()
+    _wait(lambda: all(lane.finished for lane in [*slow, *pace]))
+    scheduler.stop()
+    assert set(log[:4]) == {"d0", "d1"}  # the pace lanes' steps first, though behind in the rotation
+    assert max(lane.most_inside for lane in slow) == 1
+    assert sorted(log[4:]) == sorted(["a0", "a1", "a2"] * 2)  # one background step at a time: in rotation order
+    assert log[4:] == ["a0", "a1", "a2"] * 2
+
+
 def test_scheduler_settings_are_validated():
     with pytest.raises(ValidationError, match="threads"):
         SchedulerSettings(threads=0)
     with pytest.raises(ValidationError, match="extra"):
         SchedulerSettings(thread=2)
+    with pytest.raises(ValidationError, match="background_threads"):
+        SchedulerSettings(background_threads=0)
 
 
 # -- the analysis lane's inbox ----------------------------------------------------------------
@@ -214,3 +236,26 @@ def test_a_calibration_survives_its_stored_form():
         pytest.skip("RestCalibration needs other fields")
     back = calibration_from_dict(calibration_to_dict(cal))
     assert back.rest_end == 60.0 and back.rested is True and np.isnan(back.bearing_std)
+
+
+# -- a structure behind its pace takes its queued batches as one ----------------------------------
+
+
+def test_queued_batches_are_joined_per_topic_in_order():
+    from shm_service.recording import FollowBlock
+    from shm_service.service._pipeline import Batch
+
+    def block(topic: str, times: list[int]) -> FollowBlock:
+        t = np.asarray(times, dtype=np.int64)
+        return FollowBlock(topic, "strain", topic, t, t + 1, t[:, None] * 0.5)
+
+    first = Batch([block("/a", [1, 2]), block("/b", [1])], raw=[("/a", 1, b"x", 2)], received=10.0, refused={"/a": 1})
+    second = Batch([block("/a", [3]), block("/c", [2, 3])], raw=[("/a", 3, b"y", 4)], received=11.0, refused={"/a": 2})
+    joined = Batch.joined([first, second])
+    assert [b.topic for b in joined.blocks] == ["/a", "/b", "/c"]
+    a = joined.blocks[0]
+    assert a.log_time_ns.tolist() == [1, 2, 3] and a.publish_time_ns.tolist() == [2, 3, 4]
+    assert a.values[:, 0].tolist() == [0.5, 1.0, 1.5]
+    assert joined.raw == [("/a", 1, b"x", 2), ("/a", 3, b"y", 4)]
+    assert joined.received == 10.0 and joined.refused == {"/a": 3} and joined.truth is None
+    assert Batch.joined([first]) is first
