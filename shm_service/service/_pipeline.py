@@ -21,6 +21,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -32,6 +33,7 @@ from estimator import ImmsModel
 from ..recording import FollowBlock
 from ._archive import Archive
 from ._checks import CheckSettings, SampleChecks
+from ._delegate import ReadThrough
 from ._merge import MergeSettings, MergeStage
 from ._plausibility import SourceClock, ValueLimits
 from ._sinks import SinkGuard
@@ -376,37 +378,15 @@ class Pipeline:
     def live(self, ring) -> None:
         self.outputs.live = ring
 
-    @property
-    def clock(self) -> SourceClock | None:
-        return self.checks.clock
-
-    @property
-    def rejected(self) -> Counter:
-        return self.checks.rejected
-
-    @property
-    def committed_alarms(self) -> dict[str, str]:
-        return self.commits.committed_alarms
-
-    @property
-    def windows_committed(self) -> int:
-        return self.commits.windows_committed
-
-    @property
-    def last_window(self):
-        return self.commits.last_window
-
-    @property
-    def storage_error(self) -> str | None:
-        return self.commits.storage_error
-
-    @property
-    def storage_errors(self) -> int:
-        return self.commits.storage_errors
-
-    @property
-    def trend_rows_dropped(self) -> int:
-        return self.commits.trend_rows_dropped
+    # the stages' counters and state, read through (``ReadThrough``)
+    clock: ReadThrough[SourceClock | None] = ReadThrough("checks")
+    rejected: ReadThrough[Counter] = ReadThrough("checks")
+    committed_alarms: ReadThrough[dict[str, str]] = ReadThrough("commits")
+    windows_committed: ReadThrough[int] = ReadThrough("commits")
+    last_window: ReadThrough[Any] = ReadThrough("commits")
+    storage_error: ReadThrough[str | None] = ReadThrough("commits")
+    storage_errors: ReadThrough[int] = ReadThrough("commits")
+    trend_rows_dropped: ReadThrough[int] = ReadThrough("commits")
 
     @property
     def pending_commits(self) -> int:

@@ -134,7 +134,6 @@ class MonitoringService(_StoredRows, SingleStructureView):
                                "(server.token_file or SHM_TOKEN), which the dashboard then asks for; or bind it to "
                                "127.0.0.1, or --no-dashboard")
         self.started_at = time.time()
-        self.paused = False
         self.fleet = settings.fleet
         models = _ModelCache()
         self.structures: dict[str, Structure | _FailedStructure] = {}
@@ -359,9 +358,6 @@ class MonitoringService(_StoredRows, SingleStructureView):
         if alarm is None:
             raise KeyError(f"alarm {alarm_id} does not exist")
         return alarm
-
-    def set_paused(self, paused: bool) -> None:
-        self.paused = bool(paused)
 
     def request_baseline(self, structure_id: str | None = None) -> BaselineRequestDocument:
         """Learn a new baseline of the single structure (or of ``structure_id``) from its next windows."""

@@ -26,6 +26,7 @@ from ..recording import RecordingError
 from ._archive import Archive
 from ._checks import CheckSettings
 from ._config import ServiceSettings
+from ._delegate import ReadThrough
 from ._live import LiveRing
 from ._merge import MergeSettings
 from ._pipeline import Batch, Pipeline
@@ -251,10 +252,10 @@ class Structure:
         for lane in self._lanes:
             scheduler.add(lane)
         self._started = True
-        if isinstance(self.source, SimSource):  # a simulation is stepped on the pool too
-            self.source.start_on(scheduler)
-        else:
+        if isinstance(self.source, IngestSource):  # its requests put their batches themselves
             self.source.start()
+        else:  # a simulation, replay or followed file is stepped on the pool too
+            self.source.start_on(scheduler)
 
     def step_data(self, most: int = 8) -> None:
         """The data lane's step: the batches waiting in the source's queue (at most ``most``, joined:
@@ -468,42 +469,14 @@ class SingleStructureView:
     def primary(self) -> Structure:
         raise NotImplementedError
 
-    @property
-    def source(self) -> Source:
-        return self.primary.source
-
-    @property
-    def pipeline(self) -> Pipeline:
-        return self.primary.pipeline  # type: ignore[return-value]
-
-    @property
-    def queue(self) -> queue.Queue:
-        return self.primary.queue
-
-    @property
-    def model(self) -> Any:
-        return self.primary.model
-
-    @property
-    def rig(self) -> RigDescription:
-        return self.primary.rig
-
-    @property
-    def thresholds(self) -> ThresholdsDocument:
-        return self.primary.thresholds
-
-    @property
-    def model_document(self) -> ModelDocument:
-        return self.primary.model_document
-
-    @property
-    def pipeline_error(self) -> str | None:
-        return self.primary.pipeline_error
-
-    @property
-    def pipeline_errors(self) -> int:
-        return self.primary.pipeline_errors
-
-    @property
-    def last_pipeline_error(self) -> str | None:
-        return self.primary.last_pipeline_error
+    # the single structure's parts, read through (``ReadThrough``)
+    source: ReadThrough[Source] = ReadThrough("primary")
+    pipeline: ReadThrough[Pipeline] = ReadThrough("primary")
+    queue: ReadThrough[queue.Queue] = ReadThrough("primary")
+    model: ReadThrough[Any] = ReadThrough("primary")
+    rig: ReadThrough[RigDescription] = ReadThrough("primary")
+    thresholds: ReadThrough[ThresholdsDocument] = ReadThrough("primary")
+    model_document: ReadThrough[ModelDocument] = ReadThrough("primary")
+    pipeline_error: ReadThrough[str | None] = ReadThrough("primary")
+    pipeline_errors: ReadThrough[int] = ReadThrough("primary")
+    last_pipeline_error: ReadThrough[str | None] = ReadThrough("primary")

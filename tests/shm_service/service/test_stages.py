@@ -16,6 +16,7 @@ from shm_service.service._stage_commit import CommitSettings, CommitStage, Pendi
 from shm_service.service._stage_estimate import EstimateSettings, calibration_from_dict, calibration_to_dict
 from shm_service.service._stage_outputs import OutputSettings
 from shm_service.service._storage import StorageUnavailable, WindowCommit
+from svc_helpers import wait_for
 
 # -- the scheduler ------------------------------------------------------------------------------
 
@@ -49,11 +50,6 @@ class _Lane:
             self.finished = True
 
 
-def _wait(cond, timeout: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not cond():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.005)
 
 
 def test_the_scheduler_takes_the_lanes_round_robin():
@@ -64,7 +60,7 @@ def test_the_scheduler_takes_the_lanes_round_robin():
         for lane in lanes:
             scheduler._lanes.append(lane)
     scheduler._start()
-    _wait(lambda: all(lane.finished for lane in lanes))
+    wait_for(lambda: all(lane.finished for lane in lanes))
     scheduler.stop()
     assert log == ["s0", "s1", "s2", "s3"] * 3 + ["s1", "s3"]  # each in turn; a finished lane leaves the rotation
     assert scheduler.lanes == 0 and scheduler.steps == 14
@@ -75,7 +71,7 @@ def test_each_lane_is_stepped_by_one_thread_at_a_time():
     scheduler = Scheduler(SchedulerSettings(threads=3))
     for lane in lanes:
         scheduler.add(lane)
-    _wait(lambda: all(lane.finished for lane in lanes))
+    wait_for(lambda: all(lane.finished for lane in lanes))
     scheduler.stop()
     assert [lane.steps for lane in lanes] == [20] * 5
     assert max(lane.most_inside for lane in lanes) == 1  # a lane's steps never overlap: its data stay in order
@@ -89,9 +85,9 @@ def test_a_slow_lane_holds_one_thread_and_the_others_go_on():
     time.sleep(0.05)
     for lane in fast:
         scheduler.add(lane)
-    _wait(lambda: all(lane.finished for lane in fast))
+    wait_for(lambda: all(lane.finished for lane in fast))
     assert not slow.finished  # the fast lanes finished while the slow one was still in its step
-    _wait(lambda: slow.finished)
+    wait_for(lambda: slow.finished)
     scheduler.stop()
 
 
@@ -108,7 +104,7 @@ def test_a_lane_that_fails_is_logged_and_the_pool_goes_on(caplog):
     scheduler = Scheduler(SchedulerSettings(threads=1))
     scheduler.add(bad)
     scheduler.add(good)
-    _wait(lambda: good.finished and bad.steps == 3)
+    wait_for(lambda: good.finished and bad.steps == 3)
     scheduler.stop()
     assert "lane bad failed a step" in caplog.text
 
@@ -125,7 +121,7 @@ def test_background_lanes_wait_for_the_pace_lanes_and_take_at_most_their_threads
     with scheduler._cv:  # added together, the background lanes first in the rotation
         scheduler._lanes.extend([*slow, *pace])
     scheduler._start()
-    _wait(lambda: all(lane.finished for lane in [*slow, *pace]))
+    wait_for(lambda: all(lane.finished for lane in [*slow, *pace]))
     scheduler.stop()
     assert set(log[:4]) == {"d0", "d1"}  # the pace lanes' steps first, though behind in the rotation
     assert max(lane.most_inside for lane in slow) == 1
