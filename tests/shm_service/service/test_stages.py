@@ -255,3 +255,47 @@ def test_queued_batches_are_joined_per_topic_in_order():
     assert joined.raw == [("/a", 1, b"x", 2), ("/a", 3, b"y", 4)]
     assert joined.received == 10.0 and joined.refused == {"/a": 3} and joined.truth is None
     assert Batch.joined([first]) is first
+
+
+# -- a source on the pool ----------------------------------------------------------------------
+
+
+def test_a_source_lane_hands_batches_on_at_their_pace_and_waits_when_told_without_a_thread():
+    import queue
+
+    from shm_service.recording import FollowBlock
+    from shm_service.service._pipeline import Batch
+    from shm_service.service._sources import END, Source, SourceLane
+
+    def batch(t_s: float) -> Batch:
+        t = np.asarray([int(t_s * 1e9)], dtype=np.int64)
+        return Batch([FollowBlock("/s", "strain", "s", t, t, np.zeros((1, 1)))])
+
+    class Items(Source):
+        def items(self):
+            yield batch(100.0)
+            yield 0.3  # a followed file at its end: look again in 0.3 s
+            yield batch(100.5)  # due 0.25 s after the first at speed 2
+            self.state = "finished"
+
+    out: queue.Queue = queue.Queue(maxsize=1)
+    src = Items("s", out)
+    src.speed, src.state = 2.0, "running"
+    lane = SourceLane(src)
+    started = time.monotonic()
+    assert lane.ready()
+    lane.step()  # made and, due at once (the pace's origin), handed on
+    assert out.get_nowait().blocks[0].log_time_ns[0] == int(100e9) and src.messages == 1
+    lane.step()  # told to wait
+    assert not lane.ready()
+    wait_for(lane.ready, 5.0)
+    assert time.monotonic() - started >= 0.3
+    lane.step()  # made; due 0.25 s after the origin: already, handed on in the same step
+    assert out.qsize() == 1 and src.messages == 2
+    assert lane.ready()
+    lane.step()  # the items ended: finished
+    assert src.state == "finished" and not lane.ready()  # its END waits for room in the queue
+    out.get_nowait()
+    assert lane.ready()
+    lane.step()
+    assert out.get_nowait() is END and lane.finished
