@@ -17,6 +17,7 @@
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_fleet [--replay FILE] [--files 8] [--skip-reprocess]
      [--skip-memory] [--structures 4] [--skip-live] [--live 100] [--live-s 690] [--live-speed 1] [--live-dashboard]
+     [--live-processes 1 2] [--live-hog] [--live-only]
 (``main()`` is the entry for ``python -m benchmarks``; the eight files are the one-hour recording
 under eight names, hard links: the work per file is that of eight different hours.)
 """
@@ -257,7 +258,7 @@ def bench_structure_cost(data_s: float = 300.0, block_s: tuple[float, ...] = (1.
                                             "source": {"speed": "max"}})
             structure = Structure(_Host(), settings, models=_ModelCache())
             storage = Storage(settings.db)
-            structure.attach(storage, None, SinkGuard("dashboard", None))
+            structure.attach(storage, SinkGuard("dashboard", None))
             sim_s = pipeline_s = 0.0
             batches = structure.source.batches(block)
             while True:
@@ -291,9 +292,10 @@ def _fleet_toml(ids: list[str], block_s: float, duration_s: float) -> str:
 
 def _run_fleet(tmp: str, ids: list[str], workers: int, speed: float, seconds: float, block_s: float, poll_s: float,
                dashboard: bool, worst: dict, last: dict, first: dict, after_s: float,
-               uncommitted: dict) -> tuple[float, float, float, str, dict]:
+               uncommitted: dict, threads: dict) -> tuple[float, float, float, str, dict]:
     """One ``shm serve`` of the fleet on ``workers`` worker processes (``--workers``; 1: all in the
-    process started), polled at its one API; RSS and CPU of that process and its workers."""
+    process started), polled at its one API; RSS and CPU of that process and its workers, and the
+    most threads each process had (``threads``: pid -> (name, threads))."""
     import httpx
     import psutil
 
@@ -323,7 +325,7 @@ def _run_fleet(tmp: str, ids: list[str], workers: int, speed: float, seconds: fl
             if cpu0 is None and len(ps) >= workers:  # the workers are up: CPU from here
                 cpu0, cpu_started = sum(q.cpu_times().user + q.cpu_times().system for q in ps), time.monotonic()
             for s in client.get(f"{url}/api/structures").json()["structures"]:
-                if s["id"] not in last and s["data_time_s"] is not None:
+                if s["id"] not in first and s["data_time_s"] is not None:  # its first poll with data (starts are staggered)
                     first[s["id"]] = s["data_time_s"]
                 last[s["id"]] = s
                 if s["lag_s"] is not None:
@@ -331,6 +333,13 @@ def _run_fleet(tmp: str, ids: list[str], workers: int, speed: float, seconds: fl
                     if time.monotonic() - started >= after_s:
                         worst_after[s["id"]] = max(worst_after.get(s["id"], -1e9), s["lag_s"])
             peak_rss = max(peak_rss, sum(q.memory_info().rss for q in ps) / 2**20)
+            for q in ps:
+                try:
+                    n = q.num_threads()
+                except psutil.NoSuchProcess:
+                    continue
+                role = "front" if q.pid == front.pid else "worker"
+                threads[q.pid] = (role, max(n, threads.get(q.pid, (role, 0))[1]))
         # every window analysed is committed: what each structure analysed and wrote, at the end
         for sid in ids:
             p = client.get(f"{url}/api/structures/{sid}/status").json()["pipeline"]
@@ -347,27 +356,38 @@ def _run_fleet(tmp: str, ids: list[str], workers: int, speed: float, seconds: fl
 
 
 def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 240.0, processes: int = 1,
-                     block_s: float = 2.0, poll_s: float = 5.0, dashboard: bool = False, after_s: float = 60.0) -> dict:
+                     block_s: float = 2.0, poll_s: float = 5.0, dashboard: bool = False, after_s: float = 60.0,
+                     hog: bool = False) -> dict:
     """``shm serve`` of ``structures`` simulated structures (``--no-archive``, with or without the
     dashboard) on ``processes`` worker processes (``--workers``: each hosts every n-th structure,
     one database, one API), for ``seconds`` of wall time at ``--speed``: the worst lag of every
     structure from ``/api/structures`` (polled every ``poll_s``; overall and after ``after_s``),
-    windows committed, the RSS of all processes together and the CPU per structure-second."""
+    windows committed, the RSS of all processes together and the CPU per structure-second.
+    ``hog``: a CPU-bound process at ``nice 10`` runs beside the fleet for the whole run (issue 23's
+    acceptance: ``nice -n 10 python -c "while True: pass"``)."""
     ids = [f"mast-{k + 1:03d}" for k in range(structures)]
     worst: dict[str, float] = {}
     last: dict[str, dict] = {}
     first: dict[str, float] = {}  # data time at the first poll with data
     uncommitted: dict[str, int] = {}  # windows analysed but not (yet) written, at the end
-    with tempfile.TemporaryDirectory() as tmp:
-        wall, cpu, peak_rss, load, worst_after = _run_fleet(tmp, ids, processes, speed, seconds, block_s, poll_s, dashboard,
-                                                            worst, last, first, after_s, uncommitted)
+    threads: dict[int, tuple[str, int]] = {}
+    spinner = subprocess.Popen(["nice", "-n", "10", sys.executable, "-c", "while True: pass"]) if hog else None
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            wall, cpu, peak_rss, load, worst_after = _run_fleet(tmp, ids, processes, speed, seconds, block_s, poll_s,
+                                                                dashboard, worst, last, first, after_s, uncommitted, threads)
+    finally:
+        if spinner is not None:
+            spinner.kill()
+            spinner.wait()
     lags = [worst.get(i) for i in ids]
     windows = [last.get(i, {}).get("windows", 0) for i in ids]
     states = sorted({last.get(i, {}).get("state", "?") for i in ids})
     # the data the structures processed while measured (the CPU's denominator: a fleet that
     # falls behind processes less than speed x wall)
     data_s = sum((last[i]["data_time_s"] or first[i]) - first[i] for i in ids if i in first)
-    result = {"structures": structures, "processes": processes, "dashboard": dashboard, "speed": speed, "block_s": block_s,
+    result = {"structures": structures, "processes": processes, "dashboard": dashboard, "hog": hog, "speed": speed,
+              "block_s": block_s,
               "wall_s": round(wall, 1), "worst_lag_s": None if None in lags else round(max(lags), 2),
               f"worst_lag_after_{after_s:g}s": round(max(worst_after.values()), 2) if worst_after else None,
               "structures_lag_over_5s": sum(1 for x in lags if x is None or x > 5.0),
@@ -377,7 +397,8 @@ def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 24
               "budget_mib": 1024 + 150 * structures,
               "cpu_cores": round(cpu / wall, 2),
               "data_s_processed": round(data_s, 1), "data_s_due": round(structures * speed * wall, 1),
-              "cpu_ms_per_structure_second": round(1e3 * cpu / max(data_s, 1e-9), 2), "load_before": load,
+              "cpu_ms_per_structure_second": round(1e3 * cpu / max(data_s, 1e-9), 2),
+              "threads": sorted(threads.values()), "load_before": load,
               "load_after": _load()}
     print(f"[live] {result}", flush=True)
     return result
@@ -397,16 +418,27 @@ def main(argv: list[str] | None = None) -> int:
                    help="wall time of each live fleet, s (the budget: ten minutes at real time after the start-up)")
     p.add_argument("--live-speed", type=float, default=1.0)
     p.add_argument("--live-dashboard", action="store_true", help="live fleets with the dashboard on (worker 0 serves it)")
+    p.add_argument("--live-processes", type=int, nargs="*", default=[1, 2], metavar="P",
+                   help="worker processes of each live fleet (--workers of shm serve)")
+    p.add_argument("--live-hog", action="store_true",
+                   help='a CPU-bound process at nice 10 beside each live fleet (nice -n 10 python -c "while True: pass")')
+    p.add_argument("--live-only", action="store_true", help="only the live fleets (no memory, cost, lock, scheduler, reprocess)")
     args, _ = p.parse_known_args(argv)
+    if args.live_only:
+        for n in args.live:
+            for processes in args.live_processes:
+                bench_live_fleet(n, speed=args.live_speed, seconds=args.live_s, processes=processes,
+                                 dashboard=args.live_dashboard, hog=args.live_hog)
+        return 0
     if not args.skip_memory:  # first: before this process imports the cluster's libraries
         bench_memory_per_structure(args.structures)
     bench_structure_cost()
     bench_lock_hold()
     if not args.skip_live:
         for n in args.live:
-            for processes in (1, 2):
+            for processes in args.live_processes:
                 bench_live_fleet(n, speed=args.live_speed, seconds=args.live_s, processes=processes,
-                                 dashboard=args.live_dashboard)
+                                 dashboard=args.live_dashboard, hog=args.live_hog)
     scheduler = bench_scheduler()
     if not args.skip_reprocess:
         results = bench_reprocess(Path(args.replay), args.files)

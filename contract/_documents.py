@@ -471,7 +471,6 @@ class ServiceStatusDocument(_Document):
     version: str
     started_at: Finite = Field(description="UNIX s")
     uptime_s: Finite
-    paused: bool = Field(description="pushes to the dashboard paused (monitoring never pauses)")
     done: bool = Field(description="the source ended and everything was processed")
     pipeline_error: str | None = Field(None, description="the error of the last batch, None once a batch succeeds again")
     pipeline_errors: Count = Field(0, description="batches that failed since the start")

@@ -96,16 +96,28 @@ class Archive:
             self.close()
         return self._writer or self._open(time_ns)
 
+    def _rotates_at(self) -> int | None:
+        """The data time (ns) from which the next file starts (None: no file open)."""
+        if self._file_start_ns is None or self._writer is None:
+            return None
+        return self._file_start_ns + int(self.settings.rotate_s * 1e9)
+
     def write_many(self, messages: list[tuple[str, int, bytes, int]]) -> None:
-        """Write (topic, log_time_ns, payload, publish_time_ns) messages."""
+        """Write (topic, log_time_ns, payload, publish_time_ns) messages; a file holds at most
+        ``rotate_s`` of data however many seconds one call brings."""
         if not messages:
             return
         try:
             writer = self._writer_for(messages[0][1])
-            write = writer.write
+            rotates_at = self._rotates_at()
             size = 0
             for topic, log_ns, payload, pub_ns in messages:
-                write(topic, log_ns, payload, pub_ns)
+                if rotates_at is not None and log_ns >= rotates_at:
+                    self._bytes += size
+                    size = 0
+                    writer = self._writer_for(log_ns)
+                    rotates_at = self._rotates_at()
+                writer.write(topic, log_ns, payload, pub_ns)
                 size += len(payload) + 40
             self._bytes += size
             self.messages += len(messages)
@@ -114,15 +126,22 @@ class Archive:
             log.error("recording failed: %s", exc)
 
     def write_estimates(self, stamps_ns: Any, payloads: list[bytes]) -> None:
-        """Write estimate payloads (encoded JSON) stamped ``stamps_ns`` (integer ns, log and
-        publish time), all at once."""
+        """Write estimate payloads (encoded JSON) stamped ``stamps_ns`` (integer ns, in order; log
+        and publish time), each file's part at once."""
         if not len(payloads):
             return
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
         try:
-            writer = self._writer_for(int(stamps_ns[0]))
-            writer.write_batch(ESTIMATE_TOPIC, np.asarray(stamps_ns, dtype=np.int64), payloads)
-            self._bytes += sum(map(len, payloads)) + 40 * len(payloads)
-            self.messages += len(payloads)
+            lo = 0
+            while lo < len(stamps):
+                writer = self._writer_for(int(stamps[lo]))
+                rotates_at = self._rotates_at()
+                hi = len(stamps) if rotates_at is None else max(lo + 1, int(np.searchsorted(stamps, rotates_at)))
+                part = payloads[lo:hi]
+                writer.write_batch(ESTIMATE_TOPIC, stamps[lo:hi], part)
+                self._bytes += sum(map(len, part)) + 40 * len(part)
+                self.messages += len(part)
+                lo = hi
         except (OSError, ValueError) as exc:
             self.errors += 1
             log.error("recording failed: %s", exc)

@@ -3,7 +3,7 @@
     checks (plausibility, stuck sensors; ``_checks``) → merge on one clock (``_merge``) →
     streaming estimator (``_stage_estimate``) → windowing and analysis (``_stage_analysis``,
     with the loads of the engine's windows) → commits (``_stage_commit``) → outputs: the
-    recording, live ring and sink (``_stage_outputs``).
+    recording and live ring (``_stage_outputs``).
 
 ``process(batch)`` (the data lane) and ``step_analysis()`` (the analysis lane) are each called by
 one thread at a time — a worker's scheduler (``_scheduler``) steps them on its pool; without an
@@ -21,6 +21,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -32,16 +33,17 @@ from estimator import ImmsModel
 from ..recording import FollowBlock
 from ._archive import Archive
 from ._checks import CheckSettings, SampleChecks
+from ._delegate import ReadThrough
 from ._merge import MergeSettings, MergeStage
 from ._plausibility import SourceClock, ValueLimits
 from ._sinks import SinkGuard
 from ._stage_analysis import AnalysisStage
 from ._stage_commit import CommitSettings, CommitStage
 from ._stage_estimate import EstimateSettings, EstimateStage, stored_calibration
-from ._stage_outputs import OutputSettings, OutputStage, PipelineSink
+from ._stage_outputs import OutputSettings, OutputStage
 from ._storage import Storage
 
-__all__ = ["Batch", "Pipeline", "PipelineSink"]
+__all__ = ["Batch", "Pipeline"]
 
 log = logging.getLogger("shm.serve.pipeline")
 
@@ -59,6 +61,31 @@ class Batch:
     truth: tuple[np.ndarray, np.ndarray] | None = None
     received: float = field(default_factory=time.monotonic)
     refused: dict[str, int] | None = None  # samples per topic the source refused (its sensor is degraded meanwhile)
+
+    @classmethod
+    def joined(cls, batches: list["Batch"]) -> "Batch":
+        """Consecutive batches of one source as one (each topic's samples concatenated in order):
+        what the source would have handed on as one bigger block. A structure behind its pace
+        takes its queued batches in one step, so the per-batch costs (checks, merge, the
+        estimator's call) are paid once."""
+        if len(batches) == 1:
+            return batches[0]
+        parts: dict[str, list[FollowBlock]] = {}
+        for batch in batches:
+            for block in batch.blocks:
+                parts.setdefault(block.topic, []).append(block)
+        blocks = [b[0] if len(b) == 1 else
+                  FollowBlock(b[0].topic, b[0].kind, b[0].name, np.concatenate([x.log_time_ns for x in b]),
+                              np.concatenate([x.publish_time_ns for x in b]), np.concatenate([x.values for x in b]))
+                  for b in parts.values()]
+        raws = [b.raw for b in batches if b.raw is not None]
+        truths = [b.truth for b in batches if b.truth is not None]
+        refused: Counter = Counter()
+        for b in batches:
+            refused.update(b.refused or {})
+        return cls(blocks, [m for r in raws for m in r] if raws else None,
+                   (np.concatenate([t for t, _ in truths]), np.concatenate([d for _, d in truths])) if truths else None,
+                   min(b.received for b in batches), dict(refused) if any(b.refused is not None for b in batches) else None)
 
 
 _blas_limit = None
@@ -146,7 +173,7 @@ class Pipeline:
     def __init__(self, *, model: ImmsModel, source_id: str, storage: Storage, analysis: AnalysisConfig,
                  estimate: EstimateSettings | None = None, merge: MergeSettings | None = None,
                  checks: CheckSettings | None = None, commits: CommitSettings | None = None,
-                 outputs: OutputSettings | None = None, archive: Archive | None = None, sink: PipelineSink | None = None,
+                 outputs: OutputSettings | None = None, archive: Archive | None = None,
                  sink_guard: SinkGuard | None = None, clock: SourceClock | None = None, limits: ValueLimits | None = None,
                  analysis_lane: bool = False) -> None:
         _one_blas_thread()
@@ -163,8 +190,8 @@ class Pipeline:
         baseline = None if blob.get("monitor") else storage.active_baseline(source_id)
         self.analytics = AnalysisStage(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id,
                                        baseline=baseline, loads_state=blob.get("loads"))
-        self.outputs = OutputStage(model, source_id, storage, outputs, archive=archive, sink=sink, sink_guard=sink_guard)
-        self.commits = CommitStage(storage, source_id, self.analytics.active(), commits, on_written=self.outputs.written)
+        self.outputs = OutputStage(model, source_id, storage, outputs, archive=archive, sink_guard=sink_guard)
+        self.commits = CommitStage(storage, source_id, self.analytics.active(), commits)
         # the analysis lane (None: analysed inline, within ``process``)
         self.inbox = AnalysisInbox(self._handle, self._retry_commits) if analysis_lane else None
         self.lane_started = False  # until ``start_lane``, the windows are analysed inline (as without a lane)
@@ -351,37 +378,15 @@ class Pipeline:
     def live(self, ring) -> None:
         self.outputs.live = ring
 
-    @property
-    def clock(self) -> SourceClock | None:
-        return self.checks.clock
-
-    @property
-    def rejected(self) -> Counter:
-        return self.checks.rejected
-
-    @property
-    def committed_alarms(self) -> dict[str, str]:
-        return self.commits.committed_alarms
-
-    @property
-    def windows_committed(self) -> int:
-        return self.commits.windows_committed
-
-    @property
-    def last_window(self):
-        return self.commits.last_window
-
-    @property
-    def storage_error(self) -> str | None:
-        return self.commits.storage_error
-
-    @property
-    def storage_errors(self) -> int:
-        return self.commits.storage_errors
-
-    @property
-    def trend_rows_dropped(self) -> int:
-        return self.commits.trend_rows_dropped
+    # the stages' counters and state, read through (``ReadThrough``)
+    clock: ReadThrough[SourceClock | None] = ReadThrough("checks")
+    rejected: ReadThrough[Counter] = ReadThrough("checks")
+    committed_alarms: ReadThrough[dict[str, str]] = ReadThrough("commits")
+    windows_committed: ReadThrough[int] = ReadThrough("commits")
+    last_window: ReadThrough[Any] = ReadThrough("commits")
+    storage_error: ReadThrough[str | None] = ReadThrough("commits")
+    storage_errors: ReadThrough[int] = ReadThrough("commits")
+    trend_rows_dropped: ReadThrough[int] = ReadThrough("commits")
 
     @property
     def pending_commits(self) -> int:

@@ -4,6 +4,9 @@ forms ``/api/spectra/latest`` and ``/api/baseline`` (a service of one structure)
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import TypeVar
+
 from fastapi import APIRouter, Depends, HTTPException, Query, Response
 
 from contract import (
@@ -23,6 +26,8 @@ from ._http_pages import PageParams
 from ._store_paging import decode_cursor, encode_cursor
 
 __all__ = ["router"]
+
+T = TypeVar("T")
 
 router = APIRouter(tags=["structures"])
 
@@ -68,23 +73,25 @@ def spectra(port: ServicePort = Depends(service_port)) -> SpectrumDocument:
     return spec
 
 
+def _latest_or_404(read: Callable[[str], T | None], structure_id: str) -> T:
+    """What ``read`` holds of the structure's latest window; 404 (unknown structure, or no window yet)."""
+    latest = of_structure(read, structure_id)
+    if latest is None:
+        raise HTTPException(404, f"structure {structure_id!r} has no analysis window yet")
+    return latest
+
+
 @router.get("/api/structures/{structure_id}/spectra/latest",
             summary="amplitude spectra of b of the structure's latest window",
             response_model=SpectrumDocument, responses={**AUTH_RESPONSES, **UNKNOWN})
 def structure_spectra(structure_id: str = STRUCTURE_ID, port: ServicePort = Depends(service_port)) -> SpectrumDocument:
-    spec = of_structure(port.spectra, structure_id)
-    if spec is None:
-        raise HTTPException(404, f"structure {structure_id!r} has no analysis window yet")
-    return spec
+    return _latest_or_404(port.spectra, structure_id)
 
 
 @router.get("/api/structures/{structure_id}/windows/latest", summary="the structure's latest committed analysis window",
             response_model=WindowDocument, responses={**AUTH_RESPONSES, **UNKNOWN})
 def structure_window(structure_id: str = STRUCTURE_ID, port: ServicePort = Depends(service_port)) -> WindowDocument:
-    window = of_structure(port.structure_window, structure_id)
-    if window is None:
-        raise HTTPException(404, f"structure {structure_id!r} has no analysis window yet")
-    return window
+    return _latest_or_404(port.structure_window, structure_id)
 
 
 @router.get("/api/structures/{structure_id}/rig", summary="the rig the structure is monitored with (rig.json)",

@@ -7,6 +7,14 @@ windows) — each stepped by one pool thread at a time, so a structure's data st
 its analysis runs beside its estimator. The pool takes the lanes round-robin: a lane that was
 stepped goes to the back, so every structure gets its turn however busy the others are.
 
+The lanes that keep a structure on its pace (its source, its data lane) go first: a **background**
+lane (the analysis) is taken only when no pace lane is ready, and by at most
+``background_threads`` pool threads at a time. A window's analysis is long (a few hundred ms of
+Python and small LAPACK calls) and falls due on many structures at once; run on every pool thread
+it held the GIL against the data lanes and the fleet fell seconds behind its pace. The analysis
+has its inbox to wait in (``AnalysisInbox``); when that fills, the data lane is held back and the
+analysis gets the pool.
+
 Why: a process of many structures with three threads each (source, pipeline, analysis) had ~75
 threads convoying on one GIL; when the OS descheduled the thread holding it (a CPU-bound
 process beside it), all of them waited, and the fleet fell minutes behind its pace.
@@ -33,12 +41,14 @@ class SchedulerSettings(BaseModel):
 
     threads: int = Field(3, ge=1, le=64, description="pool threads stepping the structures' pipelines")
     idle_s: float = Field(0.05, gt=0, le=5, description="longest sleep of an idle pool thread (it is woken by new data), s")
+    background_threads: int = Field(1, ge=1, le=64, description="most pool threads stepping background lanes (the analysis) at once")
 
 
 class Lane(Protocol):
     """One lane of a structure: ``ready()`` (cheap, called under the scheduler's lock) says whether
     ``step()`` has work; ``step()`` does one unit of it (and handles its own errors);
-    ``finished`` removes the lane for good."""
+    ``finished`` removes the lane for good; ``background`` (optional, default False): taken only
+    when no other lane is ready (see the module)."""
 
     name: str
     finished: bool
@@ -57,6 +67,7 @@ class Scheduler:
         self._cv = threading.Condition()
         self._stopping = False
         self._threads: list[threading.Thread] = []
+        self._background_running = 0
         self.steps = 0
 
     def add(self, lane: Lane) -> None:
@@ -92,23 +103,40 @@ class Scheduler:
             return len(self._lanes)
 
     def _take(self) -> Lane | None:
-        """The next ready lane, taken out of the rotation while it is stepped (None: stopping)."""
+        """The next ready lane, taken out of the rotation while it is stepped (None: stopping): the
+        first ready pace lane in rotation order, else the first ready background lane while fewer
+        than ``background_threads`` step one."""
         with self._cv:
             while not self._stopping:
-                for _ in range(len(self._lanes)):
-                    lane = self._lanes.popleft()
-                    if lane.finished:
+                if any(lane.finished for lane in self._lanes):
+                    self._lanes = deque(lane for lane in self._lanes if not lane.finished)
+                room = self._background_running < self.settings.background_threads
+                background: int | None = None
+                for k, lane in enumerate(self._lanes):
+                    behind = getattr(lane, "background", False)
+                    if behind and (background is not None or not room):
                         continue
-                    try:
-                        ready = lane.ready()
-                    except Exception:  # a lane that cannot say is tried again next round
-                        log.exception("lane %s: ready() failed", lane.name)
-                        ready = False
-                    if ready:
+                    if not self._ready(lane):
+                        continue
+                    if not behind:
+                        del self._lanes[k]
                         return lane
-                    self._lanes.append(lane)
+                    background = k
+                if background is not None:
+                    lane = self._lanes[background]
+                    del self._lanes[background]
+                    self._background_running += 1
+                    return lane
                 self._cv.wait(self.settings.idle_s)
             return None
+
+    @staticmethod
+    def _ready(lane: Lane) -> bool:
+        try:
+            return lane.ready()
+        except Exception:  # a lane that cannot say is tried again next round
+            log.exception("lane %s: ready() failed", lane.name)
+            return False
 
     def _run(self) -> None:
         while True:
@@ -122,6 +150,8 @@ class Scheduler:
             finally:
                 with self._cv:
                     self.steps += 1
+                    if getattr(lane, "background", False):
+                        self._background_running -= 1
                     if not lane.finished:
                         self._lanes.append(lane)  # to the back: the others' turn first
                     self._cv.notify()

@@ -134,7 +134,6 @@ class MonitoringService(_StoredRows, SingleStructureView):
                                "(server.token_file or SHM_TOKEN), which the dashboard then asks for; or bind it to "
                                "127.0.0.1, or --no-dashboard")
         self.started_at = time.time()
-        self.paused = False
         self.fleet = settings.fleet
         models = _ModelCache()
         self.structures: dict[str, Structure | _FailedStructure] = {}
@@ -162,7 +161,7 @@ class MonitoringService(_StoredRows, SingleStructureView):
             # latest window and spectra), one structure as a fleet: nothing is pushed into it
             self.dashboard = start_dashboard(self, self.settings, self.token)
         for structure in self.running_structures():
-            structure.attach(self.storage, None, self.dashboard_guard)
+            structure.attach(self.storage, self.dashboard_guard)
         self.notifier = Notifier(self.storage, settings.notify, dict(environ) if environ is not None else None)
         archives = [s.archive for s in self.running_structures() if s.archive is not None]
         self.retention = RetentionWorker(settings.retention, storage=self.storage,
@@ -359,9 +358,6 @@ class MonitoringService(_StoredRows, SingleStructureView):
         if alarm is None:
             raise KeyError(f"alarm {alarm_id} does not exist")
         return alarm
-
-    def set_paused(self, paused: bool) -> None:
-        self.paused = bool(paused)
 
     def request_baseline(self, structure_id: str | None = None) -> BaselineRequestDocument:
         """Learn a new baseline of the single structure (or of ``structure_id``) from its next windows."""

@@ -1,7 +1,10 @@
-"""Data sources of the service. Each runs in its own thread and puts ``Batch`` objects into the
-pipeline's bounded queue; ``put`` blocks when the queue is full (back-pressure: a replay slows
-down to the pipeline's pace, a simulation too). The HTTP ingest source has no thread: requests
-put their batches directly, waiting a bounded time for room.
+"""Data sources of the service. A simulation, replay or followed file is a generator of
+``Batch`` objects (``Source.items``: a float instead says "nothing now, look again in that many
+seconds"), stepped on the service's scheduler by a ``SourceLane``: it makes the next batch, hands
+it to the pipeline's bounded queue once due at its pace and with room (back-pressure: a replay
+slows down to the pipeline's pace, a simulation too), and never waits on a pool thread. Without a
+scheduler (``start()``) a thread of its own runs the same items. The HTTP ingest source has no
+thread: requests put their batches directly, waiting a bounded time for room.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ import threading
 import time
 from collections import Counter
 from pathlib import Path
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -24,7 +28,8 @@ from ._ingest import IngestResult, IngestValidator
 from ._plausibility import SourceClock, ValueLimits
 from ._pipeline import Batch
 
-__all__ = ["FileSource", "IngestSource", "SimSource", "Source", "END", "data_lag_s", "simulation_settings"]
+__all__ = ["FileSource", "IngestSource", "SimSource", "Source", "SourceLane", "END", "data_lag_s", "newest_ns",
+           "simulation_settings"]
 
 log = logging.getLogger("shm.serve.source")
 
@@ -80,8 +85,14 @@ class Source:
     # -- lifecycle ------------------------------------------------------------------------------
 
     def start(self) -> None:
+        """Run on a thread of its own (without a scheduler: ``start_on``)."""
         self._thread = threading.Thread(target=self._main, name=f"source-{self.kind}", daemon=True)
         self._thread.start()
+
+    def start_on(self, scheduler: Any) -> None:
+        """Run on ``scheduler``'s pool (a ``SourceLane``) instead of a thread of its own."""
+        self.state = "running"
+        scheduler.add(SourceLane(self))
 
     def stop(self) -> None:
         self._stop.set()
@@ -103,8 +114,28 @@ class Source:
         finally:
             self._put(END)
 
-    def run(self) -> None:
+    def items(self) -> Iterator[Batch | float]:
+        """The source's batches in order, unpaced; a float: nothing now, look again in that many s.
+        The generator sets ``state`` (finished, failed, stopped) when it ends otherwise than running."""
         raise NotImplementedError
+
+    def run(self) -> None:
+        """The items on this thread: each batch held to the pace, counted and put (blocking)."""
+        pacer = _Pacer(self.speed, self._stop)
+        for item in self.items():
+            if self._stop.is_set():
+                break
+            if isinstance(item, float):
+                self._stop.wait(item)
+                continue
+            newest = newest_ns(item, None)
+            if newest is not None:
+                pacer.wait(newest)
+            self._count(item.blocks)
+            if not self._put(item):
+                break
+        if self._stop.is_set() and self.state == "running":
+            self.state = "stopped"
 
     def _put(self, item: Any) -> bool:
         """Blocking put that still notices ``stop()``."""
@@ -156,6 +187,11 @@ class Source:
             "rejected": sum(self.rejected.values()), "rejected_by_reason": dict(self.rejected),
             "dropped": self.dropped, "problems": self.problems[-20:] + self.health_problems(),
         }
+
+
+def newest_ns(batch: Batch, default: int | None) -> int | None:
+    """The newest data time of ``batch`` (``default``: without samples), ns."""
+    return max((int(b.log_time_ns[-1]) for b in batch.blocks if len(b)), default=default)
 
 
 class _Pacer:
@@ -287,39 +323,26 @@ class SimSource(Source):
                 truth = (start_ns + np.round(block.times * _NS).astype(np.int64), block.truth["deflection"])
             yield Batch(blocks, raw, truth)
 
-    def start_on(self, scheduler: Any) -> None:
-        """Run on ``scheduler``'s pool (a ``SourceLane``) instead of a thread of its own."""
-        self.state = "running"
-        scheduler.add(SourceLane(self))
-
-    def run(self) -> None:
-        start_ns = self.settings.start_time_ns
-        pacer = _Pacer(self.speed, self._stop)
+    def items(self) -> Iterator[Batch | float]:
         block_s = self.block_s if self.speed is not None else max(self.block_s, 10.0)  # bigger blocks at max speed
-        for batch in self.batches(block_s):
-            if self._stop.is_set():
-                self.state = "stopped"
-                return
-            newest = max((int(b.log_time_ns[-1]) for b in batch.blocks if len(b)), default=start_ns)
-            pacer.wait(newest)
-            self._count(batch.blocks)
-            if not self._put(batch):
-                self.state = "stopped"
-                return
+        yield from self.batches(block_s)
+        if self.state == "running":
+            self.state = "finished"
 
 
 class SourceLane:
-    """A simulated source stepped by the scheduler instead of a thread of its own: each step makes
-    the next batch, or hands it on once it is due (paced) and the queue has room. Ready only then,
-    so a pool thread never waits for the pace or for room."""
+    """A source stepped by the scheduler instead of a thread of its own: each step takes its next
+    item, or hands the batch on once it is due (paced) and the queue has room. Ready only then
+    (and not while the source said to look again later), so a pool thread never waits for the
+    pace, for room or for a file to grow."""
 
-    def __init__(self, source: SimSource) -> None:
+    def __init__(self, source: Source) -> None:
         self.source, self.name, self.finished = source, f"source-{source.id}", False
         self.pacer = _Pacer(source.speed, source._stop)
-        block_s = source.block_s if source.speed is not None else max(source.block_s, 10.0)  # bigger blocks at max speed
-        self._batches = iter(source.batches(block_s))
+        self._items = iter(source.items())
         self._next: Batch | None = None
-        self._newest = source.settings.start_time_ns
+        self._newest: int | None = None  # of the batch held (None: no samples yet: due at once)
+        self._idle_until = 0.0
         self._ending = False
 
     def ready(self) -> bool:
@@ -327,37 +350,48 @@ class SourceLane:
         if self._ending or src._stop.is_set():
             return not src.out.full()
         if self._next is None:
-            return True
-        return not src.out.full() and self.pacer.due_in(self._newest) <= 0
+            return time.monotonic() >= self._idle_until
+        return not src.out.full() and self._due()
 
     def step(self) -> None:
         src = self.source
         if src._stop.is_set() and not self._ending:
-            src.state, self._ending = "stopped", True
+            self._ending = True
+            if src.state == "running":
+                src.state = "stopped"
         if self._ending:
             self._end()
             return
         if self._next is None:
-            try:
-                batch = next(self._batches, None)
-            except Exception as exc:  # a source failing must not take the service down
-                log.exception("source %s failed", src.id)
-                src.state, src.error, self._ending = "failed", f"{type(exc).__name__}: {exc}", True
-                return
-            if batch is None:
-                src.state, self._ending = "finished", True
-                return
-            self._next = batch
-            self._newest = max((int(b.log_time_ns[-1]) for b in batch.blocks if len(b)), default=self._newest)
+            self._take()  # and, when it is due already (the source is behind), handed on in this step
+        if self._next is None or not self._due():
             return
-        if self.pacer.due_in(self._newest) > 0:
-            return
-        src._count(self._next.blocks)
         try:
             src.out.put_nowait(self._next)
         except queue.Full:
             return
+        src._count(self._next.blocks)
         self._next = None
+
+    def _due(self) -> bool:
+        return self._newest is None or self.pacer.due_in(self._newest) <= 0
+
+    def _take(self) -> None:
+        src = self.source
+        try:
+            item = next(self._items, None)
+        except Exception as exc:  # a source failing must not take the service down
+            log.exception("source %s failed", src.id)
+            src.state, src.error, self._ending = "failed", f"{type(exc).__name__}: {exc}", True
+            return
+        if item is None:
+            self._ending = True
+            if src.state == "running":
+                src.state = "finished"
+        elif isinstance(item, float):
+            self._idle_until = time.monotonic() + item
+        else:
+            self._next, self._newest = item, newest_ns(item, self._newest)
 
     def _end(self) -> None:
         try:
@@ -439,14 +473,9 @@ class FileSource(Source):
                     self._counted_rejects[key] = value
         self.problems = list(f.report.problems)
 
-    def _emit(self, blocks: list[FollowBlock], pacer: _Pacer) -> bool:
-        self._update_rejects()
-        return self._emit_blocks(blocks, pacer)
-
-    def _emit_blocks(self, blocks: list[FollowBlock], pacer: _Pacer) -> bool:
+    def _batch(self, blocks: list[FollowBlock]) -> Batch | None:
+        """The data blocks of ``blocks`` (and the truth, when shown) as a batch (None: no data)."""
         blocks = [b for b in blocks if len(b)]
-        if not blocks:
-            return True
         truth_block = None
         data_blocks = []
         for b in blocks:
@@ -455,15 +484,20 @@ class FileSource(Source):
             elif b.kind != "estimate":
                 data_blocks.append(b)
         if not data_blocks:
-            return True
-        pacer.wait(max(int(b.log_time_ns[-1]) for b in data_blocks))
-        self._count(data_blocks)
+            return None
         truth = None
         if truth_block is not None and self.truth and self.rig is not None:
             layout = row_layout("shm.TruthState", stations=len(self.rig.truth_stations))
             if truth_block.values.shape[1] == layout.width:
                 truth = (truth_block.log_time_ns, truth_block.values[:, layout.columns("deflection")])
-        return self._put(Batch(data_blocks, None, truth))
+        return Batch(data_blocks, None, truth)
+
+    def _polled(self, blocks: list[FollowBlock]) -> Iterator[Batch]:
+        """What the follower read: its rejects counted, its data as a batch."""
+        self._update_rejects()
+        batch = self._batch(blocks)
+        if batch is not None:
+            yield batch
 
     def _interleaved(self) -> bool:
         """True when the finished file's chunks come in time order (as a logger writes them).
@@ -489,7 +523,7 @@ class FileSource(Source):
             newest = max(newest, index.message_end_time)
         return True
 
-    def _replay_in_bulk(self, pacer: "_Pacer") -> None:
+    def _replay_in_bulk(self) -> Iterator[Batch]:
         """Replay a whole recording read at once, in 10 s slices of data time across all channels."""
         rec = read_recording(self.path, rig=self._rig_override, kinds=self._kinds())
         self.problems = list(rec.report.problems)
@@ -505,22 +539,21 @@ class FileSource(Source):
                 lo, hi = np.searchsorted(c.log_time_ns, [start, start + step])
                 if hi > lo:
                     blocks.append(FollowBlock(c.topic, c.kind, c.name, c.log_time_ns[lo:hi], c.publish_time_ns[lo:hi], c.values[lo:hi]))
-            if blocks and not self._emit_blocks(blocks, pacer):
-                return
+            batch = self._batch(blocks)
+            if batch is not None:
+                yield batch
             start += step
 
-    def run(self) -> None:
+    def items(self) -> Iterator[Batch | float]:
         if not self.follow and not self._interleaved():
             self.state = "running"
-            self._replay_in_bulk(_Pacer(self.speed, self._stop))
-            if self._stop.is_set():
-                self.state = "stopped"
+            yield from self._replay_in_bulk()
+            self.state = "stopped" if self._stop.is_set() else "finished"
             return
         f = self.follower
         assert f is not None
-        pacer = _Pacer(self.speed, self._stop)
-        if not self._emit(self._early, pacer):
-            return
+        self.state = "running"
+        yield from self._polled(self._early)
         idle_since = time.monotonic()
         replaced = f.replaced
         while not self._stop.is_set():
@@ -528,8 +561,8 @@ class FileSource(Source):
             blocks = f.poll(max_bytes=2 << 20)
             self.state = "waiting for the file" if f.missing else "running"
             self.problems = list(f.report.problems)  # a missing file's entry counts on without data
-            if blocks and not self._emit(blocks, pacer):
-                return
+            if blocks:
+                yield from self._polled(blocks)
             if f.replaced != replaced:  # a new file under the name: reading it is progress
                 replaced, before = f.replaced, -1
             if f.finished and not (self.follow and self.rotations):
@@ -539,18 +572,17 @@ class FileSource(Source):
                 self.error = f.report.problems[-1] if f.report.problems else "file damaged"
                 break
             if f.bytes_read == before or f.finished:  # at the end of what exists now
-                if not self.follow:
-                    self._emit(f.finish(), pacer)
+                if not self.follow or (self.idle_s is not None and time.monotonic() - idle_since > self.idle_s):
+                    yield from self._polled(f.finish())
                     break
-                if self.idle_s is not None and time.monotonic() - idle_since > self.idle_s:
-                    self._emit(f.finish(), pacer)
-                    break
-                self._stop.wait(self.poll_s)
+                yield float(self.poll_s)
             else:
                 idle_since = time.monotonic()
         self._update_rejects()
         if self._stop.is_set():
             self.state = "stopped"
+        elif self.state in ("running", "waiting for the file"):
+            self.state = "finished"
 
 
 class IngestSource(Source):

@@ -1,40 +1,27 @@
-"""The outputs of a structure's pipeline: its recording (the raw samples and the estimates), its
-live ring, and the sink (the dashboard adapter). Whatever a sink raises is counted by its guard
-and never stops the pipeline."""
+"""The outputs of a structure's pipeline: its recording (the raw samples and the estimates) and
+its live ring (what the dashboard and ``/live`` read through the port; nothing is pushed).
+Whatever the live ring raises is counted by its guard and never stops the pipeline."""
 
 from __future__ import annotations
 
 import logging
-import math
-import time
 from collections import deque
 from typing import Any, Protocol
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from contract import AlarmDocument, SpectrumDocument, WindowDocument, estimate_payloads
+from contract import estimate_payloads
 from estimator import FilterOutput, ImmsModel
 
 from ..recording import encode_payloads_json
 from ._archive import Archive
 from ._sinks import SinkGuard
-from ._stage_commit import PendingCommit
 from ._storage import Storage
 
-__all__ = ["LiveRingLike", "OutputSettings", "OutputStage", "PipelineSink"]
+__all__ = ["LiveRingLike", "OutputSettings", "OutputStage"]
 
 log = logging.getLogger("shm.serve.pipeline")
-
-
-class PipelineSink(Protocol):
-    """Where the pipeline pushes live data (the dashboard adapter). ``x`` is a state vector in
-    the model's ``StateLayout``. Whatever a sink raises is counted and never stops the pipeline."""
-
-    def estimate(self, t_s: float, x: np.ndarray, truth_deflection: np.ndarray | None) -> None: ...
-    def spectra(self, spectrum: SpectrumDocument) -> None: ...
-    def window(self, window: WindowDocument) -> None: ...
-    def alarm(self, alarm: AlarmDocument) -> None: ...
 
 
 class LiveRingLike(Protocol):
@@ -45,22 +32,20 @@ class LiveRingLike(Protocol):
 
 
 class OutputSettings(BaseModel):
-    """What the outputs record and push."""
+    """What the outputs record."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     archive_raw: bool = Field(False, description="record the incoming samples")
     archive_estimates: bool = Field(True, description="record /estimate/state")
     estimate_decimation: int = Field(1, ge=1, description="record every n-th estimate")
-    sink_estimate_hz: float = Field(15.0, gt=0, description="most estimates per second pushed to the sink")
 
 
 class OutputStage:
-    """The recording, live ring and sink of one structure."""
+    """The recording and live ring of one structure."""
 
     def __init__(self, model: ImmsModel, source_id: str, storage: Storage, settings: OutputSettings | None = None, *,
-                 archive: Archive | None = None, sink: PipelineSink | None = None,
-                 sink_guard: SinkGuard | None = None) -> None:
+                 archive: Archive | None = None, sink_guard: SinkGuard | None = None) -> None:
         self.settings = s = settings or OutputSettings()
         self.model = model
         self.source_id = source_id
@@ -68,12 +53,9 @@ class OutputStage:
         self.archive = archive
         self.archive_raw = s.archive_raw and archive is not None
         self.archive_estimates = s.archive_estimates and archive is not None
-        self.sink = sink
         self.live: LiveRingLike | None = None  # set by the service: the batches' estimates for a live view
-        # A failing sink is counted and logged once per kind; it never stops a batch.
+        # A failing live ring is counted and logged once per kind; it never stops a batch.
         self.sink_guard = sink_guard or SinkGuard("dashboard", log)
-        self.sink_period = 1.0 / s.sink_estimate_hz
-        self._last_push = -math.inf
         self.truth: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=8)
         self._estimate_maps: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
@@ -90,25 +72,11 @@ class OutputStage:
             self.archive.close()
 
     def estimates(self, epoch_ns: int, t_abs: np.ndarray, out: FilterOutput) -> None:
-        """A step's estimates (``t_abs`` UNIX s; ``out.t`` s after ``epoch_ns``): recorded, to the live ring, to the sink."""
+        """A step's estimates (``t_abs`` UNIX s; ``out.t`` s after ``epoch_ns``): recorded and to the live ring."""
         if self.archive_estimates:
             self._archive_estimates(epoch_ns, out)
         if self.live is not None:  # the structure's live ring: keeps them (decimated) only while watched
             self.sink_guard.call("live", self.live.add, t_abs, out.x, self._truth_at if self.truth else None)
-        if self.sink is None:
-            return
-        now = time.monotonic()
-        if now - self._last_push < self.sink_period:
-            return
-        self._last_push = now
-        truth = None
-        if self.truth:
-            tt, defl = self.truth[-1]
-            target = epoch_ns + int(round(out.t[-1] * 1e9))
-            k = int(np.clip(np.searchsorted(tt, target), 0, len(tt) - 1))
-            if abs(int(tt[k]) - target) < 50_000_000:
-                truth = defl[k]
-        self.sink_guard.call("estimate", self.sink.estimate, float(t_abs[-1]), out.x[-1].copy(), truth)
 
     def _truth_at(self, t_abs: np.ndarray) -> list[np.ndarray | None]:
         """The simulation's true deflection at the stations nearest each time (UNIX s; None farther than 50 ms)."""
@@ -132,19 +100,3 @@ class OutputStage:
         rows = estimate_payloads(layout, x, P, b @ tip, b @ shape, b @ curvature)
         stamps = epoch_ns + np.round(t * 1e9).astype(np.int64)
         self.archive.write_estimates(stamps, encode_payloads_json(rows))
-
-    def written(self, pending: PendingCommit) -> None:
-        """A window was written: its document, spectrum and alarm changes go to the sink."""
-        if self.sink is None:
-            return
-        guard = self.sink_guard
-        if pending.document is not None:
-            guard.call("window", self.sink.window, pending.document)
-        if pending.spectrum is not None:
-            guard.call("spectra", self.sink.spectra, pending.spectrum.get())
-        changes = pending.commit.alarm_changes
-        if changes:
-            changed = {c.chart for c in changes}
-            for alarm in self.storage.alarms(limit=len(changes) + 5):
-                if alarm.source == self.source_id and alarm.chart in changed:
-                    guard.call("alarm", self.sink.alarm, alarm)

@@ -61,7 +61,7 @@ def status_of(service: "MonitoringService", structure: Structure, shared: dict[s
     return StatusDocument(
         service=ServiceStatusDocument(
             version=VERSION, started_at=service.started_at, uptime_s=round(time.time() - service.started_at, 1),
-            paused=service.paused, done=structure.done if service.fleet else service.done,
+            done=structure.done if service.fleet else service.done,
             pipeline_error=structure.pipeline_error, pipeline_errors=structure.pipeline_errors,
             last_pipeline_error=structure.last_pipeline_error,
             progress=_progress(service, structure, p)),

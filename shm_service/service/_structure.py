@@ -26,9 +26,10 @@ from ..recording import RecordingError
 from ._archive import Archive
 from ._checks import CheckSettings
 from ._config import ServiceSettings
+from ._delegate import ReadThrough
 from ._live import LiveRing
 from ._merge import MergeSettings
-from ._pipeline import Pipeline
+from ._pipeline import Batch, Pipeline
 from ._plausibility import SourceClock
 from ._sinks import SinkGuard
 from ._sources import END, FileSource, IngestSource, SimSource, Source
@@ -73,7 +74,10 @@ class _DataLane:
 
 
 class _AnalysisLane:
-    """A structure's analysis lane: its estimator chunks analysed, its windows committed."""
+    """A structure's analysis lane: its estimator chunks analysed, its windows committed. A
+    background lane: the scheduler steps it when no source or data lane is ready."""
+
+    background = True
 
     def __init__(self, structure: "Structure") -> None:
         self.structure, self.name, self.finished = structure, f"analysis-{structure.id}", False
@@ -168,7 +172,7 @@ class Structure:
         # its estimates for a live view, kept while watched, with their virtual strain, stress and moment (issue 21)
         self.live = LiveRing(self.id, list(m.state_layout.names), loads=_virtual_loads(self.rig, m))
 
-    def attach(self, storage: Storage, sink: Any, sink_guard: SinkGuard) -> None:
+    def attach(self, storage: Storage, sink_guard: SinkGuard) -> None:
         """Create the pipeline on the shared ``storage`` (after the source, so a bad source fails first)."""
         settings, src, est = self.settings, self.settings.source, self.settings.estimator
         storage.touch_source(self.id, self.source.kind, src.spec, time.time())
@@ -183,9 +187,8 @@ class Structure:
             checks=CheckSettings(stuck_after_s=src.stuck_after_s, silent_after_s=src.silent_after_s),
             commits=CommitSettings(retry_s=settings.storage_retry_s),
             outputs=OutputSettings(archive_raw=raw, archive_estimates=settings.archive.estimates,
-                                   estimate_decimation=settings.archive.estimate_decimation,
-                                   sink_estimate_hz=settings.dashboard.estimate_hz),
-            archive=self.archive, sink=sink, sink_guard=sink_guard,
+                                   estimate_decimation=settings.archive.estimate_decimation),
+            archive=self.archive, sink_guard=sink_guard,
             # ingest is judged per message by its validator (its response says what was refused)
             clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits, analysis_lane=True,
         )
@@ -249,38 +252,50 @@ class Structure:
         for lane in self._lanes:
             scheduler.add(lane)
         self._started = True
-        if isinstance(self.source, SimSource):  # a simulation is stepped on the pool too
-            self.source.start_on(scheduler)
-        else:
+        if isinstance(self.source, IngestSource):  # its requests put their batches themselves
             self.source.start()
+        else:  # a simulation, replay or followed file is stepped on the pool too
+            self.source.start_on(scheduler)
 
-    def step_data(self) -> None:
-        """The data lane's step: one batch of the source's queue through the pipeline (or its end)."""
+    def step_data(self, most: int = 8) -> None:
+        """The data lane's step: the batches waiting in the source's queue (at most ``most``, joined:
+        ``Batch.joined``) through the pipeline, or its end."""
         pipeline = self.pipeline
-        try:
-            item = self.queue.get_nowait()
-        except queue.Empty:
-            if self._stopping:  # stopped, nothing left (a full queue may have kept its END out)
+        items: list[Any] = []
+        while len(items) < most:
+            try:
+                items.append(self.queue.get_nowait())
+            except queue.Empty:
+                break
+            if items[-1] is END:
+                break
+        ended = bool(items) and items[-1] is END
+        batches = items[:-1] if ended else items
+        if not batches:
+            if ended or self._stopping:  # stopped, nothing left (a full queue may have kept its END out)
                 self._end()
             return
-        if item is END:
-            self._end()
-            return
         if pipeline.past_stop_deadline():
-            pipeline.set_batch_aside(item)
-            return
-        try:
-            pipeline.process(item)
-        except Exception as exc:
-            self._batch_failed(exc)
+            for batch in batches:
+                pipeline.set_batch_aside(batch)
         else:
-            # None once a batch succeeds and nothing waits for the database
-            self.pipeline_error = pipeline.storage_error
+            try:
+                pipeline.process(Batch.joined(batches))
+            except Exception as exc:
+                self._batch_failed(exc)
+            else:
+                # None once a batch succeeds and nothing waits for the database
+                self.pipeline_error = pipeline.storage_error
         if self.first_data_ns is None and pipeline.newest_ns is not None:
-            # the pace's origin: the first batch, as the source's pacer holds it (the
-            # start-up before the first data, compiling and building models, is not lag)
-            self.first_data_ns, self.started_wall = pipeline.newest_ns, time.time()
+            # the pace's origin: the first batch, as the source's pacer held it when it made it (the
+            # start-up before the first data, compiling and building models, is not lag; its wait
+            # in the queue is)
+            first = batches[0]
+            self.first_data_ns = max((int(b.log_time_ns[-1]) for b in first.blocks if len(b)), default=pipeline.newest_ns)
+            self.started_wall = time.time() - (time.monotonic() - first.received)
         self.service.notifier.wake()
+        if ended:
+            self._end()
 
     def _end(self) -> None:
         pipeline = self.pipeline
@@ -454,42 +469,14 @@ class SingleStructureView:
     def primary(self) -> Structure:
         raise NotImplementedError
 
-    @property
-    def source(self) -> Source:
-        return self.primary.source
-
-    @property
-    def pipeline(self) -> Pipeline:
-        return self.primary.pipeline  # type: ignore[return-value]
-
-    @property
-    def queue(self) -> queue.Queue:
-        return self.primary.queue
-
-    @property
-    def model(self) -> Any:
-        return self.primary.model
-
-    @property
-    def rig(self) -> RigDescription:
-        return self.primary.rig
-
-    @property
-    def thresholds(self) -> ThresholdsDocument:
-        return self.primary.thresholds
-
-    @property
-    def model_document(self) -> ModelDocument:
-        return self.primary.model_document
-
-    @property
-    def pipeline_error(self) -> str | None:
-        return self.primary.pipeline_error
-
-    @property
-    def pipeline_errors(self) -> int:
-        return self.primary.pipeline_errors
-
-    @property
-    def last_pipeline_error(self) -> str | None:
-        return self.primary.last_pipeline_error
+    # the single structure's parts, read through (``ReadThrough``)
+    source: ReadThrough[Source] = ReadThrough("primary")
+    pipeline: ReadThrough[Pipeline] = ReadThrough("primary")
+    queue: ReadThrough[queue.Queue] = ReadThrough("primary")
+    model: ReadThrough[Any] = ReadThrough("primary")
+    rig: ReadThrough[RigDescription] = ReadThrough("primary")
+    thresholds: ReadThrough[ThresholdsDocument] = ReadThrough("primary")
+    model_document: ReadThrough[ModelDocument] = ReadThrough("primary")
+    pipeline_error: ReadThrough[str | None] = ReadThrough("primary")
+    pipeline_errors: ReadThrough[int] = ReadThrough("primary")
+    last_pipeline_error: ReadThrough[str | None] = ReadThrough("primary")

@@ -96,7 +96,6 @@ class WorkerFleet(_StoredRows):
         logging.getLogger("httpx").setLevel(max(logging.WARNING, logging.getLogger("httpx").getEffectiveLevel()))
         self._done = threading.Event()
         self._starting = False
-        self.paused = False
         # the dashboard lives here (it serves every structure); the workers run none
         self.dashboard: Any = None
         self._models = _ModelCache()
@@ -321,9 +320,6 @@ class WorkerFleet(_StoredRows):
         return _fleet_exposition(self)
 
     # -- the dashboard's port (FleetDashboardService) ---------------------------------------
-
-    def set_paused(self, paused: bool) -> None:
-        self.paused = bool(paused)  # the fleet's dashboard is pushed nothing: it stops polling what no browser shows
 
     def structure_status(self, structure_id: str) -> StatusDocument:
         return self.status(structure_id)

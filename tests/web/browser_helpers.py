@@ -4,11 +4,11 @@ picture of the beam, starting and ending ``shm serve`` / ``shm demo`` and readin
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import os
 import signal
 import subprocess
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -35,14 +35,9 @@ def visible(page: Any, text: Any, **kwargs: Any) -> Any:
 
 
 def wait(predicate: Callable[[], Any], timeout: float, what: str, poll: float = 0.25) -> Any:
-    """The first truthy value of ``predicate`` within ``timeout`` s (AssertionError naming ``what``)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(poll)
-    raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
+    """The first truthy value of ``predicate`` within ``timeout`` s (AssertionError naming ``what``):
+    the service tests' ``wait_for``."""
+    return service_test_helpers().wait_for(predicate, timeout, what, poll)
 
 
 def image(png: bytes) -> np.ndarray:
@@ -169,6 +164,7 @@ def interrupt_group(proc: subprocess.Popen) -> None:
             proc.wait(10)
 
 
+@functools.cache
 def service_test_helpers() -> Any:
     """The service tests' fast analytics settings (small windows, sensitive charts)."""
     import importlib.util

@@ -38,13 +38,13 @@ THRESHOLDS = ThresholdsDocument(frequency={"warning_sigma": 2.5, "alarm_sigma": 
                                 curvature={"warning_sigma": 2.5, "alarm_sigma": 6.0}, clear_sigma=1.5)
 
 
-def fake_status(*, started: float, paused: bool, sensors: dict[str, str], alarms: list[AlarmDocument], windows: int,
+def fake_status(*, started: float, sensors: dict[str, str], alarms: list[AlarmDocument], windows: int,
                 thresholds: ThresholdsDocument = THRESHOLDS, layout: StateLayout | None = None) -> StatusDocument:
     """A complete status document of a running simulated source (the service's shape, made-up counts)."""
     active = [a for a in alarms if a.active]
     layout = layout or StateLayout("gyro", 4, 4)
     return StatusDocument.model_validate({
-        "service": {"version": "0.1.0", "started_at": started, "uptime_s": time.time() - started, "paused": paused, "done": False},
+        "service": {"version": "0.1.0", "started_at": started, "uptime_s": time.time() - started, "done": False},
         "sources": [{"id": "virtual-rig", "kind": "sim", "state": "running", "messages": 123456, "rate_hz": 1866.7,
                      "latency_s": 0.012, "data_time_s": 42.0, "dropped": 3, "rejected": 1, "rejected_by_reason": {"nonfinite": 1},
                      "problems": []}],
@@ -116,7 +116,7 @@ class FakePort:
     def structure_status(self, structure_id: str) -> StatusDocument:
         self._check(structure_id)
         with self.lock:
-            return fake_status(started=self.started, paused=False, sensors=self.sensors, alarms=list(self._alarms.values()),
+            return fake_status(started=self.started, sensors=self.sensors, alarms=list(self._alarms.values()),
                                windows=len({r.window_start_s for r in self._history}), layout=self.model.layout)
 
     def structure_trends(self, structure_id: str, from_s: float | None, to_s: float | None, mode: int | None = None,

@@ -89,3 +89,16 @@ class Receiver:
     def close(self) -> None:
         self.server.shutdown()
         self.server.server_close()
+
+
+def wait_for(predicate, timeout: float = 60.0, what: str = "condition", poll: float = 0.05):
+    """The first truthy value of ``predicate()`` within ``timeout`` s (else AssertionError naming ``what``)."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(poll)
+    raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")

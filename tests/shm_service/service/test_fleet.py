@@ -17,7 +17,7 @@ from shm_service.service._server import ApiServer
 from shm_service.service import start_serve
 from shm_service.service._service import MonitoringService
 
-from svc_helpers import fast_overrides
+from svc_helpers import fast_overrides, wait_for
 
 TOKEN = "fleet-token-123"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -99,14 +99,6 @@ def test_source_of_the_service_and_structures_do_not_mix(tmp_path):
 # -- a running fleet ------------------------------------------------------------------------------
 
 
-def _wait(predicate, timeout_s=240.0, what="condition"):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.2)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def test_a_fleet_isolates_faults_and_serves_each_structure(tmp_path, short_recording):
@@ -149,7 +141,7 @@ def test_a_fleet_isolates_faults_and_serves_each_structure(tmp_path, short_recor
     try:
         with httpx.Client(base_url=api.url, timeout=30) as c:
             for sid in ("good", "broken-analysis", "corrupt"):
-                _wait(lambda: service.structure(sid).done, what=f"{sid} to end")  # noqa: B023
+                wait_for(lambda: service.structure(sid).done, 240, f"{sid} to end")  # noqa: B023
             doc = c.get("/api/structures").json()
             by_id = {s["id"]: s for s in doc["structures"]}
             assert list(by_id) == ["good", "broken-analysis", "missing", "corrupt", "live", "garbage"]
@@ -204,7 +196,7 @@ def test_a_fleet_isolates_faults_and_serves_each_structure(tmp_path, short_recor
             r = c.post("/api/structures/good/ingest", json=batch, headers=AUTH)
             assert r.status_code == 409 and "not ingest" in r.json()["detail"]
             assert c.post("/api/structures/nope/ingest", json=batch, headers=AUTH).status_code == 404
-            live = _wait(lambda: next((s for s in c.get("/api/structures").json()["structures"]
+            live = wait_for(lambda: next((s for s in c.get("/api/structures").json()["structures"]
                                        if s["id"] == "live" and s["data_time_s"] is not None), None), 30, "ingested data")
             assert live["lag_s"] is not None and live["lag_s"] > -61  # wall clock minus data time
 
@@ -230,7 +222,7 @@ def test_sim_structures_run_side_by_side_with_their_lag(tmp_path):
     service.start()
     try:
         with httpx.Client(base_url=api.url, timeout=30) as c:
-            first = _wait(lambda: (lambda d: d if all(s["data_time_s"] for s in d) else None)(
+            first = wait_for(lambda: (lambda d: d if all(s["data_time_s"] for s in d) else None)(
                 c.get("/api/structures").json()["structures"]), 60, "data of both")
             time.sleep(3.0)
             later = c.get("/api/structures").json()["structures"]
@@ -293,7 +285,7 @@ def test_a_fleet_on_worker_processes_behind_one_api(tmp_path, short_recording):
         assert len(serve.ready["workers"]) == 2
         url = serve.url
         with httpx.Client(base_url=url, timeout=60) as c:
-            done = _wait(lambda: (lambda d: d if d["a"]["state"] == "finished" else None)(
+            done = wait_for(lambda: (lambda d: d if d["a"]["state"] == "finished" else None)(
                 {s["id"]: s for s in c.get("/api/structures").json()["structures"]}), 300, "structure a to finish")
             assert list(done) == ["a", "b", "c"]
             assert done["a"]["windows"] > 0 and done["b"]["state"] == "running"
@@ -349,7 +341,7 @@ def test_a_fleet_on_worker_processes_with_its_dashboard_on(tmp_path, short_recor
         page = httpx.get(dashboard.split("dashboard at ")[1].split()[0], timeout=30)
         assert page.status_code == 200
         with httpx.Client(base_url=url, timeout=60) as c:
-            done = _wait(lambda: (lambda d: d if all(s["state"] == "finished" for s in d.values()) else None)(
+            done = wait_for(lambda: (lambda d: d if all(s["state"] == "finished" for s in d.values()) else None)(
                 {s["id"]: s for s in c.get("/api/structures").json()["structures"]}), 300, "both structures to finish")
             assert list(done) == ["a", "b"] and done["a"]["windows"] == done["b"]["windows"] > 0
     finally:

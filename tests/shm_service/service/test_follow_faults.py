@@ -17,7 +17,7 @@ from shm_service.recording import RecordingFollower, RecordingWriter
 from shm_service.rig_layouts import default_rig
 from shm_service.service import ServeStartError, start_serve
 
-from svc_helpers import fast_overrides
+from svc_helpers import fast_overrides, wait_for
 
 _T0 = 1_767_225_600_000_000_000
 _STEP = 5_000_000  # 200 Hz
@@ -118,14 +118,6 @@ def _serve(tmp_path: Path, path: Path) -> tuple[subprocess.Popen, str]:
     return serve.process, serve.url
 
 
-def _wait(predicate, timeout: float = 60.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError("timed out")
 
 
 def test_serve_follow_of_a_missing_file_serves_the_api_and_starts_when_it_appears(tmp_path):
@@ -140,19 +132,19 @@ def test_serve_follow_of_a_missing_file_serves_the_api_and_starts_when_it_appear
             r = c.get("/api/status")
             assert r.status_code == 503 and "waiting for" in r.json()["detail"] and r.headers["Retry-After"]
             writer = _write(path, 0, 2000, close=False)
-            st = _wait(lambda: (s := c.get("/api/status")).status_code == 200 and s.json()["sources"][0]["messages"] >= 2000
+            st = wait_for(lambda: (s := c.get("/api/status")).status_code == 200 and s.json()["sources"][0]["messages"] >= 2000
                        and s.json())
             assert st["sources"][0]["kind"] == "follow" and st["sources"][0]["messages"] == 2000
             new = tmp_path / "rotated.mcap"
             _write(new, 2000, 3000, note="b")
             os.replace(new, path)
             writer.close()
-            st = _wait(lambda: (s := c.get("/api/status").json())["sources"][0]["messages"] >= 5000 and s)
+            st = wait_for(lambda: (s := c.get("/api/status").json())["sources"][0]["messages"] >= 5000 and s)
             assert st["sources"][0]["messages"] == 5000
             assert sum("replaced" in p for p in st["sources"][0]["problems"]) == 1
             path.unlink()
             time.sleep(1.0)  # ~20 polls
-            st = _wait(lambda: (s := c.get("/api/status").json())["sources"][0]["state"] == "waiting for the file" and s)
+            st = wait_for(lambda: (s := c.get("/api/status").json())["sources"][0]["state"] == "waiting for the file" and s)
             problems = st["sources"][0]["problems"]
             assert sum("does not exist" in p for p in problems) <= 2  # the follower's entry (counted) and the health line
             assert any(re.search(r"does not exist.*seen \d+ times", p) for p in problems)

@@ -18,7 +18,7 @@ from pathlib import Path
 import httpx
 import pytest
 import tomli_w
-from svc_helpers import fast_overrides
+from svc_helpers import fast_overrides, wait_for
 
 from contract import FatigueDocument
 from shm_service.cli import main
@@ -53,14 +53,6 @@ def _status(url: str) -> dict:
     return httpx.get(f"{url}/api/status", timeout=30).json()
 
 
-def _wait(predicate, timeout: float = 300.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.2)
-    raise AssertionError("timed out")
 
 
 def _finished(url: str) -> bool:
@@ -109,7 +101,7 @@ def served(mast_recording, tmp_path_factory):
                 live.append(doc)
             return _finished(serve.url)
 
-        _wait(finished)
+        wait_for(finished, timeout=300)
         with httpx.Client(base_url=serve.url, timeout=30) as c:
             answers = {"sid": sid, "live": live, "status": c.get("/api/status").json(), "single": c.get("/api/fatigue"),
                        "structure": c.get(f"/api/structures/{sid}/fatigue"),
@@ -196,7 +188,7 @@ def test_a_sigkill_neither_loses_nor_double_counts_a_cycle(served, mast_recordin
     toml = _config(tmp_path, mast_recording, db)
     serve = _serve(toml, tmp_path)
     try:
-        _wait(lambda: _status(serve.url)["pipeline"]["windows_committed"] >= 4, timeout=300)
+        wait_for(lambda: _status(serve.url)["pipeline"]["windows_committed"] >= 4, timeout=300)
         os.kill(serve.pid, signal.SIGKILL)
         serve.process.wait(10)
     finally:
@@ -205,7 +197,7 @@ def test_a_sigkill_neither_loses_nor_double_counts_a_cycle(served, mast_recordin
     assert 0 < len(before) < len(whole)
     serve = _serve(toml, tmp_path)
     try:
-        _wait(lambda: _finished(serve.url))
+        wait_for(lambda: _finished(serve.url), timeout=300)
     finally:
         serve.stop()  # drains: every window is committed
     after = _rows(db)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import time
 
-from svc_helpers import Receiver
+from svc_helpers import Receiver, wait_for
 
 from shm_service.service._config import NotifySettings
 from shm_service.service._notify import Notifier, notify_targets
@@ -85,13 +85,6 @@ def test_email_over_smtp(tmp_path):
 # -- Alertmanager-like semantics (issue 11, item 4) ---------------------------------------------
 
 
-def _wait(predicate, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return predicate()
 
 
 def _change(action, at, chart="mode2", level="alarm"):
@@ -116,7 +109,7 @@ def test_4xx_is_permanent_and_reported_5xx_and_429_are_retried(tmp_path):
         st.commit_window(WindowCommit("src", 0.0, 20.0, [], None, None, [_change("raise", 20.0, "mode1")]))
         st.commit_window(WindowCommit("src", 0.0, 40.0, [], None, None, [_change("raise", 40.0, "mode3")]))
         n = Notifier(st, settings, environ={})
-        assert _wait(lambda: (n.deliver_due() or True) and len(rx.posts) == 1)
+        assert wait_for(lambda: (n.deliver_due() or True) and len(rx.posts) == 1)
         n.stop()
         first, second = st.outbox()
         # the 400 was not retried: one attempt, failed for good and said so
@@ -138,7 +131,7 @@ def test_each_target_gets_an_alarms_events_in_order_whatever_the_retries(tmp_pat
         n = Notifier(st, settings, environ={})
         n.deliver_due()  # raised: 500, due again in 0.15-0.3 s
         st.commit_window(WindowCommit("src", 20.0, 40.0, [], None, None, [_change("clear", 40.0)]))
-        assert _wait(lambda: (n.deliver_due() or True) and len(rx.posts) == 2)
+        assert wait_for(lambda: (n.deliver_due() or True) and len(rx.posts) == 2)
         n.stop()
         assert [(p["event"], p["sequence"]) for p in rx.posts] == [("raised", 1), ("cleared", 2)]
         assert rx.posts[0]["alarm"]["id"] == rx.posts[1]["alarm"]["id"]
@@ -163,7 +156,7 @@ def test_a_target_that_hangs_does_not_delay_another(tmp_path):
         n = Notifier(st, settings, environ={})
         began = time.monotonic()
         n.start()
-        assert _wait(lambda: len(rx.posts) == 3, timeout=10.0)
+        assert wait_for(lambda: len(rx.posts) == 3, timeout=10.0)
         elapsed = time.monotonic() - began
         n.stop()
         assert elapsed < 2.0, f"the healthy target waited {elapsed:.1f} s for the hanging one"
@@ -210,7 +203,7 @@ def test_a_firing_alarm_is_renotified_and_a_silent_sources_alarms_go_stale(tmp_p
         time.sleep(0.6)
         assert st.alarm(1).stale and st.renotify_due(0.5) == []
         n = Notifier(st, settings, environ={})
-        assert _wait(lambda: (n.deliver_due() or True) and len(rx.posts) == 3)
+        assert wait_for(lambda: (n.deliver_due() or True) and len(rx.posts) == 3)
         n.stop()
         assert [(p["event"], p["sequence"]) for p in rx.posts] == [("raised", 1), ("repeated", 2), ("stale", 3)]
         # the source delivers again: its next window un-stales the alarm

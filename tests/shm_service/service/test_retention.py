@@ -148,3 +148,17 @@ def test_a_running_service_applies_retention_to_its_data_directory(tmp_path):
     assert service.retention.files_deleted >= 2 and service.retention.errors == 0
     # what is left spans at most the age limit plus one file
     assert left[-1].start_s - left[0].start_s <= 40.0 + 20.0 + 1.0
+
+
+def test_a_recording_file_holds_at_most_rotate_s_of_data_however_much_one_write_brings(tmp_path):
+    from shm_service.rig_layouts import default_rig
+    from shm_service.service._archive import Archive
+    from shm_service.service._config import ArchiveSettings
+
+    archive = Archive(ArchiveSettings(directory=str(tmp_path), rotate_s=20.0), default_rig("benchmark"), "sim", None)
+    t0 = int(T0 * 1e9)
+    stamps = [t0 + k * 5 * 10**9 for k in range(11)]  # 0, 5, ..., 50 s: one call
+    archive.write_estimates(stamps, [b"{}"] * len(stamps))
+    archive.close()
+    starts = [f.start_s for f in list_recordings(tmp_path)]
+    assert starts == [T0, T0 + 20.0, T0 + 40.0] and archive.messages == 11 and archive.errors == 0

@@ -16,6 +16,7 @@ from shm_service.service._stage_commit import CommitSettings, CommitStage, Pendi
 from shm_service.service._stage_estimate import EstimateSettings, calibration_from_dict, calibration_to_dict
 from shm_service.service._stage_outputs import OutputSettings
 from shm_service.service._storage import StorageUnavailable, WindowCommit
+from svc_helpers import wait_for
 
 # -- the scheduler ------------------------------------------------------------------------------
 
@@ -49,11 +50,6 @@ class _Lane:
             self.finished = True
 
 
-def _wait(cond, timeout: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not cond():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.005)
 
 
 def test_the_scheduler_takes_the_lanes_round_robin():
@@ -64,7 +60,7 @@ def test_the_scheduler_takes_the_lanes_round_robin():
         for lane in lanes:
             scheduler._lanes.append(lane)
     scheduler._start()
-    _wait(lambda: all(lane.finished for lane in lanes))
+    wait_for(lambda: all(lane.finished for lane in lanes))
     scheduler.stop()
     assert log == ["s0", "s1", "s2", "s3"] * 3 + ["s1", "s3"]  # each in turn; a finished lane leaves the rotation
     assert scheduler.lanes == 0 and scheduler.steps == 14
@@ -75,7 +71,7 @@ def test_each_lane_is_stepped_by_one_thread_at_a_time():
     scheduler = Scheduler(SchedulerSettings(threads=3))
     for lane in lanes:
         scheduler.add(lane)
-    _wait(lambda: all(lane.finished for lane in lanes))
+    wait_for(lambda: all(lane.finished for lane in lanes))
     scheduler.stop()
     assert [lane.steps for lane in lanes] == [20] * 5
     assert max(lane.most_inside for lane in lanes) == 1  # a lane's steps never overlap: its data stay in order
@@ -89,9 +85,9 @@ def test_a_slow_lane_holds_one_thread_and_the_others_go_on():
     time.sleep(0.05)
     for lane in fast:
         scheduler.add(lane)
-    _wait(lambda: all(lane.finished for lane in fast))
+    wait_for(lambda: all(lane.finished for lane in fast))
     assert not slow.finished  # the fast lanes finished while the slow one was still in its step
-    _wait(lambda: slow.finished)
+    wait_for(lambda: slow.finished)
     scheduler.stop()
 
 
@@ -108,9 +104,29 @@ def test_a_lane_that_fails_is_logged_and_the_pool_goes_on(caplog):
     scheduler = Scheduler(SchedulerSettings(threads=1))
     scheduler.add(bad)
     scheduler.add(good)
-    _wait(lambda: good.finished and bad.steps == 3)
+    wait_for(lambda: good.finished and bad.steps == 3)
     scheduler.stop()
     assert "lane bad failed a step" in caplog.text
+
+
+def test_background_lanes_wait_for_the_pace_lanes_and_take_at_most_their_threads():
+    log: list[str] = []
+
+    class Background(_Lane):
+        background = True
+
+    slow = [Background(f"a{k}", work=2, cost_s=0.2, log=log) for k in range(3)]
+    pace = [_Lane(f"d{k}", work=2, log=log) for k in range(2)]
+    scheduler = Scheduler(SchedulerSettings(threads=3, background_threads=1))
+    with scheduler._cv:  # added together, the background lanes first in the rotation
+        scheduler._lanes.extend([*slow, *pace])
+    scheduler._start()
+    wait_for(lambda: all(lane.finished for lane in [*slow, *pace]))
+    scheduler.stop()
+    assert set(log[:4]) == {"d0", "d1"}  # the pace lanes' steps first, though behind in the rotation
+    assert max(lane.most_inside for lane in slow) == 1
+    assert sorted(log[4:]) == sorted(["a0", "a1", "a2"] * 2)  # one background step at a time: in rotation order
+    assert log[4:] == ["a0", "a1", "a2"] * 2
 
 
 def test_scheduler_settings_are_validated():
@@ -118,6 +134,8 @@ def test_scheduler_settings_are_validated():
         SchedulerSettings(threads=0)
     with pytest.raises(ValidationError, match="extra"):
         SchedulerSettings(thread=2)
+    with pytest.raises(ValidationError, match="background_threads"):
+        SchedulerSettings(background_threads=0)
 
 
 # -- the analysis lane's inbox ----------------------------------------------------------------
@@ -214,3 +232,70 @@ def test_a_calibration_survives_its_stored_form():
         pytest.skip("RestCalibration needs other fields")
     back = calibration_from_dict(calibration_to_dict(cal))
     assert back.rest_end == 60.0 and back.rested is True and np.isnan(back.bearing_std)
+
+
+# -- a structure behind its pace takes its queued batches as one ----------------------------------
+
+
+def test_queued_batches_are_joined_per_topic_in_order():
+    from shm_service.recording import FollowBlock
+    from shm_service.service._pipeline import Batch
+
+    def block(topic: str, times: list[int]) -> FollowBlock:
+        t = np.asarray(times, dtype=np.int64)
+        return FollowBlock(topic, "strain", topic, t, t + 1, t[:, None] * 0.5)
+
+    first = Batch([block("/a", [1, 2]), block("/b", [1])], raw=[("/a", 1, b"x", 2)], received=10.0, refused={"/a": 1})
+    second = Batch([block("/a", [3]), block("/c", [2, 3])], raw=[("/a", 3, b"y", 4)], received=11.0, refused={"/a": 2})
+    joined = Batch.joined([first, second])
+    assert [b.topic for b in joined.blocks] == ["/a", "/b", "/c"]
+    a = joined.blocks[0]
+    assert a.log_time_ns.tolist() == [1, 2, 3] and a.publish_time_ns.tolist() == [2, 3, 4]
+    assert a.values[:, 0].tolist() == [0.5, 1.0, 1.5]
+    assert joined.raw == [("/a", 1, b"x", 2), ("/a", 3, b"y", 4)]
+    assert joined.received == 10.0 and joined.refused == {"/a": 3} and joined.truth is None
+    assert Batch.joined([first]) is first
+
+
+# -- a source on the pool ----------------------------------------------------------------------
+
+
+def test_a_source_lane_hands_batches_on_at_their_pace_and_waits_when_told_without_a_thread():
+    import queue
+
+    from shm_service.recording import FollowBlock
+    from shm_service.service._pipeline import Batch
+    from shm_service.service._sources import END, Source, SourceLane
+
+    def batch(t_s: float) -> Batch:
+        t = np.asarray([int(t_s * 1e9)], dtype=np.int64)
+        return Batch([FollowBlock("/s", "strain", "s", t, t, np.zeros((1, 1)))])
+
+    class Items(Source):
+        def items(self):
+            yield batch(100.0)
+            yield 0.3  # a followed file at its end: look again in 0.3 s
+            yield batch(100.5)  # due 0.25 s after the first at speed 2
+            self.state = "finished"
+
+    out: queue.Queue = queue.Queue(maxsize=1)
+    src = Items("s", out)
+    src.speed, src.state = 2.0, "running"
+    lane = SourceLane(src)
+    started = time.monotonic()
+    assert lane.ready()
+    lane.step()  # made and, due at once (the pace's origin), handed on
+    assert out.get_nowait().blocks[0].log_time_ns[0] == int(100e9) and src.messages == 1
+    lane.step()  # told to wait
+    assert not lane.ready()
+    wait_for(lane.ready, 5.0)
+    assert time.monotonic() - started >= 0.3
+    lane.step()  # made; due 0.25 s after the origin: already, handed on in the same step
+    assert out.qsize() == 1 and src.messages == 2
+    assert lane.ready()
+    lane.step()  # the items ended: finished
+    assert src.state == "finished" and not lane.ready()  # its END waits for room in the queue
+    out.get_nowait()
+    assert lane.ready()
+    lane.step()
+    assert out.get_nowait() is END and lane.finished
