@@ -400,7 +400,7 @@ def _run_fleet(tmp: str, ids: list[str], workers: int, speed: float, seconds: fl
             if cpu0 is None and len(ps) >= workers:  # the workers are up: CPU from here
                 cpu0, cpu_started = sum(q.cpu_times().user + q.cpu_times().system for q in ps), time.monotonic()
             for s in client.get(f"{url}/api/structures").json()["structures"]:
-                if s["id"] not in last and s["data_time_s"] is not None:
+                if s["id"] not in first and s["data_time_s"] is not None:  # its first poll with data
                     first[s["id"]] = s["data_time_s"]
                 last[s["id"]] = s
                 if s["lag_s"] is not None:
