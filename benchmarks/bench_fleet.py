@@ -482,9 +482,10 @@ def main(argv: list[str] | None = None) -> int:
         bench_memory_per_structure(args.structures)
     bench_structure_cost()
     bench_lock_hold()
-    if args.compare:
+    if args.compare:  # with --live-processes and --live-hog where this tree has them
         compare_live(Path(args.compare).resolve(), args.live, speed=args.live_speed, seconds=args.live_s,
-                     dashboard=args.live_dashboard)
+                     dashboard=args.live_dashboard, processes=tuple(getattr(args, "live_processes", (1, 2))),
+                     **({"hog": True} if getattr(args, "live_hog", False) else {}))
     if not args.skip_live:
         for n in args.live:
             for processes in (1, 2):
