@@ -29,7 +29,8 @@ def _git(*args: str) -> str:
 
 def stamp(command: str) -> dict[str, str]:
     """When, on which commit and machine, and by which command a figure is measured."""
-    dirty = bool(_git("status", "--porcelain", "--untracked-files=no"))
+    # the results a run of `make bench` has already written are not a change of the code measured
+    dirty = bool(_git("status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)benchmarks/results"))
     load = os.getloadavg()
     return {
         "date": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),

@@ -14,6 +14,10 @@
   and after the first minute), windows committed (and any analysed but not written at the end),
   RSS of all processes, CPU. By default 100 at real time for 690 s: the budget's ten minutes after
   the start-up.
+- ``--compare TREE`` (another checkout, e.g. ``git worktree add ../before COMMIT``): each live
+  fleet of ``--live`` on the tree's ``shm serve`` and on this one's, alternately, with a side-by-side
+  line per fleet (issue 23: the fleet budget no slower than before, in one run). ``--skip-live``
+  then leaves out the usual live runs, which the comparison already made.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_fleet [--replay FILE] [--files 8] [--skip-reprocess]
      [--skip-memory] [--structures 4] [--skip-live] [--live 100] [--live-s 690] [--live-speed 1] [--live-dashboard]
@@ -33,6 +37,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import IO, Any
 
 
 def _load() -> str:
@@ -283,6 +288,75 @@ def bench_structure_cost(data_s: float = 300.0, block_s: tuple[float, ...] = (1.
     return results
 
 
+#: ``--compare``: the checkout whose ``shm serve`` the live fleet runs (None: this one's).
+_SERVE_TREE: Path | None = None
+
+
+def _start_tree_serve(tree: Path, args: list[str], log: IO[str], tmp: Path) -> tuple[subprocess.Popen, str]:
+    """``shm serve ARGS`` of ``tree``'s code (its directory on PYTHONPATH, as its cwd) and its API's
+    URL: from its ready file when that tree writes one, else from its "API at" banner (the trees
+    before issue 23's ready file)."""
+    import threading
+
+    from shm_service.service._processes import read_ready
+
+    help_text = subprocess.run([sys.executable, "-m", "shm_service.cli", "serve", "--help"], cwd=tree, capture_output=True,
+                               text=True, env={**os.environ, "PYTHONPATH": str(tree)}).stdout
+    ready = tmp / "ready.json"
+    extra = ["--ready-file", str(ready), "--parent-pid", str(os.getpid())] if "--ready-file" in help_text else []
+    proc = subprocess.Popen([sys.executable, "-m", "shm_service.cli", "serve", *args, *extra], cwd=tree,
+                            env={**os.environ, "PYTHONPATH": str(tree)}, stdout=subprocess.PIPE, stderr=log, text=True)
+    assert proc.stdout is not None
+    if extra:
+        deadline = time.monotonic() + 600
+        while (doc := read_ready(ready)) is None:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                proc.kill()
+                raise RuntimeError(f"{tree}: shm serve did not start: {(tmp / 'serve.log').read_text()[-2000:]}")
+            time.sleep(0.1)
+        url = str(doc["api"])
+    else:
+        line = proc.stdout.readline()
+        if "API at " not in line:
+            proc.kill()
+            proc.wait(30)
+            raise RuntimeError(f"{tree}: shm serve did not start: {(tmp / 'serve.log').read_text()[-2000:]}")
+        url = line.split("API at ")[1].split()[0]
+    # keep its stdout drained (a full pipe would stall it)
+    threading.Thread(target=proc.stdout.read, daemon=True).start()
+    return proc, url
+
+
+def compare_live(tree: Path, structures: list[int], *, speed: float, seconds: float, dashboard: bool,
+                 processes: tuple[int, ...] = (1, 2), **options: Any) -> list[dict]:
+    """Each live fleet on ``tree``'s ``shm serve`` (before) and on this tree's (after), one after
+    the other on the same machine, and a line comparing the two: worst lag (overall and after the
+    first minute), structures over 5 s, CPU per structure-second, RSS."""
+    global _SERVE_TREE
+    out = []
+    for n in structures:
+        for workers in processes:
+            pair = {}
+            for label, which in (("before", tree), ("after", None)):
+                _SERVE_TREE = which
+                try:
+                    print(f"[compare] {label}: {n} structures, {workers} process(es), {which or 'this tree'}", flush=True)
+                    pair[label] = bench_live_fleet(n, speed=speed, seconds=seconds, processes=workers, dashboard=dashboard,
+                                                   **options)
+                finally:
+                    _SERVE_TREE = None
+            b, a = pair["before"], pair["after"]
+            after_key = next(k for k in a if k.startswith("worst_lag_after_"))
+            print(f"[compare] {n} structures at speed {speed:g} on {workers} process(es), {seconds:g} s each: worst lag "
+                  f"before {b['worst_lag_s']} s / after {a['worst_lag_s']} s ({after_key}: {b[after_key]} / {a[after_key]} s), "
+                  f"over 5 s {b['structures_lag_over_5s']} / {a['structures_lag_over_5s']}, CPU "
+                  f"{b['cpu_ms_per_structure_second']} / {a['cpu_ms_per_structure_second']} ms per structure-second, "
+                  f"peak RSS {b['peak_rss_mib']} / {a['peak_rss_mib']} MiB, windows not committed "
+                  f"{b['windows_not_committed']} / {a['windows_not_committed']}", flush=True)
+            out.append(pair)
+    return out
+
+
 def _fleet_toml(ids: list[str], block_s: float, duration_s: float) -> str:
     lines = ["[sim]", f"duration_s = {duration_s}", f"block_s = {block_s}", ""]
     for k, sid in enumerate(ids):
@@ -307,11 +381,14 @@ def _run_fleet(tmp: str, ids: list[str], workers: int, speed: float, seconds: fl
             "--workers", str(workers), "--json"]
     args += ["--dashboard-port", "0"] if dashboard else ["--no-dashboard"]
     log = open(Path(tmp) / "serve.log", "w")
-    try:
-        serve = start_serve(args, stdout=subprocess.DEVNULL, stderr=log, timeout=600, ready_file=Path(tmp) / "ready.json")
-    except ServeStartError as exc:
-        raise RuntimeError(f"shm serve did not start ({exc}): {(Path(tmp) / 'serve.log').read_text()[-2000:]}") from None
-    proc, url = serve.process, serve.url
+    if _SERVE_TREE is not None:  # --compare: the other tree's shm serve (it may predate the ready file)
+        proc, url = _start_tree_serve(_SERVE_TREE, args, log, Path(tmp))
+    else:
+        try:
+            serve = start_serve(args, stdout=subprocess.DEVNULL, stderr=log, timeout=600, ready_file=Path(tmp) / "ready.json")
+        except ServeStartError as exc:
+            raise RuntimeError(f"shm serve did not start ({exc}): {(Path(tmp) / 'serve.log').read_text()[-2000:]}") from None
+        proc, url = serve.process, serve.url
     front = psutil.Process(proc.pid)
     load = _load()
     started = time.monotonic()
@@ -408,6 +485,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--replay", default="/tmp/hour.mcap", help="one-hour recording (simulated if missing)")
     p.add_argument("--files", type=int, default=8)
+    p.add_argument("--compare", default=None, metavar="TREE",
+                   help="another checkout (e.g. the tree before a change): each live fleet on its shm serve and on this "
+                        "one's, alternately, side by side (with --skip-live no second set of this tree's live runs)")
     p.add_argument("--structures", type=int, default=4)
     p.add_argument("--skip-reprocess", action="store_true")
     p.add_argument("--skip-memory", action="store_true")
@@ -434,6 +514,10 @@ def main(argv: list[str] | None = None) -> int:
         bench_memory_per_structure(args.structures)
     bench_structure_cost()
     bench_lock_hold()
+    if args.compare:  # with --live-processes and --live-hog where this tree has them
+        compare_live(Path(args.compare).resolve(), args.live, speed=args.live_speed, seconds=args.live_s,
+                     dashboard=args.live_dashboard, processes=tuple(getattr(args, "live_processes", (1, 2))),
+                     **({"hog": True} if getattr(args, "live_hog", False) else {}))
     if not args.skip_live:
         for n in args.live:
             for processes in args.live_processes:

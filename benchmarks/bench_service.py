@@ -154,11 +154,31 @@ def bench_sim_memory(seconds: float, tree: Path | None = None) -> dict:
     return result
 
 
+def warm_up(tree: Path | None, seconds: float = 300.0) -> None:
+    """A short replay of ``tree``'s code (None: this one), untimed: a tree's first run compiles its
+    numba kernels into its cache, which would count against the first timed run of that tree."""
+    with tempfile.TemporaryDirectory() as tmp:
+        short = Path(tmp) / "short.mcap"
+        subprocess.run([sys.executable, "-m", "shm_service.cli", "simulate", "--duration", str(seconds), "--excitation",
+                        "ambient", "--out", str(short)], check=True, capture_output=True)
+        env = dict(os.environ, PYTHONPATH=str(tree)) if tree is not None else None
+        started = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-m", "shm_service.cli", "serve", "--source", f"replay:{short}", "--speed",
+                               "max", "--port", "0", "--db", f"{tmp}/shm.sqlite", "--no-archive", "--no-dashboard", "--json"],
+                              cwd=tree, env=env, capture_output=True, text=True)
+    print(f"[warm-up] {tree or 'this tree'}: {seconds:g} s replayed untimed in {time.perf_counter() - started:.1f} s "
+          f"(exit {proc.returncode}; its kernels compiled and cached)", flush=True)
+    if proc.returncode != 0:
+        print(proc.stderr[-2000:], flush=True)
+
+
 def compare(recording: Path, tree: Path, rounds: int, sim_s: float = 1200.0) -> dict:
     """Before/after in one run: the one-hour replay of ``tree``'s code and this tree's, with
     ``--no-archive`` and with the default archive, alternately for ``rounds`` rounds (best wall
     and CPU of each), then the sim source's peak RSS with the raw archive (``sim_s`` of simulated data)."""
     runs: dict[tuple[str, bool], list[dict]] = {(k, a): [] for k in ("before", "after") for a in (False, True)}
+    warm_up(tree)
+    warm_up(None)
     for _ in range(rounds):
         for archive in (False, True):
             runs["before", archive].append(bench_replay(recording, dashboard=False, tree=tree, archive=archive))

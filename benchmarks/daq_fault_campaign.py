@@ -187,5 +187,26 @@ def main(argv: list[str] | None = None) -> dict:
     return summary
 
 
+def failures(summary: dict) -> list[str]:
+    """The bars of issue 26 the summary misses (empty: every bar met)."""
+    n = summary["cases"]
+    bars = {
+        "no traceback": summary["tracebacks"] == 0,
+        "every import exits 0": summary["import_exit_0"] == n,
+        "every valid value kept exactly": summary["valid_kept_exactly"] == summary["valid_values"],
+        "every faulted value counted": summary["import_rejections_counted_exactly"] == n,
+        "every shm oma exits 0": summary["oma_exit_0"] == n,
+        "the clean file's modes in every case": summary["oma_same_mode_count"] == n,
+        "shapes at MAC >= 0.99": summary["oma_min_mac"] is not None and summary["oma_min_mac"] >= 0.99,
+        "the cut recording flagged by shm inspect": summary["cut_flagged_by_inspect"] == n,
+        "the cut recording flagged by shm analyze": summary["cut_flagged_by_analyze"] == n,
+    }
+    return [name for name, met in bars.items() if not met]
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+
+    missed = failures(main())
+    print("bars: " + ("all met" if not missed else "NOT met: " + "; ".join(missed)))
+    sys.exit(1 if missed else 0)

@@ -240,7 +240,7 @@ def campaign(sources: tuple[str, ...] = ("sim", "ingest"), at_s: float = 80.0, a
     return outcomes
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.fault_campaign", description=__doc__.splitlines()[0])
     ap.add_argument("--sources", default="sim,ingest", help="comma-separated: sim, ingest")
     ap.add_argument("--only", help="only the scenarios whose name contains this")
@@ -254,7 +254,12 @@ def main(argv: list[str] | None = None) -> None:
         fmt = lambda v: "–" if v is None else f"{v:.1f} s"  # noqa: E731
         print(f"| {r['source']} | {r['fault']} | {fmt(r['detect_s'])} | {r['detected_by']} | {fmt(r['recover_s'])} | "
               f"{fmt(o.extra.get('healthz_ok_after_s'))} | {r['filter_restarts']} | {r['rejected']} |")
+    # the bar (issue 11, item 9): every fault is shown by the service and every one is recovered from
+    missed = [f"{o.source}: {o.scenario.name}" for o in outcomes if o.detect_s is None or o.recover_s is None]
+    print(f"\n{len(outcomes) - len(missed)} of {len(outcomes)} faults detected and recovered from"
+          + (f"; not: {', '.join(missed)}" if missed else ""))
+    return 1 if missed or not outcomes else 0
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    sys.exit(main(sys.argv[1:]))
