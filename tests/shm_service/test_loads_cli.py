@@ -127,7 +127,9 @@ def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path
     assert [s["hot_spot"] for s in doc["stations"]] == [None, "weld", None, None]
     assert doc["stations"][1]["curve"] == "EN1993-1-9:71" and doc["stations"][1]["damage"] is not None
     assert doc["stations"][0]["damage"] is None  # no --curve: no damage where there is no hot spot
-    assert "modal truncation seen at the strain gauges" in doc["band_method"]
+    assert doc["band_method"].startswith("leave-one-gauge-out residuals at the strain gauges")
+    # an estimate recording: its gauges aided it and cannot be left out here, so they are in sample
+    assert all(not g["out_of_sample"] and g["leverage"] == 0.5 for g in doc["gauges"])
     assert [c["name"] for c in doc["channels"]] == ["g1", "g2", "g3", "g4"]
     assert doc["start_s"] > 0 and doc["duration_s"] > 10  # from the rest phase's end
     # against the truth's curvature over the same span: the estimate follows the strain
@@ -152,6 +154,32 @@ def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path
     assert all(w["band_half_width"] >= 0.02 and w["stations"][0]["del"][0]["band"] is not None for w in windows)
     code, _, err = run(capsys, "loads", str(est), "--stations", "4.5")
     assert code == 2 and "--stations: 4.5 is outside the beam [0, 4.0]" in err
+
+
+def test_a_raw_recording_leaves_each_gauge_out(capsys, estimate_file):
+    """On a raw recording the estimator runs again without each gauge: every gauge is out of sample,
+    the bands of the ideal paper excitation are narrow and hold the true DEL."""
+    from shm_service.estimation import truth_from_recording
+    from shm_service.recording import read_recording
+
+    raw, _est = estimate_file
+    capsys.readouterr()
+    code, out, err = run(capsys, "loads", str(raw), "--stations", "0.5,1.5,2.5,3.5", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert [g["name"] for g in doc["gauges"]] == ["g1", "g2", "g3", "g4"]
+    assert all(g["out_of_sample"] and g["leverage"] == 0.0 and g["half_width"] >= 0 for g in doc["gauges"])
+    rec = read_recording(raw)
+    truth = truth_from_recording(rec)
+    span = (truth.t >= doc["start_s"]) & (truth.t <= doc["start_s"] + doc["duration_s"])
+    stations = list(rec.rig.truth_stations)
+    c = rec.rig.beam.thickness / 2
+    for s in doc["stations"]:
+        assert 0.02 <= s["band_half_width"] <= 0.05  # the floor, and narrow on the ideal paper excitation
+        if s["position_m"] in stations:
+            true_del = signal_loads(-c * truth.curvature[span, stations.index(s["position_m"])], n_eq=doc["duration_s"]).dels[0][2]
+            low, high = s["del"][0]["band"]
+            assert low <= true_del <= high
 
 
 def test_channels_in_volts_are_counted_with_a_warning(capsys):
