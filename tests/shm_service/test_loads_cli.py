@@ -110,8 +110,21 @@ def estimate_file(tmp_path_factory):
     return raw, est
 
 
-def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path):
+def _true_dels(raw, doc) -> dict[float, float]:
+    """The truth's strain DEL (m = 3) over the document's span at its stations that are truth stations."""
     from shm_service.estimation import truth_from_recording
+    from shm_service.recording import read_recording
+
+    rec = read_recording(raw)
+    truth = truth_from_recording(rec)
+    span = (truth.t >= doc["start_s"]) & (truth.t <= doc["start_s"] + doc["duration_s"])
+    stations = list(rec.rig.truth_stations)
+    c = rec.rig.beam.thickness / 2
+    return {s["position_m"]: signal_loads(-c * truth.curvature[span, stations.index(s["position_m"])], n_eq=doc["duration_s"]).dels[0][2]
+            for s in doc["stations"] if s["position_m"] in stations}
+
+
+def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path):
     from shm_service.recording import read_recording
 
     raw, est = estimate_file
@@ -133,15 +146,11 @@ def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path
     assert [c["name"] for c in doc["channels"]] == ["g1", "g2", "g3", "g4"]
     assert doc["start_s"] > 0 and doc["duration_s"] > 10  # from the rest phase's end
     # against the truth's curvature over the same span: the estimate follows the strain
-    rec = read_recording(raw)
-    truth = truth_from_recording(rec)
-    span = (truth.t >= doc["start_s"]) & (truth.t <= doc["start_s"] + doc["duration_s"])
-    stations = list(rec.rig.truth_stations)
-    c = rec.rig.beam.thickness / 2
+    true_dels = _true_dels(raw, doc)
+    assert true_dels
     for s in doc["stations"]:
-        if s["position_m"] in stations:
-            true = -c * truth.curvature[span, stations.index(s["position_m"])]
-            true_del = signal_loads(true, n_eq=doc["duration_s"]).dels[0][2]
+        if s["position_m"] in true_dels:
+            true_del = true_dels[s["position_m"]]
             est_del = s["del"][0]["strain_range"]
             assert est_del == pytest.approx(true_del, rel=0.1)
             low, high = s["del"][0]["band"]
@@ -159,9 +168,6 @@ def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path
 def test_a_raw_recording_leaves_each_gauge_out(capsys, estimate_file):
     """On a raw recording the estimator runs again without each gauge: every gauge is out of sample,
     the bands of the ideal paper excitation are narrow and hold the true DEL."""
-    from shm_service.estimation import truth_from_recording
-    from shm_service.recording import read_recording
-
     raw, _est = estimate_file
     capsys.readouterr()
     code, out, err = run(capsys, "loads", str(raw), "--stations", "0.5,1.5,2.5,3.5", "--json")
@@ -169,17 +175,13 @@ def test_a_raw_recording_leaves_each_gauge_out(capsys, estimate_file):
     doc = json.loads(out)
     assert [g["name"] for g in doc["gauges"]] == ["g1", "g2", "g3", "g4"]
     assert all(g["out_of_sample"] and g["leverage"] == 0.0 and g["half_width"] >= 0 for g in doc["gauges"])
-    rec = read_recording(raw)
-    truth = truth_from_recording(rec)
-    span = (truth.t >= doc["start_s"]) & (truth.t <= doc["start_s"] + doc["duration_s"])
-    stations = list(rec.rig.truth_stations)
-    c = rec.rig.beam.thickness / 2
+    true_dels = _true_dels(raw, doc)
+    assert true_dels
     for s in doc["stations"]:
         assert 0.02 <= s["band_half_width"] <= 0.05  # the floor, and narrow on the ideal paper excitation
-        if s["position_m"] in stations:
-            true_del = signal_loads(-c * truth.curvature[span, stations.index(s["position_m"])], n_eq=doc["duration_s"]).dels[0][2]
+        if s["position_m"] in true_dels:
             low, high = s["del"][0]["band"]
-            assert low <= true_del <= high
+            assert low <= true_dels[s["position_m"]] <= high
 
 
 def test_channels_in_volts_are_counted_with_a_warning(capsys):
