@@ -9,6 +9,7 @@ import pytest
 
 from analytics import FatigueDetail, HotSpotFatigue, bending_moment, rainflow_cycles, signal_loads, sn_curve, virtual_strain
 from shm_service.cli import main
+from shm_service.recording import read_recording
 
 ASTM = [-2, 1, -3, 5, -1, 3, -4, 4, -2]
 
@@ -113,7 +114,6 @@ def estimate_file(tmp_path_factory):
 def _true_dels(raw, doc) -> dict[float, float]:
     """The truth's strain DEL (m = 3) over the document's span at its stations that are truth stations."""
     from shm_service.estimation import truth_from_recording
-    from shm_service.recording import read_recording
 
     rec = read_recording(raw)
     truth = truth_from_recording(rec)
@@ -125,8 +125,6 @@ def _true_dels(raw, doc) -> dict[float, float]:
 
 
 def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path):
-    from shm_service.recording import read_recording
-
     raw, est = estimate_file
     rig = json.loads(read_recording(raw).rig.to_json())
     rig["hot_spots"] = [{"name": "weld", "position": 1.1, "curve": "EN1993-1-9:71", "scf": 2.0, "gamma_Mf": 1.35}]
@@ -182,6 +180,28 @@ def test_a_raw_recording_leaves_each_gauge_out(capsys, estimate_file):
         if s["position_m"] in true_dels:
             low, high = s["del"][0]["band"]
             assert low <= true_dels[s["position_m"]] <= high
+
+
+def test_shm_analyze_says_what_the_loads_band_rests_on(capsys, estimate_file, tmp_path):
+    """shm analyze passes the recording's gauges to the engine: each window's hot spots carry a band
+    with its method; a rig without gauges gets no band, and the output says why."""
+    raw, est = estimate_file
+    rig = json.loads(read_recording(raw).rig.to_json())
+    rig["hot_spots"] = [{"name": "weld", "position": 1.1, "curve": "EN1993-1-9:71"}]
+    with_gauges, without = tmp_path / "rig.json", tmp_path / "rig_without_gauges.json"
+    with_gauges.write_text(json.dumps(rig))
+    without.write_text(json.dumps(dict(rig, sensors=[s for s in rig["sensors"] if s["kind"] != "strain"])))
+    config = tmp_path / "short.toml"
+    config.write_text("[analytics]\nwindow_s = 5.0\noverlap = 0.5\nbaseline_s = 10.0\nbaseline_min_windows = 3\n")
+    common = (str(est), "--config", str(config), "--not-before", "58")
+    code, out, err = run(capsys, "analyze", *common, "--rig", str(with_gauges), "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["loads"] and doc["loads_band"].startswith("leave-one-gauge-out DEL residuals at the strain gauges (g1 ")
+    assert all(h["del_band_pa"] is not None for w in doc["loads"] for h in w["hot_spots"])
+    code, out, err = run(capsys, "analyze", *common, "--rig", str(without))
+    assert code == 0, err
+    assert "(no band)" in out and "band: no band: no strain gauge measured over the analysed windows" in out
 
 
 def test_channels_in_volts_are_counted_with_a_warning(capsys):
