@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from ._fatigue import FatigueDetail
 from ._rainflow import Cycles, HalfCyclePolicy, _finite_samples, _half_weight, cycles_by_range, rainflow_cycles
@@ -71,6 +72,8 @@ class DelBand:
 
 #: Smallest half-width of a virtual station's DEL band (the estimate's own resolution).
 BAND_FLOOR = 0.02
+#: Two-sided coverage of the prediction of a station's half-width between or beyond the gauges.
+PREDICTION_COVERAGE = 0.8
 #: Leverage assumed for a gauge that aided the estimate when its own is unknown (an estimate file, the
 #: live engine): its residual r becomes r/(1 − h) = 2r. A re-estimate without the gauge (``shm loads`` on
 #: a raw recording) needs no assumption: its virtual strain there is out of sample (h = 0).
@@ -87,9 +90,12 @@ def gauge_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, float]], 
     when g aided the estimate, v was pulled towards m and the leave-one-out residual is r/(1 − h)
     (the hat-matrix correction), so v_loo = m − r/(1 − h). The gauge's DEL factor is
     ρ_m = DEL_m(measured)/DEL_m(v_loo) and its half-width a_g = max over exponents of max(ρ, 1/ρ) − 1.
-    A station at a gauge takes that gauge's a; between two gauges the larger of the two (neither
-    sees the truncation between them); beyond the outermost gauges the largest of all (nothing is
-    measured there); at least ``BAND_FLOOR``. The band is [DEL/(1 + a), DEL·(1 + a)].
+    A station at a gauge takes that gauge's a. Elsewhere no gauge sees the truncation: the n gauges'
+    half-widths are a sample of it, and a point's is predicted from them with Student's t (zero
+    mean, n degrees of freedom, two-sided ``PREDICTION_COVERAGE``): k·rms(a_g), k = t·sqrt(1 + 1/n).
+    Between two gauges a station takes the larger of the two gauges' and the prediction; beyond
+    the outermost gauges the largest of all and the prediction; at least ``BAND_FLOOR``. The band
+    is [DEL/(1 + a), DEL·(1 + a)].
 
     Parameters
     ----------
@@ -137,6 +143,11 @@ def gauge_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, float]], 
     found.sort()
     pos = np.array([p for p, _, _ in found])
     half = np.array([a for _, a, _ in found])
+    # between the gauges the truncation is unseen: the gauges' half-widths are a sample of n values of
+    # it, and a station's is predicted from them (Student's t, zero mean, n degrees of freedom, two-sided
+    # PREDICTION_COVERAGE): k·rms with k = t·sqrt(1 + 1/n)
+    n = half.size
+    predicted = float(stats.t.ppf(0.5 + PREDICTION_COVERAGE / 2, n) * np.sqrt(1.0 + 1.0 / n) * np.sqrt(np.mean(half**2)))
     names = ", ".join(f"{n} {p:g} m" for p, _, n in found)
     kinds = {"out of sample" if r["out_of_sample"] else f"in sample, h = {r['leverage']:g}" for r in rows}
     bands = []
@@ -146,13 +157,15 @@ def gauge_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, float]], 
             a, where = float(half[at].max()), "at that gauge"
         elif pos[0] < x < pos[-1]:
             k = int(np.searchsorted(pos, x))
-            a, where = float(max(half[k - 1], half[k])), f"the larger of the gauges at {pos[k - 1]:g} and {pos[k]:g} m"
+            a, where = float(max(half[k - 1], half[k], predicted)), (
+                f"the larger of the gauges at {pos[k - 1]:g} and {pos[k]:g} m and the prediction {predicted:.4f}")
         else:
-            a, where = float(half.max()), "beyond the outermost gauges: the largest"
+            a, where = float(max(half.max(), predicted)), f"beyond the outermost gauges: the largest and the prediction {predicted:.4f}"
         a = max(BAND_FLOOR, a)
         method = (f"leave-one-gauge-out DEL residuals at the strain gauges ({names}; {', '.join(sorted(kinds))}): "
                   f"measured/virtual DEL factor rho with the virtual strain of an estimate without the gauge, or the "
-                  f"in-sample residual r/(1-h); a = max(rho, 1/rho) - 1 over the exponents; station at {x:g} m: {where}, "
+                  f"in-sample residual r/(1-h); a = max(rho, 1/rho) - 1 over the exponents; between and beyond the gauges at "
+                  f"least the {PREDICTION_COVERAGE:.0%} Student-t prediction from the gauges' a; station at {x:g} m: {where}, "
                   f"at least {BAND_FLOOR:.0%}; band [DEL/(1+a), DEL*(1+a)] with a = {a:.4f}")
         bands.append(DelBand(1.0 / (1.0 + a), 1.0 + a, method))
     return bands, rows

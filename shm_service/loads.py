@@ -14,8 +14,9 @@ the estimator runs once more per gauge it used, without that gauge (an out-of-sa
 strain); on an estimate recording (no re-run possible) a gauge that aided the estimate is taken in
 sample, its residual r widened to r/(1 − h) with the leverage h = ``UNKNOWN_LEVERAGE``. A gauge's
 half-width a is max(ρ, 1/ρ) − 1 of the measured/virtual DEL factor ρ; a station at a gauge takes
-its a, between two gauges the larger of the two, beyond the outermost the largest, at least 2 %:
-[DEL/(1 + a), DEL·(1 + a)]; the damage band is the damage of the counted cycles with their ranges
+its a; elsewhere no gauge sees the truncation, and the gauges' a are a sample of it: between two
+gauges the larger of the two and the 80 % Student-t prediction from the gauges' a, beyond the
+outermost the largest and the prediction, at least 2 %: [DEL/(1 + a), DEL·(1 + a)]; the damage band is the damage of the counted cycles with their ranges
 scaled by those two factors. Without gauges no band can be given, and the output says so.
 """
 
@@ -39,8 +40,9 @@ __all__ = ["add_loads_parser", "loads_of_recording", "loads_of_table", "parse_st
 _BAND_METHOD = ("leave-one-gauge-out residuals at the strain gauges: at each gauge the measured/virtual DEL factor rho, the "
                 "virtual strain from an estimate without that gauge (raw recording: the estimator run again per gauge) or "
                 "the in-sample residual r/(1-h), h = {h:g} (estimate recording); a = max(rho, 1/rho) - 1 over the exponents; "
-                "a station at a gauge takes its a, between two gauges the larger, beyond the outermost gauges the largest, "
-                "at least 2 %; band [DEL/(1+a), DEL*(1+a)]")
+                "a station at a gauge takes its a; between two gauges the larger of the two and the 80 % Student-t prediction "
+                "from the gauges' a (k*rms, k = t(0.9, n)*sqrt(1 + 1/n)), beyond the outermost gauges the largest and the "
+                "prediction; at least 2 %; band [DEL/(1+a), DEL*(1+a)]")
 #: Young's modulus for plain strain channels without a rig (structural steel, Pa).
 STEEL_YOUNGS_MODULUS = 2.1e11
 

@@ -20,10 +20,12 @@ def _bands(gauges, stations):
 
 def test_out_of_sample_and_in_sample_factors_by_hand():
     m = MEASURED
-    # out of sample (h = 0): virtual = m/1.1, the measured DEL is 1.1 times the virtual's: a = 0.1
-    a, bands, rows = _bands([("g1", 1.0, m / 1.1, m, 0.0)], [1.0])
+    # out of sample (h = 0): virtual = m/1.1, the measured DEL is 1.1 times the virtual's: a = 0.1 at the gauge
+    a, bands, rows = _bands([("g1", 1.0, m / 1.1, m, 0.0)], [1.0, 2.0])
     assert a[0] == pytest.approx(0.1, rel=1e-12) and bands[0].low == pytest.approx(1 / 1.1, rel=1e-12)
     assert rows[0]["out_of_sample"] and rows[0]["del_factor"][0]["measured_over_virtual"] == pytest.approx(1.1, rel=1e-12)
+    # away from a single gauge the prediction: t(0.9, 1 dof) = 3.077684 × sqrt(2) × 0.1
+    assert a[1] == pytest.approx(3.077684 * np.sqrt(2.0) * 0.1, rel=1e-6)
     # an over-estimate counts the same way: virtual = 1.05 m gives a = 0.05
     assert _bands([("g1", 1.0, 1.05 * m, m, 0.0)], [1.0])[0][0] == pytest.approx(0.05, rel=1e-12)
     # in sample with leverage 0.5: r = m − 0.95 m, r/(1 − h) = 0.1 m, v_loo = 0.9 m: a = 1/0.9 − 1
@@ -36,9 +38,13 @@ def test_each_station_by_its_position_between_and_beyond_the_gauges():
     gauges = [("g1", 1.0, m / 1.1, m, 0.0), ("g3", 3.0, m / 1.05, m, 0.0), ("g2", 2.0, 1.03 * m, m, 0.0),
               ("g4", 3.5, m.copy(), m, 0.0)]  # given out of order: sorted by position
     a, bands, _ = _bands(gauges, [0.5, 1.0, 1.5, 2.0, 2.5, 3.25, 3.5, 3.8])
-    # beyond: the largest; at a gauge: its own; between: the larger of the two; never below the floor
-    assert a == pytest.approx([0.10, 0.10, 0.10, 0.03, 0.05, 0.05, BAND_FLOOR, 0.10], rel=1e-12)
-    assert "at 2.5 m: the larger of the gauges at 2 and 3 m" in bands[4].method
+    # the prediction where no gauge measured: t(0.9, 4 dof) = 1.533206, × sqrt(1 + 1/4), × rms(0.10, 0.03, 0.05, 0)
+    predicted = 1.533206 * np.sqrt(1.25) * np.sqrt((0.10**2 + 0.03**2 + 0.05**2 + 0.0) / 4)
+    assert predicted == pytest.approx(0.09922, abs=1e-5)
+    # beyond: the largest and the prediction; at a gauge: its own; between: the larger of the two and the
+    # prediction; never below the floor
+    assert a == pytest.approx([0.10, 0.10, 0.10, 0.03, predicted, predicted, BAND_FLOOR, 0.10], rel=1e-6)
+    assert "at 2.5 m: the larger of the gauges at 2 and 3 m and the prediction 0.0992" in bands[4].method
     assert "beyond the outermost gauges" in bands[0].method and "leave-one-gauge-out" in bands[0].method
 
 
