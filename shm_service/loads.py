@@ -331,6 +331,8 @@ def _out_of_sample(rec: Any, gauges: list, gauge_masks: list, t: Any, used: tupl
                 again = deformation_record(rec, model_args=dict(args, gauges=others))
             except ValueError as exc:
                 raise LoadsError(f"the band's re-estimate without gauge {name}: {exc}") from None
+            if not again.estimated_here:  # an estimate recording gives its own b again: that is not out of sample
+                raise LoadsError(f"{rec.path} is an estimate recording: no gauge can be left out of it (give the raw recording)")
             b = np.column_stack([np.interp(t[mask], again.times, again.b[:, k]) for k in range(again.b.shape[1])])
             virtual = virtual_strain(b, again.units.curvature(np.array([position])), beam.fibre_distance([position]))[:, 0]
         out.append((name, position, virtual, measured, 0.0))

@@ -182,6 +182,15 @@ def test_a_raw_recording_leaves_each_gauge_out(capsys, estimate_file):
             assert low <= true_dels[s["position_m"]] <= high
 
 
+def test_no_gauge_can_be_left_out_of_an_estimate_recording(estimate_file):
+    from shm_service.loads import LoadsError, loads_of_recording
+
+    _raw, est = estimate_file
+    with pytest.raises(LoadsError, match="is an estimate recording: no gauge can be left out of it"):
+        loads_of_recording(read_recording(est), model_args={}, stations=(1.0,), curve=None, exponents=(3.0,), n_eq=None,
+                           half_cycles="half", start_s=None, leave_one_out=True)
+
+
 def test_shm_analyze_says_what_the_loads_band_rests_on(capsys, estimate_file, tmp_path):
     """shm analyze passes the recording's gauges to the engine: each window's hot spots carry a band
     with its method; a rig without gauges gets no band, and the output says why."""
