@@ -16,8 +16,9 @@ sample, its residual r widened to r/(1 − h) with the leverage h = ``UNKNOWN_LE
 half-width a is max(ρ, 1/ρ) − 1 of the measured/virtual DEL factor ρ; a station at a gauge takes
 its a; elsewhere no gauge sees the truncation, and the gauges' a are a sample of it: between two
 gauges the larger of the two and the 80 % Student-t prediction from the gauges' a, beyond the
-outermost the largest and the prediction, at least 2 %: [DEL/(1 + a), DEL·(1 + a)]; the damage band is the damage of the counted cycles with their ranges
-scaled by those two factors. Without gauges no band can be given, and the output says so.
+outermost the largest and the prediction, at least 2 %: [DEL/(1 + a), DEL·(1 + a)]; the damage
+band is the damage of the counted cycles with their ranges scaled by those two factors. Without
+gauges no band can be given, and the output says so.
 """
 
 from __future__ import annotations
