@@ -327,7 +327,7 @@ def _prepare(times_s, b, temperature, bearing, fs):
 
 
 def _run(times_s, b, curvature_shapes, stations_eta, *, fs, temperature, bearing, expected_hz, baseline, config, beam_length,
-         signatures, time_origin_ns, not_before_s, learn, loads=None):
+         signatures, time_origin_ns, not_before_s, learn, loads=None, gauges=None):
     cfg = config or AnalysisConfig()
     if not isinstance(cfg, AnalysisConfig):
         raise ValueError(f"config must be an AnalysisConfig, got {type(cfg).__name__}")
@@ -346,7 +346,7 @@ def _run(times_s, b, curvature_shapes, stations_eta, *, fs, temperature, bearing
     origin = int(time_origin_ns)
     not_before = None if not_before_s is None else origin + int(round(float(not_before_s) * _NS))
     engine = MonitoringEngine(mon, origin_ns=origin, time_zero_ns=origin, not_before_ns=not_before, loads=loads)
-    engine_windows = engine.add(t, B, support=d, temperature=temp)
+    engine_windows = engine.add(t, B, support=d, temperature=temp, gauges=gauges)
     windows = tuple(w.result for w in engine_windows)
     # the hot spots' loads per window and their alarm events (issue 21), when the engine has loads
     loads_windows = tuple((w.loads, w.loads_events) for w in engine_windows if w.loads is not None)
@@ -370,6 +370,7 @@ def analyze(
     time_origin_ns: int = 0,
     not_before_s: float | None = None,
     loads: object | None = None,
+    gauges: dict[str, tuple[object, object]] | None = None,
 ) -> AnalysisResult:
     """Modal analytics of a record: the engine's windows (:class:`analytics.MonitoringEngine`, the
     same as ``shm serve``'s) and the record's modes.
@@ -392,6 +393,8 @@ def analyze(
         aligned to multiples of the step in data time and reported in s after it.
     not_before_s : windows starting earlier (s after the origin) are not analysed (the filter converging).
     loads : LoadsMonitor or None: the hot spots' loads and fatigue, per window (issue 21).
+    gauges : measured strain by gauge name, (times s after time_origin_ns, values m/m), for the
+        loads' DEL bands (the monitor's gauges), or None: the windows' loads carry no band.
 
     Returns
     -------
@@ -406,7 +409,7 @@ def analyze(
     cfg, fs, B, t, d, mon, engine, windows, loads_windows = _run(
         times_s, b, curvature_shapes, stations_eta, fs=fs, temperature=temperature, bearing=bearing, expected_hz=expected_hz,
         baseline=baseline, config=config, beam_length=beam_length, signatures=signatures, time_origin_ns=time_origin_ns,
-        not_before_s=not_before_s, learn="period", loads=loads)
+        not_before_s=not_before_s, learn="period", loads=loads, gauges=gauges)
     flags: dict = {}
     for w in windows:
         for f in w.flags:

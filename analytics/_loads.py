@@ -12,13 +12,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from ._fatigue import FatigueDetail
 from ._rainflow import Cycles, HalfCyclePolicy, _finite_samples, _half_weight, cycles_by_range, rainflow_cycles
 from ._sn_curves import damage_equivalent_range
 from ._validate import as_signal
 
-__all__ = ["BAND_FLOOR", "IN_SAMPLE_FACTOR", "DelBand", "SignalLoads", "VirtualLoads", "bending_moment", "signal_loads", "truncation_band", "virtual_strain"]
+__all__ = ["BAND_FLOOR", "UNKNOWN_LEVERAGE", "DelBand", "SignalLoads", "VirtualLoads", "bending_moment", "gauge_bands", "signal_loads", "virtual_strain"]
 
 
 def virtual_strain(b: object, curvature_shapes: object, fibre_distance: object) -> np.ndarray:
@@ -71,46 +72,103 @@ class DelBand:
 
 #: Smallest half-width of a virtual station's DEL band (the estimate's own resolution).
 BAND_FLOOR = 0.02
-#: The gauges pulled the estimate towards themselves: their in-sample discrepancy is scaled by this.
-IN_SAMPLE_FACTOR = 2.0
+#: Two-sided coverage of the prediction of a station's half-width between or beyond the gauges.
+PREDICTION_COVERAGE = 0.8
+#: Leverage assumed for a gauge that aided the estimate when its own is unknown (an estimate file, the
+#: live engine): its residual r becomes r/(1 − h) = 2r. A re-estimate without the gauge (``shm loads`` on
+#: a raw recording) needs no assumption: its virtual strain there is out of sample (h = 0).
+UNKNOWN_LEVERAGE = 0.5
 
 
-def truncation_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, exponents: tuple[float, ...], n_eq: float,
-                    in_sample: tuple[str, ...], half_cycles: HalfCyclePolicy = "half") -> tuple[DelBand | None, list[dict]]:
-    """The DEL band of virtual stations: the modal truncation seen at the strain gauges.
+def gauge_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, float]], stations: object, *,
+                exponents: tuple[float, ...], n_eq: float,
+                half_cycles: HalfCyclePolicy = "half") -> tuple[list[DelBand] | None, list[dict]]:
+    """Per-station DEL bands of virtual strain from leave-one-gauge-out residuals at the strain gauges.
 
-    At each gauge the DEL of the virtual strain (from b) is compared with the DEL of the measured
-    strain; the largest relative discrepancy over the gauges and exponents, times ``IN_SAMPLE_FACTOR``
-    at a gauge that aided the estimate (the estimate was pulled towards it, so its discrepancy
-    understates the one between gauges), at least ``BAND_FLOOR``, is the half-width a of the band
-    [DEL/(1 + a), DEL·(1 + a)].
+    At gauge g the virtual strain v (from b) is compared with the measured strain m. When v comes
+    from an estimate that never saw gauge g its residual r = m − v is out of sample (leverage h = 0);
+    when g aided the estimate, v was pulled towards m and the leave-one-out residual is r/(1 − h)
+    (the hat-matrix correction), so v_loo = m − r/(1 − h). The gauge's DEL factor is
+    ρ_m = DEL_m(measured)/DEL_m(v_loo) and its half-width a_g = max over exponents of max(ρ, 1/ρ) − 1.
+    A station at a gauge takes that gauge's a. Elsewhere no gauge sees the truncation: the n gauges'
+    half-widths are a sample of it, and a point's is predicted from them with Student's t (zero
+    mean, n degrees of freedom, two-sided ``PREDICTION_COVERAGE``): k·rms(a_g), k = t·sqrt(1 + 1/n).
+    Between two gauges a station takes the larger of the two gauges' and the prediction; beyond
+    the outermost gauges the largest of all and the prediction; at least ``BAND_FLOOR``. The band
+    is [DEL/(1 + a), DEL·(1 + a)].
 
     Parameters
     ----------
-    gauges : (name, position m, virtual strain (n,), measured strain (n,)) per gauge.
-    exponents : Wöhler exponents. n_eq : equivalent cycles. in_sample : the gauges that aided the estimate.
+    gauges : (name, position m, virtual strain (n,), measured strain (n,), leverage h in [0, 1)) per gauge.
+    stations : (S,) positions of the virtual stations, m.
+    exponents : Wöhler exponents (> 0). n_eq : equivalent cycles (> 0).
 
     Returns
     -------
-    (DelBand, or None without gauges; per gauge its discrepancies).
+    (one DelBand per station, or None without a gauge that has cycles; per gauge its discrepancies).
+
+    Raises
+    ------
+    ValueError : a leverage outside [0, 1), virtual and measured of different lengths, a non-finite sample.
+
+    Examples
+    --------
+    >>> m = np.sin(np.linspace(0.0, 20.0, 400))
+    >>> bands, _ = gauge_bands([("g1", 1.0, m / 1.1, m, 0.0)], [0.5], exponents=(3.0,), n_eq=10.0)
+    >>> round(bands[0].high, 6)
+    1.1
     """
-    if not gauges:
-        return None, []
-    worst, rows = 0.0, []
-    for name, position, virtual, measured in gauges:
-        v = signal_loads(virtual, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"virtual strain at {name}")
-        g = signal_loads(measured, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain gauge {name}")
-        rel = {m: (dv / dg - 1.0) if dg > 0 else 0.0 for (m, _, dv), (_, _, dg) in zip(v.dels, g.dels)}
-        rms = float(np.sqrt(np.mean((np.asarray(virtual) - np.asarray(measured)) ** 2)) / max(g.rms, 1e-300))
-        aided = name in in_sample
-        rows.append({"name": name, "position_m": position, "aided_the_estimate": aided,
-                     "del_discrepancy": [{"m": m, "relative": r} for m, r in rel.items()], "strain_rms_discrepancy": rms})
-        worst = max(worst, (IN_SAMPLE_FACTOR if aided else 1.0) * max(abs(r) for r in rel.values()))
-    a = max(BAND_FLOOR, worst)
-    method = (f"modal truncation seen at the strain gauges ({', '.join(str(g[0]) for g in gauges)}): largest relative DEL "
-              f"discrepancy of the virtual against the measured strain, x{IN_SAMPLE_FACTOR:g} at a gauge that aided the estimate, "
-              f"at least {BAND_FLOOR:.0%}; band [DEL/(1+a), DEL*(1+a)] with a = {a:.4f}")
-    return DelBand(1.0 / (1.0 + a), 1.0 + a, method), rows
+    eta = as_signal("stations", stations, min_len=1, ndim=(1,))
+    rows, found = [], []
+    for name, position, virtual, measured, leverage in gauges:
+        h = float(leverage)
+        if not 0.0 <= h < 1.0:
+            raise ValueError(f"leverage of gauge {name} must be in [0, 1), got {leverage}")
+        m = _finite_samples(f"strain gauge {name}", measured)
+        v = _finite_samples(f"virtual strain at {name}", virtual)
+        if m.size != v.size or m.size == 0:
+            raise ValueError(f"gauge {name}: virtual strain has {v.size} samples, measured {m.size} (must agree, > 0)")
+        loo = m - (m - v) / (1.0 - h)
+        g = signal_loads(m, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain gauge {name}")
+        w = signal_loads(loo, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"virtual strain at {name}")
+        ratios = [(mx, dg / dv if dv > 0 else np.inf) for (mx, _, dg), (_, _, dv) in zip(g.dels, w.dels) if dg > 0]
+        a = max((max(r, 1.0 / r) - 1.0 for _, r in ratios), default=None)
+        rows.append({"name": name, "position_m": float(position), "leverage": h, "out_of_sample": h == 0.0,
+                     "del_factor": [{"m": mx, "measured_over_virtual": r} for mx, r in ratios], "half_width": a,
+                     "strain_rms_discrepancy": float(np.sqrt(np.mean((loo - m) ** 2)) / max(g.rms, 1e-300))})
+        if a is not None:  # a gauge without cycles says nothing about the DELs
+            found.append((float(position), a, str(name)))
+    if not found:
+        return None, rows
+    found.sort()
+    pos = np.array([p for p, _, _ in found])
+    half = np.array([a for _, a, _ in found])
+    # between the gauges the truncation is unseen: the gauges' half-widths are a sample of n values of
+    # it, and a station's is predicted from them (Student's t, zero mean, n degrees of freedom, two-sided
+    # PREDICTION_COVERAGE): k·rms with k = t·sqrt(1 + 1/n)
+    n = half.size
+    predicted = float(stats.t.ppf(0.5 + PREDICTION_COVERAGE / 2, n) * np.sqrt(1.0 + 1.0 / n) * np.sqrt(np.mean(half**2)))
+    names = ", ".join(f"{n} {p:g} m" for p, _, n in found)
+    kinds = {"out of sample" if r["out_of_sample"] else f"in sample, h = {r['leverage']:g}" for r in rows}
+    bands = []
+    for x in eta:
+        at = np.isclose(pos, x, rtol=0.0, atol=1e-9)
+        if at.any():
+            a, where = float(half[at].max()), "at that gauge"
+        elif pos[0] < x < pos[-1]:
+            k = int(np.searchsorted(pos, x))
+            a, where = float(max(half[k - 1], half[k], predicted)), (
+                f"the larger of the gauges at {pos[k - 1]:g} and {pos[k]:g} m and the prediction {predicted:.4f}")
+        else:
+            a, where = float(max(half.max(), predicted)), f"beyond the outermost gauges: the largest and the prediction {predicted:.4f}"
+        a = max(BAND_FLOOR, a)
+        method = (f"leave-one-gauge-out DEL residuals at the strain gauges ({names}; {', '.join(sorted(kinds))}): "
+                  f"measured/virtual DEL factor rho with the virtual strain of an estimate without the gauge, or the "
+                  f"in-sample residual r/(1-h); a = max(rho, 1/rho) - 1 over the exponents; between and beyond the gauges at "
+                  f"least the {PREDICTION_COVERAGE:.0%} Student-t prediction from the gauges' a; station at {x:g} m: {where}, "
+                  f"at least {BAND_FLOOR:.0%}; band [DEL/(1+a), DEL*(1+a)] with a = {a:.4f}")
+        bands.append(DelBand(1.0 / (1.0 + a), 1.0 + a, method))
+    return bands, rows
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,8 @@ line (1 = the warning line; the alarm line and the clear line are multiples of i
 
 With strain gauges (``GaugeSpec``) and their measured strain in a window, each hot spot's DELs
 and damage increment carry a band, the modal truncation seen at the gauges
-(:func:`analytics.truncation_band`, the same as ``shm loads``), with the method stated.
+(:func:`analytics.gauge_bands`: leave-one-gauge-out residuals, a gauge that aided the estimate
+taken in sample with ``UNKNOWN_LEVERAGE``; per hot spot by its position), with the method stated.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from contract import ChartDocument, HotSpotLoadsDocument, LoadsWindowDocument, S
 
 from ._alarms import AlarmEvent, AlarmLogic
 from ._fatigue import FatigueDetail, HotSpotFatigue
-from ._loads import truncation_band
+from ._loads import UNKNOWN_LEVERAGE, gauge_bands
 from ._rainflow import HalfCyclePolicy
 
 __all__ = ["GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor"]
@@ -207,8 +208,9 @@ class LoadsMonitor:
         band = self._band(B, measured, B.shape[0] / float(fs))
         return self.process_stress(start_s, stress, B.shape[0] / float(fs), temperature_c, stations=stations, band=band)
 
-    def _band(self, B: np.ndarray, measured: dict[str, np.ndarray] | None, duration: float) -> tuple[float, float, str] | None:
-        """(low, high, method) of the window's DEL band from the gauges measured over all of it, else None."""
+    def _band(self, B: np.ndarray, measured: dict[str, np.ndarray] | None,
+              duration: float) -> list[tuple[float, float, str]] | None:
+        """(low, high, method) per hot spot of the window's DEL bands from the gauges measured over all of it, else None."""
         if not measured or not self.gauges:
             return None
         pairs = []
@@ -216,20 +218,22 @@ class LoadsMonitor:
             m = measured.get(g.name)
             if m is None or len(m) != B.shape[0] or not np.all(np.isfinite(m)):
                 continue
-            pairs.append((g.name, g.position_m, -g.fibre_distance_m * (B @ g.curvature_shape), np.asarray(m, dtype=float)))
+            # a gauge that aided the estimate is in sample, its leverage unknown here
+            pairs.append((g.name, g.position_m, -g.fibre_distance_m * (B @ g.curvature_shape), np.asarray(m, dtype=float),
+                          UNKNOWN_LEVERAGE if g.in_sample else 0.0))
         if not pairs:
             return None
-        in_sample = tuple(g.name for g in self.gauges if g.in_sample)
-        found, _rows = truncation_band(pairs, exponents=self.config.exponents, n_eq=self.config.n_eq_per_s * duration,
-                                       in_sample=in_sample, half_cycles=self.config.half_cycles)
-        return None if found is None else (found.low, found.high, found.method)
+        found, _rows = gauge_bands(pairs, [h.position_m for h in self.hot_spots], exponents=self.config.exponents,
+                                   n_eq=self.config.n_eq_per_s * duration, half_cycles=self.config.half_cycles)
+        return None if found is None else [(f.low, f.high, f.method) for f in found]
 
     def process_stress(self, start_s: float, stress: object, duration_s: float, temperature_c: float | None, *,
                        stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                       band: tuple[float, float, str] | None = None) -> LoadsWindowDocument:
+                       band: tuple[float, float, str] | list[tuple[float, float, str]] | None = None) -> LoadsWindowDocument:
         """Count one window's hot-spot stress (n, hot spots) in Pa at the reference E, lasting ``duration_s``;
         ``stations``: (η, strain RMS, strain range) of the window's envelope, or None; ``band``: (low, high,
-        method) of the DELs relative to their value, or None."""
+        method) of the DELs relative to their value (one for all hot spots, or a list of one per hot
+        spot), or None."""
         S = np.asarray(stress, dtype=float)
         if S.ndim != 2 or S.shape[1] != len(self.hot_spots) or S.shape[0] < 1:
             raise ValueError(f"stress must be (n, {len(self.hot_spots)}) with n >= 1, got shape {S.shape}")
@@ -240,6 +244,9 @@ class LoadsMonitor:
         if temperature_c is not None:
             factor = 1.0 + self.temperature_coefficient * (temperature_c - self.reference_temperature)
         c = self.config
+        bands: list[tuple[float, float, str] | None] = list(band) if isinstance(band, list) else [band] * len(self.hot_spots)
+        if len(bands) != len(self.hot_spots):
+            raise ValueError(f"{len(bands)} bands for {len(self.hot_spots)} hot spots")
         docs, charts = [], []
         m0 = str(int(c.exponents[0])) if float(c.exponents[0]).is_integer() else str(c.exponents[0])
         for k, h in enumerate(self.hot_spots):
@@ -247,8 +254,9 @@ class LoadsMonitor:
             life = self.fatigue[h.name].life(self.design_life_years)
             dels = {(str(int(m)) if float(m).is_integer() else str(m)): v for m, v in w.del_pa.items()}
             banded: dict[str, Any] = {}
-            if band is not None:
-                low, high, method = band
+            spot_band = bands[k]
+            if spot_band is not None:
+                low, high, method = spot_band
                 fatigue = self.fatigue[h.name]
                 banded = {"del_band_pa": {k: [v * low, v * high] for k, v in dels.items()}, "band_method": method,
                           "damage_band": [fatigue.detail.damage(fatigue.last_closed, low),

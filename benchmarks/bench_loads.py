@@ -8,7 +8,9 @@ engine counts (HotSpotFatigue: streaming count, window DEL, Miner damage on an E
 With ``--accuracy RAW EST`` it measures the virtual sensor instead: RAW a virtual-rig recording with
 its truth (``shm simulate --ideal --duration 300``), EST its estimate (``shm estimate RAW --out EST``);
 per truth station the strain RMS error and the DEL errors (m = 3, 5) against the truth's curvature
-(ε_true = −c κ_true), and whether the true DEL lies in the band ``shm loads`` gives.
+(ε_true = −c κ_true), the band's half-width and whether the true DEL lies in the band ``shm loads``
+gives on RAW (leave-one-gauge-out: the estimator run again on RAW without each gauge, EST's model;
+``--in-sample``: EST's in-sample residuals instead, as ``shm loads EST`` gives them).
 
 With ``--replay RECORDING RIG`` it measures what the loads add to the service: the recording
 replayed through ``shm serve``'s pipeline (in process, ``--speed max``) with RIG's hot spots and
@@ -22,6 +24,7 @@ Run: PYTHONPATH=. .venv/bin/python benchmarks/bench_loads.py [--quick] [--accura
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 
@@ -53,8 +56,12 @@ def accuracy(raw_path: str, est_path: str) -> None:
     raw, est = read_recording(raw_path), read_recording(est_path)
     record = deformation_record(est)
     stations = tuple(raw.rig.truth_stations)
-    doc = loads_of_recording(raw, record=record, model_args={}, stations=stations, curve=None, exponents=(3.0, 5.0), n_eq=None,
-                             half_cycles="half", start_s=None)
+    # the estimator's model as EST was made (its metadata), for the band's re-estimates without each gauge
+    selection = json.loads(est.metadata["estimator"]["selection"])
+    model_args = {"peripheral": selection["peripheral"], "modes": int(est.metadata["estimator"]["modes"]),
+                  "imus": tuple(selection["imus"]), "tofs": tuple(selection["tofs"]), "gauges": tuple(selection["gauges"])}
+    doc = loads_of_recording(raw, record=record, model_args=model_args, stations=stations, curve=None, exponents=(3.0, 5.0),
+                             n_eq=None, half_cycles="half", start_s=None, leave_one_out="--in-sample" not in sys.argv)
     truth = truth_from_recording(raw)
     keep = record.times >= (record.rest_end_s or 0.0)
     idx = np.searchsorted(truth.t, record.times[keep])
@@ -63,7 +70,10 @@ def accuracy(raw_path: str, est_path: str) -> None:
     virtual = virtual_strain(record.b[keep], record.units.curvature(np.asarray(stations)), c)
     print(f"accuracy of the virtual strain: {est_path} against the truth of {raw_path}, {doc['duration_s']:.1f} s from {doc['start_s']:.1f} s")
     print(f"  band: {doc['band_method']}")
-    print(f"  {'η [m]':>6} {'RMS err %':>10} {'DEL3 err %':>11} {'DEL5 err %':>11}  true DEL in band (m=3, 5)")
+    for g in doc["gauges"]:
+        print(f"  gauge {g['name']} at {g['position_m']:g} m ({'out of sample' if g['out_of_sample'] else 'in sample'}): "
+              f"half-width {100 * g['half_width']:.2f} %")
+    print(f"  {'η [m]':>6} {'RMS err %':>10} {'DEL3 err %':>11} {'DEL5 err %':>11} {'band ±%':>8}  true DEL in band (m=3, 5)")
     inside = [0, 0]
     for j, station in enumerate(doc["stations"]):
         ref = signal_loads(true[:, j], n_eq=doc["duration_s"]).dels
@@ -73,7 +83,9 @@ def accuracy(raw_path: str, est_path: str) -> None:
             errs.append(100 * (entry["strain_range"] / dt - 1))
             ok.append(entry["band"] is not None and entry["band"][0] <= dt <= entry["band"][1])
             inside[k] += ok[-1]
-        print(f"  {station['position_m']:6.2f} {100 * rms:10.2f} {errs[0]:11.2f} {errs[1]:11.2f}  {ok}")
+        width = station["band_half_width"]
+        print(f"  {station['position_m']:6.2f} {100 * rms:10.2f} {errs[0]:11.2f} {errs[1]:11.2f} "
+              f"{'-' if width is None else f'{100 * width:.2f}':>8}  {ok}")
     print(f"  true DEL inside the band at {inside[0]} (m=3) and {inside[1]} (m=5) of {len(stations)} stations")
 
 

@@ -16,6 +16,7 @@ from analytics import AnalysisConfig, AnalysisResult, Baseline, analyze, learn_b
 from .estimation import DeformationRecord, deformation_record
 
 __all__ = ["DEFAULT_WARMUP_S", "RecordAnalysis", "trend_rows", "analyze_deformations", "analyze_recording", "baseline_from_deformations",
+           "recording_gauges",
            "baseline_from_recording"]
 
 #: windows starting less than this after the rest phase are not analysed (the filter converging);
@@ -70,12 +71,15 @@ def _kwargs(rig, data: DeformationRecord, config: AnalysisConfig | None, warmup_
 
 def analyze_deformations(rig, data: DeformationRecord, *, config: AnalysisConfig | None = None, baseline: Baseline | None = None,
                          warmup_s: float | None = DEFAULT_WARMUP_S, not_before_s: float | None = None,
-                         signatures=None, loads_tap: list | None = None) -> AnalysisResult:
+                         signatures=None, loads_tap: list | None = None,
+                         gauges: dict | None = None) -> AnalysisResult:
     """The engine over a deformation record (b(t), the support displacement, temperature) of ``rig``.
 
     Windows starting before ``not_before_s`` (s after the recording's first message; default the
     rest phase's end plus ``warmup_s``, when the record knows it) are not analysed, as in ``shm serve``.
-    ``loads_tap``: a list that receives each window's loads input (``LoadsMonitor.tap``)."""
+    ``loads_tap``: a list that receives each window's loads input (``LoadsMonitor.tap``).
+    ``gauges``: the strain gauges' measured strain (``recording_gauges``) for the loads' DEL bands
+    (each gauge taken as in sample: the estimate may have used it), or None: no band."""
     kw = _kwargs(rig, data, config, warmup_s, not_before_s, signatures)
     loads = None
     if rig.hot_spots:  # the hot spots' loads and fatigue in the same engine (issue 21)
@@ -83,7 +87,18 @@ def analyze_deformations(rig, data: DeformationRecord, *, config: AnalysisConfig
 
         loads = LoadsMonitor.from_rig(rig, data.units.curvature)
         loads.tap = loads_tap
-    return analyze(data.times, data.b, data.units.curvature(data.stations), data.stations, baseline=baseline, loads=loads, **kw)
+    return analyze(data.times, data.b, data.units.curvature(data.stations), data.stations, baseline=baseline, loads=loads,
+                   gauges=gauges if loads is not None else None, **kw)
+
+
+def recording_gauges(rec) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The recording's strain gauges' measured strain by name: (s after the recording's start, m/m)."""
+    out = {}
+    for sensor in rec.rig.sensors_of("strain"):
+        channel = rec.channels.get(sensor.topic)
+        if channel is not None and len(channel) >= 2:
+            out[sensor.name] = ((channel.log_time_ns - rec.start_ns) * 1e-9, channel.values[:, 0])
+    return out
 
 
 def baseline_from_deformations(rig, data: DeformationRecord, *, config: AnalysisConfig | None = None,

@@ -291,7 +291,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
 def _cmd_analyze(args: argparse.Namespace) -> int:
     from analytics import BaselineError
 
-    from .analysis import analyze_deformations, baseline_from_deformations
+    from .analysis import analyze_deformations, baseline_from_deformations, recording_gauges
 
     config, warmup = _analysis_settings(args)
     baseline = None
@@ -303,10 +303,13 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
             raise CliError(f"{args.baseline}: {exc}") from None
     rec, data = _deformations_of(args.recording, args)
     try:
-        result = analyze_deformations(rec.rig, data, config=config, baseline=baseline, warmup_s=warmup, not_before_s=args.not_before)
+        result = analyze_deformations(rec.rig, data, config=config, baseline=baseline, warmup_s=warmup, not_before_s=args.not_before,
+                                      gauges=recording_gauges(rec))
     except ValueError as exc:
         raise CliError(f"{args.recording}: {exc}{_cut_note(rec)}") from None
     output = {**result.as_dict(), **_recording_problems(rec)}
+    if "loads" in output:
+        output["loads_band"] = _loads_band_note(output["loads"])
     if data.truth_metadata and "eigenfrequencies_hz" in data.truth_metadata:
         exact = json.loads(data.truth_metadata["eigenfrequencies_hz"])
         zeta_key = next((k for k in ("modal_damping_ratios", "damping_ratios") if k in data.truth_metadata), None)
@@ -348,7 +351,34 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
         print(f"flags: {len(output['flags'])}")
         for flag in output["flags"]:
             print("  " + ", ".join(f"{k}={v}" for k, v in flag.items()))
+        if output.get("loads"):
+            _print_loads(output["loads"][-1], output["loads_band"])
     return 0
+
+
+def _loads_band_note(windows: list[dict]) -> str:
+    """What the loads' DEL bands of ``shm analyze`` rest on: the method of the first band, or why there is none."""
+    for w in windows:
+        for h in w.get("hot_spots", []):
+            if h.get("band_method"):
+                return str(h["band_method"])
+    return ("no band: no strain gauge measured over the analysed windows (none in the rig, or no samples in the recording), "
+            "so the virtual strain's modal truncation cannot be judged")
+
+
+def _print_loads(last: dict, note: str) -> None:
+    """The hot spots at the last window: DEL (m = 3) with its band, consumed life, remaining life; and the band's basis."""
+    print(f"loads at the last window ({last['start_s']:.0f} s):")
+    for h in last["hot_spots"]:
+        dels = h.get("del_pa") or {}
+        key = next(iter(dels), None)
+        band = (h.get("del_band_pa") or {}).get(key) if key else None
+        del_text = "-" if key is None else f"DEL{key} {dels[key] / 1e6:.3g} MPa" + (
+            f" [{band[0] / 1e6:.3g}, {band[1] / 1e6:.3g}]" if band else " (no band)")
+        remaining = h.get("remaining_years")
+        print(f"  {h['name']:>20} at {h['position_m']:g} m: {del_text}, consumed {h['consumed']:.3e}, "
+              f"remaining {'-' if remaining is None else f'{remaining:.3g} years'} ({h.get('verdict')})")
+    print(f"  band: {note}")
 
 
 # -- shm reprocess, shm baseline learn ---------------------------------------------------

@@ -6,15 +6,19 @@ stations (the rig's hot spots plus a grid, or ``--stations``), with the recordin
 counted as measured channels; or plain measured strain or stress channels in any format
 ``shm oma`` reads, counted directly.
 
-The band of a virtual station ("modal truncation seen at the strain gauges"): the strain at
-unmeasured points comes from the unit deformations and misses what the structure does outside
-their span. The gauges see it: at each gauge the DEL of the virtual strain (from b) is compared
-with the DEL of the measured strain. The largest relative discrepancy over the gauges, doubled
-when the gauges aided the estimate (the estimate was pulled towards them, so the discrepancy
-there understates the one between them), with a floor of 2 %, is the half-width a of every
-station's band, [DEL/(1 + a), DEL·(1 + a)]; the damage band is the damage of the counted cycles
-with their ranges scaled by those two factors. Without gauges no band can be given, and the
-output says so.
+The band of a virtual station (leave-one-gauge-out residuals, ``analytics.gauge_bands``): the strain
+at unmeasured points comes from the unit deformations and misses what the structure does outside
+their span. The gauges see it: at each gauge the DEL of the measured strain is compared with the
+DEL of the virtual strain there from an estimate that did not use that gauge. On a raw recording
+the estimator runs once more per gauge it used, without that gauge (an out-of-sample virtual
+strain); on an estimate recording (no re-run possible) a gauge that aided the estimate is taken in
+sample, its residual r widened to r/(1 − h) with the leverage h = ``UNKNOWN_LEVERAGE``. A gauge's
+half-width a is max(ρ, 1/ρ) − 1 of the measured/virtual DEL factor ρ; a station at a gauge takes
+its a; elsewhere no gauge sees the truncation, and the gauges' a are a sample of it: between two
+gauges the larger of the two and the 80 % Student-t prediction from the gauges' a, beyond the
+outermost the largest and the prediction, at least 2 %: [DEL/(1 + a), DEL·(1 + a)]; the damage
+band is the damage of the counted cycles with their ranges scaled by those two factors. Without
+gauges no band can be given, and the output says so.
 """
 
 from __future__ import annotations
@@ -33,6 +37,13 @@ if TYPE_CHECKING:
 
 __all__ = ["add_loads_parser", "loads_of_recording", "loads_of_table", "parse_stations"]
 
+#: The band's method, in the document (each station's a in its band).
+_BAND_METHOD = ("leave-one-gauge-out residuals at the strain gauges: at each gauge the measured/virtual DEL factor rho, the "
+                "virtual strain from an estimate without that gauge (raw recording: the estimator run again per gauge) or "
+                "the in-sample residual r/(1-h), h = {h:g} (estimate recording); a = max(rho, 1/rho) - 1 over the exponents; "
+                "a station at a gauge takes its a; between two gauges the larger of the two and the 80 % Student-t prediction "
+                "from the gauges' a (k*rms, k = t(0.9, n)*sqrt(1 + 1/n)), beyond the outermost gauges the largest and the "
+                "prediction; at least 2 %; band [DEL/(1+a), DEL*(1+a)]")
 #: Young's modulus for plain strain channels without a rig (structural steel, Pa).
 STEEL_YOUNGS_MODULUS = 2.1e11
 
@@ -119,21 +130,26 @@ def _time_span(times: np.ndarray, start: float) -> tuple[np.ndarray, float, floa
     return keep, float(t[0] - times[0]), float(t[-1] - t[0] + dt)
 
 
-def gauge_band(gauges: list[tuple[str, float, np.ndarray, np.ndarray]], *, exponents: tuple[float, ...], n_eq: float,
-               in_sample: tuple[str, ...], half_cycles: str = "half"):
-    """The band of the virtual stations from the gauges (``analytics.truncation_band``, the engine's too)."""
-    from analytics import truncation_band
+def gauge_band(gauges: list[tuple[str, float, Any, Any, float]], stations: Any, *, exponents: tuple[float, ...],
+               n_eq: float, half_cycles: Any = "half") -> tuple[Any, list[dict]]:
+    """The bands of the virtual stations from the gauges (``analytics.gauge_bands``, the engine's too)."""
+    from analytics import gauge_bands
 
-    return truncation_band(gauges, exponents=exponents, n_eq=n_eq, in_sample=in_sample, half_cycles=half_cycles)
+    return gauge_bands(gauges, stations, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles)
 
 
 def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[float, ...] | None, curve: Any, exponents: tuple[float, ...],
-                       n_eq: float | None, half_cycles: str, start_s: float | None, window_s: float | None = None) -> dict[str, Any]:
+                       n_eq: float | None, half_cycles: str, start_s: float | None, window_s: float | None = None,
+                       leave_one_out: bool | None = None) -> dict[str, Any]:
     """The ``shm loads`` document of a contract recording (raw or estimate); with ``window_s`` also
-    per window of that length (each counted on its own, its band from that window's gauges)."""
+    per window of that length (each counted on its own, its band from that window's gauges).
+
+    ``leave_one_out``: re-run the estimator on ``rec`` (raw: its IMUs and aiding) with ``model_args``
+    once per gauge the estimate used, without that gauge, for the band; default: when the estimate
+    is made here."""
     import numpy as np
 
-    from analytics import bending_moment, signal_loads, virtual_strain
+    from analytics import UNKNOWN_LEVERAGE, bending_moment, signal_loads, virtual_strain
 
     from .estimation import deformation_record
 
@@ -166,19 +182,21 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     youngs = None if beam.youngs_modulus is None else beam.youngs_modulus * factor
     moment = bending_moment(kappa, beam.bending_stiffness(eta)) * factor[:, None]
 
-    gauges, gauge_masks = _gauge_comparisons(rec, t, b[keep], units, beam)
+    compared, gauge_masks = _gauge_comparisons(rec, t, b[keep], units, beam)
     used = _gauges_used(rec, record, model_args)
-    band, gauge_rows = gauge_band(gauges, exponents=exponents, n_eq=n_eq_value, in_sample=used, half_cycles=half_cycles)
+    loo = record.estimated_here if leave_one_out is None else leave_one_out
+    judged = _out_of_sample(rec, compared, gauge_masks, t, used, model_args, beam) if loo else [
+        (n, p, v, m, UNKNOWN_LEVERAGE if n in used else 0.0) for n, p, v, m in compared]
+    bands, gauge_rows = gauge_band(judged, positions, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles)
 
     default_detail = None if curve is None else _detail(curve)
     design = rig.fatigue.design_life_years if rig.fatigue is not None else None
-    stress_of = dict(youngs=youngs, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, band=band, duration=duration,
-                     design=design)
-    out_stations = [_station_doc(pos, spots.get(pos), strain[:, j], moment[:, j], beam, default_detail, **stress_of)
-                    for j, pos in enumerate(positions)]
+    stress_of = dict(youngs=youngs, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, duration=duration, design=design)
+    out_stations = [_station_doc(pos, spots.get(pos), strain[:, j], moment[:, j], beam, default_detail,
+                                 band=None if bands is None else bands[j], **stress_of) for j, pos in enumerate(positions)]
 
     channels = []
-    for name, position, _virtual, measured in gauges:
+    for name, position, _virtual, measured, _h in judged:
         gl = signal_loads(measured, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name=f"strain gauge {name}",
                           detail=default_detail if beam.youngs_modulus is not None else None, to_stress=beam.youngs_modulus or 1.0)
         gdoc = _signal_doc(gl, to_stress=beam.youngs_modulus)
@@ -189,14 +207,14 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         "start_s": span_start, "duration_s": duration, "source": "virtual strain from the estimate" + (
             " (estimated here)" if record.estimated_here else ""),
         "half_cycles": half_cycles,
-        "band_method": band.method if band is not None else ("no strain gauge samples in the recording (an estimate written before it carried the gauges, or a rig "
+        "band_method": _BAND_METHOD.format(h=UNKNOWN_LEVERAGE) if bands is not None else ("no strain gauge samples in the recording (an estimate written before it carried the gauges, or a rig "
                                                                    "without gauges): the modal truncation cannot be seen, no band"),
         "gauges": gauge_rows,
         "stations": out_stations,
         "channels": channels,
         "root_bending_moment": root,
-        "windows": None if window_s is None else _windows(t, strain, gauges, gauge_masks, positions, window_s, exponents=exponents,
-                                                          half_cycles=half_cycles, used=used, origin=float(times[0])),
+        "windows": None if window_s is None else _windows(t, strain, judged, gauge_masks, positions, window_s, exponents=exponents,
+                                                          half_cycles=half_cycles, origin=float(times[0])),
     }
 
 
@@ -246,6 +264,7 @@ def _station_doc(pos: float, spot: Any, strain: Any, moment: Any, beam: Any, def
         doc.update(damage=sl.damage, damage_band=None if sl.damage_band is None else list(sl.damage_band))
         stress_rms = sl.rms
     return {"position_m": pos, "hot_spot": None if spot is None else spot.name,
+            "band_half_width": None if band is None else band.high - 1.0,
             "curve": None if detail is None else detail.curve.name, **doc, **_life(doc["damage"], duration, design),
             "stress_rms_pa": stress_rms, "bending_moment_rms_nm": float(np.sqrt(np.mean(moment ** 2))),
             "bending_moment_range_max_nm": float(np.ptp(moment))}
@@ -264,7 +283,7 @@ def _root_moment(b: Any, units: Any, beam: Any, factor: Any, exponents: Any, n_e
             "del": [{"m": m, "n_eq": n, "moment_range_nm": v} for m, n, v in rl.dels]}
 
 
-def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, exponents, half_cycles: str, used, origin: float) -> list[dict[str, Any]]:
+def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, exponents, half_cycles: str, origin: float) -> list[dict[str, Any]]:
     """Per window of ``window_s`` (1 Hz equivalent): each station's strain DEL with the band of that window's gauges."""
     import numpy as np
 
@@ -278,16 +297,46 @@ def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, expo
             continue
         duration = float(sel.sum()) * float(np.median(np.diff(t)))
         # each gauge's samples lie on t[mask]: its part of the window is sel[mask]
-        g = [(n, p, v[sel[mask]], m[sel[mask]]) for (n, p, v, m), mask in zip(gauges, gauge_masks) if sel[mask].sum() >= 2]
-        band, _rows = gauge_band(g, exponents=exponents, n_eq=duration, in_sample=used, half_cycles=half_cycles)
+        g = [(n, p, v[sel[mask]], m[sel[mask]], h) for (n, p, v, m, h), mask in zip(gauges, gauge_masks) if sel[mask].sum() >= 2]
+        bands, _rows = gauge_band(g, positions, exponents=exponents, n_eq=duration, half_cycles=half_cycles) if g else (None, [])
         rows = []
         for j, pos in enumerate(positions):
+            band = None if bands is None else bands[j]
             sl = signal_loads(strain[sel, j], exponents=exponents, n_eq=duration, half_cycles=half_cycles, name=f"strain at {pos} m")
-            rows.append({"position_m": pos, "del": [{"m": m, "n_eq": n, "strain_range": v,
-                                                      "band": None if band is None else [v * band.low, v * band.high]}
-                                                     for m, n, v in sl.dels]})
+            rows.append({"position_m": pos, "band_half_width": None if band is None else band.high - 1.0,
+                         "del": [{"m": m, "n_eq": n, "strain_range": v, "band": None if band is None else [v * band.low, v * band.high]}
+                                 for m, n, v in sl.dels]})
         out.append({"start_s": float(a - origin), "duration_s": duration,
-                    "band_half_width": None if band is None else band.high - 1.0, "stations": rows})
+                    "band_half_width": None if bands is None else max(x.high for x in bands) - 1.0, "stations": rows})
+    return out
+
+
+def _out_of_sample(rec: Any, gauges: list, gauge_masks: list, t: Any, used: tuple[str, ...], model_args: dict,
+                   beam: Any) -> list[tuple[str, float, Any, Any, float]]:
+    """The gauges with the virtual strain at each from an estimate that did not use it: the estimator
+    run again on ``rec`` without that gauge (the rest of ``model_args`` kept; the aided unit
+    deformations left to the estimator, which picks them for the gauges it has). A gauge the
+    estimate did not use is out of sample already. (name, position, virtual, measured, leverage 0)."""
+    import numpy as np
+
+    from analytics import virtual_strain
+
+    from .estimation import deformation_record
+
+    out = []
+    for (name, position, virtual, measured), mask in zip(gauges, gauge_masks):
+        if name in used:
+            others = tuple(g for g in used if g != name)
+            args = {k: v for k, v in model_args.items() if k != "aided"}
+            try:
+                again = deformation_record(rec, model_args=dict(args, gauges=others))
+            except ValueError as exc:
+                raise LoadsError(f"the band's re-estimate without gauge {name}: {exc}") from None
+            if not again.estimated_here:  # an estimate recording gives its own b again: that is not out of sample
+                raise LoadsError(f"{rec.path} is an estimate recording: no gauge can be left out of it (give the raw recording)")
+            b = np.column_stack([np.interp(t[mask], again.times, again.b[:, k]) for k in range(again.b.shape[1])])
+            virtual = virtual_strain(b, again.units.curvature(np.array([position])), beam.fibre_distance([position]))[:, 0]
+        out.append((name, position, virtual, measured, 0.0))
     return out
 
 

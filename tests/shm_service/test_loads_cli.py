@@ -9,6 +9,7 @@ import pytest
 
 from analytics import FatigueDetail, HotSpotFatigue, bending_moment, rainflow_cycles, signal_loads, sn_curve, virtual_strain
 from shm_service.cli import main
+from shm_service.recording import read_recording
 
 ASTM = [-2, 1, -3, 5, -1, 3, -4, 4, -2]
 
@@ -110,10 +111,20 @@ def estimate_file(tmp_path_factory):
     return raw, est
 
 
-def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path):
+def _true_dels(raw, doc) -> dict[float, float]:
+    """The truth's strain DEL (m = 3) over the document's span at its stations that are truth stations."""
     from shm_service.estimation import truth_from_recording
-    from shm_service.recording import read_recording
 
+    rec = read_recording(raw)
+    truth = truth_from_recording(rec)
+    span = (truth.t >= doc["start_s"]) & (truth.t <= doc["start_s"] + doc["duration_s"])
+    stations = list(rec.rig.truth_stations)
+    c = rec.rig.beam.thickness / 2
+    return {s["position_m"]: signal_loads(-c * truth.curvature[span, stations.index(s["position_m"])], n_eq=doc["duration_s"]).dels[0][2]
+            for s in doc["stations"] if s["position_m"] in stations}
+
+
+def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path):
     raw, est = estimate_file
     rig = json.loads(read_recording(raw).rig.to_json())
     rig["hot_spots"] = [{"name": "weld", "position": 1.1, "curve": "EN1993-1-9:71", "scf": 2.0, "gamma_Mf": 1.35}]
@@ -127,19 +138,17 @@ def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path
     assert [s["hot_spot"] for s in doc["stations"]] == [None, "weld", None, None]
     assert doc["stations"][1]["curve"] == "EN1993-1-9:71" and doc["stations"][1]["damage"] is not None
     assert doc["stations"][0]["damage"] is None  # no --curve: no damage where there is no hot spot
-    assert "modal truncation seen at the strain gauges" in doc["band_method"]
+    assert doc["band_method"].startswith("leave-one-gauge-out residuals at the strain gauges")
+    # an estimate recording: its gauges aided it and cannot be left out here, so they are in sample
+    assert all(not g["out_of_sample"] and g["leverage"] == 0.5 for g in doc["gauges"])
     assert [c["name"] for c in doc["channels"]] == ["g1", "g2", "g3", "g4"]
     assert doc["start_s"] > 0 and doc["duration_s"] > 10  # from the rest phase's end
     # against the truth's curvature over the same span: the estimate follows the strain
-    rec = read_recording(raw)
-    truth = truth_from_recording(rec)
-    span = (truth.t >= doc["start_s"]) & (truth.t <= doc["start_s"] + doc["duration_s"])
-    stations = list(rec.rig.truth_stations)
-    c = rec.rig.beam.thickness / 2
+    true_dels = _true_dels(raw, doc)
+    assert true_dels
     for s in doc["stations"]:
-        if s["position_m"] in stations:
-            true = -c * truth.curvature[span, stations.index(s["position_m"])]
-            true_del = signal_loads(true, n_eq=doc["duration_s"]).dels[0][2]
+        if s["position_m"] in true_dels:
+            true_del = true_dels[s["position_m"]]
             est_del = s["del"][0]["strain_range"]
             assert est_del == pytest.approx(true_del, rel=0.1)
             low, high = s["del"][0]["band"]
@@ -152,6 +161,56 @@ def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path
     assert all(w["band_half_width"] >= 0.02 and w["stations"][0]["del"][0]["band"] is not None for w in windows)
     code, _, err = run(capsys, "loads", str(est), "--stations", "4.5")
     assert code == 2 and "--stations: 4.5 is outside the beam [0, 4.0]" in err
+
+
+def test_a_raw_recording_leaves_each_gauge_out(capsys, estimate_file):
+    """On a raw recording the estimator runs again without each gauge: every gauge is out of sample,
+    the bands of the ideal paper excitation are narrow and hold the true DEL."""
+    raw, _est = estimate_file
+    capsys.readouterr()
+    code, out, err = run(capsys, "loads", str(raw), "--stations", "0.5,1.5,2.5,3.5", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert [g["name"] for g in doc["gauges"]] == ["g1", "g2", "g3", "g4"]
+    assert all(g["out_of_sample"] and g["leverage"] == 0.0 and g["half_width"] >= 0 for g in doc["gauges"])
+    true_dels = _true_dels(raw, doc)
+    assert true_dels
+    for s in doc["stations"]:
+        assert 0.02 <= s["band_half_width"] <= 0.05  # the floor, and narrow on the ideal paper excitation
+        if s["position_m"] in true_dels:
+            low, high = s["del"][0]["band"]
+            assert low <= true_dels[s["position_m"]] <= high
+
+
+def test_no_gauge_can_be_left_out_of_an_estimate_recording(estimate_file):
+    from shm_service.loads import LoadsError, loads_of_recording
+
+    _raw, est = estimate_file
+    with pytest.raises(LoadsError, match="is an estimate recording: no gauge can be left out of it"):
+        loads_of_recording(read_recording(est), model_args={}, stations=(1.0,), curve=None, exponents=(3.0,), n_eq=None,
+                           half_cycles="half", start_s=None, leave_one_out=True)
+
+
+def test_shm_analyze_says_what_the_loads_band_rests_on(capsys, estimate_file, tmp_path):
+    """shm analyze passes the recording's gauges to the engine: each window's hot spots carry a band
+    with its method; a rig without gauges gets no band, and the output says why."""
+    raw, est = estimate_file
+    rig = json.loads(read_recording(raw).rig.to_json())
+    rig["hot_spots"] = [{"name": "weld", "position": 1.1, "curve": "EN1993-1-9:71"}]
+    with_gauges, without = tmp_path / "rig.json", tmp_path / "rig_without_gauges.json"
+    with_gauges.write_text(json.dumps(rig))
+    without.write_text(json.dumps(dict(rig, sensors=[s for s in rig["sensors"] if s["kind"] != "strain"])))
+    config = tmp_path / "short.toml"
+    config.write_text("[analytics]\nwindow_s = 5.0\noverlap = 0.5\nbaseline_s = 10.0\nbaseline_min_windows = 3\n")
+    common = (str(est), "--config", str(config), "--not-before", "58")
+    code, out, err = run(capsys, "analyze", *common, "--rig", str(with_gauges), "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["loads"] and doc["loads_band"].startswith("leave-one-gauge-out DEL residuals at the strain gauges (g1 ")
+    assert all(h["del_band_pa"] is not None for w in doc["loads"] for h in w["hot_spots"])
+    code, out, err = run(capsys, "analyze", *common, "--rig", str(without))
+    assert code == 0, err
+    assert "(no band)" in out and "band: no band: no strain gauge measured over the analysed windows" in out
 
 
 def test_channels_in_volts_are_counted_with_a_warning(capsys):
