@@ -18,8 +18,7 @@ from shm_service.service._metrics import merge_expositions
 from shm_service.service._server import ApiServer
 from shm_service.service._service import MonitoringService
 
-from svc_helpers import fast_overrides
-from test_fleet import _wait
+from svc_helpers import fast_overrides, wait_for
 
 
 def test_the_live_ring_keeps_one_estimate_per_tick_only_while_watched():
@@ -101,7 +100,7 @@ def test_live_and_rig_of_a_structure_over_http(fleet_api):
         assert rig["support"] == "clamped" and rig["orientation"] == "standing" and rig["beam"]["length"] == 1.5
         first = c.get("/api/structures/mast-01/live").json()
         assert first["seq"] == 0 and first["t_s"] == [] and "phi" not in first["state_names"]
-        doc = _wait(lambda: (lambda d: d if d["seq"] > 0 else None)(c.get("/api/structures/mast-01/live").json()),
+        doc = wait_for(lambda: (lambda d: d if d["seq"] > 0 else None)(c.get("/api/structures/mast-01/live").json()),
                     60, "the mast's estimates")
         assert len(doc["x"]) == len(doc["t_s"]) == doc["seq"] and len(doc["x"][0]) == len(doc["state_names"])
         assert np.all(np.diff(doc["t_s"]) >= 0.1 - 1e-6)  # at most 10 per second of data
@@ -117,7 +116,7 @@ def test_live_and_rig_of_a_structure_over_http(fleet_api):
 def test_metrics_of_a_fleet_in_one_process(fleet_api):
     service, url = fleet_api
     with httpx.Client(base_url=url, timeout=30) as c:
-        _wait(lambda: all(s["data_time_s"] for s in c.get("/api/structures").json()["structures"]), 60, "data of both")
+        wait_for(lambda: all(s["data_time_s"] for s in c.get("/api/structures").json()["structures"]), 60, "data of both")
         text = c.get("/metrics").text
         assert c.get("/api/status").status_code == 409  # the single-structure routes still point at the fleet's
     families = [line.split()[2] for line in text.splitlines() if line.startswith("# TYPE ")]
@@ -149,9 +148,9 @@ def test_the_dashboard_of_a_fleet_in_one_process_reads_only_the_structure_shown(
         poller = dash.poller
         time.sleep(1.0)
         assert poller.polls == {}  # no browser, nothing asked for: the dashboard reads nothing
-        feed = _wait(lambda: (lambda f: f if f is not None and not isinstance(f, str) else None)(poller.feed("b")), 30,
+        feed = wait_for(lambda: (lambda f: f if f is not None and not isinstance(f, str) else None)(poller.feed("b")), 30,
                      "the feed of b")  # asked for as a browser that chose b does (every frame)
-        _wait(lambda: (poller.feed("b"), poller.ids() == ["a", "b"])[1], 30, "the overview")
+        wait_for(lambda: (poller.feed("b"), poller.ids() == ["a", "b"])[1], 30, "the overview")
         assert feed.id == "b" and tuple(feed.layout.names) == tuple(service.structure("b").model.state_layout.names)
 
         def drawn():
@@ -159,11 +158,11 @@ def test_the_dashboard_of_a_fleet_in_one_process_reads_only_the_structure_shown(
             feed.play()
             return feed.snapshot().estimate
 
-        _wait(drawn, 60, "b's live estimates drawn")
+        wait_for(drawn, 60, "b's live estimates drawn")
         assert service.structure("b").live.watched and not service.structure("a").live.watched
         assert poller.polls.get("structure_model") == 1 and poller.polls["live"] >= 1
         assert poller.feed("nope") is None
-        _wait(lambda: isinstance(poller.feed("nope"), str), 10, "the error of an unknown structure")
+        wait_for(lambda: isinstance(poller.feed("nope"), str), 10, "the error of an unknown structure")
         assert "nope" in poller.feed("nope")
     finally:
         service.stop(drain_s=0)
