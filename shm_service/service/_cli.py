@@ -291,9 +291,11 @@ def _print_summary(status: Any, elapsed: float, args: argparse.Namespace) -> int
     if args.json:
         print(json.dumps(summary), flush=True)
     else:
+        # a run stopped before its first estimate processed no data: no pace to report
+        pace = "no data processed" if summary["realtime_factor"] is None else f"{summary['realtime_factor']}x real time"
         print(f"shm serve: {summary['state']}: {summary['messages']} samples, {summary['estimates']} estimates, "
               f"{summary['windows']} windows, {summary['trend_rows']} trend rows in {summary['wall_s']} s "
-              f"({summary['realtime_factor']}x real time)", flush=True)
+              f"({pace})", flush=True)
     return code
 
 

@@ -282,7 +282,9 @@ class Structure:
             try:
                 pipeline.process(Batch.joined(batches))
             except Exception as exc:
-                self._batch_failed(exc)
+                # the joined batches went as one: each is counted as skipped (the loss is counted,
+                # not hidden behind one error)
+                self._batch_failed(exc, batches=len(batches))
             else:
                 # None once a batch succeeds and nothing waits for the database
                 self.pipeline_error = pipeline.storage_error
@@ -313,9 +315,11 @@ class Structure:
             self.service.notifier.wake()
             self._done.set()
 
-    def _batch_failed(self, exc: Exception, what: str = "pipeline error on a batch; batch skipped") -> None:
+    def _batch_failed(self, exc: Exception, what: str = "pipeline error on a batch; batch skipped", batches: int = 1) -> None:
         text = f"{type(exc).__name__}: {exc}"
-        self.pipeline_errors += 1
+        self.pipeline_errors += batches
+        if batches > 1:
+            what = f"pipeline error on {batches} joined batches; all {batches} skipped"
         self.pipeline_error = self.last_pipeline_error = text
         # The same error on every batch would flood the log: its first time with the traceback.
         if self.pipeline_errors <= 3:

@@ -127,3 +127,50 @@ def test_healthz_follows_the_pipeline_and_recovers(ingest_service):
         assert st["service"]["pipeline_error"] is None and st["service"]["pipeline_errors"] == 1
         assert st["service"]["last_pipeline_error"] == "RuntimeError: injected fault"
         assert "shm_pipeline_errors_total 1" in c.get("/metrics").text
+
+
+def test_a_failed_joined_batch_counts_each_batch_it_skipped(ingest_service):
+    # A structure behind its pace takes up to eight queued batches in one step (joined). When that
+    # step fails, every batch in it is lost: the count says how many, not one.
+    import threading
+
+    service, url = ingest_service
+    original = service.pipeline.process
+    release = threading.Event()
+    calls: list[int] = []
+
+    def failing_twice(batch):
+        calls.append(len(batch.blocks[0]))
+        if len(calls) == 1:
+            release.wait(20)  # the next posts queue up behind this step
+            raise RuntimeError("injected fault")
+        if len(calls) == 2:
+            raise RuntimeError("injected fault")
+        original(batch)
+
+    service.pipeline.process = failing_twice
+    t0 = 1_767_225_600_000_000_000
+
+    def post(c: httpx.Client, start: int) -> None:
+        batch = {"messages": [{"topic": "/imu/D", "log_time_ns": start + i * 5_000_000,
+                               "payload": {"accel": [-9.81, 0.0, 0.0], "gyro": [0.0, 0.0, 0.0]}} for i in range(20)]}
+        assert c.post("/api/ingest", json=batch, headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 200
+
+    with httpx.Client(base_url=url) as c:
+        post(c, t0)
+        deadline = time.monotonic() + 20
+        while not calls and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert calls == [20]  # the first batch is in the (held) step
+        post(c, t0 + 10**9)
+        post(c, t0 + 2 * 10**9)
+        release.set()
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            st = c.get("/api/status").json()
+            if st["service"]["pipeline_errors"] >= 3:
+                break
+            time.sleep(0.05)
+        assert calls == [20, 40]  # the two queued batches went as one step
+        assert st["service"]["pipeline_errors"] == 3
+        assert "shm_pipeline_errors_total 3" in c.get("/metrics").text
