@@ -328,33 +328,54 @@ def _start_tree_serve(tree: Path, args: list[str], log: IO[str], tmp: Path) -> t
 
 
 def compare_live(tree: Path, structures: list[int], *, speed: float, seconds: float, dashboard: bool,
-                 processes: tuple[int, ...] = (1, 2), **options: Any) -> list[dict]:
+                 processes: tuple[int, ...] = (1, 2), repeats: int = 1, **options: Any) -> list[dict]:
     """Each live fleet on ``tree``'s ``shm serve`` (before) and on this tree's (after), one after
     the other on the same machine, and a line comparing the two: worst lag (overall and after the
-    first minute), structures over 5 s, CPU per structure-second, RSS."""
+    first minute), structures over 5 s, CPU per structure-second, RSS. ``repeats`` > 1: the pairs
+    again in alternating order (before-after, after-before, ...: a drift of the machine over the
+    run, its clock or its neighbours, falls on both trees alike) and the mean CPU of each tree."""
     global _SERVE_TREE
     out = []
     for n in structures:
         for workers in processes:
-            pair = {}
-            for label, which in (("before", tree), ("after", None)):
-                _SERVE_TREE = which
-                try:
-                    print(f"[compare] {label}: {n} structures, {workers} process(es), {which or 'this tree'}", flush=True)
-                    pair[label] = bench_live_fleet(n, speed=speed, seconds=seconds, processes=workers, dashboard=dashboard,
-                                                   **options)
-                finally:
-                    _SERVE_TREE = None
-            b, a = pair["before"], pair["after"]
-            after_key = next(k for k in a if k.startswith("worst_lag_after_"))
-            print(f"[compare] {n} structures at speed {speed:g} on {workers} process(es), {seconds:g} s each: worst lag "
-                  f"before {b['worst_lag_s']} s / after {a['worst_lag_s']} s ({after_key}: {b[after_key]} / {a[after_key]} s), "
-                  f"over 5 s {b['structures_lag_over_5s']} / {a['structures_lag_over_5s']}, CPU "
-                  f"{b['cpu_ms_per_structure_second']} / {a['cpu_ms_per_structure_second']} ms per structure-second, "
-                  f"peak RSS {b['peak_rss_mib']} / {a['peak_rss_mib']} MiB, windows not committed "
-                  f"{b['windows_not_committed']} / {a['windows_not_committed']}", flush=True)
-            out.append(pair)
+            cpu: dict[str, list[float]] = {"before": [], "after": []}
+            for repeat in range(repeats):
+                pair = _compare_pair(tree, n, workers, speed=speed, seconds=seconds, dashboard=dashboard,
+                                     reverse=repeat % 2 == 1, **options)
+                out.append(pair)
+                for label in cpu:
+                    cpu[label].append(pair[label]["cpu_ms_per_structure_second"])
+            if repeats > 1:
+                mb, ma = sum(cpu["before"]) / repeats, sum(cpu["after"]) / repeats
+                print(f"[compare] {n} structures on {workers} process(es), {repeats} pairs in alternating order: CPU before "
+                      f"{' '.join(map(str, cpu['before']))} (mean {mb:.2f}) / after {' '.join(map(str, cpu['after']))} "
+                      f"(mean {ma:.2f}) ms per structure-second, after/before {ma / mb:.3f}", flush=True)
     return out
+
+
+def _compare_pair(tree: Path, n: int, workers: int, *, speed: float, seconds: float, dashboard: bool, reverse: bool,
+                  **options: Any) -> dict:
+    """One fleet on each tree (``reverse``: this tree's first) and the line comparing them."""
+    global _SERVE_TREE
+    pair = {}
+    order = [("before", tree), ("after", None)]
+    for label, which in (order[::-1] if reverse else order):
+        _SERVE_TREE = which
+        try:
+            print(f"[compare] {label}: {n} structures, {workers} process(es), {which or 'this tree'}", flush=True)
+            pair[label] = bench_live_fleet(n, speed=speed, seconds=seconds, processes=workers, dashboard=dashboard,
+                                           **options)
+        finally:
+            _SERVE_TREE = None
+    b, a = pair["before"], pair["after"]
+    after_key = next(k for k in a if k.startswith("worst_lag_after_"))
+    print(f"[compare] {n} structures at speed {speed:g} on {workers} process(es), {seconds:g} s each: worst lag "
+          f"before {b['worst_lag_s']} s / after {a['worst_lag_s']} s ({after_key}: {b[after_key]} / {a[after_key]} s), "
+          f"over 5 s {b['structures_lag_over_5s']} / {a['structures_lag_over_5s']}, CPU "
+          f"{b['cpu_ms_per_structure_second']} / {a['cpu_ms_per_structure_second']} ms per structure-second, "
+          f"peak RSS {b['peak_rss_mib']} / {a['peak_rss_mib']} MiB, windows not committed "
+          f"{b['windows_not_committed']} / {a['windows_not_committed']}", flush=True)
+    return pair
 
 
 def _fleet_toml(ids: list[str], block_s: float, duration_s: float) -> str:
@@ -488,6 +509,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--compare", default=None, metavar="TREE",
                    help="another checkout (e.g. the tree before a change): each live fleet on its shm serve and on this "
                         "one's, alternately, side by side (with --skip-live no second set of this tree's live runs)")
+    p.add_argument("--compare-repeats", type=int, default=1, metavar="K",
+                   help="--compare: K pairs in alternating order (before-after, after-before, ...) and the mean of each")
     p.add_argument("--structures", type=int, default=4)
     p.add_argument("--skip-reprocess", action="store_true")
     p.add_argument("--skip-memory", action="store_true")
@@ -517,6 +540,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.compare:  # with --live-processes and --live-hog where this tree has them
         compare_live(Path(args.compare).resolve(), args.live, speed=args.live_speed, seconds=args.live_s,
                      dashboard=args.live_dashboard, processes=tuple(getattr(args, "live_processes", (1, 2))),
+                     repeats=args.compare_repeats,
                      **({"hog": True} if getattr(args, "live_hog", False) else {}))
     if not args.skip_live:
         for n in args.live:

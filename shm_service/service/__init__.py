@@ -8,10 +8,27 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["SENSOR_STATES", "ServeProcess", "ServeStartError", "read_ready", "start_serve"]
+#: What embeds the service in a program (and what its tests use): the service and its settings, the
+#: HTTP app and a server for it, the storage, and ``start_serve`` for ``shm serve`` as a process.
+_HOMES = {
+    # the service and its configuration
+    "MonitoringService": "_service", "ServiceError": "_service",
+    "ServiceSettings": "_config", "SettingsError": "_config", "load_settings": "_config", "render_toml": "_config",
+    "resolve_token": "_config", "AlarmSettings": "_config", "ArchiveSettings": "_config",
+    "DashboardSettings": "_config", "EstimatorSettings": "_config", "NotifySettings": "_config",
+    "RetentionSettings": "_config", "ServerSettings": "_config", "SimSettings": "_config",
+    "SourceSettings": "_config", "StructureSettings": "_config",
+    # the HTTP API over a service
+    "create_app": "_api", "ApiServer": "_server",
+    # the database
+    "Storage": "_storage", "StorageUnavailable": "_storage", "WindowCommit": "_storage", "AlarmChange": "_storage",
+    "SCHEMA_VERSION": "_storage",
+    # shm serve as a process
+    "SENSOR_STATES": "_dashboard_port", "ServeProcess": "_launch", "ServeStartError": "_launch",
+    "start_serve": "_launch", "read_ready": "_processes",
+}
 
-_HOMES = {"SENSOR_STATES": "_dashboard_port", "ServeProcess": "_launch",
-          "ServeStartError": "_launch", "start_serve": "_launch", "read_ready": "_processes"}
+__all__ = sorted(_HOMES)
 
 
 def __getattr__(name: str) -> Any:

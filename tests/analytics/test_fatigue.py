@@ -12,8 +12,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from analytics import (
-    SECONDS_PER_YEAR, Cycles, FatigueDetail, HotSpotFatigue, RainflowCounter, RainflowResidue, cycles_by_range,
-    damage_equivalent_range, miner_damage, rainflow_cycles, remaining_life, sn_curve,
+    SECONDS_PER_YEAR,
+    Cycles,
+    FatigueDetail,
+    HotSpotFatigue,
+    RainflowCounter,
+    RainflowResidue,
+    cycles_by_range,
+    damage_equivalent_range,
+    miner_damage,
+    rainflow_cycles,
+    remaining_life,
+    sn_curve,
 )
 
 ASTM = [-2, 1, -3, 5, -1, 3, -4, 4, -2]
@@ -149,7 +159,7 @@ def test_dnv_curves_at_their_knees(name, n_knee, s_knee_mpa, m1):
 
 
 def test_dnv_tables_cover_the_contracts_names():
-    from analytics._sn_curves import DNV_RP_C203_CURVES
+    from analytics import DNV_RP_C203_CURVES
     from contract import DNV_RP_C203_CURVE_NAMES, DNV_RP_C203_ENVIRONMENTS
 
     assert set(DNV_RP_C203_CURVES) == set(DNV_RP_C203_ENVIRONMENTS)

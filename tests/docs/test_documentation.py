@@ -76,7 +76,7 @@ def _keys(model):
 
 
 def test_the_configuration_reference_lists_every_key_with_its_default():
-    from shm_service.service._config import ServiceSettings
+    from shm_service.service import ServiceSettings
 
     page = docs_reference.configuration_page()
     keys = list(_keys(ServiceSettings))
@@ -90,7 +90,7 @@ def test_the_configuration_reference_lists_every_key_with_its_default():
 
 def test_the_http_reference_lists_every_route_and_types_the_ingest_payloads():
     import contract
-    from shm_service.service._api import create_app
+    from shm_service.service import create_app
 
     page = docs_reference.http_page()
     doc = create_app(object()).openapi()

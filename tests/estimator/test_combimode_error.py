@@ -3,9 +3,7 @@
 import numpy as np
 import pytest
 
-from estimator import build_model
-from estimator._beam import assemble_beam
-from estimator._unit_deformations import unit_deformations
+from estimator import assemble_beam, build_model, unit_deformations
 from shm_service.rig_layouts import build_rig
 
 

@@ -10,8 +10,7 @@ deflection is e(t) = A·s̃₂(L)·sin Ωt.
 import numpy as np
 import pytest
 
-from estimator import FilterConfig, RestCalibration, build_model
-from estimator._beam import assemble_beam, natural_modes
+from estimator import FilterConfig, RestCalibration, assemble_beam, build_model, natural_modes
 from estimator._filter import model_arrays
 from estimator._imms import least_squares_map, propagate
 from shm_service.rig_layouts import build_rig

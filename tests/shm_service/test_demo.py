@@ -18,8 +18,7 @@ from pathlib import Path
 import pytest
 
 from shm_service.demo import MARKER, DemoError, demo_timeline, prepare_demo_directory
-from shm_service.service._config import load_settings
-from shm_service.service._storage import Storage
+from shm_service.service import Storage, load_settings
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -10,9 +10,8 @@ import numpy as np
 import orjson
 import pytest
 
-from shm_service.recording import RecordingWriter, read_recording
+from shm_service.recording import RecordingWriter, encode_payloads_json, read_recording
 from shm_service.recording._fastdecode import decode_template, template_codes
-from shm_service.recording._writer import encode_payloads_json
 from shm_service.rig_layouts import build_rig
 from shm_service.service._ingest import IngestValidator
 

@@ -80,7 +80,7 @@ def test_shm_modes_on_the_example_matches_the_shooting_reference(name, capsys):
 @pytest.mark.parametrize("name", ["mast", "blade"])
 def test_the_examples_serve_configuration_and_rig_load(name):
     from contract import load_rig
-    from shm_service.service._config import load_settings
+    from shm_service.service import load_settings
 
     settings = load_settings(EXAMPLES / name / "serve.toml")
     assert settings.source.rig == f"examples/{name}/rig.json"

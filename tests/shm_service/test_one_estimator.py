@@ -16,8 +16,7 @@ from estimator import StreamingSettings, build_model, estimate
 from shm_service.cli import main
 from shm_service.estimation import deformation_record, measurements_from_recording
 from shm_service.recording import ESTIMATE_TOPIC, RecordingWriter, read_recording
-from shm_service.service._config import load_settings
-from shm_service.service._service import MonitoringService
+from shm_service.service import MonitoringService, load_settings
 from shm_service.virtual_rig import SimulationSettings, simulate
 
 _NS = 1_000_000_000

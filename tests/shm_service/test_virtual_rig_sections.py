@@ -10,8 +10,7 @@ import pytest
 
 from contract import parse_rig
 from estimator import assemble_beam, natural_modes
-from shm_service.virtual_rig import SimulationSettings
-from shm_service.virtual_rig._virtual_rig import VirtualRig
+from shm_service.virtual_rig import SimulationSettings, VirtualRig
 
 MAST = Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json"
 

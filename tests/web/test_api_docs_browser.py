@@ -6,16 +6,12 @@ from __future__ import annotations
 from urllib.parse import urlparse
 
 import pytest
-
 from browser_helpers import CHROMIUM_ARGS, VIEWPORT
 
 
 @pytest.fixture()
 def api_url(tmp_path):
-    from shm_service.service._api import create_app
-    from shm_service.service._config import load_settings
-    from shm_service.service._server import ApiServer
-    from shm_service.service._service import MonitoringService
+    from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
 
     settings = load_settings(None, {"source": {"spec": "ingest"}, "dashboard": {"enabled": False},
                                     "db": str(tmp_path / "shm.sqlite"), "archive": {"enabled": False}})

@@ -19,13 +19,23 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from browser_helpers import (
-    assert_chart_drawn, assert_tall_beam, browser_page, close_webgl_notice, rss_bytes, scene_picture,
-    service_test_helpers, serve_urls, stop_process, support_offset, visible, wait,
+    assert_chart_drawn,
+    assert_tall_beam,
+    browser_page,
+    close_webgl_notice,
+    rss_bytes,
+    scene_picture,
+    serve_urls,
+    service_test_helpers,
+    stop_process,
+    support_offset,
+    visible,
+    wait,
 )
-from contract import ModeDocument, StructureModel, WindowDocument
 from dashboard_feeder import ID, TOKEN, FakePort, alarm, demo_spectrum, history_rows, simulated_estimates
+
+from contract import ModeDocument, StructureModel, WindowDocument
 from shm_service.service import start_serve
 
 # The README's screenshot is refreshed on request (SHM_DASHBOARD_SCREENSHOT=docs/dashboard.png);
@@ -150,15 +160,15 @@ def layout_gamma(dash) -> int:
 def test_alarm_raised_by_the_service_shows_on_the_page(chromium, tmp_path):
     """End to end: the service (replay of a damaged recording) with its dashboard on free ports, read
     through its port like a fleet's: the alarm the data raises is notified on the page."""
-    from shm_service.service._config import load_settings
-    from shm_service.service._service import MonitoringService
+    from shm_service.service import MonitoringService, load_settings
     from shm_service.virtual_rig import SimulationSettings, simulate
 
     recording = tmp_path / "damaged.mcap"
     simulate(SimulationSettings(duration=150.0, rest=10.0, excitation="ambient", seed=3,
                                 damage=("mass:0.126@4.0",), damage_at=90.0), recording)
     overrides = service_test_helpers().fast_overrides(tmp_path, **{
-        "source.spec": f"replay:{recording}", "source.speed": "4", "source.keep_running": True,
+        # 8x: the page waits for the alarm at the end of the replay, not for a state in between
+        "source.spec": f"replay:{recording}", "source.speed": "8", "source.keep_running": True,
         "dashboard.enabled": True, "dashboard.port": 0,
     })
     service = MonitoringService(load_settings(None, overrides), environ={})

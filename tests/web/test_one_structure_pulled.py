@@ -9,8 +9,8 @@ from __future__ import annotations
 import httpx
 import numpy as np
 import pytest
-
 from browser_helpers import service_test_helpers, wait
+
 from contract import ServicePort, WindowDocument
 
 pytestmark = pytest.mark.e2e
@@ -18,10 +18,7 @@ pytestmark = pytest.mark.e2e
 
 @pytest.mark.timeout(300)
 def test_a_structure_of_one_is_pulled_through_its_port(tmp_path):
-    from shm_service.service._api import create_app
-    from shm_service.service._config import load_settings
-    from shm_service.service._server import ApiServer
-    from shm_service.service._service import MonitoringService
+    from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
 
     overrides = service_test_helpers().fast_overrides(tmp_path, **{
         "source.spec": "sim", "source.speed": "4", "sim.duration_s": 600.0, "archive.enabled": False,

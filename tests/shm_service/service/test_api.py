@@ -8,13 +8,9 @@ import time
 
 import httpx
 import pytest
-
-from shm_service.service._api import create_app
-from shm_service.service._config import load_settings
-from shm_service.service._server import ApiServer
-from shm_service.service._service import MonitoringService
-
 from svc_helpers import fast_overrides
+
+from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
 
 TOKEN = "test-token-123"
 

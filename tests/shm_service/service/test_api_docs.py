@@ -8,14 +8,10 @@ from urllib.parse import urljoin, urlparse
 
 import httpx
 import pytest
-
-from shm_service.service._api import create_app
-from shm_service.service._config import load_settings
-from shm_service.service._docs import ASSETS, CONTENT_SECURITY_POLICY, STATIC_URL
-from shm_service.service._server import ApiServer
-from shm_service.service._service import MonitoringService
-
 from svc_helpers import fast_overrides
+
+from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
+from shm_service.service._docs import ASSETS, CONTENT_SECURITY_POLICY, STATIC_URL
 
 
 @pytest.fixture()

@@ -8,9 +8,18 @@ import tomllib
 
 import pytest
 
-from shm_service.service._config import ServiceSettings, SettingsError, load_settings, render_toml, resolve_token
 from contract import TrendRow
-from shm_service.service._storage import SCHEMA_VERSION, AlarmChange, Storage, WindowCommit
+from shm_service.service import (
+    SCHEMA_VERSION,
+    AlarmChange,
+    ServiceSettings,
+    SettingsError,
+    Storage,
+    WindowCommit,
+    load_settings,
+    render_toml,
+    resolve_token,
+)
 
 
 def test_rendered_defaults_parse_back_to_the_defaults():

@@ -14,7 +14,7 @@ import httpx
 import pytest
 
 from benchmarks.bench_export import PeakMemory, fill
-from shm_service.service._launch import start_serve
+from shm_service.service import start_serve
 
 ROWS = 200_000
 #: the most the server may grow while it sends them: under half the JSON's size

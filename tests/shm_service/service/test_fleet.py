@@ -10,14 +10,9 @@ import time
 
 import httpx
 import pytest
-
-from shm_service.service._api import create_app
-from shm_service.service._config import SettingsError, load_settings, render_toml
-from shm_service.service._server import ApiServer
-from shm_service.service import start_serve
-from shm_service.service._service import MonitoringService
-
 from svc_helpers import fast_overrides, wait_for
+
+from shm_service.service import ApiServer, MonitoringService, SettingsError, create_app, load_settings, render_toml, start_serve
 
 TOKEN = "fleet-token-123"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}

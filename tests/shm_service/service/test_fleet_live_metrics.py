@@ -10,15 +10,11 @@ import time
 import httpx
 import numpy as np
 import pytest
+from svc_helpers import fast_overrides, wait_for
 
-from shm_service.service._api import create_app
-from shm_service.service._config import load_settings
+from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
 from shm_service.service._live import LiveRing
 from shm_service.service._metrics import merge_expositions
-from shm_service.service._server import ApiServer
-from shm_service.service._service import MonitoringService
-
-from svc_helpers import fast_overrides, wait_for
 
 
 def test_the_live_ring_keeps_one_estimate_per_tick_only_while_watched():

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from shm_service.service._storage import AlarmChange, Storage, StorageUnavailable, WindowCommit
+from shm_service.service import AlarmChange, Storage, StorageUnavailable, WindowCommit
 
 
 def _row_commit(source: str, k: int, changes=()) -> WindowCommit:
@@ -186,7 +186,7 @@ def test_a_plain_group_with_a_bad_window_falls_back_to_one_savepoint_each(tmp_pa
 
 
 def test_the_schema_version_is_read_without_the_writers_lock(tmp_path):
-    from shm_service.service._storage import SCHEMA_VERSION
+    from shm_service.service import SCHEMA_VERSION
 
     st = Storage(tmp_path / "s.sqlite")
     held, release = threading.Event(), threading.Event()

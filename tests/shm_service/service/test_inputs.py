@@ -96,7 +96,7 @@ def test_sim_source_takes_support_orientation_and_length_from_the_sim_table(tmp_
     import tomllib
 
     from estimator import BucklingError
-    from shm_service.service._config import ServiceSettings
+    from shm_service.service import ServiceSettings
     from shm_service.service._sources import SimSource
 
     cfg = tomllib.loads('[sim]\nsupport = "clamped"\norientation = "standing"\nlength_m = 1.5\n'

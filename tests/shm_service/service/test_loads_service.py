@@ -22,7 +22,7 @@ from svc_helpers import fast_overrides, wait_for
 
 from contract import FatigueDocument
 from shm_service.cli import main
-from shm_service.service._launch import start_serve
+from shm_service.service import start_serve
 
 ROOT = Path(__file__).resolve().parents[3]
 MAST = ROOT / "examples" / "mast" / "rig.json"
@@ -217,10 +217,7 @@ def test_a_sigkill_neither_loses_nor_double_counts_a_cycle(served, mast_recordin
 
 def test_the_fatigue_router_in_process(served, tmp_path):
     """The router against the service's own database, in process (the app on a loopback port)."""
-    from shm_service.service._api import create_app
-    from shm_service.service._config import load_settings
-    from shm_service.service._server import ApiServer
-    from shm_service.service._service import MonitoringService
+    from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
 
     whole_tmp, toml, a = served
     settings = load_settings(toml, {"db": str(whole_tmp / "shm.sqlite"), "source": {"spec": "ingest", "id": a["sid"]},

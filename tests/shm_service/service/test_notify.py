@@ -8,9 +8,8 @@ import time
 
 from svc_helpers import Receiver, wait_for
 
-from shm_service.service._config import NotifySettings
+from shm_service.service import AlarmChange, NotifySettings, Storage, WindowCommit
 from shm_service.service._notify import Notifier, notify_targets
-from shm_service.service._storage import AlarmChange, Storage, WindowCommit
 
 
 def _raise(storage):
@@ -94,7 +93,7 @@ def _change(action, at, chart="mode2", level="alarm"):
 def test_an_unparsable_webhook_url_is_a_configuration_error_naming_the_key():
     import pytest
 
-    from shm_service.service._config import SettingsError, load_settings
+    from shm_service.service import SettingsError, load_settings
 
     for url in ("http://[::1/hook", "http://example.org:99999/x", "ftp://example.org/x", "http:///x"):
         with pytest.raises(SettingsError, match=r"notify\.webhooks"):
@@ -236,7 +235,7 @@ def test_notification_ids_do_not_repeat_after_a_power_loss(tmp_path):
 
 
 def test_alarm_and_outbox_transactions_are_committed_with_synchronous_full(tmp_path):
-    from shm_service.service._config import ServiceSettings
+    from shm_service.service import ServiceSettings
 
     assert ServiceSettings().storage_alarm_sync == "full"
     st = Storage(tmp_path / "s.sqlite", notify_targets=[("webhook", "http://127.0.0.1:1/x")])

@@ -13,8 +13,7 @@ from svc_helpers import fast_overrides
 
 from shm_service.cli import main
 from shm_service.recording import read_recording
-from shm_service.service._config import load_settings
-from shm_service.service._service import MonitoringService
+from shm_service.service import MonitoringService, load_settings
 
 
 @pytest.fixture(scope="module")

@@ -13,10 +13,9 @@ import time
 
 import pytest
 
-from shm_service.service._storage import AlarmChange, Storage, StorageUnavailable, WindowCommit
-from shm_service.service._store_writer import WRITER_ADDRESS, WRITER_KEY, RemoteStorage, WriterServer, open_storage
-
 from contract import TrendRow
+from shm_service.service import AlarmChange, Storage, StorageUnavailable, WindowCommit
+from shm_service.service._store_writer import WRITER_ADDRESS, WRITER_KEY, RemoteStorage, WriterServer, open_storage
 
 
 def _window(source: str, k: int, alarm: str | None = None) -> WindowCommit:

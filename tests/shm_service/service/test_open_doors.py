@@ -8,13 +8,10 @@ import socket
 
 import httpx
 import pytest
-
-from shm_service.service._api import AuthLimiter, HostCheck, create_app
-from shm_service.service._config import SettingsError, load_settings
-from shm_service.service._server import ApiServer
-from shm_service.service._service import MonitoringService
-
 from svc_helpers import fast_overrides
+
+from shm_service.service import ApiServer, MonitoringService, SettingsError, load_settings
+from shm_service.service._api import AuthLimiter, HostCheck, create_app
 
 TOKEN = "test-token-123"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -166,7 +163,7 @@ def test_off_loopback_every_route_needs_the_token_and_guesses_are_limited(tmp_pa
 
 
 def test_serve_refuses_a_dashboard_off_loopback_without_a_token(tmp_path):
-    from shm_service.service._service import ServiceError
+    from shm_service.service import ServiceError
 
     o = fast_overrides(tmp_path, **{"source.spec": "ingest"})
     o["dashboard"] = {"enabled": True, "host": "0.0.0.0", "port": 0}

@@ -6,13 +6,11 @@ from __future__ import annotations
 import inspect
 
 import pytest
+from svc_helpers import fast_overrides
 
 from contract import ServicePort, StructurePort
-from shm_service.service._config import load_settings
-from shm_service.service._service import MonitoringService
+from shm_service.service import MonitoringService, load_settings
 from shm_service.service._workers import WorkerFleet
-
-from svc_helpers import fast_overrides
 
 
 def _port_methods(port: type) -> dict[str, inspect.Signature]:

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from shm_service.service._config import ServiceSettings
+from shm_service.service import ServiceSettings
 from shm_service.service._progress import COMPILING, describe_progress
 
 NS = 1_000_000_000

@@ -9,7 +9,7 @@ import logging
 import pytest
 
 from shm_service.cli import main
-from shm_service.service._storage import Storage
+from shm_service.service import Storage
 from shm_service.virtual_rig import SimulationSettings, simulate
 
 
@@ -90,7 +90,7 @@ def test_reprocess_is_analyze_per_file_idempotent_and_feeds_the_service_baseline
     from shm_service.service._stage_analysis import AnalysisStage
 
     model = build_model(read_recording(short_recording, kinds=()).rig)
-    from shm_service.service._config import load_settings
+    from shm_service.service import load_settings
 
     live = AnalysisStage(model, load_settings(config).engine_config(), None, None, "mast-01", baseline=active)  # as the service starts
     assert live.monitor.baseline is not None and not live.learning_baseline

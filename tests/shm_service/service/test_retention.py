@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
+from contract import TrendRow
+from shm_service.service import RetentionSettings, SettingsError, Storage, WindowCommit, load_settings
 from shm_service.service._archive import parse_archive_name
-from shm_service.service._config import RetentionSettings, SettingsError, load_settings
 from shm_service.service._retention import RecordingFile, RetentionWorker, list_recordings, plan_recording_retention
-from shm_service.service._storage import Storage, TrendRow, WindowCommit
 
 HOUR = 3600.0
 DAY = 86400.0
@@ -124,7 +124,7 @@ def test_worker_deletes_real_files_and_rows_and_counts(tmp_path):
 def test_a_running_service_applies_retention_to_its_data_directory(tmp_path):
     from svc_helpers import fast_overrides
 
-    from shm_service.service._service import MonitoringService
+    from shm_service.service import MonitoringService
 
     overrides = fast_overrides(tmp_path, **{"source.spec": "sim", "source.speed": "max", "sim.duration_s": 120.0,
                                             "sim.damage_at_s": None, "archive.rotate_s": 20.0,
@@ -152,8 +152,8 @@ def test_a_running_service_applies_retention_to_its_data_directory(tmp_path):
 
 def test_a_recording_file_holds_at_most_rotate_s_of_data_however_much_one_write_brings(tmp_path):
     from shm_service.rig_layouts import default_rig
+    from shm_service.service import ArchiveSettings
     from shm_service.service._archive import Archive
-    from shm_service.service._config import ArchiveSettings
 
     archive = Archive(ArchiveSettings(directory=str(tmp_path), rotate_s=20.0), default_rig("benchmark"), "sim", None)
     t0 = int(T0 * 1e9)

@@ -17,8 +17,7 @@ import pytest
 from svc_helpers import fast_overrides
 
 from shm_service.recording import read_recording
-from shm_service.service._config import ArchiveSettings, load_settings
-from shm_service.service._service import MonitoringService
+from shm_service.service import ArchiveSettings, MonitoringService, load_settings
 
 ROOT = Path(__file__).resolve().parents[3]
 

@@ -12,10 +12,7 @@ import httpx
 import pytest
 from svc_helpers import Receiver, fast_overrides
 
-from shm_service.service._api import create_app
-from shm_service.service._config import load_settings
-from shm_service.service._server import ApiServer
-from shm_service.service._service import MonitoringService
+from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
 
 TOKEN = "sink-test-token"
 

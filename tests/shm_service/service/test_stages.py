@@ -9,14 +9,14 @@ import time
 import numpy as np
 import pytest
 from pydantic import ValidationError
+from svc_helpers import wait_for
 
+from shm_service.service import StorageUnavailable, WindowCommit
 from shm_service.service._pipeline import AnalysisInbox
 from shm_service.service._scheduler import Scheduler, SchedulerSettings
 from shm_service.service._stage_commit import CommitSettings, CommitStage, PendingCommit
 from shm_service.service._stage_estimate import EstimateSettings, calibration_from_dict, calibration_to_dict
 from shm_service.service._stage_outputs import OutputSettings
-from shm_service.service._storage import StorageUnavailable, WindowCommit
-from svc_helpers import wait_for
 
 # -- the scheduler ------------------------------------------------------------------------------
 

@@ -16,14 +16,11 @@ import httpx
 import orjson
 import pytest
 from mcap.reader import make_reader
-
-from shm_service.rig_layouts import default_rig
-from shm_service.recording import classify_topic
-from shm_service.service._config import load_settings
-from shm_service.service._launch import start_serve
-from shm_service.service._service import MonitoringService
-
 from svc_helpers import FAST, fast_overrides
+
+from shm_service.recording import classify_topic
+from shm_service.rig_layouts import default_rig
+from shm_service.service import MonitoringService, load_settings, start_serve
 
 TOKEN = "test-token-backlog"
 _PAYLOAD = {"imu": lambda i: {"accel": [-9.81, 0.001 * (i % 7), 0.0], "gyro": [0.0, 0.0, 1e-4 * (i % 5)]},

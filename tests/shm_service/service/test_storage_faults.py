@@ -13,11 +13,16 @@ import httpx
 import pytest
 from svc_helpers import fast_overrides
 
-from shm_service.service._api import create_app
-from shm_service.service._config import load_settings
-from shm_service.service._server import ApiServer
-from shm_service.service._service import MonitoringService
-from shm_service.service._storage import AlarmChange, Storage, StorageUnavailable, WindowCommit
+from shm_service.service import (
+    AlarmChange,
+    ApiServer,
+    MonitoringService,
+    Storage,
+    StorageUnavailable,
+    WindowCommit,
+    create_app,
+    load_settings,
+)
 
 TOKEN = "test-token-123"
 

@@ -6,13 +6,9 @@ from __future__ import annotations
 
 import httpx
 import pytest
-
-from shm_service.service._api import create_app
-from shm_service.service._config import load_settings
-from shm_service.service._server import ApiServer
-from shm_service.service._service import MonitoringService
-
 from svc_helpers import fast_overrides
+
+from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
 
 
 @pytest.fixture()
@@ -85,7 +81,7 @@ def test_a_cursor_of_another_list_or_not_ours_is_refused(running):
 def test_alarms_page_newest_first(running, tmp_path):
     import time
 
-    from shm_service.service._storage import AlarmChange, Storage, WindowCommit
+    from shm_service.service import AlarmChange, Storage, WindowCommit
 
     storage = Storage(tmp_path / "shm.sqlite")
     for k in range(5):
