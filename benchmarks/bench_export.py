@@ -33,7 +33,7 @@ MODES = 4
 
 def fill(db: Path, rows: int, *, source: str = "mast-1", chunk: int = 50_000) -> float:
     """``rows`` trend rows (``MODES`` per 60 s window from t = 1.7e9 s) in ``db``; seconds taken."""
-    from shm_service.service._storage import Storage
+    from shm_service.service import Storage
 
     t0 = time.monotonic()
     storage = Storage(db)
@@ -133,7 +133,7 @@ def before(tree: Path, db: Path, rows: int) -> None:
     """The one-request exports from ``shm serve`` of another source tree (its own code: run from it)."""
     import os
 
-    from shm_service.service._launch import start_serve
+    from shm_service.service import start_serve
 
     env = {**os.environ, "PYTHONPATH": str(tree)}
     with start_serve(["--source", "ingest", "--db", str(db), "--port", "0", "--no-dashboard", "--no-archive"], env=env,
@@ -152,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--before", metavar="TREE", help="also export once from `shm serve` of this source tree (the "
                                                           "tree before a change), side by side on the same database")
     args, _ = parser.parse_known_args(argv)
-    from shm_service.service._launch import start_serve
+    from shm_service.service import start_serve
 
     with tempfile.TemporaryDirectory(prefix="bench-export-") as tmp:
         db = Path(tmp) / "shm.sqlite"

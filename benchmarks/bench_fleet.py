@@ -110,7 +110,7 @@ def bench_scheduler(tasks: int = 400, workers: int = 2) -> dict:
 def bench_commit(rows_per_file: int = 560, files: int = 20) -> float:
     """Seconds the client spends committing one reprocessed hour (its trend rows and ledger row)."""
     from contract import TrendRow
-    from shm_service.service._storage import Storage
+    from shm_service.service import Storage
 
     with tempfile.TemporaryDirectory() as tmp:
         storage = Storage(Path(tmp) / "c.sqlite")
@@ -153,7 +153,7 @@ def bench_lock_hold(busy_threads: int = 20, group: int = 19, seconds: float = 20
     import threading
 
     from contract import TrendRow
-    from shm_service.service._storage import Storage, WindowCommit
+    from shm_service.service import Storage, WindowCommit
 
     results = {}
     for path in ("one statement", "transaction"):
@@ -214,8 +214,8 @@ def bench_memory_per_structure(structures: int = 4, settle_s: float = 90.0) -> d
     MonitoringService (its own database, no archive, no dashboard), sampled after ``settle_s``."""
     import psutil
 
-    from shm_service.service._config import load_settings
-    from shm_service.service._service import MonitoringService
+    from shm_service.service import load_settings
+    from shm_service.service import MonitoringService
 
     proc = psutil.Process()
     services = []
@@ -248,9 +248,9 @@ def bench_structure_cost(data_s: float = 300.0, block_s: tuple[float, ...] = (1.
     """CPU per structure-second of one simulated structure (benchmark layout, Gamma = 4, 200 Hz),
     split into the virtual rig's generation and the pipeline (estimator, analysis, commits), run
     unpaced in this thread (``time.process_time``: the machine's load does not count)."""
-    from shm_service.service._config import load_settings
+    from shm_service.service import load_settings
     from shm_service.service._service import SinkGuard, Structure, _ModelCache
-    from shm_service.service._storage import Storage
+    from shm_service.service import Storage
 
     class _Host:  # what a Structure asks of its service
         fleet = False
@@ -298,7 +298,7 @@ def _start_tree_serve(tree: Path, args: list[str], log: IO[str], tmp: Path) -> t
     before issue 23's ready file)."""
     import threading
 
-    from shm_service.service._processes import read_ready
+    from shm_service.service import read_ready
 
     help_text = subprocess.run([sys.executable, "-m", "shm_service.cli", "serve", "--help"], cwd=tree, capture_output=True,
                                text=True, env={**os.environ, "PYTHONPATH": str(tree)}).stdout

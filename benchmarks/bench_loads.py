@@ -134,8 +134,7 @@ def replay_overhead(recording: str, rig_path: str) -> None:
     if not rig.get("hot_spots"):
         raise SystemExit(f"{rig_path} names no hot spots: nothing to compare")
     script = (
-        "import sys, time; from shm_service.service._config import load_settings;"
-        "from shm_service.service._service import MonitoringService;"
+        "import sys, time; from shm_service.service import MonitoringService, load_settings;"
         "s = load_settings(None, {'db': sys.argv[1], 'source': {'spec': 'replay:' + sys.argv[2], 'rig': sys.argv[3], 'speed': 'max'},"
         " 'archive': {'enabled': False}, 'dashboard': {'enabled': False}, 'server': {'port': 0},"
         " 'estimator': {'peripheral': 'gyro', 'modes': 4, 'imus': 4, 'tofs': 0, 'gauges': 4}});"

@@ -94,8 +94,8 @@ def bench_memory(hours: float, sample_s: float = 30.0) -> dict:
     """The sim source at max speed for ``hours`` of simulated time, in process; RSS sampled."""
     import psutil
 
-    from shm_service.service._config import load_settings
-    from shm_service.service._service import MonitoringService
+    from shm_service.service import load_settings
+    from shm_service.service import MonitoringService
 
     proc = psutil.Process()
     with tempfile.TemporaryDirectory() as tmp:

@@ -86,7 +86,7 @@ class Outcome:
 
 
 def settings(tmp: Path, *, source: str, faults: tuple[str, ...], duration_s: float, seed: int = 3) -> Any:
-    from shm_service.service._config import load_settings
+    from shm_service.service import load_settings
 
     cfg = json.loads(json.dumps(FAST))
     cfg.update({"db": str(tmp / "shm.sqlite"), "source": {"spec": source},
@@ -132,7 +132,7 @@ def run(source: str, faults: tuple[str, ...], duration_s: float, *, fault_topic:
     """Run a simulated rig with ``faults`` through the service (``source`` "sim" or "ingest"),
     observing after every 1 s batch. Returns the observations and the final status document."""
     from shm_service.service._ingest import parse_body
-    from shm_service.service._service import MonitoringService
+    from shm_service.service import MonitoringService
     from shm_service.service._sources import SimSource
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -134,10 +134,10 @@ def campaign(requests: int, *, seed: int = 11, workdir: Path | None = None) -> d
     """Send ``requests`` generated requests; returns the counts by status and the 5xx examples."""
     import httpx
 
-    from shm_service.service._api import create_app
-    from shm_service.service._config import load_settings
-    from shm_service.service._server import ApiServer
-    from shm_service.service._service import MonitoringService
+    from shm_service.service import create_app
+    from shm_service.service import load_settings
+    from shm_service.service import ApiServer
+    from shm_service.service import MonitoringService
 
     tmp = Path(workdir or tempfile.mkdtemp(prefix="shm-http-campaign-"))
     cfg = {"db": str(tmp / "shm.sqlite"), "source": {"spec": "ingest"}, "dashboard": {"enabled": False},
