@@ -327,6 +327,30 @@ def _start_tree_serve(tree: Path, args: list[str], log: IO[str], tmp: Path) -> t
     return proc, url
 
 
+def compare_cost(tree: Path, rounds: int = 2) -> dict:
+    """``bench_structure_cost`` of ``tree`` (before) and of this tree (after), each in a process of
+    its own, alternately ``rounds`` times: the CPU per structure-second of one simulated structure
+    split into the virtual rig's generation and the pipeline (``time.process_time``, so the
+    machine's load does not count). A live fleet's CPU is both: this says which one changed."""
+    code = ("import json, benchmarks.bench_fleet as b; r = b.bench_structure_cost(block_s=(2.0,)); "
+            "print('COST', json.dumps(r[2.0]))")
+    runs: dict[str, list[dict]] = {"before": [], "after": []}
+    here = Path(__file__).resolve().parents[1]
+    for k in range(rounds):
+        order = [("before", tree), ("after", here)]
+        for label, where in (order[::-1] if k % 2 else order):
+            out = subprocess.run([sys.executable, "-c", code], cwd=where, capture_output=True, text=True, check=True,
+                                 env={**os.environ, "PYTHONPATH": str(where)}).stdout
+            runs[label].append(json.loads(out.split("COST ", 1)[1]))
+    mean = {label: {key: round(sum(r[key] for r in rs) / len(rs), 2) for key in ("sim_ms_per_s", "pipeline_ms_per_s")}
+            for label, rs in runs.items()}
+    b, a = mean["before"], mean["after"]
+    print(f"[compare] one structure, block 2 s, mean of {rounds}: the virtual rig {b['sim_ms_per_s']} / {a['sim_ms_per_s']} ms, "
+          f"the pipeline (estimator, analysis, commits) {b['pipeline_ms_per_s']} / {a['pipeline_ms_per_s']} ms of CPU per "
+          f"structure-second (before / after)", flush=True)
+    return mean
+
+
 def compare_live(tree: Path, structures: list[int], *, speed: float, seconds: float, dashboard: bool,
                  processes: tuple[int, ...] = (1, 2), repeats: int = 1, **options: Any) -> list[dict]:
     """Each live fleet on ``tree``'s ``shm serve`` (before) and on this tree's (after), one after
@@ -538,6 +562,7 @@ def main(argv: list[str] | None = None) -> int:
     bench_structure_cost()
     bench_lock_hold()
     if args.compare:  # with --live-processes and --live-hog where this tree has them
+        compare_cost(Path(args.compare).resolve())
         compare_live(Path(args.compare).resolve(), args.live, speed=args.live_speed, seconds=args.live_s,
                      dashboard=args.live_dashboard, processes=tuple(getattr(args, "live_processes", (1, 2))),
                      repeats=args.compare_repeats,
