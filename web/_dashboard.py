@@ -33,6 +33,30 @@ from ._view import ClientView
 __all__ = ["Dashboard", "SENSOR_STATES"]
 
 log = logging.getLogger(__name__)
+
+
+class _ProbeFilter(logging.Filter):
+    """A client that opens the dashboard's port and closes it without a request (a browser's
+    speculative preconnect, a TCP health check, a port scan) makes the websockets server log
+    "opening handshake failed" at ERROR with three tracebacks. Nothing failed: such a record is
+    logged at DEBUG, without the tracebacks. A handshake that did send something stays an error."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.getMessage() != "opening handshake failed" or not record.exc_info:
+            return True
+        cause = record.exc_info[1]
+        while cause is not None and not (isinstance(cause, EOFError) and "after 0 bytes" in str(cause)):
+            cause = cause.__cause__
+        if cause is None:  # not the closed-before-a-byte case
+            return True
+        if not logging.getLogger(record.name).isEnabledFor(logging.DEBUG):
+            return False
+        record.levelno, record.levelname, record.exc_info, record.exc_text = logging.DEBUG, "DEBUG", None, None
+        record.msg, record.args = "a client opened the dashboard's port and closed it without a request", ()
+        return True
+
+
+_PROBES = _ProbeFilter()
 #: What the dashboard reads of the port (a missing one is refused at construction).
 PORT_METHODS = ("structures_document", "structure_model", "structure_status", "structure_trends", "structure_alarms",
                 "structure_window", "structure_spectra", "structure_fatigue", "live", "acknowledge")
@@ -87,6 +111,9 @@ class Dashboard:
         self.context = ViewContext(label=label, fleet=self.fleet, structures=self.poller,
                                    acknowledge=self._acknowledge, stats=self._stats)
         self.gate = None
+        probes = logging.getLogger("websockets.server")
+        if _PROBES not in probes.filters:
+            probes.addFilter(_PROBES)
         if off_loopback:  # viser on a free loopback port; the token gate (web._gate) on the public address
             self.server = viser.ViserServer(host="127.0.0.1", port=0, label=label, verbose=False)
             try:

@@ -38,12 +38,12 @@ def mast_recording(tmp_path_factory) -> Path:
     return path
 
 
-def _config(tmp: Path, recording: Path, db: Path) -> Path:
+def _config(tmp: Path, recording: Path, db: Path, speed: str = "max") -> Path:
     o = fast_overrides(tmp)
     o.pop("archive")
     o["db"] = str(db)
     o["estimator"].update({"peripheral": "gyro", "modes": 4, "imus": 4, "tofs": 0, "gauges": 4})
-    o["source"] = {"spec": f"replay:{recording}", "rig": str(MAST), "speed": "max", "keep_running": True}
+    o["source"] = {"spec": f"replay:{recording}", "rig": str(MAST), "speed": speed, "keep_running": True}
     o["archive"] = {"directory": str(tmp / "recordings"), "estimate_decimation": 1}
     toml = tmp / "serve.toml"
     toml.write_text(tomli_w.dumps(o))
@@ -187,8 +187,10 @@ def test_a_sigkill_neither_loses_nor_double_counts_a_cycle(served, mast_recordin
     whole_tmp, _, a = served
     whole = _rows(whole_tmp / "shm.sqlite")
     db = tmp_path / "shm.sqlite"
+    # paced (10x), so the kill lands mid-run: at max speed a fast machine committed every window
+    # before the poll that saw the fourth could kill it
+    serve = _serve(_config(tmp_path, mast_recording, db, speed="10"), tmp_path)
     toml = _config(tmp_path, mast_recording, db)
-    serve = _serve(toml, tmp_path)
     try:
         wait_for(lambda: _status(serve.url)["pipeline"]["windows_committed"] >= 4, timeout=300)
         os.kill(serve.pid, signal.SIGKILL)

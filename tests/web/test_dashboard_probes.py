@@ -1,0 +1,51 @@
+"""A client that opens the dashboard's port and closes it without a request (a browser's
+preconnect, a TCP health check) is not an error in the service's log; a client that sends
+something that is not a handshake still is. A real viser server and real sockets."""
+
+from __future__ import annotations
+
+import logging
+import socket
+import time
+
+import pytest
+import viser
+
+from web._dashboard import _PROBES
+
+
+@pytest.fixture()
+def viser_server():
+    logger = logging.getLogger("websockets.server")
+    logger.addFilter(_PROBES)
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    yield int(server.get_port())
+    server.stop()
+    logger.removeFilter(_PROBES)
+
+
+def _errors(caplog) -> list[logging.LogRecord]:
+    return [r for r in caplog.records if r.name == "websockets.server" and r.levelno >= logging.ERROR]
+
+
+def _wait_for(predicate, timeout: float = 5.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.05)
+    return predicate()
+
+
+def test_a_probe_of_the_port_is_not_an_error_but_garbage_is(viser_server, caplog):
+    caplog.set_level(logging.DEBUG, logger="websockets.server")
+    with socket.create_connection(("127.0.0.1", viser_server), timeout=5):
+        pass  # connected, closed without a byte
+    assert _wait_for(lambda: any("without a request" in r.getMessage() for r in caplog.records))
+    assert _errors(caplog) == []
+    probe = next(r for r in caplog.records if "without a request" in r.getMessage())
+    assert probe.levelno == logging.DEBUG and probe.exc_info is None
+    with socket.create_connection(("127.0.0.1", viser_server), timeout=5) as s:
+        s.sendall(b"NOT A HANDSHAKE\r\n\r\n")
+        s.recv(1024)
+    assert _wait_for(lambda: len(_errors(caplog)) == 1)
