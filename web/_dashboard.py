@@ -39,7 +39,9 @@ class _ProbeFilter(logging.Filter):
     """A client that opens the dashboard's port and closes it without a request (a browser's
     speculative preconnect, a TCP health check, a port scan) makes the websockets server log
     "opening handshake failed" at ERROR with three tracebacks. Nothing failed: such a record is
-    logged at DEBUG, without the tracebacks. A handshake that did send something stays an error."""
+    logged at DEBUG, without the tracebacks. A handshake that did send something stays an error.
+    (viser drops every "opening handshake failed" once its server answered a first HTTP request;
+    before that, a browser's preconnect to a freshly started dashboard was logged as an error.)"""
 
     def filter(self, record: logging.LogRecord) -> bool:
         if record.getMessage() != "opening handshake failed" or not record.exc_info:
