@@ -214,8 +214,7 @@ def bench_memory_per_structure(structures: int = 4, settle_s: float = 90.0) -> d
     MonitoringService (its own database, no archive, no dashboard), sampled after ``settle_s``."""
     import psutil
 
-    from shm_service.service import load_settings
-    from shm_service.service import MonitoringService
+    from shm_service.service import MonitoringService, load_settings
 
     proc = psutil.Process()
     services = []
@@ -248,9 +247,8 @@ def bench_structure_cost(data_s: float = 300.0, block_s: tuple[float, ...] = (1.
     """CPU per structure-second of one simulated structure (benchmark layout, Gamma = 4, 200 Hz),
     split into the virtual rig's generation and the pipeline (estimator, analysis, commits), run
     unpaced in this thread (``time.process_time``: the machine's load does not count)."""
-    from shm_service.service import load_settings
+    from shm_service.service import Storage, load_settings
     from shm_service.service._service import SinkGuard, Structure, _ModelCache
-    from shm_service.service import Storage
 
     class _Host:  # what a Structure asks of its service
         fleet = False

@@ -94,8 +94,7 @@ def bench_memory(hours: float, sample_s: float = 30.0) -> dict:
     """The sim source at max speed for ``hours`` of simulated time, in process; RSS sampled."""
     import psutil
 
-    from shm_service.service import load_settings
-    from shm_service.service import MonitoringService
+    from shm_service.service import MonitoringService, load_settings
 
     proc = psutil.Process()
     with tempfile.TemporaryDirectory() as tmp:

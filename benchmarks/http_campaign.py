@@ -134,10 +134,7 @@ def campaign(requests: int, *, seed: int = 11, workdir: Path | None = None) -> d
     """Send ``requests`` generated requests; returns the counts by status and the 5xx examples."""
     import httpx
 
-    from shm_service.service import create_app
-    from shm_service.service import load_settings
-    from shm_service.service import ApiServer
-    from shm_service.service import MonitoringService
+    from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
 
     tmp = Path(workdir or tempfile.mkdtemp(prefix="shm-http-campaign-"))
     cfg = {"db": str(tmp / "shm.sqlite"), "source": {"spec": "ingest"}, "dashboard": {"enabled": False},

@@ -10,7 +10,7 @@ import time
 
 import httpx
 import pytest
-from svc_helpers import Receiver, fast_overrides
+from svc_helpers import Receiver, fast_overrides, wait_for
 
 from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
 
@@ -84,6 +84,18 @@ def ingest_service(tmp_path):
     service.stop(drain_s=0)
 
 
+def _post(c: httpx.Client, start: int) -> None:
+    """20 samples of IMU D at rest from ``start`` (ns), ingested with the token."""
+    batch = {"messages": [{"topic": "/imu/D", "log_time_ns": start + i * 5_000_000,
+                           "payload": {"accel": [-9.81, 0.0, 0.0], "gyro": [0.0, 0.0, 0.0]}} for i in range(20)]}
+    assert c.post("/api/ingest", json=batch, headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 200
+
+
+def _status_when(c: httpx.Client, predicate) -> dict:
+    """The first /api/status that satisfies ``predicate`` within 20 s."""
+    return wait_for(lambda: (st if predicate(st := c.get("/api/status").json()) else None), 20, "the status")
+
+
 def test_healthz_follows_the_pipeline_and_recovers(ingest_service):
     service, url = ingest_service
     original = service.pipeline.process
@@ -98,28 +110,14 @@ def test_healthz_follows_the_pipeline_and_recovers(ingest_service):
     service.pipeline.process = flaky
     t0 = 1_767_225_600_000_000_000
 
-    def post(start: int) -> None:
-        batch = {"messages": [{"topic": "/imu/D", "log_time_ns": start + i * 5_000_000,
-                               "payload": {"accel": [-9.81, 0.0, 0.0], "gyro": [0.0, 0.0, 0.0]}} for i in range(20)]}
-        assert c.post("/api/ingest", json=batch, headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 200
-
-    def wait_for(predicate) -> dict:
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            st = c.get("/api/status").json()
-            if predicate(st):
-                return st
-            time.sleep(0.05)
-        raise AssertionError(f"status never matched: {st['service']}")
-
     with httpx.Client(base_url=url) as c:
         assert c.get("/healthz").json()["status"] == "ok"
-        post(t0)
-        st = wait_for(lambda st: st["service"]["pipeline_errors"] == 1)
+        _post(c, t0)
+        st = _status_when(c, lambda st: st["service"]["pipeline_errors"] == 1)
         assert st["service"]["pipeline_error"] == "RuntimeError: injected fault"
         assert c.get("/healthz").json()["status"] == "degraded"
-        post(t0 + 10**9)
-        st = wait_for(lambda st: st["pipeline"]["samples"] == 20)
+        _post(c, t0 + 10**9)
+        st = _status_when(c, lambda st: st["pipeline"]["samples"] == 20)
         assert c.get("/healthz").json()["status"] == "ok"
         assert st["service"]["pipeline_error"] is None and st["service"]["pipeline_errors"] == 1
         assert st["service"]["last_pipeline_error"] == "RuntimeError: injected fault"
@@ -148,26 +146,14 @@ def test_a_failed_joined_batch_counts_each_batch_it_skipped(ingest_service):
     service.pipeline.process = failing_twice
     t0 = 1_767_225_600_000_000_000
 
-    def post(c: httpx.Client, start: int) -> None:
-        batch = {"messages": [{"topic": "/imu/D", "log_time_ns": start + i * 5_000_000,
-                               "payload": {"accel": [-9.81, 0.0, 0.0], "gyro": [0.0, 0.0, 0.0]}} for i in range(20)]}
-        assert c.post("/api/ingest", json=batch, headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 200
-
     with httpx.Client(base_url=url) as c:
-        post(c, t0)
-        deadline = time.monotonic() + 20
-        while not calls and time.monotonic() < deadline:
-            time.sleep(0.01)
+        _post(c, t0)
+        wait_for(lambda: calls, 20, "the first step")
         assert calls == [20]  # the first batch is in the (held) step
-        post(c, t0 + 10**9)
-        post(c, t0 + 2 * 10**9)
+        _post(c, t0 + 10**9)
+        _post(c, t0 + 2 * 10**9)
         release.set()
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            st = c.get("/api/status").json()
-            if st["service"]["pipeline_errors"] >= 3:
-                break
-            time.sleep(0.05)
+        st = _status_when(c, lambda st: st["service"]["pipeline_errors"] >= 3)
         assert calls == [20, 40]  # the two queued batches went as one step
         assert st["service"]["pipeline_errors"] == 3
         assert "shm_pipeline_errors_total 3" in c.get("/metrics").text
