@@ -317,10 +317,11 @@ class Structure:
 
     def _batch_failed(self, exc: Exception, what: str = "pipeline error on a batch; batch skipped", batches: int = 1) -> None:
         text = f"{type(exc).__name__}: {exc}"
+        # the text before the count: a status read in between sees the count with its error
+        self.pipeline_error = self.last_pipeline_error = text
         self.pipeline_errors += batches
         if batches > 1:
             what = f"pipeline error on {batches} joined batches; all {batches} skipped"
-        self.pipeline_error = self.last_pipeline_error = text
         # The same error on every batch would flood the log: its first time with the traceback.
         if self.pipeline_errors <= 3:
             log.exception("%s%s", f"structure {self.id}: " if self.service.fleet else "", what)
