@@ -153,10 +153,6 @@ class AnalysisInbox:
     def ready(self) -> bool:
         return bool(self.items) or time.monotonic() >= self._idle_at
 
-    def wait_s(self) -> float | None:
-        """Seconds until the retry falls due when nothing arrives (None: items wait now)."""
-        return None if self.items else self._idle_at - time.monotonic()
-
     def step(self) -> None:
         with self.lock:
             if self.items:

