@@ -4,7 +4,8 @@ not a test).
 ``bench_fleet --compare`` measures the whole budget (lag, RSS, CPU per structure-second) over
 10-minute runs. This is the quick A/B for a change in the runtime: ``shm serve`` of ``--structures``
 simulated structures on two worker processes (``--no-archive``, real time, 2 s blocks), the CPU
-of the front and of each worker over ``--measure-s`` once ``--skip-s`` have passed (the start, the
+of the front and of each worker over ``--measure-s`` once ``--skip-s`` have passed since its API
+came up (the start, the
 kernels, the first windows), for each tree in turn, ``--rounds`` times::
 
     git worktree add ../other <commit>
@@ -17,20 +18,18 @@ there; run once before measuring.
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.bench_fleet import _fleet_toml, _load
+from benchmarks.bench_fleet import _fleet_toml, _load, _start_tree_serve
 
 
 def fleet_cpu(tree: Path, structures: int, *, skip_s: float, measure_s: float) -> dict:
     """Cores used by the front and by each worker of ``tree``'s ``shm serve`` of ``structures``
-    simulated structures on two workers, over ``measure_s`` after ``skip_s``."""
+    simulated structures on two workers, over ``measure_s`` from ``skip_s`` after its API came up."""
     import psutil
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -39,8 +38,7 @@ def fleet_cpu(tree: Path, structures: int, *, skip_s: float, measure_s: float) -
         args = ["--config", str(cfg), "--speed", "1", "--no-archive", "--port", "0", "--db", f"{tmp}/shm.sqlite",
                 "--workers", "2", "--json", "--no-dashboard"]
         with open(Path(tmp) / "serve.log", "w") as log:
-            proc = subprocess.Popen([sys.executable, "-m", "shm_service.cli", "serve", *args], cwd=tree,
-                                    env={**os.environ, "PYTHONPATH": str(tree)}, stdout=subprocess.DEVNULL, stderr=log)
+            proc, _ = _start_tree_serve(tree, args, log, Path(tmp))  # returns once its API is up
             try:
                 front = psutil.Process(proc.pid)
                 time.sleep(skip_s)

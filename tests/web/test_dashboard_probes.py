@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import logging
 import socket
-import time
 
 import pytest
 import viser
+from browser_helpers import wait
 
 from web._dashboard import _PROBES
 
@@ -32,24 +32,15 @@ def _errors(caplog) -> list[logging.LogRecord]:
     return [r for r in caplog.records if r.name == "websockets.server" and r.levelno >= logging.ERROR]
 
 
-def _wait_for(predicate, timeout: float = 5.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.05)
-    return predicate()
-
-
 def test_a_probe_of_the_port_is_not_an_error_but_garbage_is(viser_server, caplog):
     caplog.set_level(logging.DEBUG, logger="websockets.server")
     with socket.create_connection(("127.0.0.1", viser_server), timeout=5):
         pass  # connected, closed without a byte
-    assert _wait_for(lambda: any("without a request" in r.getMessage() for r in caplog.records))
+    wait(lambda: any("without a request" in r.getMessage() for r in caplog.records), 5, "the probe's DEBUG record", poll=0.05)
     assert _errors(caplog) == []
     probe = next(r for r in caplog.records if "without a request" in r.getMessage())
     assert probe.levelno == logging.DEBUG and probe.exc_info is None
     with socket.create_connection(("127.0.0.1", viser_server), timeout=5) as s:
         s.sendall(b"NOT A HANDSHAKE\r\n\r\n")
         s.recv(1024)
-    assert _wait_for(lambda: len(_errors(caplog)) == 1)
+    wait(lambda: len(_errors(caplog)) == 1, 5, "the garbage's ERROR record", poll=0.05)

@@ -190,7 +190,6 @@ def test_a_sigkill_neither_loses_nor_double_counts_a_cycle(served, mast_recordin
     # paced (10x), so the kill lands mid-run: at max speed a fast machine committed every window
     # before the poll that saw the fourth could kill it
     serve = _serve(_config(tmp_path, mast_recording, db, speed="10"), tmp_path)
-    toml = _config(tmp_path, mast_recording, db)
     try:
         wait_for(lambda: _status(serve.url)["pipeline"]["windows_committed"] >= 4, timeout=300)
         os.kill(serve.pid, signal.SIGKILL)
@@ -199,7 +198,7 @@ def test_a_sigkill_neither_loses_nor_double_counts_a_cycle(served, mast_recordin
         serve.kill()
     before = _rows(db)
     assert 0 < len(before) < len(whole)
-    serve = _serve(toml, tmp_path)
+    serve = _serve(_config(tmp_path, mast_recording, db), tmp_path)  # the rest at max speed
     try:
         wait_for(lambda: _finished(serve.url), timeout=300)
     finally:
