@@ -348,7 +348,7 @@ def _run(times_s, b, curvature_shapes, stations_eta, *, fs, temperature, bearing
     engine = MonitoringEngine(mon, origin_ns=origin, time_zero_ns=origin, not_before_ns=not_before, loads=loads)
     engine_windows = engine.add(t, B, support=d, temperature=temp, gauges=gauges)
     windows = tuple(w.result for w in engine_windows)
-    # the hot spots' loads per window and their alarm events (issue 21), when the engine has loads
+    # the hot spots' loads per window and their alarm events, when the engine has loads
     loads_windows = tuple((w.loads, w.loads_events) for w in engine_windows if w.loads is not None)
     return cfg, fs, B, t, d, mon, engine, windows, loads_windows
 
@@ -392,7 +392,7 @@ def analyze(
     time_origin_ns : data time (ns, UNIX for a contract recording) of times_s = 0: windows are
         aligned to multiples of the step in data time and reported in s after it.
     not_before_s : windows starting earlier (s after the origin) are not analysed (the filter converging).
-    loads : LoadsMonitor or None: the hot spots' loads and fatigue, per window (issue 21).
+    loads : LoadsMonitor or None: the hot spots' loads and fatigue, per window.
     gauges : measured strain by gauge name, (times s after time_origin_ns, values m/m), for the
         loads' DEL bands (the monitor's gauges), or None: the windows' loads carry no band.
 

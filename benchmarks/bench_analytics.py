@@ -1,4 +1,4 @@
-"""Bars of issue 5 through the real chain: simulate → estimator (shm_service.processing.estimation.
+"""The monitoring bars through the real chain: simulate → estimator (shm_service.processing.estimation.
 deformation_record) → analytics.analyze, with a peer operational modal analysis (pyOMA-2,
 SSI-cov on the raw IMU accelerations) side by side.
 

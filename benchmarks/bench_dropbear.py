@@ -1,4 +1,4 @@
-"""Issue 25's DROPBEAR figures: 0.5 s windows every 0.25 s, band 15–80 Hz, the windows whose
+"""The DROPBEAR figures: 0.5 s windows every 0.25 s, band 15–80 Hz, the windows whose
 acceleration RMS is at least 5× the trial's quietest; the lowest listed mode of each window
 against the roller position (PinLoc): slow steps (dwell windows, PinLoc std ≤ 0.01 V) the
 relative RMS residual of a cubic fit, random dwell the Spearman rank correlation; and the share

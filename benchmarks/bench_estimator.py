@@ -1,5 +1,5 @@
-"""Issue 3's bars: accuracy over five seeds (ideal, realistic, another tool's recordings),
-consistency (NEES), and speed side by side with the straightforward filterpy loop; issue 12's
+"""The estimator's bars: accuracy over five seeds (ideal, realistic, another tool's recordings),
+consistency (NEES), and speed side by side with the straightforward filterpy loop; the combimode's
 clamped configurations (the fixed bearing hanging, a standing mast) and the decoupling of the
 unit deformations' spectra with the bearing fixed (the paper's Figures 13–14).
 

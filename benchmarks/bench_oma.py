@@ -1,4 +1,4 @@
-"""Operational modal analysis (issue 15): speed of one window, the honesty of the reported
+"""Operational modal analysis: speed of one window, the honesty of the reported
 uncertainties, and the DROPBEAR figures of ``shm oma`` against a naive Welch peak picker, with
 pyOMA-2's SSI-cov side by side where it installs.
 

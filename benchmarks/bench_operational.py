@@ -1,4 +1,4 @@
-"""Issue 15's acceptance figures on 30-minute operational recordings, through the real chain
+"""The operational acceptance figures on 30-minute operational recordings, through the real chain
 (recording → estimator → ``shm_service.processing.analysis``, the code ``shm analyze`` runs), with pyOMA-2
 side by side and the analytics' speed.
 

@@ -1,4 +1,4 @@
-"""The DAQ fault campaign of issue 26: generated files with the faults field data has, through the
+"""The DAQ fault campaign: generated files with the faults field data has, through the
 real commands, compared with the clean file sample by sample.
 
 Each case writes an 8-channel, 200 Hz CSV of a three-mode response (``shm_service.formats.daq_faults``)
@@ -183,12 +183,12 @@ def main(argv: list[str] | None = None) -> dict:
         "cut_flagged_by_analyze": sum(bool(r.get("analyze_says_cut")) for r in results),
         "wall_s": round(time.perf_counter() - started, 1),
     }
-    print("DAQ fault campaign (issue 26): " + json.dumps(summary))
+    print("DAQ fault campaign: " + json.dumps(summary))
     return summary
 
 
 def failures(summary: dict) -> list[str]:
-    """The bars of issue 26 the summary misses (empty: every bar met)."""
+    """The campaign's bars the summary misses (empty: every bar met)."""
     n = summary["cases"]
     bars = {
         "no traceback": summary["tracebacks"] == 0,

@@ -612,8 +612,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_oma_parser(sub)
     _add_inspect_parser(sub)
     from .commands.demo import add_demo_parser
-    from .commands.loads import add_loads_parser  # shm loads (issue 21)
-    from .service._cli import add_serve_parser  # shm serve (issue 6)
+    from .commands.loads import add_loads_parser  # shm loads
+    from .service._cli import add_serve_parser  # shm serve
     add_serve_parser(sub)
     add_demo_parser(sub)
     add_loads_parser(sub)

@@ -28,10 +28,10 @@ PACKAGES = ("contract", "estimator", "analytics", "shm_service", "web", "benchma
 TREE_PAGE = ROOT / "docs" / "development" / "tree.md"
 
 
-def module_files(root: Path = ROOT) -> dict[str, Path]:
-    """Every module of the project by its dotted name (a package by its ``__init__``)."""
+def module_files(root: Path = ROOT, packages: tuple[str, ...] = PACKAGES) -> dict[str, Path]:
+    """Every module of the packages under ``root`` by its dotted name (a package by its ``__init__``)."""
     out: dict[str, Path] = {}
-    for top in PACKAGES:
+    for top in packages:
         for path in sorted((root / top).rglob("*.py")):
             rel = path.relative_to(root).with_suffix("")
             parts = list(rel.parts)
@@ -183,11 +183,12 @@ def tree_map(files: dict[str, Path] | None = None) -> str:
         uses = set()
         for module in inside:
             for target in graph[module]:
-                if not (target == package or target.startswith(package + ".")):
-                    owner = target if _is_package(target, files) else target.rpartition(".")[0]
-                    uses.add(owner if owner else target)
-        # a package listed by its deepest folder, children folded into their parent if imported whole
-        shown = sorted(u for u in uses if not any(u.startswith(v + ".") for v in uses))
+                if target == package or target.startswith(package + "."):
+                    continue
+                owner = target if _is_package(target, files) else target.rpartition(".")[0]
+                # a module of an enclosing package is named itself: its package would say too much
+                uses.add(target if package.startswith(owner + ".") else owner)
+        shown = sorted(uses)
         lines.append(f"| `{package}` | {len(members)} | {_summary(files[package]).replace('|', '/')} | "
                      f"{', '.join(f'`{u}`' for u in shown) or '—'} |")
     lines += [

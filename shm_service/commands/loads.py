@@ -1,4 +1,4 @@
-"""``shm loads``: strain, stress, rainflow cycles, DELs and fatigue damage of a record (issue 21).
+"""``shm loads``: strain, stress, rainflow cycles, DELs and fatigue damage of a record.
 
 DATA is either a contract recording — raw (the estimator runs first, with ``shm estimate``'s
 options) or an estimate — whose virtual strain ε(η, t) = −c(η)·Σ b s''(η) is counted at the

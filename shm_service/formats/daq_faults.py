@@ -1,4 +1,4 @@
-"""DAQ files with the faults field data has, for the campaign and the property tests (issue 26).
+"""DAQ files with the faults field data has, for the campaign and the property tests.
 
 :func:`write_faulted_csv` writes a clean table of channels with a time column, then applies
 faults: cells made blank, ``NaN``, ``inf``/``-inf``, ``1e30`` or text; a row's time repeated or

@@ -82,7 +82,7 @@ def analyze_deformations(rig, data: DeformationRecord, *, config: AnalysisConfig
     (each gauge taken as in sample: the estimate may have used it), or None: no band."""
     kw = _kwargs(rig, data, config, warmup_s, not_before_s, signatures)
     loads = None
-    if rig.hot_spots:  # the hot spots' loads and fatigue in the same engine (issue 21)
+    if rig.hot_spots:  # the hot spots' loads and fatigue in the same engine
         from analytics import LoadsMonitor
 
         loads = LoadsMonitor.from_rig(rig, data.units.curvature)

@@ -211,7 +211,7 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
                 writer.write(topic, lt, {key: value}, pt)
         for stamp, payload in zip(stamps.tolist(), estimate_payloads(result)):
             writer.write(ESTIMATE_TOPIC, stamp, payload)
-        if loads is not None:  # each estimate's strain and moments at the hot spots and the grid (issue 21)
+        if loads is not None:  # each estimate's strain and moments at the hot spots and the grid
             out = loads(result.model.state_layout.b_of(result.x))
             root = out["root_moment_nm"] if out["root_moment_nm"] is not None else np.zeros(len(stamps))
             for stamp, strain, moment, m0 in zip(stamps.tolist(), out["strain"].tolist(), out["moment_nm"].tolist(), root.tolist()):

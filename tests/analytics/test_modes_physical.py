@@ -1,4 +1,4 @@
-"""Issue 25: every listed mode physical, modes followed across windows, modes that move within a
+"""Every listed mode physical, modes followed across windows, modes that move within a
 window listed once. Synthetic records with exact frequencies, and the DROPBEAR trials (tests/data/
 dropbear, CC BY-SA 4.0, Vereen, Downey, Dodson & Moura 2023) under the issue's protocol: 0.5 s
 windows every 0.25 s, band 15–80 Hz, the lowest listed mode of each excited window."""

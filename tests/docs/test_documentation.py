@@ -1,4 +1,4 @@
-"""The documentation (issue 24): the site builds offline with ``mkdocs build --strict`` (a broken
+"""The documentation: the site builds offline with ``mkdocs build --strict`` (a broken
 link, a missing page or a generated page that fails is an error), the generated reference holds
 every command, option, configuration key, HTTP route and ``rig.json`` key of the code, the
 validation pages carry their stamp, the README stays short and its links resolve, and the numpydoc

@@ -1,4 +1,4 @@
-"""Issue 26: a bad value costs its channel that sample and nothing else, and is counted.
+"""A bad value costs its channel that sample and nothing else, and is counted.
 
 The faults are written into real files (text, .npz) and go through the real commands
 (``shm import``, ``shm oma``); the kept samples are compared with the clean file sample by sample.

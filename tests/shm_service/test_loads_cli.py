@@ -1,4 +1,4 @@
-"""`shm loads` (issue 21): measured channels counted directly, virtual strain of an estimate recording."""
+"""`shm loads`: measured channels counted directly, virtual strain of an estimate recording."""
 
 from __future__ import annotations
 
@@ -247,7 +247,7 @@ def test_estimate_analyze_and_loads_take_one_definition_of_the_model_options():
 def test_the_estimate_recording_carries_each_estimates_virtual_loads(estimate_file):
     """`shm estimate --out` writes /estimate/loads: per estimate the strain and bending moment at the
     stations its metadata names (the rig's hot spots, then 16 stations from the support), and the
-    moment at the support; ε = −c Σ b s'' and M = EI κ of the estimate's own b (issue 21)."""
+    moment at the support; ε = −c Σ b s'' and M = EI κ of the estimate's own b."""
     from contract import ESTIMATE_LOADS_TOPIC, ESTIMATE_TOPIC
     from estimator import build_model
     from shm_service.recording import read_recording

@@ -194,7 +194,7 @@ def test_bad_input_is_refused_with_a_message_naming_the_value(tmp_path, capsys, 
     bad[123, 1] = np.nan
     nan = tmp_path / "nan.csv"
     write_text(nan, bad, ",", time=True)
-    code, out, err = run(capsys, "oma", nan, *BAND)  # a NaN costs one sample, counted and filled (issue 26)
+    code, out, err = run(capsys, "oma", nan, *BAND)  # a NaN costs one sample, counted and filled
     assert code == 0 and "b: 1 rejected (1 nonfinite); first: line 125 (nonfinite)" in out, err
     code, _, err = run(capsys, "oma", short, "--fs", FS, "--channels", "0,zz")
     assert code == 2 and "unknown channel 'zz'" in err

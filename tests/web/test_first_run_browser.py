@@ -1,4 +1,4 @@
-"""The first run shows itself (issue 24): ``shm demo`` as ``make demo`` runs it (the defaults: the
+"""The first run shows itself: ``shm demo`` as ``make demo`` runs it (the defaults: the
 virtual rig at 4× real time, its dashboard on), in headless Chromium from the moment its dashboard's
 port opens. The panel's header, its tabs and a status line saying what the service is doing appear
 at once, and ``/api/status`` counts estimates within 30 s of the port opening: the rest phase's

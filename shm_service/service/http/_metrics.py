@@ -211,13 +211,13 @@ def _families(st: StatusDocument) -> list[_Family]:
            [({"sink": name, "kind": kind}, v) for name, sink in st.sinks.items() for kind, v in sink.errors_by_kind.items()],
            service=("*",))
     metric("shm_trend_rows", "gauge", "trend rows stored", [({}, st.storage.trend_rows)], service=("*",))
-    _fatigue_families(metric, p.hot_spots)  # the hot spots after the last committed window (issue 21)
+    _fatigue_families(metric, p.hot_spots)  # the hot spots after the last committed window
     return out
 
 
 
 def _fatigue_families(metric: Callable[..., None], spots: list[Any]) -> None:
-    """The hot spots' fatigue families (issue 21); none without hot spots."""
+    """The hot spots' fatigue families; none without hot spots."""
     if not spots:
         return
     metric("shm_fatigue_consumed_ratio", "gauge", "consumed fatigue life D of a hot spot (Palmgren-Miner; 1 = exhausted)",

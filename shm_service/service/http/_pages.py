@@ -1,4 +1,4 @@
-"""The paging convention of every list route (issue 26: an export says what it holds).
+"""The paging convention of every list route (an export says what it holds).
 
 Query: ``limit`` (default 1000, at most ``contract.MAX_PAGE``) and ``cursor`` (the
 ``next_cursor`` of the previous page, opaque). JSON: the list under its key, ``count`` (in this

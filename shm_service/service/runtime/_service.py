@@ -101,7 +101,7 @@ class _StoredRows:
 
     def structure_fatigue(self, structure_id: str, from_s: float | None = None, to_s: float | None = None,
                           limit: int = 100_000) -> FatigueDocument:
-        """Its hot spots' loads and life from the stored windows (issue 21; ``storage._fatigue``)."""
+        """Its hot spots' loads and life from the stored windows."""
         self._known(structure_id)
         return fatigue_document(structure_id, *self.storage.fatigue_windows(structure_id, from_s=from_s, to_s=to_s, limit=limit))
 

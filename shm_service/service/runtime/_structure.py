@@ -169,7 +169,7 @@ class Structure:
                                             unit_modes=[list(g) for g in m.mode_map.unit_modes])
         self.pipeline: Pipeline | None = None
         self.archive: Archive | None = None
-        # its estimates for a live view, kept while watched, with their virtual strain, stress and moment (issue 21)
+        # its estimates for a live view, kept while watched, with their virtual strain, stress and moment
         self.live = LiveRing(self.id, list(m.state_layout.names), loads=_virtual_loads(self.rig, m))
 
     def attach(self, storage: Storage, sink_guard: SinkGuard) -> None:

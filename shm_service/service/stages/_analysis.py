@@ -50,7 +50,7 @@ class WindowOutput:
     start_s: float
     new_baseline: bool
     alarm_changes: list[AlarmChange]
-    loads: LoadsWindowDocument | None = None  # the hot spots' loads of the window (issue 21)
+    loads: LoadsWindowDocument | None = None  # the hot spots' loads of the window
 
 
 def _monitor_stations(model) -> np.ndarray:
@@ -78,7 +78,7 @@ class AnalysisStage:
         self.min_coverage = min_coverage
         self.signatures = None
         self.monitor = self._monitor(monitor_state, baseline)
-        # the hot spots' loads in the same engine (issue 21); its state (the rainflow residue, the
+        # the hot spots' loads in the same engine; its state (the rainflow residue, the
         # damage) is committed with every window, so a restart continues the count exactly
         self.loads = self._loads(loads_state) if model.rig.hot_spots else None
         self.engine: MonitoringEngine | None = None

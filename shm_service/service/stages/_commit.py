@@ -74,7 +74,7 @@ class CommitStage:
         self.trend_rows_dropped = 0  # rows of waiting windows dropped beyond max_pending (their alarms kept)
         self.windows_committed = 0
         self.last_window: WindowDocument | None = None
-        self.last_loads: LoadsWindowDocument | None = None  # of the newest written window (issue 21)
+        self.last_loads: LoadsWindowDocument | None = None  # of the newest written window
 
     def add(self, window: WindowOutput, *, monitor_state: dict, raised: dict[str, str], baseline: dict | None,
             calibration: dict | None) -> None:

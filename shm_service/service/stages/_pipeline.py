@@ -263,7 +263,7 @@ class Pipeline:
 
     def _gauges(self, released: dict, epoch_ns: int) -> dict | None:
         """The released strain gauge samples by gauge name (times s after ``epoch_ns``, values): the
-        loads' band (issue 21)."""
+        loads' band."""
         loads = self.analytics.loads
         if loads is None or not loads.gauges:
             return None

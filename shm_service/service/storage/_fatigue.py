@@ -1,4 +1,4 @@
-"""The fatigue rows of the service's database (issue 21): per structure, analysis window and hot
+"""The fatigue rows of the service's database: per structure, analysis window and hot
 spot the window's loads (DEL per Wöhler exponent, largest range, damage increment) and the hot
 spot's life after it (consumed D, damage rate, remaining life, verdict); per window the strain
 envelope along the beam.

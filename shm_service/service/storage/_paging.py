@@ -1,4 +1,4 @@
-"""Keyset paging of the stored lists (issue 26: an export says what it holds and streams).
+"""Keyset paging of the stored lists (an export says what it holds and streams).
 
 A page is read in ONE read transaction of a connection of its own (WAL: a snapshot; writers
 never wait for it), so its ``total``, ``count``, the rows it streams and its ``next_cursor``

@@ -1,4 +1,4 @@
-"""One service per database (issue 26): the lock beside the database, real processes."""
+"""One service per database: the lock beside the database, real processes."""
 
 from __future__ import annotations
 

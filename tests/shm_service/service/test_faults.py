@@ -1,5 +1,5 @@
 """Sensor faults injected for real into the running service, in-process and batch by batch
-(issue 11, items 1, 2 and 9; the long campaign is ``python -m benchmarks.fault_campaign``):
+(the long campaign is ``python -m benchmarks.fault_campaign``):
 what the service shows (health, status, /metrics) and how soon it recovers, in data seconds."""
 
 from __future__ import annotations

@@ -114,7 +114,7 @@ def test_sim_source_takes_support_orientation_and_length_from_the_sim_table(tmp_
         SimSource("sim", queue.Queue(), ServiceSettings.model_validate(mast), raw=False, truth=True)
 
 
-# -- plausibility of times and values (issue 11, items 1 and 5) ----------------------------------
+# -- plausibility of times and values ----------------------------------
 
 S = 1_000_000_000
 
@@ -151,7 +151,7 @@ def test_a_live_sources_clock_runs_on_with_the_wall_clock():
     # two hours later (wall clock) it resumes where its clock stands now: not ahead, not off the window
     assert clock.judge_one("/imu/D", wall - 3600 * S, wall_ns=wall + 7200 * S, mono=7200.0) == 0
     # one sensor's clock alone corrected to the wall clock while the source is three hours behind
-    # (a backfill, issue 26): far from its stream's time, a clock jump of that sensor
+    # (a backfill): far from its stream's time, a clock jump of that sensor
     assert clock.judge_one("/imu/D", wall + 7200 * S, wall_ns=wall + 7200 * S, mono=7200.0) == 1
     # a source running near the wall clock: a stamp near the wall clock is on time whatever its past
     near = SourceClock(window_s=3600.0, max_ahead_s=1.0, live=True, future_tolerance_s=60.0)
@@ -244,7 +244,7 @@ def _backfill(t0: int, n: int, topics=("/imu/D", "/tof/s1", "/strain/g1"), step=
 
 
 def test_a_wall_clock_stamp_inside_a_backfill_is_a_clock_jump_not_the_channels_new_time():
-    """Issue 26 item 4: backfilling data stamped from 1970, one /strain/g1 sample stamped with the
+    """Backfilling data stamped from 1970, one /strain/g1 sample stamped with the
     present time is rejected (a clock jump, counted), and every later g1 sample is taken."""
     wall = 1_767_225_600 * S
     v = IngestValidator(default_rig("benchmark"), max_messages=10_000)

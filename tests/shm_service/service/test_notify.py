@@ -81,7 +81,7 @@ def test_email_over_smtp(tmp_path):
         controller.stop()
 
 
-# -- Alertmanager-like semantics (issue 11, item 4) ---------------------------------------------
+# -- Alertmanager-like semantics ---------------------------------------------
 
 
 

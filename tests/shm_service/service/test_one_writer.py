@@ -1,4 +1,4 @@
-"""One writer per database (issue 23 item 3): a fleet's workers hand their writes to the front's
+"""One writer per database: a fleet's workers hand their writes to the front's
 ``WriterServer`` and only read the database; a worker killed mid-stream loses no committed
 window and doubles nothing; a window sent again changes nothing."""
 

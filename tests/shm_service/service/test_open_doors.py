@@ -1,4 +1,4 @@
-"""Issue 11, item 9 (open doors), with real requests against the real server (uvicorn on a free
+"""Open doors, with real requests against the real server (uvicorn on a free
 loopback port): the Host check against DNS rebinding, body limits on chunked bodies, the rate
 limit on wrong tokens, and the token on every route off loopback."""
 

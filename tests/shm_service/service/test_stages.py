@@ -1,4 +1,4 @@
-"""The runtime's stages on their own (issue 23 item 2) and the scheduler that steps them (item 4):
+"""The runtime's stages on their own and the scheduler that steps them (item 4):
 small inputs, exact expectations."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The fatigue rows (issue 21): a window's document round trip, a replayed window kept, a
+"""The fatigue rows: a window's document round trip, a replayed window kept, a
 reprocessed one replaced, the period and limit of a query, the document of a period."""
 
 from __future__ import annotations

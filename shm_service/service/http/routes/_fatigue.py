@@ -1,5 +1,5 @@
 """``GET /api/fatigue`` and ``GET /api/structures/{id}/fatigue``: the hot spots' loads and life
-(issue 21) as a typed ``FatigueDocument`` (JSON) or one CSV row per window and hot spot."""
+ as a typed ``FatigueDocument`` (JSON) or one CSV row per window and hot spot."""
 
 from __future__ import annotations
 

@@ -158,7 +158,7 @@ _MIGRATIONS: tuple[str, ...] = (
         done_at REAL NOT NULL
     );
     """,
-    # 5: the hot spots' loads and life per window (issue 21; the residue is in monitor_state's engine state)
+    # 5: the hot spots' loads and life per window
     FATIGUE_SCHEMA,
 )
 
