@@ -235,7 +235,7 @@ def _payload_section() -> list[str]:
 
 
 def http_page() -> str:
-    from shm_service.service._api import create_app
+    from shm_service.service.http._app import create_app
 
     doc = create_app(object()).openapi()
     out = ["# HTTP API reference", "", GENERATED.format(what="from the service's OpenAPI document, as `/openapi.json` serves it"),

@@ -1,4 +1,4 @@
-"""Bars of issue 5 through the real chain: simulate → estimator (shm_service.estimation.
+"""Bars of issue 5 through the real chain: simulate → estimator (shm_service.processing.estimation.
 deformation_record) → analytics.analyze, with a peer operational modal analysis (pyOMA-2,
 SSI-cov on the raw IMU accelerations) side by side.
 
@@ -91,13 +91,13 @@ class Deformations:
 
 
 def deformations(settings, *, log=_log) -> Deformations:
-    """Simulate (cached) → shm_service.estimation.deformation_record (cached) for ``settings``."""
+    """Simulate (cached) → shm_service.processing.estimation.deformation_record (cached) for ``settings``."""
     path = recording_path(settings, log=log)
     npz = path.with_suffix(".b.npz")
     if npz.exists() and "support" not in np.load(npz).files:  # cached before the support was kept
         npz.unlink()
     if not npz.exists():
-        from shm_service.estimation import deformation_record
+        from shm_service.processing.estimation import deformation_record
         from shm_service.recording import read_recording
 
         t0 = time.perf_counter()
@@ -128,9 +128,9 @@ def deformations(settings, *, log=_log) -> Deformations:
 # -- the chain -----------------------------------------------------------------------------
 def analysis(d: Deformations):
     """analytics.analyze on the deformation record the way ``shm analyze`` runs it
-    (shm_service.analysis): the estimator's support displacement as the measured input, windows
+    (shm_service.processing.analysis): the estimator's support displacement as the measured input, windows
     aligned in data time, the warm-up after the rest phase skipped, the rig's FE damage signatures."""
-    from shm_service.analysis import DEFAULT_WARMUP_S
+    from shm_service.processing.analysis import DEFAULT_WARMUP_S
 
     t0 = time.perf_counter()
     sig = damage_signatures(parse_rig(d.rig_json), d.stations, gamma=d.b.shape[1])

@@ -24,7 +24,7 @@ TRIALS = [f"{p}/test{k}" for p in ("slow-steps", "random-dwell") for k in range(
 
 def evaluate(path: Path, channels: str = "accel", window: float = 0.5, step: float = 0.25) -> dict:
     from analytics import OmaConfig, OperationalModalAnalysis
-    from shm_service.tables import read_table
+    from shm_service.formats.tables import read_table
 
     table = read_table(path)
     names = ["Low G Accel"] + ([c for c in ("SG_300_a", "SG_306_b") if c in table.channels] if channels == "all" else [])

@@ -20,7 +20,7 @@ from benchmarks.other_tool import write_other_tool_recording
 from analytics import amplitude_spectrum
 from estimator import FilterConfig, ImmsFilter, build_events, build_model, calibrate_at_rest, estimate
 from estimator._filterpy_reference import run_filterpy
-from shm_service.estimation import measurements_from_recording, truth_from_recording
+from shm_service.processing.estimation import measurements_from_recording, truth_from_recording
 from shm_service.recording import read_recording
 from shm_service.study import StudySettings
 from shm_service.virtual_rig import SimulationSettings, simulate

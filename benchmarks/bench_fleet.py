@@ -248,7 +248,7 @@ def bench_structure_cost(data_s: float = 300.0, block_s: tuple[float, ...] = (1.
     split into the virtual rig's generation and the pipeline (estimator, analysis, commits), run
     unpaced in this thread (``time.process_time``: the machine's load does not count)."""
     from shm_service.service import Storage, load_settings
-    from shm_service.service._service import SinkGuard, Structure, _ModelCache
+    from shm_service.service.runtime._service import SinkGuard, Structure, _ModelCache
 
     class _Host:  # what a Structure asks of its service
         fleet = False

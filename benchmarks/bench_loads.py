@@ -49,8 +49,8 @@ def _signal(seconds: float, seed: int) -> np.ndarray:
 def accuracy(raw_path: str, est_path: str) -> None:
     """Virtual strain and DELs at the truth stations against the truth (see the module docstring)."""
     from analytics import signal_loads, virtual_strain
-    from shm_service.estimation import deformation_record, truth_from_recording
-    from shm_service.loads import loads_of_recording
+    from shm_service.processing.estimation import deformation_record, truth_from_recording
+    from shm_service.commands.loads import loads_of_recording
     from shm_service.recording import read_recording
 
     raw, est = read_recording(raw_path), read_recording(est_path)

@@ -122,7 +122,7 @@ def dropbear() -> list[str]:
     from scipy import stats
 
     from analytics import OmaConfig, OperationalModalAnalysis, tracked_frequency
-    from shm_service.tables import read_table, select_channels
+    from shm_service.formats.tables import read_table, select_channels
 
     rows = ["\n[DROPBEAR] 0.5 s windows, band 10-100 Hz, first bending mode tracked in 20-50 Hz (ours: SSI-cov; naive: Welch peak)",
             "  trial               windows  ours            naive          found (ours/naive)  time"]

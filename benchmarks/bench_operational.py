@@ -1,5 +1,5 @@
 """Issue 15's acceptance figures on 30-minute operational recordings, through the real chain
-(recording → estimator → ``shm_service.analysis``, the code ``shm analyze`` runs), with pyOMA-2
+(recording → estimator → ``shm_service.processing.analysis``, the code ``shm analyze`` runs), with pyOMA-2
 side by side and the analytics' speed.
 
 Recordings: the virtual rig's ``--excitation operational`` (support 3 mm RMS with a broadband
@@ -50,13 +50,13 @@ def _cached_deformations(path: Path):
     """(rig, DeformationRecord, estimator seconds) of a recording, b(t) cached beside it."""
     from estimator import parse_rig
     from estimator import assemble_beam, unit_deformations
-    from shm_service.estimation import DeformationRecord
+    from shm_service.processing.estimation import DeformationRecord
 
     st = path.stat()
     key = hashlib.sha1(f"{path.resolve()}:{st.st_size}:{int(st.st_mtime)}".encode()).hexdigest()[:12]
     npz = CACHE / f"op_{path.stem}_{key}.npz"
     if not npz.exists():
-        from shm_service.estimation import deformation_record
+        from shm_service.processing.estimation import deformation_record
         from shm_service.recording import read_recording
 
         t0 = time.perf_counter()
@@ -92,7 +92,7 @@ def _single_thread():
 
 
 def _analyse(rig, data, baseline=None):
-    from shm_service.analysis import analyze_deformations
+    from shm_service.processing.analysis import analyze_deformations
 
     with _single_thread():
         t0, c0 = time.perf_counter(), time.process_time()
@@ -101,7 +101,7 @@ def _analyse(rig, data, baseline=None):
 
 
 def _baseline(rig, data):
-    from shm_service.analysis import baseline_from_deformations
+    from shm_service.processing.analysis import baseline_from_deformations
 
     with _single_thread():
         return baseline_from_deformations(rig, data)

@@ -131,9 +131,9 @@ def run(source: str, faults: tuple[str, ...], duration_s: float, *, fault_topic:
         seed: int = 3) -> tuple[list[Observation], Any]:
     """Run a simulated rig with ``faults`` through the service (``source`` "sim" or "ingest"),
     observing after every 1 s batch. Returns the observations and the final status document."""
-    from shm_service.service._ingest import parse_body
+    from shm_service.service.sources._ingest import parse_body
     from shm_service.service import MonitoringService
-    from shm_service.service._sources import SimSource
+    from shm_service.service.sources._sources import SimSource
 
     with tempfile.TemporaryDirectory() as tmp:
         s = settings(Path(tmp), source=source, faults=faults, duration_s=duration_s, seed=seed)

@@ -134,7 +134,7 @@ def test_bad_input_names_the_value(call, match):
 
 
 def _lowest(trial: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple]:
-    from shm_service.tables import read_table
+    from shm_service.formats.tables import read_table
 
     table = read_table(DATA / f"{trial}.txt")
     acc = table.data[:, table.channels.index("Low G Accel")]

@@ -113,7 +113,7 @@ def estimate_file(tmp_path_factory):
 
 def _true_dels(raw, doc) -> dict[float, float]:
     """The truth's strain DEL (m = 3) over the document's span at its stations that are truth stations."""
-    from shm_service.estimation import truth_from_recording
+    from shm_service.processing.estimation import truth_from_recording
 
     rec = read_recording(raw)
     truth = truth_from_recording(rec)
@@ -183,7 +183,7 @@ def test_a_raw_recording_leaves_each_gauge_out(capsys, estimate_file):
 
 
 def test_no_gauge_can_be_left_out_of_an_estimate_recording(estimate_file):
-    from shm_service.loads import LoadsError, loads_of_recording
+    from shm_service.commands.loads import LoadsError, loads_of_recording
 
     _raw, est = estimate_file
     with pytest.raises(LoadsError, match="is an estimate recording: no gauge can be left out of it"):

@@ -1,4 +1,4 @@
-"""``shm oma`` on every file format ``shm_service.tables`` reads, and its errors."""
+"""``shm oma`` on every file format ``shm_service.formats.tables`` reads, and its errors."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from scipy import io
 
 from shm_service.cli import main
 from shm_service.recording import RecordingWriter
-from shm_service.tables import TableError, read_table, select_channels
+from shm_service.formats.tables import TableError, read_table, select_channels
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "analytics"))
 from oma_systems import ambient_response, three_dof  # noqa: E402

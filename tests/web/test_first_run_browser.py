@@ -24,7 +24,7 @@ FIRST_ESTIMATES_S = 30.0
 
 def _load_factor() -> float:
     return max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1))
-#: the phrases of service.progress (shm_service/service/_progress.py) before monitoring starts
+#: the phrases of service.progress (shm_service/service/runtime/_progress.py) before monitoring starts
 PHASES = ("compiling the filter", "waiting for data", "calibrating at rest", "calibrated; the filter starts",
           "waiting for the first analysis window", "learning the baseline")
 

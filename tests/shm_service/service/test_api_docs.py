@@ -11,7 +11,7 @@ import pytest
 from svc_helpers import fast_overrides
 
 from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
-from shm_service.service._docs import ASSETS, CONTENT_SECURITY_POLICY, STATIC_URL
+from shm_service.service.http._docs import ASSETS, CONTENT_SECURITY_POLICY, STATIC_URL
 
 
 @pytest.fixture()

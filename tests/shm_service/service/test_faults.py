@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from benchmarks.fault_campaign import PHI_OK_RAD, D_OK_M, Scenario, evaluate, run
-from shm_service.service._api import _metrics
+from shm_service.service.http._app import _metrics
 
 FAULT_AT = 65.0  # after the 60 s rest: the rig moves
 

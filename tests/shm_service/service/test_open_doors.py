@@ -11,7 +11,7 @@ import pytest
 from svc_helpers import fast_overrides
 
 from shm_service.service import ApiServer, MonitoringService, SettingsError, load_settings
-from shm_service.service._api import AuthLimiter, HostCheck, create_app
+from shm_service.service.http._app import AuthLimiter, HostCheck, create_app
 
 TOKEN = "test-token-123"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}

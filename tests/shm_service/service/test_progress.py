@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import pytest
 
 from shm_service.service import ServiceSettings
-from shm_service.service._progress import COMPILING, describe_progress
+from shm_service.service.runtime._progress import COMPILING, describe_progress
 
 NS = 1_000_000_000
 

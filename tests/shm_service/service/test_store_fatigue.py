@@ -8,7 +8,7 @@ import sqlite3
 import pytest
 
 from contract import HotSpotLoadsDocument, LoadsWindowDocument, StationLoadsDocument
-from shm_service.service._store_fatigue import FatigueRepository, fatigue_document
+from shm_service.service.storage._fatigue import FatigueRepository, fatigue_document
 
 
 def _window(start: float, consumed: float, rms: float = 1e-5, span: float = 4e-5) -> LoadsWindowDocument:
