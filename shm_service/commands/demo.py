@@ -78,7 +78,7 @@ def add_demo_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 #: The mast's rig description (shipped with the examples a user starts from).
-MAST_RIG = Path(__file__).resolve().parents[1] / "examples" / "mast" / "rig.json"
+MAST_RIG = Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json"
 #: The storm on the mast: it begins and has passed at these fractions of the scenario after the rest
 #: phase (after the default baseline, so the baseline is the mast in ambient wind; the damage comes
 #: as the storm builds up).
