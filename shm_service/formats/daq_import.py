@@ -79,12 +79,13 @@ class ClockMap(_Closed):
     it may be left out when there is one.
     """
 
-    file: str | None = None
-    column: str | None = None
-    unit: Literal["s", "ms", "us", "ns"] = "s"
-    rate_hz: float | None = Field(None, gt=0.0, allow_inf_nan=False)
-    start: AwareDatetime | None = None
-    start_ns: int | None = Field(None, ge=0, le=_MAX_NS)
+    file: str | None = Field(None, description="the DATA file this clock times (its name or path as given); may be left out with one file")
+    column: str | None = Field(None, description="the name of the file's time column (or give rate_hz)")
+    unit: Literal["s", "ms", "us", "ns"] = Field("s", description="the time column's unit")
+    rate_hz: float | None = Field(None, gt=0.0, allow_inf_nan=False, description="a sample rate, Hz: row k at start + k/rate_hz (or give column)")
+    start: AwareDatetime | None = Field(None, description="absolute time of the column's zero or of the first row, a TOML date-time "
+                                        "with a UTC offset (default: the epoch)")
+    start_ns: int | None = Field(None, ge=0, le=_MAX_NS, description="the same as ns since the UNIX epoch (not with start)")
 
     @model_validator(mode="after")
     def _one_time_base(self) -> ClockMap:
@@ -113,13 +114,14 @@ class ColumnMap(_Closed):
     ``accel``) ``index`` 0, 1 or 2; ``SI = scale · value + offset``; ``clock`` (required when the map
     has several); ``name``, the column's name in the file, defaults to the map's key."""
 
-    topic: str
-    field: str
-    index: int | None = Field(None, ge=0)
-    scale: float = Field(1.0, allow_inf_nan=False)
-    offset: float = Field(0.0, allow_inf_nan=False)
-    clock: str | None = None
-    name: str | None = Field(None, min_length=1)
+    topic: str = Field(description="the contract topic it fills, of a sensor of rig.json: /imu/NAME, /tof/NAME, /strain/NAME, "
+                       "/bearing/displacement, /env/temperature")
+    field: str = Field(description="the payload field: accel or gyro (imu), distance (tof, bearing: displacement), strain, temperature")
+    index: int | None = Field(None, ge=0, description="the axis of a vector field, 0/1/2 = sensor x/y/z (required for accel and gyro)")
+    scale: float = Field(1.0, allow_inf_nan=False, description="SI = scale · value + offset: the factor from the file's unit to SI (not 0)")
+    offset: float = Field(0.0, allow_inf_nan=False, description="… and the offset, in SI")
+    clock: str | None = Field(None, description="the clock (a key of [clocks]) that times this column; required when there are several")
+    name: str | None = Field(None, min_length=1, description="the column's name in the file (default: this entry's key)")
 
     @field_validator("scale")
     @classmethod

@@ -103,7 +103,17 @@ class _StoredRows:
                           limit: int = 100_000) -> FatigueDocument:
         """Its hot spots' loads and life from the stored windows."""
         self._known(structure_id)
-        return fatigue_document(structure_id, *self.storage.fatigue_windows(structure_id, from_s=from_s, to_s=to_s, limit=limit))
+        return fatigue_document(structure_id, *self.storage.fatigue_windows(structure_id, from_s=from_s, to_s=to_s, limit=limit),
+                                design_life_years=self._design_life(structure_id))
+
+    def _design_life(self, structure_id: str) -> float | None:
+        """The rig's ``fatigue.design_life_years`` of structure ``structure_id`` (None: not given, or
+        its rig not known yet: a structure that failed to start, a worker not up)."""
+        try:
+            rig = self.structure_rig(structure_id)  # type: ignore[attr-defined]
+        except Exception:  # noqa: BLE001 - no rig: the stored hot spots' design life stands
+            return None
+        return rig.fatigue.design_life_years if rig.fatigue is not None else None
 
     def fatigue(self, structure_id: str | None = None, from_s: float | None = None, to_s: float | None = None,
                 limit: int = 100_000) -> FatigueDocument:

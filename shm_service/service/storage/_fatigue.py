@@ -142,10 +142,12 @@ class FatigueRepository:
 
 
 def fatigue_document(structure_id: str, windows: list[LoadsWindowDocument], total: int,
-                     latest: LoadsWindowDocument | None) -> FatigueDocument:
+                     latest: LoadsWindowDocument | None, *, design_life_years: float | None = None) -> FatigueDocument:
     """The ``FatigueDocument`` of a period: the hot spots as the period's newest window left them,
     its windows (the trend) and the strain envelope along the beam over them (largest ranges;
-    the RMS over the windows' time)."""
+    the RMS over the windows' time). ``design_life_years``: the rig's ``fatigue.design_life_years``
+    (the document's design life whether or not a window was stored yet); None: the stored hot
+    spots' own."""
     envelope: dict[float, list[float]] = {}  # position -> [Σ rms² duration, Σ duration, range max, stress range max]
     for w in windows:
         for s in w.stations:
@@ -158,6 +160,7 @@ def fatigue_document(structure_id: str, windows: list[LoadsWindowDocument], tota
     stations = [StationLoadsDocument(position_m=x, strain_rms=math.sqrt(e[0] / e[1]) if e[1] > 0 else None, strain_range_max=e[2],
                                      stress_range_max_pa=e[3]) for x, e in sorted(envelope.items())]
     spots = [] if latest is None else list(latest.hot_spots)
-    design = next((h.design_life_years for h in spots if h.design_life_years is not None), None)
+    design = design_life_years if design_life_years is not None else next(
+        (h.design_life_years for h in spots if h.design_life_years is not None), None)
     return FatigueDocument(structure_id=structure_id, design_life_years=design, hot_spots=spots, windows=windows,
                            envelope=stations, total=total, truncated=total > len(windows))
