@@ -12,7 +12,7 @@ to the site, made from the objects the product itself uses:
 - ``reference/rig.md``: every ``rig.json`` key (``contract.RigDescription`` and its parts) and the
   recording contract's topics and payloads.
 
-- ``reference/channel-map.md``: the channel map of ``shm import`` (``shm_service.daq_import.ChannelMap``).
+- ``reference/channel-map.md``: the channel map of ``shm import`` (``shm_service.formats.daq_import.ChannelMap``).
 
 The reference pages are also kept in the checkout (``docs/reference/*.md``, so that the links of
 ``docs/reference/index.md`` resolve without a build); ``python docs_reference.py --reference``
@@ -417,10 +417,10 @@ def validation_index() -> str:
 
 
 def channel_map_page() -> str:
-    from shm_service.daq_import import ChannelMap, ClockMap, ColumnMap
-    from shm_service.service._plausibility import ValueLimits
+    from shm_service.formats.daq_import import ChannelMap, ClockMap, ColumnMap
+    from shm_service.recording._plausibility import ValueLimits
 
-    out = ["# Channel map (`shm import --map`)", "", GENERATED.format(what="from `shm_service.daq_import.ChannelMap`"),
+    out = ["# Channel map (`shm import --map`)", "", GENERATED.format(what="from `shm_service.formats.daq_import.ChannelMap`"),
            "A channel map is a TOML file that says, for `shm import`, which column of which DAQ file fills which topic and "
            "payload field of the [recording contract](rig.md), how to scale it to SI and which clock times it. It is "
            "closed: an unknown key is an error naming it, and every topic must be a sensor of the `rig.json` given "

@@ -7,6 +7,7 @@ M = EI(η, T)·κ. Pure numerics: arrays in, arrays and frozen results out.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -19,7 +20,7 @@ from ._rainflow import Cycles, HalfCyclePolicy, _finite_samples, _half_weight, c
 from ._sn_curves import damage_equivalent_range
 from ._validate import as_signal
 
-__all__ = ["BAND_FLOOR", "UNKNOWN_LEVERAGE", "DelBand", "SignalLoads", "VirtualLoads", "bending_moment", "gauge_bands", "signal_loads", "virtual_strain"]
+__all__ = ["BAND_COVERAGE", "BAND_FLOOR", "UNKNOWN_LEVERAGE", "WITHHOLD_HALF_WIDTH", "DelBand", "OutsideBasis", "outside_basis_bands", "SignalLoads", "VirtualLoads", "bending_moment", "gauge_bands", "signal_loads", "virtual_strain"]
 
 
 def virtual_strain(b: object, curvature_shapes: object, fibre_distance: object) -> np.ndarray:
@@ -114,7 +115,7 @@ def gauge_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, float]], 
     Examples
     --------
     >>> m = np.sin(np.linspace(0.0, 20.0, 400))
-    >>> bands, _ = gauge_bands([("g1", 1.0, m / 1.1, m, 0.0)], [0.5], exponents=(3.0,), n_eq=10.0)
+    >>> bands, _ = gauge_bands([("g1", 1.0, m / 1.1, m, 0.0)], [1.0], exponents=(3.0,), n_eq=10.0)
     >>> round(bands[0].high, 6)
     1.1
     """
@@ -169,6 +170,176 @@ def gauge_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, float]], 
                   f"at least {BAND_FLOOR:.0%}; band [DEL/(1+a), DEL*(1+a)] with a = {a:.4f}")
         bands.append(DelBand(1.0 / (1.0 + a), 1.0 + a, method))
     return bands, rows
+
+
+#: Nominal two-sided coverage of a station's calibrated DEL band (:func:`outside_basis_bands`).
+BAND_COVERAGE = 0.9
+#: A station whose DEL band is wider than ±this (relative) has no damage or life figure: the DEL is
+#: not known well enough for one (damage goes with DEL^m: ±50 % on the DEL is a factor 3.4 at m = 3).
+WITHHOLD_HALF_WIDTH = 0.5
+
+
+@dataclass(frozen=True)
+class OutsideBasis:
+    """What the structure does beyond the estimator's basis, where the band needs it.
+
+    gauge_shapes : (G, K) strain per unit modal amplitude (−c ψ''_j) of K modes above the basis at
+    the G gauges, in the order of the gauges given to :func:`outside_basis_bands`.
+    station_shapes : (S, K) the same at the stations. station_rms : (S,) RMS of each station's
+    virtual strain over the span the band is for (m/m).
+    """
+
+    gauge_shapes: np.ndarray
+    station_shapes: np.ndarray
+    station_rms: np.ndarray
+
+
+def _conformal_max(scores: np.ndarray, coverage: float) -> float:
+    """The split-conformal quantile of ``scores``: the ⌈(n + 1)·coverage⌉-th smallest; with too few
+    scores for that coverage (the rank beyond n) the largest, whose coverage is n/(n + 1)."""
+    s = np.sort(np.asarray(scores, dtype=float))
+    n = s.size
+    rank = int(math.ceil((n + 1) * coverage))
+    return float(s[min(rank, n) - 1])
+
+
+def outside_basis_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, float]], stations: object,
+                        outside: OutsideBasis, *, exponents: tuple[float, ...], n_eq: float,
+                        half_cycles: HalfCyclePolicy = "half", coverage: float = BAND_COVERAGE,
+                        windows: int = 1) -> tuple[list[DelBand] | None, list[dict]]:
+    """Per-station DEL bands calibrated on the gauges' cross-validated residuals and carried along
+    the beam by the modes above the basis.
+
+    At gauge g the virtual strain v (leave-one-out: from an estimate without g, or the in-sample
+    residual r widened to r/(1 − h)) misses e_g = m − v_loo of the measured m. Three steps:
+
+    1. **The curvature outside the basis along the beam.** The residuals' variances σ_g² are
+       fitted (non-negative least squares) by K modes above the basis and a floor,
+       σ_g² = σ₀² + Σ_j λ_j φ_j(g)², φ_j = −c ψ''_j; at a station η the missing strain then has
+       σ_e(η)² = σ₀² + Σ_j λ_j φ_j(η)², and its relative size q(η) = σ_e(η)/rms(v(η)).
+    2. **What a relative residual does to the DEL, cross-validated.** At each gauge and in each of
+       ``windows`` equal parts of the span (and over the whole span) the DEL factor
+       ρ = DEL_m(m)/DEL_m(v_loo), its score |ln ρ| (largest over the exponents) over the gauge's
+       q_g = rms(e_g)/rms(v_loo) is one sample of κ, the log-DEL error per unit relative
+       residual. κ̂ is the split-conformal ``coverage`` quantile of the gauges' scores, each
+       gauge's own the largest over its parts (the parts of one gauge are not independent); with
+       fewer gauges than that coverage needs (4 gauges: 90 % needs 9) the largest score, a coverage
+       of n/(n + 1) under exchangeable positions.
+    3. **The band.** ln(1 + a) = κ̂·q(η), at least ``BAND_FLOOR``; at a gauge's position at least
+       that gauge's own whole-span |ln ρ|. [DEL/(1 + a), DEL·(1 + a)].
+
+    Where the structure lies in its basis the residuals are the estimate's noise: q and the band
+    are small. Where modes above the basis carry curvature, the fitted λ put it where those modes
+    bend, between and beyond the gauges too.
+
+    Parameters
+    ----------
+    gauges : (name, position m, virtual strain (n,), measured strain (n,), leverage h in [0, 1)) per gauge.
+    stations : (S,) positions, m. outside : :class:`OutsideBasis` (its gauge rows in the order of ``gauges``).
+    exponents : Wöhler exponents (> 0). n_eq : equivalent cycles of the whole span (> 0); a part has its share.
+    coverage : nominal two-sided coverage in (0, 1). windows : parts of the span per gauge (≥ 1).
+
+    Returns
+    -------
+    (one DelBand per station, or None without a gauge that has cycles; per gauge its discrepancies).
+
+    Raises
+    ------
+    ValueError : shapes that disagree with the gauges or stations, a leverage outside [0, 1), a
+    non-finite sample, a coverage outside (0, 1).
+
+    Examples
+    --------
+    One gauge reading 1.1 times the virtual strain, no mode above the basis (K = 0): the residual
+    is the floor everywhere, q = 0.1 at a station whose virtual strain is as large; one gauge is
+    too few scores for 90 % (coverage 1/2), κ̂ is its κ = ln 1.1/0.1: ln(1 + a) = ln 1.1, a = 0.1.
+
+    >>> m = np.sin(np.linspace(0.0, 60.0, 3000))
+    >>> o = OutsideBasis(np.zeros((1, 0)), np.zeros((1, 0)), np.array([np.sqrt(np.mean((m / 1.1) ** 2))]))
+    >>> bands, _ = outside_basis_bands([("g1", 1.0, m / 1.1, m, 0.0)], [2.0], o, exponents=(3.0,), n_eq=10.0, windows=1)
+    >>> round(bands[0].high, 3)
+    1.1
+    """
+    from scipy.optimize import nnls
+
+    if not 0.0 < coverage < 1.0:
+        raise ValueError(f"{coverage=} must be in (0, 1)")
+    if isinstance(windows, bool) or not isinstance(windows, int) or windows < 1:
+        raise ValueError(f"{windows=} must be an integer >= 1")
+    eta = as_signal("stations", stations, min_len=1, ndim=(1,))
+    phi_g = np.asarray(outside.gauge_shapes, dtype=float).reshape(len(gauges), -1)
+    phi_s = np.asarray(outside.station_shapes, dtype=float).reshape(eta.size, -1)
+    rms_s = np.asarray(outside.station_rms, dtype=float).reshape(-1)
+    if phi_g.shape[1] != phi_s.shape[1] or rms_s.size != eta.size:
+        raise ValueError(f"outside: gauge shapes {phi_g.shape}, station shapes {phi_s.shape} and station RMS {rms_s.shape} "
+                         f"disagree with {len(gauges)} gauges and {eta.size} stations")
+    if not (np.all(np.isfinite(phi_g)) and np.all(np.isfinite(phi_s)) and np.all(np.isfinite(rms_s)) and np.all(rms_s >= 0)):
+        raise ValueError("outside: shapes and station RMS must be finite (RMS >= 0)")
+    rows, used = [], []
+    for k, (name, position, virtual, measured, leverage) in enumerate(gauges):
+        h = float(leverage)
+        if not 0.0 <= h < 1.0:
+            raise ValueError(f"leverage of gauge {name} must be in [0, 1), got {leverage}")
+        m = _finite_samples(f"strain gauge {name}", measured)
+        v = _finite_samples(f"virtual strain at {name}", virtual)
+        if m.size != v.size or m.size == 0:
+            raise ValueError(f"gauge {name}: virtual strain has {v.size} samples, measured {m.size} (must agree, > 0)")
+        loo = m - (m - v) / (1.0 - h)
+        e = m - loo
+        rms_v = float(np.sqrt(np.mean(loo**2)))
+        rms_e = float(np.sqrt(np.mean(e**2)))
+        whole = _log_factor(m, loo, exponents, n_eq, half_cycles, name)
+        parts = [whole]
+        if windows > 1:
+            for sel in np.array_split(np.arange(m.size), windows):
+                if sel.size >= 4:
+                    parts.append(_log_factor(m[sel], loo[sel], exponents, n_eq * sel.size / m.size, half_cycles, name))
+        found = [p for p in parts if p is not None]
+        q = rms_e / rms_v if rms_v > 0 else np.inf
+        score = None if not found or not np.isfinite(q) or q == 0 else max(found) / q
+        rows.append({"name": name, "position_m": float(position), "leverage": h, "out_of_sample": h == 0.0,
+                     "half_width": None if whole is None else float(np.expm1(whole)),
+                     "strain_rms_discrepancy": rms_e / max(float(np.sqrt(np.mean(m**2))), 1e-300),
+                     "relative_residual": None if not np.isfinite(q) else q, "score": score})
+        if whole is not None:
+            used.append((k, float(position), rms_e**2, whole, score))
+    if not used:
+        return None, rows
+    # 1. the residual's variance along the beam: floor plus the modes above the basis (NNLS)
+    idx = [k for k, *_ in used]
+    A = np.column_stack([np.ones(len(idx)), phi_g[idx] ** 2])
+    y = np.array([var for _, _, var, _, _ in used])
+    scale = float(np.max(A)) or 1.0
+    lam, _res = nnls(A / scale, y / scale) if y.max() > 0 else (np.zeros(A.shape[1]), 0.0)
+    var_s = lam[0] + (phi_s**2) @ lam[1:]
+    # 2. κ̂: the conformal quantile of the gauges' scores (each gauge's largest over its parts)
+    scores = np.array([s for *_, s in used if s is not None])
+    kappa = _conformal_max(scores, coverage) if scores.size else 0.0
+    bands = []
+    names = ", ".join(f"{gauges[k][0]} {p:g} m" for k, p, *_ in used)
+    for j, x in enumerate(eta):
+        q = float(np.sqrt(var_s[j]) / rms_s[j]) if rms_s[j] > 0 else (0.0 if var_s[j] == 0 else np.inf)
+        log_a = kappa * q
+        at = [w for _, p, _, w, _ in used if abs(p - x) <= 1e-9]
+        if at:
+            log_a = max(log_a, max(at))
+        a = max(BAND_FLOOR, float(np.expm1(log_a)) if np.isfinite(log_a) else np.inf)
+        method = (f"calibrated on the gauges' cross-validated residuals ({names}): missing strain along the beam "
+                  f"from {phi_s.shape[1]} modes above the basis and a floor fitted to the gauges' residual variances; "
+                  f"q = its RMS over the station's virtual strain RMS = {q:.4f}; log-DEL error per unit q, the "
+                  f"{coverage:.0%} conformal quantile over the gauges (each its worst of {windows} parts and the whole) "
+                  f"kappa = {kappa:.4f}; ln(1+a) = kappa*q, at a gauge at least its own, at least {BAND_FLOOR:.0%}: a = {a:.4f}")
+        bands.append(DelBand(1.0 / (1.0 + a), 1.0 + a, method))
+    return bands, rows
+
+
+def _log_factor(measured: np.ndarray, virtual: np.ndarray, exponents: tuple[float, ...], n_eq: float,
+                half_cycles: HalfCyclePolicy, name: str) -> float | None:
+    """max over the exponents of |ln(DEL(measured)/DEL(virtual))|, or None without cycles."""
+    g = signal_loads(measured, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain gauge {name}")
+    w = signal_loads(virtual, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"virtual strain at {name}")
+    logs = [abs(math.log(dg / dv)) if dv > 0 else math.inf for (_, _, dg), (_, _, dv) in zip(g.dels, w.dels) if dg > 0]
+    return max(logs) if logs else None
 
 
 @dataclass(frozen=True)

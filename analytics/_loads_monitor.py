@@ -31,7 +31,7 @@ from contract import ChartDocument, HotSpotLoadsDocument, LoadsWindowDocument, S
 
 from ._alarms import AlarmEvent, AlarmLogic
 from ._fatigue import FatigueDetail, HotSpotFatigue
-from ._loads import UNKNOWN_LEVERAGE, gauge_bands
+from ._loads import UNKNOWN_LEVERAGE, OutsideBasis, gauge_bands, outside_basis_bands
 from ._rainflow import HalfCyclePolicy
 
 __all__ = ["GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor"]
@@ -104,7 +104,7 @@ class LoadsMonitor:
     def __init__(self, hot_spots: list[HotSpotSpec], *, youngs_modulus: float, temperature_coefficient: float = 0.0,
                  reference_temperature: float = 20.0, design_life_years: float | None = None, config: LoadsConfig | None = None,
                  state: dict[str, Any] | None = None, stations: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                 gauges: list[GaugeSpec] | None = None) -> None:
+                 gauges: list[GaugeSpec] | None = None, outside: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         if not hot_spots:
             raise ValueError("hot_spots is empty: the rig description names no hot spot")
         names = [h.name for h in hot_spots]
@@ -141,14 +141,25 @@ class LoadsMonitor:
         #: ``shm reprocess`` chains the files of an archive through one monitor with it
         self.tap: list[tuple] | None = None
         self.gauges = list(gauges or [])
+        #: the strain per unit amplitude of the modes above the basis at the gauges (G, K) and the hot spots
+        #: (H, K), for the calibrated band (``analytics.outside_basis_bands``), or None: the plain gauge band
+        self.outside = None
+        if outside is not None:
+            at_gauges, at_spots = (np.asarray(a, dtype=float) for a in outside)
+            if at_gauges.shape[0] != len(self.gauges) or at_spots.shape[0] != len(self.hot_spots) or at_gauges.shape[1:] != at_spots.shape[1:]:
+                raise ValueError(f"outside: {at_gauges.shape} at the gauges and {at_spots.shape} at the hot spots disagree with "
+                                 f"{len(self.gauges)} gauges and {len(self.hot_spots)} hot spots")
+            self.outside = (at_gauges.reshape(len(self.gauges), -1), at_spots.reshape(len(self.hot_spots), -1))
 
     @classmethod
     def from_rig(cls, rig: Any, curvature_at: Any, *, config: LoadsConfig | None = None, state: dict[str, Any] | None = None,
-                 gauges_in_sample: tuple[str, ...] | None = None) -> "LoadsMonitor":
+                 gauges_in_sample: tuple[str, ...] | None = None, outside_at: Any = None) -> "LoadsMonitor":
         """The monitor of a rig description's ``hot_spots`` (contract.RigDescription); ``curvature_at(η)`` gives the
         unit deformations' s'' at positions η (len(η), Γ) (``estimator.UnitDeformations.curvature``).
         The rig's strain gauges judge the band; ``gauges_in_sample`` names those that aided the estimate
-        (None: unknown, all of them are taken as in-sample: the wider band)."""
+        (None: unknown, all of them are taken as in-sample: the wider band). ``outside_at(η)`` gives the
+        strain per unit amplitude of the modes above the basis (len(η), K) for the calibrated band
+        (``shm_service.commands.loads.outside_shapes``), or None: the plain gauge band."""
         from ._sn_curves import sn_curve
 
         beam = rig.beam
@@ -175,9 +186,13 @@ class LoadsMonitor:
             g_shapes, g_c = np.asarray(curvature_at(at), dtype=float), np.asarray(beam.fibre_distance(at), dtype=float)
             gauges = [GaugeSpec(g.name, float(g.position), g_shapes[k], float(g_c[k]),
                                 gauges_in_sample is None or g.name in gauges_in_sample) for k, g in enumerate(sensors)]
+        outside = None
+        if outside_at is not None and gauges:
+            outside = (np.asarray(outside_at(np.array([g.position_m for g in gauges])), dtype=float),
+                       np.asarray(outside_at(eta), dtype=float))
         return cls(spots, youngs_modulus=beam.youngs_modulus, temperature_coefficient=beam.youngs_modulus_temperature_coefficient,
                    reference_temperature=beam.reference_temperature, design_life_years=design, config=config, state=state,
-                   stations=stations, gauges=gauges)
+                   stations=stations, gauges=gauges, outside=outside)
 
     def state_dict(self) -> dict[str, Any]:
         # copies: a window's state may be serialised after later windows ran (a commit waiting for the database)
@@ -213,18 +228,25 @@ class LoadsMonitor:
         """(low, high, method) per hot spot of the window's DEL bands from the gauges measured over all of it, else None."""
         if not measured or not self.gauges:
             return None
-        pairs = []
-        for g in self.gauges:
+        pairs, rows = [], []
+        for k, g in enumerate(self.gauges):
             m = measured.get(g.name)
             if m is None or len(m) != B.shape[0] or not np.all(np.isfinite(m)):
                 continue
+            rows.append(k)
             # a gauge that aided the estimate is in sample, its leverage unknown here
             pairs.append((g.name, g.position_m, -g.fibre_distance_m * (B @ g.curvature_shape), np.asarray(m, dtype=float),
                           UNKNOWN_LEVERAGE if g.in_sample else 0.0))
         if not pairs:
             return None
-        found, _rows = gauge_bands(pairs, [h.position_m for h in self.hot_spots], exponents=self.config.exponents,
-                                   n_eq=self.config.n_eq_per_s * duration, half_cycles=self.config.half_cycles)
+        positions = [h.position_m for h in self.hot_spots]
+        kw = dict(exponents=self.config.exponents, n_eq=self.config.n_eq_per_s * duration, half_cycles=self.config.half_cycles)
+        if self.outside is not None:
+            strain = np.column_stack([-h.fibre_distance_m * (B @ h.curvature_shape) for h in self.hot_spots])
+            outside = OutsideBasis(self.outside[0][rows], self.outside[1], np.sqrt(np.mean(strain**2, axis=0)))
+            found, _rows = outside_basis_bands(pairs, positions, outside, **kw)  # type: ignore[arg-type]
+        else:
+            found, _rows = gauge_bands(pairs, positions, **kw)  # type: ignore[arg-type]
         return None if found is None else [(f.low, f.high, f.method) for f in found]
 
     def process_stress(self, start_s: float, stress: object, duration_s: float, temperature_c: float | None, *,

@@ -38,12 +38,12 @@ if TYPE_CHECKING:
 __all__ = ["add_loads_parser", "loads_of_recording", "loads_of_table", "parse_stations"]
 
 #: The band's method, in the document (each station's a in its band).
-_BAND_METHOD = ("leave-one-gauge-out residuals at the strain gauges: at each gauge the measured/virtual DEL factor rho, the "
-                "virtual strain from an estimate without that gauge (raw recording: the estimator run again per gauge) or "
-                "the in-sample residual r/(1-h), h = {h:g} (estimate recording); a = max(rho, 1/rho) - 1 over the exponents; "
-                "a station at a gauge takes its a; between two gauges the larger of the two and the 80 % Student-t prediction "
-                "from the gauges' a (k*rms, k = t(0.9, n)*sqrt(1 + 1/n)), beyond the outermost gauges the largest and the "
-                "prediction; at least 2 %; band [DEL/(1+a), DEL*(1+a)]")
+_BAND_METHOD = ("calibrated on the gauges' cross-validated residuals (analytics.outside_basis_bands): at each gauge the "
+                "virtual strain from an estimate without that gauge (raw recording: the estimator run again per gauge) or the "
+                "in-sample residual r/(1-h), h = {h:g} (estimate recording); the missing strain along the beam from the rig's "
+                "modes above the basis and a floor fitted to the gauges' residual variances; the log-DEL error per unit relative "
+                "residual, its 90 % conformal quantile over the gauges; ln(1+a) = that times the station's relative missing "
+                "strain, at a gauge at least its own, at least 2 %; band [DEL/(1+a), DEL*(1+a)]")
 #: Young's modulus for plain strain channels without a rig (structural steel, Pa).
 STEEL_YOUNGS_MODULUS = 2.1e11
 
@@ -130,12 +130,82 @@ def _time_span(times: np.ndarray, start: float) -> tuple[np.ndarray, float, floa
     return keep, float(t[0] - times[0]), float(t[-1] - t[0] + dt)
 
 
-def gauge_band(gauges: list[tuple[str, float, Any, Any, float]], stations: Any, *, exponents: tuple[float, ...],
-               n_eq: float, half_cycles: Any = "half") -> tuple[Any, list[dict]]:
-    """The bands of the virtual stations from the gauges (``analytics.gauge_bands``, the engine's too)."""
-    from analytics import gauge_bands
+#: Modes above the basis the band's missing strain is fitted with (at most the gauges less one).
+OUTSIDE_MODES = 2
 
-    return gauge_bands(gauges, stations, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles)
+
+def outside_shapes(rig: Any, units: Any, count: int = OUTSIDE_MODES) -> Any:
+    """``at(η) -> (len(η), K)``: the strain per unit amplitude −c ψ''_j of the rig's first ``count``
+    natural modes above the unit deformations' highest frequency (those the basis does not hold)."""
+    import numpy as np
+
+    from estimator import assemble_beam, natural_modes
+
+    top = max(float(np.max(np.atleast_1d(f))) for f in units.frequencies_hz)
+    model = assemble_beam(rig)
+    free = len(model.free_dofs)
+    modes = natural_modes(model, min(free, len(units.frequencies_hz) + 2 + count))
+    above = [j for j, f in enumerate(modes.frequencies_hz) if f > 1.02 * top][:count]
+    beam = rig.beam
+
+    def at(eta: Any) -> Any:
+        x = np.atleast_1d(np.asarray(eta, dtype=float))
+        psi = modes.shapes.evaluate(x, 2)[:, above]
+        return -psi * np.asarray(beam.fibre_distance(x), dtype=float)[:, None]
+
+    return at
+
+
+def gauge_band(gauges: list[tuple[str, float, Any, Any, float]], stations: Any, *, exponents: tuple[float, ...],
+               n_eq: float, half_cycles: Any = "half", outside_at: Any = None, station_rms: Any = None) -> tuple[Any, list[dict]]:
+    """The bands of the virtual stations from the gauges: calibrated on their cross-validated residuals
+    and carried along the beam by the modes above the basis (``analytics.outside_basis_bands``) when
+    ``outside_at`` and the stations' virtual strain RMS are given, else ``analytics.gauge_bands``."""
+    import numpy as np
+
+    from analytics import OutsideBasis, gauge_bands, outside_basis_bands
+
+    if outside_at is None or station_rms is None or not gauges:
+        return gauge_bands(gauges, stations, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles)
+    outside = OutsideBasis(outside_at(np.array([p for _, p, *_ in gauges])), outside_at(np.asarray(stations, dtype=float)),
+                           np.asarray(station_rms, dtype=float))
+    return outside_basis_bands(gauges, stations, outside, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles)
+
+
+#: A gauge whose measured strain and the virtual strain there differ by more than this (RMS of the difference
+#: over the measured RMS) says the estimate does not hold the structure's curvature: no damage or life figure.
+WITHHOLD_DISCREPANCY = 1.0
+#: What to change when the virtual strain does not hold (the reason's second half).
+WITHHOLD_REMEDY = ("more unit deformations (--modes), more IMUs (--imus), or a band-limit on the gauges' aiding "
+                   "(--aided: aid only the unit deformations whose modes the gauges resolve)")
+
+
+def withhold_figures(stations: list[dict[str, Any]], gauges: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Null the damage and life figures of stations whose virtual strain disagrees with the measured
+    gauges by more than its band (in place); the list of what was withheld, each with its reason.
+
+    A station is withheld when its band is wider than ±``analytics.WITHHOLD_HALF_WIDTH`` of the DEL,
+    or every station is when a gauge's strain RMS discrepancy exceeds ``WITHHOLD_DISCREPANCY``."""
+    from analytics import WITHHOLD_HALF_WIDTH
+
+    worst = max(((g.get("strain_rms_discrepancy") or 0.0, g["name"]) for g in gauges), default=(0.0, None))
+    out = []
+    for s in stations:
+        width = s.get("band_half_width")
+        reason = None
+        if worst[0] > WITHHOLD_DISCREPANCY:
+            reason = (f"the virtual strain differs from strain gauge {worst[1]} by {worst[0]:.0%} of its RMS "
+                      f"(more than {WITHHOLD_DISCREPANCY:.0%}): the estimate does not hold the structure's curvature")
+        elif width is not None and width > WITHHOLD_HALF_WIDTH:
+            reason = (f"the DEL band is ±{width:.0%} (wider than ±{WITHHOLD_HALF_WIDTH:.0%}): virtual and measured strain "
+                      "disagree beyond what a damage figure can carry")
+        if reason is None:
+            continue
+        reason = f"{reason}; change: {WITHHOLD_REMEDY}"
+        s.update(damage=None, damage_band=None, life_at_this_load_years=None, life_verdict="withheld",
+                 exhausts_design_life_early=None, withheld_reason=reason)
+        out.append({"position_m": s["position_m"], "hot_spot": s.get("hot_spot"), "reason": reason})
+    return out
 
 
 def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[float, ...] | None, curve: Any, exponents: tuple[float, ...],
@@ -187,7 +257,9 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     loo = record.estimated_here if leave_one_out is None else leave_one_out
     judged = _out_of_sample(rec, compared, gauge_masks, t, used, model_args, beam) if loo else [
         (n, p, v, m, UNKNOWN_LEVERAGE if n in used else 0.0) for n, p, v, m in compared]
-    bands, gauge_rows = gauge_band(judged, positions, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles)
+    beyond = outside_shapes(rig, units)
+    bands, gauge_rows = gauge_band(judged, positions, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles,
+                                   outside_at=beyond, station_rms=np.sqrt(np.mean(strain**2, axis=0)))
 
     default_detail = None if curve is None else _detail(curve)
     design = rig.fatigue.design_life_years if rig.fatigue is not None else None
@@ -202,6 +274,7 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         gdoc = _signal_doc(gl, to_stress=beam.youngs_modulus)
         channels.append({"name": name, "position_m": position, **gdoc, **_life(gdoc["damage"], duration, design)})
 
+    withheld = withhold_figures(out_stations, gauge_rows)
     root = _root_moment(b[keep], units, beam, factor, exponents, n_eq_value, half_cycles) if rig.support == "clamped" else None
     return {
         "start_s": span_start, "duration_s": duration, "source": "virtual strain from the estimate" + (
@@ -211,9 +284,10 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
                                                                    "without gauges): the modal truncation cannot be seen, no band"),
         "gauges": gauge_rows,
         "stations": out_stations,
+        "withheld": withheld,
         "channels": channels,
         "root_bending_moment": root,
-        "windows": None if window_s is None else _windows(t, strain, judged, gauge_masks, positions, window_s, exponents=exponents,
+        "windows": None if window_s is None else _windows(t, strain, judged, gauge_masks, positions, window_s, exponents=exponents, outside_at=beyond,
                                                           half_cycles=half_cycles, origin=float(times[0])),
     }
 
@@ -283,7 +357,8 @@ def _root_moment(b: Any, units: Any, beam: Any, factor: Any, exponents: Any, n_e
             "del": [{"m": m, "n_eq": n, "moment_range_nm": v} for m, n, v in rl.dels]}
 
 
-def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, exponents, half_cycles: str, origin: float) -> list[dict[str, Any]]:
+def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, exponents, half_cycles: str, origin: float,
+             outside_at: Any = None) -> list[dict[str, Any]]:
     """Per window of ``window_s`` (1 Hz equivalent): each station's strain DEL with the band of that window's gauges."""
     import numpy as np
 
@@ -298,7 +373,8 @@ def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, expo
         duration = float(sel.sum()) * float(np.median(np.diff(t)))
         # each gauge's samples lie on t[mask]: its part of the window is sel[mask]
         g = [(n, p, v[sel[mask]], m[sel[mask]], h) for (n, p, v, m, h), mask in zip(gauges, gauge_masks) if sel[mask].sum() >= 2]
-        bands, _rows = gauge_band(g, positions, exponents=exponents, n_eq=duration, half_cycles=half_cycles) if g else (None, [])
+        bands, _rows = gauge_band(g, positions, exponents=exponents, n_eq=duration, half_cycles=half_cycles, outside_at=outside_at,
+                                  station_rms=np.sqrt(np.mean(strain[sel] ** 2, axis=0))) if g else (None, [])
         rows = []
         for j, pos in enumerate(positions):
             band = None if bands is None else bands[j]
@@ -438,6 +514,9 @@ def _print_table(doc: dict[str, Any]) -> None:
         print(f"band: {doc['band_method']}")
     for warning in doc.get("warnings") or ():
         print(f"warning: {warning}")
+    withheld = doc.get("withheld") or ()
+    if withheld:
+        print(f"withheld: damage and life of {len(withheld)} station(s): {withheld[0]['reason']}")
 
     def row(label: str, s: dict[str, Any]) -> str:
         dels = "  ".join(
@@ -448,6 +527,8 @@ def _print_table(doc: dict[str, Any]) -> None:
         damage = "-" if s["damage"] is None else f"{s['damage']:.3e}"
         if s.get("life_verdict") == "finite":
             damage += f" (life at this load {s['life_at_this_load_years']:.3g} years)"
+        elif s.get("life_verdict") == "withheld":
+            damage += " (withheld: see above)"
         elif s.get("life_verdict") == "no_damage_below_cutoff":
             damage += " (below the cut-off: nothing consumed)"
         return (f"{label:>22}  rms {1e6 * s['strain_rms']:9.3f} µε  max range {1e6 * s['strain_range_max']:9.3f} µε  {dels}  "

@@ -112,7 +112,7 @@ def analyse_file(path: str, options: AnalysisOptions, source: str) -> dict[str, 
     its trend rows (window times in UNIX s, as the live service stores them)."""
     from analytics import AnalysisConfig
 
-    from ..processing.analysis import analyze_deformations, trend_rows
+    from ..processing.analysis import analyze_deformations, recording_gauges, trend_rows
 
     config, warmup = options.settings()
     rec, data = options.deformations(path)
@@ -127,7 +127,8 @@ def analyse_file(path: str, options: AnalysisOptions, source: str) -> dict[str, 
         # shorter than one analysis window: nothing to analyse, which is not a failure
         return {"windows": 0, "rows": [], "start_s": rec.start_ns / 1e9, "end_s": rec.end_ns / 1e9, "loads": loads, "tap": []}
     tap: list = []
-    result = analyze_deformations(rec.rig, data, config=config, warmup_s=warmup, loads_tap=tap)
+    # the recording's strain gauges, as ``shm analyze`` passes them: each window's loads carry their band
+    result = analyze_deformations(rec.rig, data, config=config, warmup_s=warmup, loads_tap=tap, gauges=recording_gauges(rec))
     rows = [row.model_dump() for w in result.windows
             for row in trend_rows(source, w, offset + w.start_s, offset + w.end_s)]
     # each window's counted hot-spot stress, in UNIX s: this process chains them across the files

@@ -85,7 +85,9 @@ def analyze_deformations(rig, data: DeformationRecord, *, config: AnalysisConfig
     if rig.hot_spots:  # the hot spots' loads and fatigue in the same engine
         from analytics import LoadsMonitor
 
-        loads = LoadsMonitor.from_rig(rig, data.units.curvature)
+        from ..commands.loads import outside_shapes
+
+        loads = LoadsMonitor.from_rig(rig, data.units.curvature, outside_at=outside_shapes(rig, data.units))
         loads.tap = loads_tap
     return analyze(data.times, data.b, data.units.curvature(data.stations), data.stations, baseline=baseline, loads=loads,
                    gauges=gauges if loads is not None else None, **kw)

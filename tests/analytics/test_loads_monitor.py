@@ -192,3 +192,35 @@ def test_virtual_loads_by_hand_and_bad_input():
         VirtualLoads([0.0], ["a", "b"], [[1.0]], [0.01], Beam())
     with pytest.raises(ValueError, match="fibre_distance"):
         VirtualLoads([0.0], ["a"], [[1.0]], [-0.01], Beam())
+
+
+def test_the_calibrated_band_through_the_engine():
+    """With the modes above the basis given (none here: K = 0, the missing strain a floor), the engine's
+    band is ``outside_basis_bands``': a gauge reading 1/1.1 of the virtual strain out of sample has the
+    relative residual q = 1 − 1/1.1 and score ln(1.1)/q (one gauge: the largest), so a hot spot whose virtual
+    strain has the gauge's RMS r times over gets ln(1 + a) = ln(1.1)·(RMS_g/RMS_h), at least the 2 % floor."""
+    from analytics import GaugeSpec
+
+    shape = np.array([0.8, 0.2, 0.1])
+    b = _b(200.0)
+    t = np.arange(b.shape[0]) / FS
+    virtual = -0.005 * (b @ shape)
+    spots = _spots()
+    mon = ModalMonitor(EXPECTED, S2, ETA, fs=FS)
+    loads = LoadsMonitor(spots, youngs_modulus=E, gauges=[GaugeSpec("g1", 1.5, shape, 0.005, False)],
+                         outside=(np.zeros((1, 0)), np.zeros((len(spots), 0))))
+    engine = MonitoringEngine(mon, origin_ns=ORIGIN_NS, time_zero_ns=ORIGIN_NS, loads=loads)
+    docs = [w.loads for w in engine.add(t, b, gauges={"g1": (t, virtual / 1.1)})]
+    assert docs
+    h, spot = docs[0].hot_spots[0], spots[0]
+    assert h.band_method.startswith("calibrated on the gauges' cross-validated residuals (g1 1.5 m)")
+    # the window's counted samples: the engine's first step; the gauge's RMS and the hot spot's over them
+    n = round(docs[0].duration_s * FS)
+    first = b[:n]
+    rms_g = np.sqrt(np.mean((0.005 * (first @ shape)) ** 2))
+    rms_h = np.sqrt(np.mean((spot.fibre_distance_m * (first @ spot.curvature_shape)) ** 2))
+    expected = max(0.02, np.expm1(np.log(1.1) * rms_g / rms_h))
+    assert h.del_band_pa["3"][1] / h.del_pa["3"] == pytest.approx(1 + expected, rel=1e-6)
+    with pytest.raises(ValueError, match="disagree with 1 gauges"):
+        LoadsMonitor(spots, youngs_modulus=E, gauges=[GaugeSpec("g1", 1.5, shape, 0.005, False)],
+                     outside=(np.zeros((2, 0)), np.zeros((len(spots), 0))))

@@ -132,7 +132,7 @@ def test_the_rig_reference_gives_every_key_and_section_shape_a_meaning():
 
 
 def test_the_channel_map_reference_lists_every_key_with_its_meaning():
-    from shm_service.daq_import import ChannelMap, ClockMap, ColumnMap
+    from shm_service.formats.daq_import import ChannelMap, ClockMap, ColumnMap
 
     page = docs_reference.channel_map_page()
     for model in (ClockMap, ColumnMap):

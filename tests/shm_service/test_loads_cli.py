@@ -138,7 +138,8 @@ def test_virtual_strain_of_an_estimate_recording(capsys, estimate_file, tmp_path
     assert [s["hot_spot"] for s in doc["stations"]] == [None, "weld", None, None]
     assert doc["stations"][1]["curve"] == "EN1993-1-9:71" and doc["stations"][1]["damage"] is not None
     assert doc["stations"][0]["damage"] is None  # no --curve: no damage where there is no hot spot
-    assert doc["band_method"].startswith("leave-one-gauge-out residuals at the strain gauges")
+    assert doc["band_method"].startswith("calibrated on the gauges' cross-validated residuals")
+    assert doc["withheld"] == []  # the band is narrow: the damage is given
     # an estimate recording: its gauges aided it and cannot be left out here, so they are in sample
     assert all(not g["out_of_sample"] and g["leverage"] == 0.5 for g in doc["gauges"])
     assert [c["name"] for c in doc["channels"]] == ["g1", "g2", "g3", "g4"]
@@ -270,3 +271,21 @@ def test_the_estimate_recording_carries_each_estimates_virtual_loads(estimate_fi
     np.testing.assert_allclose(moment, kappa * ei, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(root, 0.0, atol=1e-9)  # the lab sheet's pinned bearing carries no moment
     assert np.std(strain[:, 1]) > 1e-7
+
+
+def test_damage_and_life_are_withheld_where_the_virtual_strain_does_not_hold():
+    """A station whose band is wider than ±50 %, or every station once a gauge's strain disagrees with the
+    virtual strain by more than its own RMS, has no damage or life figure: null, with the reason and what to change."""
+    from shm_service.commands.loads import withhold_figures
+
+    def station(pos, width):
+        return {"position_m": pos, "hot_spot": None, "band_half_width": width, "damage": 1e-6, "damage_band": [1e-7, 1e-5],
+                "life_at_this_load_years": 3.0, "life_verdict": "finite"}
+
+    stations = [station(1.0, 0.04), station(2.0, 0.8)]
+    out = withhold_figures(stations, [{"name": "g1", "strain_rms_discrepancy": 0.2}])
+    assert [w["position_m"] for w in out] == [2.0] and "±80%" in out[0]["reason"] and "--modes" in out[0]["reason"]
+    assert stations[0]["damage"] == 1e-6 and stations[1]["damage"] is None and stations[1]["life_verdict"] == "withheld"
+    stations = [station(1.0, 0.04)]
+    out = withhold_figures(stations, [{"name": "g3", "strain_rms_discrepancy": 10.0}])
+    assert "strain gauge g3 by 1000%" in out[0]["reason"] and stations[0]["life_at_this_load_years"] is None

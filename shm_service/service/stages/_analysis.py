@@ -119,15 +119,19 @@ class AnalysisStage:
             return self._monitor(None)
 
     def _loads(self, state: dict | None) -> LoadsMonitor:
+        from ...commands.loads import outside_shapes
+
         units = self.model.units
+        beyond = outside_shapes(self.model.rig, units)  # the modes above the basis: the calibrated band
         try:
-            return LoadsMonitor.from_rig(self.model.rig, units.curvature, state=state, gauges_in_sample=self._aiding_gauges())
+            return LoadsMonitor.from_rig(self.model.rig, units.curvature, state=state, gauges_in_sample=self._aiding_gauges(),
+                                         outside_at=beyond)
         except ValueError as exc:
             if state is None:
                 raise
             # never silently: the consumed life starts again from zero
             log.error("%s: stored loads state unusable (%s); the hot spots' damage is counted from zero", self.source_id, exc)
-            return LoadsMonitor.from_rig(self.model.rig, units.curvature, gauges_in_sample=self._aiding_gauges())
+            return LoadsMonitor.from_rig(self.model.rig, units.curvature, gauges_in_sample=self._aiding_gauges(), outside_at=beyond)
 
     def _aiding_gauges(self) -> tuple[str, ...]:
         """The strain gauges the estimator uses (their discrepancy is in-sample: the band doubles it)."""

@@ -138,7 +138,7 @@ def test_the_service_counts_the_hot_spots_and_serves_their_fatigue(served):
         assert all(h.n_eq == pytest.approx(10.0) for h in trend)
         # the band of each window, judged at the mast's four strain gauges, with its method stated
         for h in trend:
-            assert h.band_method.startswith("leave-one-gauge-out DEL residuals at the strain gauges (g1 ")
+            assert h.band_method.startswith("calibrated on the gauges' cross-validated residuals (g1 ")
             assert all(f"{g} " in h.band_method for g in ("g2", "g3", "g4"))
             for m, (low, high) in h.del_band_pa.items():
                 assert low < h.del_pa[m] < high and high / h.del_pa[m] == pytest.approx(h.del_pa[m] / low, rel=1e-9)
