@@ -130,32 +130,6 @@ def _time_span(times: np.ndarray, start: float) -> tuple[np.ndarray, float, floa
     return keep, float(t[0] - times[0]), float(t[-1] - t[0] + dt)
 
 
-#: Modes above the basis the band's missing strain is fitted with (at most the gauges less one).
-OUTSIDE_MODES = 2
-
-
-def outside_shapes(rig: Any, units: Any, count: int = OUTSIDE_MODES) -> Any:
-    """``at(η) -> (len(η), K)``: the strain per unit amplitude −c ψ''_j of the rig's first ``count``
-    natural modes above the unit deformations' highest frequency (those the basis does not hold)."""
-    import numpy as np
-
-    from estimator import assemble_beam, natural_modes
-
-    top = max(float(np.max(np.atleast_1d(f))) for f in units.frequencies_hz)
-    model = assemble_beam(rig)
-    free = len(model.free_dofs)
-    modes = natural_modes(model, min(free, len(units.frequencies_hz) + 2 + count))
-    above = [j for j, f in enumerate(modes.frequencies_hz) if f > 1.02 * top][:count]
-    beam = rig.beam
-
-    def at(eta: Any) -> Any:
-        x = np.atleast_1d(np.asarray(eta, dtype=float))
-        psi = modes.shapes.evaluate(x, 2)[:, above]
-        return -psi * np.asarray(beam.fibre_distance(x), dtype=float)[:, None]
-
-    return at
-
-
 def gauge_band(gauges: list[tuple[str, float, Any, Any, float]], stations: Any, *, exponents: tuple[float, ...],
                n_eq: float, half_cycles: Any = "half", outside_at: Any = None, station_rms: Any = None) -> tuple[Any, list[dict]]:
     """The bands of the virtual stations from the gauges: calibrated on their cross-validated residuals
@@ -257,6 +231,8 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     loo = record.estimated_here if leave_one_out is None else leave_one_out
     judged = _out_of_sample(rec, compared, gauge_masks, t, used, model_args, beam) if loo else [
         (n, p, v, m, UNKNOWN_LEVERAGE if n in used else 0.0) for n, p, v, m in compared]
+    from ..processing.estimation import outside_shapes
+
     beyond = outside_shapes(rig, units)
     bands, gauge_rows = gauge_band(judged, positions, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles,
                                    outside_at=beyond, station_rms=np.sqrt(np.mean(strain**2, axis=0)))

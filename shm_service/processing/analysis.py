@@ -85,7 +85,7 @@ def analyze_deformations(rig, data: DeformationRecord, *, config: AnalysisConfig
     if rig.hot_spots:  # the hot spots' loads and fatigue in the same engine
         from analytics import LoadsMonitor
 
-        from ..commands.loads import outside_shapes
+        from .estimation import outside_shapes
 
         loads = LoadsMonitor.from_rig(rig, data.units.curvature, outside_at=outside_shapes(rig, data.units))
         loads.tap = loads_tap

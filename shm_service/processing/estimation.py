@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from typing import Any
+
 import numpy as np
 
 from contract import (
@@ -20,6 +22,7 @@ from estimator import EstimateResult, Measurements, SensorSeries
 from ..recording import Recording
 
 __all__ = [
+    "outside_shapes",
     "DeformationRecord",
     "TruthSeries",
     "deformation_record",
@@ -288,3 +291,29 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None, settin
     return DeformationRecord(times, b, units, np.asarray(rec.rig.truth_stations, dtype=float) if rec.rig.truth_stations
                              else np.linspace(0.0, rec.rig.beam.length, 9)[1:], temperature, bearing,
                              rec.metadata.get("truth"), estimated_here, support, int(rec.start_ns), rest_end)
+
+
+#: Modes above the basis the band's missing strain is fitted with (at most the gauges less one).
+OUTSIDE_MODES = 2
+
+
+def outside_shapes(rig: Any, units: Any, count: int = OUTSIDE_MODES) -> Any:
+    """``at(η) -> (len(η), K)``: the strain per unit amplitude −c ψ''_j of the rig's first ``count``
+    natural modes above the unit deformations' highest frequency (those the basis does not hold)."""
+    import numpy as np
+
+    from estimator import assemble_beam, natural_modes
+
+    top = max(float(np.max(np.atleast_1d(f))) for f in units.frequencies_hz)
+    model = assemble_beam(rig)
+    free = len(model.free_dofs)
+    modes = natural_modes(model, min(free, len(units.frequencies_hz) + 2 + count))
+    above = [j for j, f in enumerate(modes.frequencies_hz) if f > 1.02 * top][:count]
+    beam = rig.beam
+
+    def at(eta: Any) -> Any:
+        x = np.atleast_1d(np.asarray(eta, dtype=float))
+        psi = modes.shapes.evaluate(x, 2)[:, above]
+        return -psi * np.asarray(beam.fibre_distance(x), dtype=float)[:, None]
+
+    return at

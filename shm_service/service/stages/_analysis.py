@@ -119,7 +119,7 @@ class AnalysisStage:
             return self._monitor(None)
 
     def _loads(self, state: dict | None) -> LoadsMonitor:
-        from ...commands.loads import outside_shapes
+        from ...processing.estimation import outside_shapes
 
         units = self.model.units
         beyond = outside_shapes(self.model.rig, units)  # the modes above the basis: the calibrated band
