@@ -195,6 +195,8 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
 
     from analytics import UNKNOWN_LEVERAGE, bending_moment, signal_loads, virtual_strain
 
+    from ..processing.estimation import outside_shapes
+
     from ..processing.estimation import deformation_record
 
     rig = rec.rig
@@ -231,8 +233,6 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     loo = record.estimated_here if leave_one_out is None else leave_one_out
     judged = _out_of_sample(rec, compared, gauge_masks, t, used, model_args, beam) if loo else [
         (n, p, v, m, UNKNOWN_LEVERAGE if n in used else 0.0) for n, p, v, m in compared]
-    from ..processing.estimation import outside_shapes
-
     beyond = outside_shapes(rig, units)
     bands, gauge_rows = gauge_band(judged, positions, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles,
                                    outside_at=beyond, station_rms=np.sqrt(np.mean(strain**2, axis=0)))
