@@ -4,12 +4,12 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test check lint types bench docs clean
+.PHONY: demo test check lint types bench docs clean servers servers-installed
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,docs]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,docs,cluster]'
 	$(PY) -m shm_service.warmup  # compile the filter's kernels now: the first demo shows estimates at once
 	touch $(STAMP)
 
@@ -30,7 +30,7 @@ types: $(STAMP)
 
 # The quick tier (under 2 minutes on 2 cores): lint, types and the unit tests; no browser, no service
 # processes, no long physics runs (the markers of tests/conftest.py).
-check: lint types
+check: lint types servers-installed
 	$(PY) -m pytest -q -n auto --dist loadgroup --no-loadscope-reorder -m "not slow and not e2e and not browser"
 
 # Everything: lint, types and the whole suite. One worker per core, single tests handed out as workers
@@ -39,8 +39,18 @@ check: lint types
 # TEST_WORKERS: the xdist workers (default: one per core); the browser and service tests mostly wait
 # on paced replays, so a worker more than the cores may pay off: make test TEST_WORKERS=3.
 TEST_WORKERS ?= auto
-test: lint types
+test: lint types servers-installed
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder
+
+# PostgreSQL and Mosquitto (Debian's packages) when missing: the tests of a fleet start throwaway
+# servers of their own (shm_service/devservers.py); apt-get update once, then the install (as root).
+servers-installed:
+	@bash .ci/install-servers
+
+# A throwaway PostgreSQL and Mosquitto on free loopback ports for a local demo against real servers;
+# it prints their URLs. Ctrl-C stops both, their data go with them.
+servers: $(STAMP) servers-installed
+	$(PY) -m shm_service.devservers
 
 bench: $(STAMP)
 	$(PY) -m benchmarks

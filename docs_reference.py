@@ -12,7 +12,12 @@ to the site, made from the objects the product itself uses:
 - ``reference/rig.md``: every ``rig.json`` key (``contract.RigDescription`` and its parts) and the
   recording contract's topics and payloads.
 
-``python docs_reference.py OUT_DIR`` writes the same pages as files (to read them without MkDocs).
+- ``reference/channel-map.md``: the channel map of ``shm import`` (``shm_service.formats.daq_import.ChannelMap``).
+
+The reference pages are also kept in the checkout (``docs/reference/*.md``, so that the links of
+``docs/reference/index.md`` resolve without a build); ``python docs_reference.py --reference``
+rewrites them from the code, and a test fails while they differ. ``python docs_reference.py
+OUT_DIR`` writes every generated page as files (to read them without MkDocs).
 """
 
 from __future__ import annotations
@@ -88,23 +93,40 @@ def _submodel(annotation: Any) -> Any:
     return None
 
 
-def _model_table(model: Any, prefix: str = "") -> tuple[list[str], list[tuple[str, Any]]]:
-    """Rows of ``model``'s scalar keys, and its sub-models (name, model) to document apart."""
+def _submodels(annotation: Any) -> list[Any]:
+    """Every pydantic model in ``annotation`` (each member of a union such as a section's shapes)."""
+    from pydantic import BaseModel
+
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    found: list[Any] = []
+    for arg in typing.get_args(annotation):
+        found += [m for m in _submodels(arg) if m not in found]
+    return found
+
+
+def _model_table(model: Any, prefix: str = "", *, sections: bool = False) -> tuple[list[str], list[tuple[str, Any]]]:
+    """Rows of ``model``'s keys, and its sub-models (name, model) to document apart. ``sections``:
+    a key holding a sub-model gets a row too (its type "section"), as every collection key does."""
     rows, subs = [], []
     for name, field in model.model_fields.items():
-        sub = _submodel(field.annotation)
-        if sub is not None and typing.get_origin(field.annotation) not in (tuple, list, dict):
-            subs.append((prefix + name, sub))
+        models = _submodels(field.annotation)
+        collection = typing.get_origin(field.annotation) in (tuple, list, dict) or any(
+            typing.get_origin(a) in (tuple, list, dict) for a in typing.get_args(field.annotation))
+        if models and not collection:
+            subs += [(prefix + name, m) for m in models]
+            if sections:
+                rows.append(f"| `{prefix}{name}` | section ({' or '.join(m.__name__ for m in models)}) | {_default(field)} | "
+                            f"{_cell(field.description)} |")
             continue
-        if sub is not None:
-            subs.append((prefix + name + "[]", sub))
+        subs += [(prefix + name + "[]", m) for m in models]
         rows.append(f"| `{prefix}{name}` | {_type_name(field.annotation)} | {_default(field)} | {_cell(field.description)} |")
     return rows, subs
 
 
-def _model_sections(model: Any, title: str, level: int = 2, seen: set | None = None) -> list[str]:
+def _model_sections(model: Any, title: str, level: int = 2, seen: set | None = None, *, sections: bool = False) -> list[str]:
     seen = set() if seen is None else seen
-    rows, subs = _model_table(model)
+    rows, subs = _model_table(model, sections=sections)
     out = [f"{'#' * level} {title}", ""]
     doc = (model.__doc__ or "").strip()
     if doc and not doc.startswith("Usage docs"):
@@ -115,7 +137,10 @@ def _model_sections(model: Any, title: str, level: int = 2, seen: set | None = N
         if sub in seen:
             continue
         seen.add(sub)
-        out += _model_sections(sub, f"`{name}` ({sub.__name__})" if not name.startswith("[") else name, level + (level < 4), seen)
+        shape = sub.model_fields.get("shape")
+        variant = typing.get_args(shape.annotation) if shape is not None and typing.get_origin(shape.annotation) is typing.Literal else ()
+        head = f"`{name}` with `shape = \"{variant[0]}\"` ({sub.__name__})" if variant else f"`{name}` ({sub.__name__})"
+        out += _model_sections(sub, head if not name.startswith("[") else name, level + (level < 4), seen, sections=sections)
     return out
 
 
@@ -235,7 +260,7 @@ def _payload_section() -> list[str]:
 
 
 def http_page() -> str:
-    from shm_service.service._api import create_app
+    from shm_service.service.http._app import create_app
 
     doc = create_app(object()).openapi()
     out = ["# HTTP API reference", "", GENERATED.format(what="from the service's OpenAPI document, as `/openapi.json` serves it"),
@@ -306,7 +331,10 @@ def rig_page() -> str:
            "`shm inspect FILE --print-rig` prints a recording's `rig.json`, and `shm serve --source ingest --rig "
            "rig.json` takes the same payloads over HTTP. The full contract, with its signs and frames, is "
            "`recording-format.md` of the project's specifications.", ""]
-    out += _model_sections(contract.RigDescription, "`rig.json` keys", 2)
+    out += _model_sections(contract.RigDescription, "`rig.json` keys", 2, sections=True)
+    out += ["## Extension keys", "", "Keys beyond the contract's that the project's tools write or read; any other extra key is "
+            "kept and ignored.", "", "| key | meaning |", "| --- | --- |",
+            *[f"| `{k}` | {_cell(v)} |" for k, v in contract.EXTENSION_KEYS.items()], ""]
     out += ["## Topics and payloads", "", "| topic | schema | payload keys |", "| --- | --- | --- |"]
     topics = {"shm.Imu": "`/imu/NAME`", "shm.Distance": "`/tof/NAME`, `/bearing/displacement`", "shm.Strain": "`/strain/NAME`",
               "shm.Temperature": "`/env/temperature`", "shm.TruthState": "`/truth/state`", "shm.EstimateState": "`/estimate/state`"}
@@ -388,11 +416,49 @@ def validation_index() -> str:
     return "\n".join(out) + "\n"
 
 
+def channel_map_page() -> str:
+    from shm_service.formats.daq_import import ChannelMap, ClockMap, ColumnMap
+    from shm_service.recording._plausibility import ValueLimits
+
+    out = ["# Channel map (`shm import --map`)", "", GENERATED.format(what="from `shm_service.formats.daq_import.ChannelMap`"),
+           "A channel map is a TOML file that says, for `shm import`, which column of which DAQ file fills which topic and "
+           "payload field of the [recording contract](rig.md), how to scale it to SI and which clock times it. It is "
+           "closed: an unknown key is an error naming it, and every topic must be a sensor of the `rig.json` given "
+           "with `--rig`. Its sections:", "",
+           "- `[clocks.NAME]`: one or more time bases. A clock is a time column of a file (`column`, in `unit`) or a "
+           "sample rate (`rate_hz`), with the absolute time of its zero (`start` or `start_ns`). `file` names the DATA "
+           "file (as given on the command line, by name or path) the clock's column is in, or whose rows it times; it "
+           "may be left out when one file is imported.",
+           "- `[columns.\"COLUMN\"]`: one entry per imported column, keyed by the column's name in the file (or any key, "
+           "with `name` the column's name). `topic` and `field` say what it fills (`/imu/NAME` `accel` or `gyro`, "
+           "`/tof/NAME` `distance`, `/strain/NAME` `strain`, `/bearing/displacement` `displacement`, "
+           "`/env/temperature` `temperature`); `index` is the axis of a vector field (0 = x, 1 = y, 2 = z of the "
+           "sensor frame), `SI = scale · value + offset`, and `clock` names the clock that times the column (required "
+           "when the map has several; every column of a topic shares one clock). A column is read from the file of its clock.",
+           "- `[limits]`: the physical limits per sensor kind in SI; a sample beyond them is rejected as implausible "
+           "and counted, never written.", "",
+           "An example with two loggers, each with its own file and clock:", "",
+           "```toml", "[clocks.fast]", "file = \"imu.csv\"", "column = \"t\"", "unit = \"s\"",
+           "start = 2026-01-01T00:00:00Z", "", "[clocks.slow]", "file = \"tof.csv\"", "rate_hz = 33.33",
+           "start = 2026-01-01T00:00:00Z", "", "[columns.\"D ay\"]", "topic = \"/imu/D\"", "field = \"accel\"",
+           "index = 1", "clock = \"fast\"", "", "[columns.rho1]", "topic = \"/tof/t1\"", "field = \"distance\"",
+           "scale = 0.001       # mm -> m", "clock = \"slow\"", "```", "",
+           "`examples/dropbear/channels.toml` is a worked map of a LabVIEW export.", ""]
+    for model, title in ((ClockMap, "`[clocks.NAME]` (ClockMap)"), (ColumnMap, "`[columns.\"COLUMN\"]` (ColumnMap)"),
+                         (ValueLimits, "`[limits]` (ValueLimits)")):
+        rows, _ = _model_table(model)
+        doc = (model.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
+        out += [f"## {title}", "", doc, "", "| key | type | default | meaning |", "| --- | --- | --- | --- |", *rows, ""]
+    del ChannelMap
+    return "\n".join(out) + "\n"
+
+
 PAGES = {
     "reference/configuration.md": configuration_page,
     "reference/cli.md": cli_page,
     "reference/http-api.md": http_page,
     "reference/rig.md": rig_page,
+    "reference/channel-map.md": channel_map_page,
 }
 
 
@@ -416,7 +482,18 @@ def on_files(files: Any, config: Any) -> Any:
     return files
 
 
+def stale_reference_pages(docs: Path = ROOT / "docs") -> list[str]:
+    """The reference pages (``PAGES``) whose copy under ``docs`` is missing or differs from what the
+    code generates now: the checkout keeps them so that a reader finds them without a build."""
+    return [uri for uri, make in PAGES.items() if not (docs / uri).exists() or (docs / uri).read_text() != make()]
+
+
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["--reference"]:  # the checkout's copies of the reference pages: docs/reference/*.md
+        for uri, make in PAGES.items():
+            (ROOT / "docs" / uri).write_text(make())
+            print(ROOT / "docs" / uri)
+        sys.exit(0)
     target = Path(sys.argv[1] if len(sys.argv) > 1 else "site-reference")
     for uri, make in _all_pages().items():
         path = target / uri

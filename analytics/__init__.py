@@ -49,9 +49,9 @@ __all__ = [
     "classify_excitation", "cluster_poles", "damping_estimates", "frf_h1", "frf_modes", "identify_modes", "identify_windows", "modal_assurance",
     "modal_phase_collinearity", "output_correlations", "prepare_band", "segment_correlations", "ssi_cov", "ssi_poles",
     "stabilisation_diagram", "subspace_damping", "toeplitz_from_data", "tracked_frequency",
-    # issue 25: physical modes, moving modes, tracks across windows
+    # physical modes, moving modes, tracks across windows
     "ModeTrack", "ModeTracker", "SubwindowTrack", "local_visibility", "subwindow_frequencies", "track_windows",
-    # loads and fatigue (issue 21): streaming rainflow, S–N curves, Miner damage, remaining life
+    # loads and fatigue: streaming rainflow, S–N curves, Miner damage, remaining life
     "Cycles", "DNV_RP_C203_CURVES", "EN1993_DETAIL_CATEGORIES", "FatigueDetail", "HalfCyclePolicy", "HotSpotFatigue",
     "LifeEstimate", "LoadsWindow", "RainflowCounter", "RainflowResidue", "SECONDS_PER_YEAR", "SnCurve", "cycles_by_range",
     "damage_equivalent_range", "miner_damage", "rainflow_cycles", "remaining_life", "sn_curve",

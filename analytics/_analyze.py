@@ -263,10 +263,14 @@ def _summaries(mon: ModalMonitor, windows: tuple[WindowResult, ...], B: np.ndarr
                 mac = None if refs[i] is None else float(modal_assurance(shape[None], refs[i][None])[0, 0])
                 if math.isfinite(m.damping_ratio) and m.damping_ratio > 0:
                     damping.append(subspace_damping(m))
-        if f_hz is None and len(good) >= 2:
+        if len(good) >= 2:
+            # the windows' subspace frequencies, averaged: the record's estimate when the record-long
+            # identification found no pole, or one it states less precisely than they agree (a weak
+            # mode whose record-long pole a neighbouring one pulls: the windows' spread is the measure)
             fv = np.array([e.frequency_hz for e in good])
-            method, f_hz = "ssi_windows", float(np.mean(fv))
-            f_std = float(np.std(fv, ddof=1) / math.sqrt(max(1.0, len(good) * indep)))
+            w_std = float(np.std(fv, ddof=1) / math.sqrt(max(1.0, len(good) * indep)))
+            if f_hz is None or not (f_std is not None and math.isfinite(f_std) and f_std <= w_std):
+                method, f_hz, f_std = "ssi_windows", float(np.mean(fv)), w_std
         spectral = None
         if avg is not None:
             ref = f_hz or mon.f0[i]
@@ -298,10 +302,18 @@ def _summaries(mon: ModalMonitor, windows: tuple[WindowResult, ...], B: np.ndarr
 
 
 def _preferred(estimates: list[DampingEstimate], free: bool) -> DampingEstimate | None:
-    """Free decays where the record is made of them; else the record's subspace pole (no
-    assumption on the input's colour, measured across all windows together); else random decrement."""
+    """Free decays where the record is made of them; else, of the record's subspace pole (no
+    assumption on the input's colour, measured across all windows together) and the random
+    decrement, the one with the smaller stated 1σ (the subspace pole's when the two are alike
+    within a factor 2; a weak mode's record-long pole can be far less certain than its signature)."""
     by = {e.method: e for e in estimates}
-    for method in (("free_decay", "ssi", "random_decrement") if free else ("ssi", "random_decrement", "free_decay")):
+    if free and "free_decay" in by:
+        return by["free_decay"]
+    ssi, rd = by.get("ssi"), by.get("random_decrement")
+    if ssi is not None and rd is not None:
+        sharper = math.isfinite(rd.damping_std) and rd.damping_std > 0 and not ssi.damping_std <= 2.0 * rd.damping_std
+        return rd if sharper else ssi
+    for method in ("ssi", "random_decrement", "free_decay"):
         if method in by:
             return by[method]
     return None
@@ -348,7 +360,7 @@ def _run(times_s, b, curvature_shapes, stations_eta, *, fs, temperature, bearing
     engine = MonitoringEngine(mon, origin_ns=origin, time_zero_ns=origin, not_before_ns=not_before, loads=loads)
     engine_windows = engine.add(t, B, support=d, temperature=temp, gauges=gauges)
     windows = tuple(w.result for w in engine_windows)
-    # the hot spots' loads per window and their alarm events (issue 21), when the engine has loads
+    # the hot spots' loads per window and their alarm events, when the engine has loads
     loads_windows = tuple((w.loads, w.loads_events) for w in engine_windows if w.loads is not None)
     return cfg, fs, B, t, d, mon, engine, windows, loads_windows
 
@@ -392,7 +404,7 @@ def analyze(
     time_origin_ns : data time (ns, UNIX for a contract recording) of times_s = 0: windows are
         aligned to multiples of the step in data time and reported in s after it.
     not_before_s : windows starting earlier (s after the origin) are not analysed (the filter converging).
-    loads : LoadsMonitor or None: the hot spots' loads and fatigue, per window (issue 21).
+    loads : LoadsMonitor or None: the hot spots' loads and fatigue, per window.
     gauges : measured strain by gauge name, (times s after time_origin_ns, values m/m), for the
         loads' DEL bands (the monitor's gauges), or None: the windows' loads carry no band.
 

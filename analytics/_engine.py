@@ -144,7 +144,7 @@ class MonitoringEngine:
         self.loads_errors = 0
         self.b = _Series()
         self.temperature = _Series()
-        self.gauges: dict[str, _Series] = {}  # measured strain by gauge name: the loads' band (issue 21)
+        self.gauges: dict[str, _Series] = {}  # measured strain by gauge name: the loads' band
         self.windows = 0
         self.skipped_incomplete = 0
         self.skipped_warmup = 0

@@ -159,7 +159,7 @@ class LoadsMonitor:
         The rig's strain gauges judge the band; ``gauges_in_sample`` names those that aided the estimate
         (None: unknown, all of them are taken as in-sample: the wider band). ``outside_at(η)`` gives the
         strain per unit amplitude of the modes above the basis (len(η), K) for the calibrated band
-        (``shm_service.loads.outside_shapes``), or None: the plain gauge band."""
+        (``shm_service.commands.loads.outside_shapes``), or None: the plain gauge band."""
         from ._sn_curves import sn_curve
 
         beam = rig.beam

@@ -54,8 +54,8 @@ def case(excitation: str, layout: str, simulator: dict | None, seed: int, tmp: P
 
     from analytics import signal_loads, virtual_strain
     from shm_service.cli import main as shm
-    from shm_service.estimation import deformation_record, truth_from_recording
-    from shm_service.loads import loads_of_recording
+    from shm_service.processing.estimation import deformation_record, truth_from_recording
+    from shm_service.commands.loads import loads_of_recording
     from shm_service.recording import read_recording
 
     rig = _rig(LAYOUTS[layout], simulator, tmp / f"rig{seed}.json")

@@ -1,4 +1,4 @@
-"""Issue 25's DROPBEAR figures: 0.5 s windows every 0.25 s, band 15–80 Hz, the windows whose
+"""The DROPBEAR figures: 0.5 s windows every 0.25 s, band 15–80 Hz, the windows whose
 acceleration RMS is at least 5× the trial's quietest; the lowest listed mode of each window
 against the roller position (PinLoc): slow steps (dwell windows, PinLoc std ≤ 0.01 V) the
 relative RMS residual of a cubic fit, random dwell the Spearman rank correlation; and the share
@@ -24,7 +24,7 @@ TRIALS = [f"{p}/test{k}" for p in ("slow-steps", "random-dwell") for k in range(
 
 def evaluate(path: Path, channels: str = "accel", window: float = 0.5, step: float = 0.25) -> dict:
     from analytics import OmaConfig, OperationalModalAnalysis
-    from shm_service.tables import read_table
+    from shm_service.formats.tables import read_table
 
     table = read_table(path)
     names = ["Low G Accel"] + ([c for c in ("SG_300_a", "SG_306_b") if c in table.channels] if channels == "all" else [])

@@ -1,5 +1,5 @@
-"""Issue 3's bars: accuracy over five seeds (ideal, realistic, another tool's recordings),
-consistency (NEES), and speed side by side with the straightforward filterpy loop; issue 12's
+"""The estimator's bars: accuracy over five seeds (ideal, realistic, another tool's recordings),
+consistency (NEES), and speed side by side with the straightforward filterpy loop; the combimode's
 clamped configurations (the fixed bearing hanging, a standing mast) and the decoupling of the
 unit deformations' spectra with the bearing fixed (the paper's Figures 13–14).
 
@@ -20,7 +20,7 @@ from benchmarks.other_tool import write_other_tool_recording
 from analytics import amplitude_spectrum
 from estimator import FilterConfig, ImmsFilter, build_events, build_model, calibrate_at_rest, estimate
 from estimator._filterpy_reference import run_filterpy
-from shm_service.estimation import measurements_from_recording, truth_from_recording
+from shm_service.processing.estimation import measurements_from_recording, truth_from_recording
 from shm_service.recording import read_recording
 from shm_service.study import StudySettings
 from shm_service.virtual_rig import SimulationSettings, simulate

@@ -1,4 +1,4 @@
-"""Trend exports of a long history from a real ``shm serve`` (issue 26 item 5): a million stored
+"""Trend exports of a long history from a real ``shm serve``: a million stored
 trend rows exported at once as CSV and as JSON, and paged through with the cursor; the server's
 memory while it sends them.
 

@@ -1,4 +1,4 @@
-"""Issue 14's figures for archives and structures (benchmarks, not tests):
+"""The figures for archives and structures (benchmarks, not tests):
 
 - ``shm reprocess`` of eight one-hour recordings on 1 and 2 workers of a LocalCluster (the
   scaling ratio), each run into a fresh database;
@@ -16,7 +16,7 @@
   the start-up.
 - ``--compare TREE`` (another checkout, e.g. ``git worktree add ../before COMMIT``): each live
   fleet of ``--live`` on the tree's ``shm serve`` and on this one's, alternately, with a side-by-side
-  line per fleet (issue 23: the fleet budget no slower than before, in one run). ``--skip-live``
+  line per fleet (the fleet budget no slower than before, in one run). ``--skip-live``
   then leaves out the usual live runs, which the comparison already made.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_fleet [--replay FILE] [--files 8] [--skip-reprocess]
@@ -248,7 +248,7 @@ def bench_structure_cost(data_s: float = 300.0, block_s: tuple[float, ...] = (1.
     split into the virtual rig's generation and the pipeline (estimator, analysis, commits), run
     unpaced in this thread (``time.process_time``: the machine's load does not count)."""
     from shm_service.service import Storage, load_settings
-    from shm_service.service._service import SinkGuard, Structure, _ModelCache
+    from shm_service.service.runtime._service import SinkGuard, Structure, _ModelCache
 
     class _Host:  # what a Structure asks of its service
         fleet = False
@@ -293,7 +293,7 @@ _SERVE_TREE: Path | None = None
 def _start_tree_serve(tree: Path, args: list[str], log: IO[str], tmp: Path) -> tuple[subprocess.Popen, str]:
     """``shm serve ARGS`` of ``tree``'s code (its directory on PYTHONPATH, as its cwd) and its API's
     URL: from its ready file when that tree writes one, else from its "API at" banner (the trees
-    before issue 23's ready file)."""
+    before the ready file)."""
     import threading
 
     from shm_service.service import read_ready
@@ -483,7 +483,7 @@ def bench_live_fleet(structures: int, *, speed: float = 1.0, seconds: float = 24
     one database, one API), for ``seconds`` of wall time at ``--speed``: the worst lag of every
     structure from ``/api/structures`` (polled every ``poll_s``; overall and after ``after_s``),
     windows committed, the RSS of all processes together and the CPU per structure-second.
-    ``hog``: a CPU-bound process at ``nice 10`` runs beside the fleet for the whole run (issue 23's
+    ``hog``: a CPU-bound process at ``nice 10`` runs beside the fleet for the whole run (the fleet budget's
     acceptance: ``nice -n 10 python -c "while True: pass"``)."""
     ids = [f"mast-{k + 1:03d}" for k in range(structures)]
     worst: dict[str, float] = {}

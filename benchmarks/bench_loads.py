@@ -1,4 +1,4 @@
-"""Cost of the loads (issue 21): the streaming rainflow count per structure-second, next to the
+"""Cost of the loads: the streaming rainflow count per structure-second, next to the
 `rainflow` package (ASTM E1049 three-point, whole records) on the same signals.
 
 A structure here is one hour at 200 Hz of a narrow-band strain signal at each of 4 hot spots (the
@@ -49,8 +49,8 @@ def _signal(seconds: float, seed: int) -> np.ndarray:
 def accuracy(raw_path: str, est_path: str) -> None:
     """Virtual strain and DELs at the truth stations against the truth (see the module docstring)."""
     from analytics import signal_loads, virtual_strain
-    from shm_service.estimation import deformation_record, truth_from_recording
-    from shm_service.loads import loads_of_recording
+    from shm_service.processing.estimation import deformation_record, truth_from_recording
+    from shm_service.commands.loads import loads_of_recording
     from shm_service.recording import read_recording
 
     raw, est = read_recording(raw_path), read_recording(est_path)
@@ -91,7 +91,7 @@ def accuracy(raw_path: str, est_path: str) -> None:
 
 def counting_acceptance() -> None:
     """The ASTM E1049-85 example through ``shm loads`` (a one-column CSV) and a 30-minute record
-    counted whole and in 1 s batches (issue 21's acceptance)."""
+    counted whole and in 1 s batches (the loads' acceptance)."""
     import contextlib
     import io
     import json

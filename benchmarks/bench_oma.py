@@ -1,4 +1,4 @@
-"""Operational modal analysis (issue 15): speed of one window, the honesty of the reported
+"""Operational modal analysis: speed of one window, the honesty of the reported
 uncertainties, and the DROPBEAR figures of ``shm oma`` against a naive Welch peak picker, with
 pyOMA-2's SSI-cov side by side where it installs.
 
@@ -122,7 +122,7 @@ def dropbear() -> list[str]:
     from scipy import stats
 
     from analytics import OmaConfig, OperationalModalAnalysis, tracked_frequency
-    from shm_service.tables import read_table, select_channels
+    from shm_service.formats.tables import read_table, select_channels
 
     rows = ["\n[DROPBEAR] 0.5 s windows, band 10-100 Hz, first bending mode tracked in 20-50 Hz (ours: SSI-cov; naive: Welch peak)",
             "  trial               windows  ours            naive          found (ours/naive)  time"]

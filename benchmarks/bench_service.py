@@ -1,5 +1,5 @@
-"""Bars of issues 6 and 10 (``shm serve``): end-to-end replay speed of a one-hour recording with
-the dashboard off and on (issue 10: under 3 minutes on 2 cores with it on, every window
+"""The service's bars (``shm serve``): end-to-end replay speed of a one-hour recording with
+the dashboard off and on (under 3 minutes on 2 cores with it on, every window
 committed, nothing in the log), and flat memory over a long simulated run at maximum speed.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_service [--replay FILE] [--hours H] [--skip-replay] [--skip-sim]

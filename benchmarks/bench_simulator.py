@@ -1,4 +1,4 @@
-"""Issue 2's speed bar: 300 s of the default layout must simulate in under 30 s on one core.
+"""The simulator's speed bar: 300 s of the default layout must simulate in under 30 s on one core.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.bench_simulator
 """

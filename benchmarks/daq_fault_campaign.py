@@ -1,7 +1,7 @@
-"""The DAQ fault campaign of issue 26: generated files with the faults field data has, through the
+"""The DAQ fault campaign: generated files with the faults field data has, through the
 real commands, compared with the clean file sample by sample.
 
-Each case writes an 8-channel, 200 Hz CSV of a three-mode response (``shm_service.daq_faults``)
+Each case writes an 8-channel, 200 Hz CSV of a three-mode response (``shm_service.formats.daq_faults``)
 with random faults — blank cells, NaN, ±inf, 1e30, text, repeated and backwards times, a last row
 cut short, a units row, decimal commas — then runs
 
@@ -71,7 +71,7 @@ def _mac(a, b) -> float:
 
 
 def _case(rng: np.random.Generator, clean: np.ndarray, tmp: Path, k: int) -> dict:
-    from shm_service.daq_faults import CELL_FAULTS, write_faulted_csv
+    from shm_service.formats.daq_faults import CELL_FAULTS, write_faulted_csv
 
     n = clean.shape[0]
     kinds = sorted(CELL_FAULTS)
@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--seconds", type=float, default=120.0)
     parser.add_argument("--seed", type=int, default=26)
     args, _ = parser.parse_known_args(argv)
-    from shm_service.daq_faults import modal_response
+    from shm_service.formats.daq_faults import modal_response
 
     rng = np.random.default_rng(args.seed)
     clean = modal_response(int(args.seconds * FS), FS, CHANNELS)
@@ -154,7 +154,7 @@ def main(argv: list[str] | None = None) -> dict:
         tmp = Path(tmp_name)
         _rig(tmp / "rig.json")
         _map(tmp / "map.toml")
-        from shm_service.daq_faults import write_faulted_csv
+        from shm_service.formats.daq_faults import write_faulted_csv
 
         reference = write_faulted_csv(tmp / "clean.csv", clean, FS)
         code, text, err, _ = _run(["oma", str(reference.path), "--fmax", "15", "--json"])
@@ -183,12 +183,12 @@ def main(argv: list[str] | None = None) -> dict:
         "cut_flagged_by_analyze": sum(bool(r.get("analyze_says_cut")) for r in results),
         "wall_s": round(time.perf_counter() - started, 1),
     }
-    print("DAQ fault campaign (issue 26): " + json.dumps(summary))
+    print("DAQ fault campaign: " + json.dumps(summary))
     return summary
 
 
 def failures(summary: dict) -> list[str]:
-    """The bars of issue 26 the summary misses (empty: every bar met)."""
+    """The campaign's bars the summary misses (empty: every bar met)."""
     n = summary["cases"]
     bars = {
         "no traceback": summary["tracebacks"] == 0,

@@ -1,4 +1,4 @@
-"""The sensor-fault campaign of issue 11 (item 9): faults injected into ``sim`` (the virtual
+"""The sensor-fault campaign: faults injected into ``sim`` (the virtual
 rig's samples, before the service sees them) and into ``ingest`` (the same samples, faulted,
 sent as ingest requests through the validator), with the time to detect and to recover of each.
 
@@ -131,9 +131,9 @@ def run(source: str, faults: tuple[str, ...], duration_s: float, *, fault_topic:
         seed: int = 3) -> tuple[list[Observation], Any]:
     """Run a simulated rig with ``faults`` through the service (``source`` "sim" or "ingest"),
     observing after every 1 s batch. Returns the observations and the final status document."""
-    from shm_service.service._ingest import parse_body
+    from shm_service.service.sources._ingest import parse_body
     from shm_service.service import MonitoringService
-    from shm_service.service._sources import SimSource
+    from shm_service.service.sources._sources import SimSource
 
     with tempfile.TemporaryDirectory() as tmp:
         s = settings(Path(tmp), source=source, faults=faults, duration_s=duration_s, seed=seed)
@@ -254,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
         fmt = lambda v: "–" if v is None else f"{v:.1f} s"  # noqa: E731
         print(f"| {r['source']} | {r['fault']} | {fmt(r['detect_s'])} | {r['detected_by']} | {fmt(r['recover_s'])} | "
               f"{fmt(o.extra.get('healthz_ok_after_s'))} | {r['filter_restarts']} | {r['rejected']} |")
-    # the bar (issue 11, item 9): every fault is shown by the service and every one is recovered from
+    # the bar: every fault is shown by the service and every one is recovered from
     missed = [f"{o.source}: {o.scenario.name}" for o in outcomes if o.detect_s is None or o.recover_s is None]
     print(f"\n{len(outcomes) - len(missed)} of {len(outcomes)} faults detected and recovered from"
           + (f"; not: {', '.join(missed)}" if missed else ""))

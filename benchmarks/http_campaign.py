@@ -1,4 +1,4 @@
-"""The HTTP part of issue 11's fault campaign (item 9): generated requests against the real
+"""The HTTP part of the fault campaign: generated requests against the real
 server (uvicorn on a free loopback port, an ingest service on a real SQLite file), half to an
 API bound as on loopback, half to one that requires the token everywhere (as off loopback), with
 and without the token: mutated query parameters and path ids, ingest bodies with NaN, Infinity,

@@ -1,4 +1,4 @@
-"""The crash part of issue 11's fault campaign (item 9): ``shm serve`` replaying a recording with
+"""The crash part of the fault campaign: ``shm serve`` replaying a recording with
 an alarm in it (a mass added at 90 s) is killed with SIGKILL at random instants, restarted each
 time on the same database, while a webhook receiver delays some of its 2xx answers. After every
 kill: ``PRAGMA integrity_check`` is ok and no committed row (trend rows, alarms, alarm events,

@@ -85,6 +85,7 @@ from ._payloads import (
 )
 from ._rig import (
     DNV_RP_C203_CURVE_NAMES,
+    EXTENSION_KEYS,
     DNV_RP_C203_ENVIRONMENTS,
     EN1993_DETAIL_CATEGORIES,
     EN1993_SHEAR_CATEGORIES,
@@ -112,7 +113,7 @@ __all__ = [
     # the runtime's ports (the HTTP routers and the dashboard are typed against them)
     "MAX_PAGE", "Page", "ServicePort", "StructureModel", "StructurePort",
     # rig.json
-    "Beam", "Orientation", "PointMass", "RigDescription",
+    "Beam", "EXTENSION_KEYS", "Orientation", "PointMass", "RigDescription",
     "DNV_RP_C203_CURVE_NAMES", "DNV_RP_C203_ENVIRONMENTS", "EN1993_DETAIL_CATEGORIES", "EN1993_SHEAR_CATEGORIES",
     "FatigueSettings", "HotSpot", "check_curve_spec", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
     "STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT", "Support", "load_rig", "parse_rig",

@@ -80,7 +80,7 @@ __all__ = [
 Level = Literal["ok", "warning", "alarm"]
 AlarmLevel = Literal["warning", "alarm"]
 ChartKind = Literal["frequency", "curvature", "fatigue"]
-#: Conditions of a hot spot's fatigue charts (issue 21): the damage rate against the design life,
+#: Conditions of a hot spot's fatigue charts: the damage rate against the design life,
 #: the DEL against its baseline, the consumed life.
 FATIGUE_CONDITIONS: Final[tuple[str, ...]] = ("rate", "del", "consumed")
 WindowKind = Literal["forced", "free_decay", "ambient", "quiet"]
@@ -592,7 +592,7 @@ class PipelineStatusDocument(_Document):
     busy_fraction: Finite
     active_alarms: dict[str, AlarmLevel]
     hot_spots: list[HotSpotLoadsDocument] = Field(default_factory=list,
-                                                description="the hot spots' loads and life after the last committed window (issue 21)")
+                                                description="the hot spots' loads and life after the last committed window")
 
 
 class BaselineModeDocument(_Document):
@@ -737,7 +737,7 @@ class LiveEstimatesDocument(_Document):
     x: list[list[Finite]] = Field(default_factory=list, description="the state vector of each estimate")
     sensors: dict[str, SensorState] = Field(default_factory=dict, description="topic -> state, now")
     watch_s: Finite = Field(description="how long the structure keeps estimates after this read, s")
-    # virtual loads of each estimate (issue 21): the hot spots, then a grid from the support
+    # virtual loads of each estimate: the hot spots, then a grid from the support
     loads_stations_m: list[Finite] = Field(default_factory=list, description="stations of strain, stress and moment, m")
     loads_station_names: list[str] = Field(default_factory=list, description="the hot spot at each station, '' for a grid station")
     strain: list[list[Finite]] = Field(default_factory=list, description="bending strain ε = −c κ per estimate and station, m/m")
@@ -770,7 +770,7 @@ class IngestResultDocument(_Document):
     errors: list[IngestErrorDocument]
 
 
-# -- loads and fatigue (issue 21) ------------------------------------------------------------
+# -- loads and fatigue ------------------------------------------------------------
 
 
 class StationLoadsDocument(_Document):

@@ -32,7 +32,7 @@ __all__ = [
 
 TRUTH_TOPIC: Final = "/truth/state"
 ESTIMATE_TOPIC: Final = "/estimate/state"
-#: The virtual loads of each estimate (issue 21) at the stations the recording's metadata "loads" names.
+#: The virtual loads of each estimate at the stations the recording's metadata "loads" names.
 ESTIMATE_LOADS_TOPIC: Final = "/estimate/loads"
 BEARING_TOPIC: Final = "/bearing/displacement"
 TEMPERATURE_TOPIC: Final = "/env/temperature"

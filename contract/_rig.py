@@ -103,6 +103,17 @@ def check_curve_spec(spec: object) -> None:
     raise ValueError(f"curve {spec!r}: unknown standard {parts[0]!r}; known: EN1993-1-9, DNV-RP-C203, or {{'points': ...}}")
 
 
+#: The extension keys the project's own tools write or read (the contract allows extra keys and
+#: readers that do not know them ignore them): the key as it stands in rig.json -> its meaning.
+EXTENSION_KEYS: dict[str, str] = {
+    "simulator": "an object: the virtual rig's settings a recording was simulated with (every `shm simulate` setting but the rig's "
+                 "own support, orientation, length and layout); `shm simulate --rig FILE` reads it as the settings' defaults",
+    "notes": "free text (a string or a list of strings): where the values came from, what was estimated; never read",
+    "sensors[].axes": "the axes an IMU measures, e.g. [\"accel_y\"] for a single-axis accelerometer (`shm import` writes it when the "
+                      "channel map fills fewer than six; the unfilled fields are written as 0.0 and are not used)",
+}
+
+
 class RigError(ValueError):
     """A rig description that breaks the contract; the message names the offending key."""
 
@@ -119,9 +130,9 @@ class StiffnessSegment(_ContractModel):
     stiffener (factor > 1).
     """
 
-    start: float = Field(ge=0.0)
-    end: float
-    factor: float = Field(gt=0.0)
+    start: float = Field(ge=0.0, description="where the segment starts, m from D")
+    end: float = Field(description="where it ends, m from D (> start, on the beam)")
+    factor: float = Field(gt=0.0, description="its bending stiffness over the nominal EI (0.8: a 20 % loss; > 1: a stiffener)")
 
     @model_validator(mode="after")
     def _ordered(self) -> "StiffnessSegment":
@@ -133,19 +144,19 @@ class StiffnessSegment(_ContractModel):
 class RectangleSection(_ContractModel):
     """A solid rectangle at ``position`` (m from D), bending across its ``thickness`` (m)."""
 
-    position: float = Field(ge=0.0, allow_inf_nan=False)
-    shape: Literal["rectangle"]
-    width: float = Field(gt=0.0, allow_inf_nan=False)
-    thickness: float = Field(gt=0.0, allow_inf_nan=False)
+    position: float = Field(ge=0.0, allow_inf_nan=False, description="the station's arc length from D, m")
+    shape: Literal["rectangle"] = Field(description='"rectangle": a solid rectangle')
+    width: float = Field(gt=0.0, allow_inf_nan=False, description="across the bending plane, m")
+    thickness: float = Field(gt=0.0, allow_inf_nan=False, description="in the bending plane (the beam bends across it), m")
 
 
 class TubeSection(_ContractModel):
     """A circular hollow section at ``position`` (m from D): ``outer_diameter`` and ``wall_thickness`` (m)."""
 
-    position: float = Field(ge=0.0, allow_inf_nan=False)
-    shape: Literal["tube"]
-    outer_diameter: float = Field(gt=0.0, allow_inf_nan=False)
-    wall_thickness: float = Field(gt=0.0, allow_inf_nan=False)
+    position: float = Field(ge=0.0, allow_inf_nan=False, description="the station's arc length from D, m")
+    shape: Literal["tube"] = Field(description='"tube": a circular hollow section (a mast, a tower)')
+    outer_diameter: float = Field(gt=0.0, allow_inf_nan=False, description="outer diameter, m (the fibre distance is half of it)")
+    wall_thickness: float = Field(gt=0.0, allow_inf_nan=False, description="wall thickness, m (at most half the outer diameter)")
 
     @model_validator(mode="after")
     def _wall_fits(self) -> TubeSection:
@@ -159,11 +170,13 @@ class TubeSection(_ContractModel):
 class TableSection(_ContractModel):
     """Any other section by its properties at the reference temperature: EI (N·m²), μ (kg/m), c (m)."""
 
-    position: float = Field(ge=0.0, allow_inf_nan=False)
-    shape: Literal["table"]
-    bending_stiffness: float = Field(gt=0.0, allow_inf_nan=False)
-    mass_per_length: float = Field(gt=0.0, allow_inf_nan=False)
-    fibre_distance: float = Field(gt=0.0, allow_inf_nan=False)
+    position: float = Field(ge=0.0, allow_inf_nan=False, description="the station's arc length from D, m")
+    shape: Literal["table"] = Field(description='"table": any other section (a blade) by its properties')
+    bending_stiffness: float = Field(gt=0.0, allow_inf_nan=False, description="EI at the reference temperature, N·m² (follows the beam's "
+                                     "temperature coefficient)")
+    mass_per_length: float = Field(gt=0.0, allow_inf_nan=False, description="μ = ρA, kg/m")
+    fibre_distance: float = Field(gt=0.0, allow_inf_nan=False, description="c, the distance of the outer fibre from the neutral axis, m "
+                                  "(strain ε = −c·κ)")
 
 
 Section = Annotated[RectangleSection | TubeSection | TableSection, Field(discriminator="shape")]
@@ -201,15 +214,22 @@ class Beam(_ContractModel):
     ``density`` (kg/m³) apply to rectangles and tubes; a beam of table sections only may omit them.
     """
 
-    length: float = Field(gt=0.0, allow_inf_nan=False)
-    width: float | None = Field(default=None, gt=0.0, allow_inf_nan=False)
-    thickness: float | None = Field(default=None, gt=0.0, allow_inf_nan=False)
-    youngs_modulus: float | None = Field(default=None, gt=0.0, allow_inf_nan=False)
-    density: float | None = Field(default=None, gt=0.0, allow_inf_nan=False)
-    youngs_modulus_temperature_coefficient: float = STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT
-    reference_temperature: float = 20.0
-    stiffness_segments: tuple[StiffnessSegment, ...] = ()
-    sections: tuple[Section, ...] | None = None
+    length: float = Field(gt=0.0, allow_inf_nan=False, description="arc length from D to the tip, m")
+    width: float | None = Field(default=None, gt=0.0, allow_inf_nan=False, description="the uniform rectangle's width, m "
+                                "(not with sections)")
+    thickness: float | None = Field(default=None, gt=0.0, allow_inf_nan=False, description="the uniform rectangle's thickness, m "
+                                    "(the beam bends across it; not with sections)")
+    youngs_modulus: float | None = Field(default=None, gt=0.0, allow_inf_nan=False, description="E at the reference temperature, Pa "
+                                         "(rectangles and tubes; a beam of table sections may omit it)")
+    density: float | None = Field(default=None, gt=0.0, allow_inf_nan=False, description="ρ, kg/m³ (rectangles and tubes)")
+    youngs_modulus_temperature_coefficient: float = Field(STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT, description=
+                                                          "relative change of E per K (steel's by default); every EI follows it")
+    reference_temperature: float = Field(20.0, description="the temperature E and the tables' EI are given at, °C")
+    stiffness_segments: tuple[StiffnessSegment, ...] = Field((), description="segments whose EI is a factor times the nominal "
+                                                             "(damage, stiffeners)")
+    sections: tuple[Section, ...] | None = Field(None, description="the cross-section along the beam: stations of shape rectangle, "
+                                                 "tube or table ordered from 0 to length, linear tapers between neighbours, a step where "
+                                                 "two share a position; None: the uniform rectangle width × thickness")
 
     @model_validator(mode="after")
     def _sections_consistent(self) -> Beam:
@@ -428,12 +448,13 @@ class Beam(_ContractModel):
 class HotSpot(_ContractModel):
     """A named position with a fatigue detail: its S–N curve, stress concentration and partial factors."""
 
-    name: str = Field(min_length=1)
-    position: float
-    curve: str | dict[str, Any]
-    scf: float = Field(default=1.0, gt=0.0)
-    gamma_Ff: float = Field(default=1.0, gt=0.0)
-    gamma_Mf: float = Field(default=1.0, gt=0.0)
+    name: str = Field(min_length=1, description="the hot spot's name (unique), as the loads and /api/fatigue report it")
+    position: float = Field(description="arc length from D, m")
+    curve: str | dict[str, Any] = Field(description='its S–N curve: "EN1993-1-9:CLASS" (e.g. "EN1993-1-9:71"), '
+                                        '"DNV-RP-C203:CURVE" (e.g. "DNV-RP-C203:D"), or {"points": [[N, Δσ Pa], ...]}')
+    scf: float = Field(default=1.0, gt=0.0, description="stress concentration factor on the nominal stress")
+    gamma_Ff: float = Field(default=1.0, gt=0.0, description="partial factor on the stress ranges (loads)")
+    gamma_Mf: float = Field(default=1.0, gt=0.0, description="partial factor on the fatigue strength (material)")
 
     @field_validator("curve")
     @classmethod
@@ -445,19 +466,21 @@ class HotSpot(_ContractModel):
 class FatigueSettings(_ContractModel):
     """Rig-level fatigue settings: the design life the remaining life is judged against."""
 
-    design_life_years: float | None = Field(default=None, gt=0.0)
+    design_life_years: float | None = Field(default=None, gt=0.0, description="the design life, years: the remaining life and "
+                                            "the consumed share are judged against it (shm loads, /api/fatigue)")
 
 
 class PointMass(_ContractModel):
-    position: float = Field(ge=0.0)
-    mass: float = Field(ge=0.0)
-    rotary_inertia: float = Field(default=0.0, ge=0.0)
+    position: float = Field(ge=0.0, description="arc length from D, m")
+    mass: float = Field(ge=0.0, description="kg (a sensor board, an added mass)")
+    rotary_inertia: float = Field(default=0.0, ge=0.0, description="about the axis of bending, kg·m²")
 
 
 class Sensor(_ContractModel):
-    name: str = Field(min_length=1)
-    kind: SensorKind
-    position: float | None = None
+    name: str = Field(min_length=1, description="unique within its kind; the topic's NAME (/imu/NAME); the IMU at the support is D")
+    kind: SensorKind = Field(description="imu (accel + gyro), tof (distance to the reflector), strain (a gauge on the +ζ face), "
+                             "bearing (the support's displacement d), temperature")
+    position: float | None = Field(None, description="arc length from D, m (required for imu, tof and strain)")
 
     @property
     def topic(self) -> str:
@@ -475,16 +498,19 @@ class RigDescription(_ContractModel):
     fixed bearing of Section 3.5, φ ≡ 0), orientation (``hanging`` below D, gravity along +η;
     ``standing`` above D, gravity along −η, self-weight compresses the beam), attached masses and sensors."""
 
-    beam: Beam
-    gravity: float = Field(ge=0.0)
-    reflector_distance: float | None = None
-    support: Support = "pinned"
-    orientation: Orientation = "hanging"
-    point_masses: tuple[PointMass, ...] = ()
-    sensors: tuple[Sensor, ...]
-    truth_stations: tuple[float, ...] = ()
-    hot_spots: tuple[HotSpot, ...] = ()
-    fatigue: FatigueSettings | None = None
+    beam: Beam = Field(description="the beam: length, material, cross-section along it (the beam section below)")
+    gravity: float = Field(ge=0.0, description="g, m/s² (0: a beam moving in a horizontal plane)")
+    reflector_distance: float | None = Field(None, description="distance of the ToFs' reflector plane from D along ζ at rest, m "
+                                             "(required with ToF sensors, else left out)")
+    support: Support = Field("pinned", description='"pinned": the paper\'s plain bearing (φ a state); "clamped": fixed to the '
+                             'carriage or the ground (φ ≡ 0)')
+    orientation: Orientation = Field("hanging", description='"hanging": below D, gravity along +η; "standing": above D (a mast), '
+                                     "gravity along −η (needs clamped)")
+    point_masses: tuple[PointMass, ...] = Field((), description="attached masses (the point_masses[] section below)")
+    sensors: tuple[Sensor, ...] = Field(description="every sensor (the sensors[] section below)")
+    truth_stations: tuple[float, ...] = Field((), description="stations where a simulation writes the true deflection and curvature, m")
+    hot_spots: tuple[HotSpot, ...] = Field((), description="fatigue details for shm loads and /api/fatigue (the hot_spots[] section below)")
+    fatigue: FatigueSettings | None = Field(None, description="rig-level fatigue settings (the fatigue section below)")
 
     @model_validator(mode="after")
     def _consistent(self) -> "RigDescription":

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from ._argtypes import number, output_path
-from ._commands import (  # noqa: F401  (the commands' shared parts; reprocess, loads and import call them)
+from .commands._common import (  # noqa: F401  (the commands' shared parts; reprocess, loads and import call them)
     DEFAULT_SENSOR_COUNT,
     CliError,
     _analysis_settings,
@@ -197,7 +197,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 # -- shm estimate ------------------------------------------------------------------------
 def _cmd_estimate(args: argparse.Namespace) -> int:
-    from .estimation import estimate_recording, score_against_truth, truth_from_recording, write_estimates
+    from .processing.estimation import estimate_recording, score_against_truth, truth_from_recording, write_estimates
     from .recording import read_recording
 
     rec = read_recording(args.recording, rig=args.rig)
@@ -291,7 +291,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
 def _cmd_analyze(args: argparse.Namespace) -> int:
     from analytics import BaselineError
 
-    from .analysis import analyze_deformations, baseline_from_deformations, recording_gauges
+    from .processing.analysis import analyze_deformations, baseline_from_deformations, recording_gauges
 
     config, warmup = _analysis_settings(args)
     baseline = None
@@ -393,7 +393,7 @@ def _print_loads(last: dict, note: str) -> None:
 
 # -- shm reprocess, shm baseline learn ---------------------------------------------------
 def _analysis_options(args: argparse.Namespace):
-    from .reprocess import AnalysisOptions
+    from .commands.reprocess import AnalysisOptions
 
     return AnalysisOptions(rig=args.rig, peripheral=args.peripheral, modes=args.modes, imus=args.imus, tofs=args.tofs,
                            gauges=args.gauges, config=args.config)
@@ -402,7 +402,7 @@ def _analysis_options(args: argparse.Namespace):
 def _cmd_reprocess(args: argparse.Namespace) -> int:
     import time
 
-    from .reprocess import reprocess
+    from .commands.reprocess import reprocess
 
     started = time.perf_counter()
     outcomes = reprocess(args.recordings, args.db, workers=args.workers, scheduler=args.scheduler, force=args.force,
@@ -437,7 +437,7 @@ def _time_arg(text: str) -> float:
 def _cmd_baseline_learn(args: argparse.Namespace) -> int:
     import math
 
-    from .reprocess import learn_baseline
+    from .commands.reprocess import learn_baseline
 
     period = (args.start if args.start is not None else -math.inf, args.end if args.end is not None else math.inf)
     if period[0] >= period[1]:
@@ -490,8 +490,8 @@ def _oma_identify(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
 
     from analytics import OmaConfig, OperationalModalAnalysis
 
-    from .oma_input import clean_for_identification
-    from .tables import TableError, read_table, select_channels
+    from .formats.oma_input import clean_for_identification
+    from .formats.tables import TableError, read_table, select_channels
 
     try:
         table = read_table(args.data, fs=args.fs, nonfinite="keep")
@@ -604,7 +604,7 @@ def _add_configuration_arguments(p: argparse.ArgumentParser, *, rig_file: bool) 
 
 
 def _cmd_import(args: argparse.Namespace) -> int:
-    from .daq_import import cmd_import
+    from .commands.daq import cmd_import
 
     return cmd_import(args)
 
@@ -621,9 +621,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_baseline_parser(sub)
     _add_oma_parser(sub)
     _add_inspect_parser(sub)
-    from .demo import add_demo_parser
-    from .loads import add_loads_parser  # shm loads (issue 21)
-    from .service._cli import add_serve_parser  # shm serve (issue 6)
+    from .commands.demo import add_demo_parser
+    from .commands.loads import add_loads_parser  # shm loads
+    from .service._cli import add_serve_parser  # shm serve
     add_serve_parser(sub)
     add_demo_parser(sub)
     add_loads_parser(sub)
@@ -763,7 +763,7 @@ def _add_baseline_parser(sub: Any) -> None:
 
 def _add_oma_parser(sub: Any) -> None:
     p = sub.add_parser("oma", help="operational modal analysis (SSI-cov) of measured channels: .npy/.npz, CSV/TSV/text, .mat, HDF5, .mcap")
-    p.add_argument("data", help="measured channels (see shm_service/tables.py for the formats)")
+    p.add_argument("data", help="measured channels (see shm_service/formats/tables.py for the formats)")
     p.add_argument("--fs", type=number(low=0, low_open=True, unit="Hz"), default=None,
                    help="sample rate, Hz (required without a time column)")
     p.add_argument("--channels", default=None, help="channels to use, names or column indices: A,B,...")

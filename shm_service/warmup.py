@@ -110,9 +110,9 @@ def _lock() -> Iterator[None]:
 
 def _end_with_parent() -> None:
     """In the child: the kernel ends it when the thread that started it ends (even by SIGKILL)."""
-    from .service._processes import _set_pdeathsig
+    from ._lifetime import set_parent_death_signal
 
-    _set_pdeathsig(signal.SIGKILL)
+    set_parent_death_signal(signal.SIGKILL)
 
 
 class Cancelled(RuntimeError):

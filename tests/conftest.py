@@ -157,3 +157,50 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "browser: needs a real Chromium (make test only)")
     config.addinivalue_line("markers", "e2e: a real service end to end, processes or a whole run (make test only)")
     config.pluginmanager.register(_GroupSuffix(), "shm-xdist-group-suffix")
+
+
+# -- real PostgreSQL and Mosquitto servers (a fleet across machines) ---------------------------------
+# Started once per test process (an xdist worker each), on free loopback ports, from Debian's
+# packages (make test installs them when missing: .ci/install-servers); they die with the process.
+
+
+@pytest.fixture(scope="session")
+def postgres_server():
+    """A throwaway PostgreSQL (``shm_service.devservers.DevServer``) for the whole session."""
+    from shm_service.devservers import start_postgres
+
+    server = start_postgres()
+    yield server
+    server.stop()
+
+
+@pytest.fixture(scope="session")
+def postgres_url(postgres_server) -> str:
+    """The URL of the session's PostgreSQL database ``shm`` (``postgresql://postgres@127.0.0.1:PORT/shm``)."""
+    return postgres_server.url
+
+
+@pytest.fixture
+def fresh_postgres_url(postgres_server) -> str:
+    """The URL of a database of its own for one test, in the session's PostgreSQL (dropped after it)."""
+    import uuid
+
+    import psycopg
+
+    name = f"t_{uuid.uuid4().hex[:12]}"
+    admin = postgres_server.url.rsplit("/", 1)[0] + "/postgres"
+    with psycopg.connect(admin, autocommit=True) as db:
+        db.execute(f'CREATE DATABASE "{name}"')
+    yield postgres_server.url.rsplit("/", 1)[0] + "/" + name
+    with psycopg.connect(admin, autocommit=True) as db:
+        db.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+
+@pytest.fixture(scope="session")
+def mqtt_server():
+    """A throwaway Mosquitto (``shm_service.devservers.DevServer``) for the whole session."""
+    from shm_service.devservers import start_mosquitto
+
+    server = start_mosquitto()
+    yield server
+    server.stop()

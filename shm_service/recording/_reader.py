@@ -38,7 +38,7 @@ from contract import (
     parse_rig,
 )
 
-from ..service._plausibility import ValueLimits, all_plausible, implausible_values
+from ._plausibility import ValueLimits, all_plausible, implausible_values
 from ._writer import MAGIC, RIG_ATTACHMENT
 
 __all__ = ["Channel", "ReadReport", "Recording", "RecordingError", "TopicReport", "read_recording"]

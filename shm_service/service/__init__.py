@@ -12,20 +12,20 @@ from typing import Any
 #: HTTP app and a server for it, the storage, and ``start_serve`` for ``shm serve`` as a process.
 _HOMES = {
     # the service and its configuration
-    "MonitoringService": "_service", "ServiceError": "_service",
+    "MonitoringService": "runtime._service", "ServiceError": "runtime._service",
     "ServiceSettings": "_config", "SettingsError": "_config", "load_settings": "_config", "render_toml": "_config",
     "resolve_token": "_config", "AlarmSettings": "_config", "ArchiveSettings": "_config",
     "DashboardSettings": "_config", "EstimatorSettings": "_config", "NotifySettings": "_config",
     "RetentionSettings": "_config", "ServerSettings": "_config", "SimSettings": "_config",
     "SourceSettings": "_config", "StructureSettings": "_config",
     # the HTTP API over a service
-    "create_app": "_api", "ApiServer": "_server",
+    "create_app": "http._app", "ApiServer": "http._server",
     # the database
-    "Storage": "_storage", "StorageUnavailable": "_storage", "WindowCommit": "_storage", "AlarmChange": "_storage",
-    "SCHEMA_VERSION": "_storage",
+    "Storage": "storage._storage", "StorageUnavailable": "storage._storage", "WindowCommit": "storage._storage", "AlarmChange": "storage._storage",
+    "SCHEMA_VERSION": "storage._storage",
     # shm serve as a process
-    "SENSOR_STATES": "_dashboard_port", "ServeProcess": "_launch", "ServeStartError": "_launch",
-    "start_serve": "_launch", "read_ready": "_processes",
+    "SENSOR_STATES": "runtime._dashboard_port", "ServeProcess": "runtime._launch", "ServeStartError": "runtime._launch",
+    "start_serve": "runtime._launch", "read_ready": "runtime._processes",
 }
 
 __all__ = sorted(_HOMES)

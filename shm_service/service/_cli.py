@@ -58,7 +58,7 @@ def add_process_arguments(p: argparse.ArgumentParser) -> None:
 def _ready(args: argparse.Namespace, **document: Any) -> None:
     path = getattr(args, "ready_file", None)
     if path:
-        from ._processes import write_ready
+        from .runtime._processes import write_ready
 
         write_ready(path, document)
 
@@ -96,10 +96,10 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
-    """``shm serve`` under the database's lock (``_db_lock``: one service per database; a fleet's
+    """``shm serve`` under the database's lock (``storage.sqlite._lock``: one service per database; a fleet's
     workers run under their front process's)."""
     from ._config import SettingsError, load_settings
-    from ._db_lock import DatabaseBusy, DatabaseLock
+    from .storage.sqlite._lock import DatabaseBusy, DatabaseLock
 
     try:
         settings = load_settings(args.config, overrides_from_args(args))
@@ -123,8 +123,8 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
 def _worker_part(settings: Any, worker_of: str) -> tuple[Any, Any] | None:
     """A worker's part of the fleet (``--worker-of I/N``) and its worker lock (held for the
     process's life: a later front knows this worker still runs on the database); None: bad value."""
-    from ._processes import hold_worker_lock
-    from ._workers import part_of
+    from .runtime._processes import hold_worker_lock
+    from .runtime._workers import part_of
 
     try:
         index, count = (int(x) for x in worker_of.split("/"))
@@ -140,7 +140,7 @@ def _wait_for_rig(args: argparse.Namespace, settings: Any, slot: Any, api: Any, 
     """follow: the API serves (healthz degraded, the rest 503 "starting") until the file's rig.json
     is readable; returns the service, or the exit code (0 stopped meanwhile, 2 an error)."""
     from ._config import SettingsError
-    from ._service import MonitoringService, RigPending, ServiceError
+    from .runtime._service import MonitoringService, RigPending, ServiceError
 
     if getattr(args, "worker_of", None) is None:
         print(f"shm serve: API at {api.url}; {slot.waiting_for}", flush=True)
@@ -159,11 +159,11 @@ def _wait_for_rig(args: argparse.Namespace, settings: Any, slot: Any, api: Any, 
 
 
 def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = None) -> int:
-    from ._api import create_app
+    from .http._app import create_app
     from ._config import SettingsError, load_settings, render_toml
-    from ._server import ApiServer
-    from ._service import MonitoringService, RigPending, ServiceError
-    from ._starting import ServiceSlot, StartingService
+    from .http._server import ApiServer
+    from .runtime._service import MonitoringService, RigPending, ServiceError
+    from .runtime._starting import ServiceSlot, StartingService
 
     try:
         settings = load_settings(args.config, overrides_from_args(args))
@@ -239,7 +239,7 @@ def _print_where(service: Any, settings: Any, api: Any) -> None:
 def _serve_until_stopped(args: argparse.Namespace, settings: Any, service: Any, api: Any, stop: threading.Event) -> int:
     """Start the service (after compiling the filter's kernels), say it is ready, serve until it is
     done or stopped (SIGTERM, SIGINT, the parent's end), stop it and print its summary."""
-    from ._progress import ProgressLog, compile_first
+    from .runtime._progress import ProgressLog, compile_first
 
     started = time.monotonic()
     progress = ProgressLog(service)
@@ -302,7 +302,7 @@ def _print_summary(status: Any, elapsed: float, args: argparse.Namespace) -> int
 def _watch_parent(args: argparse.Namespace) -> None:
     parent = getattr(args, "parent_pid", None)
     if parent is not None:
-        from ._processes import end_with_parent
+        from .runtime._processes import end_with_parent
 
         end_with_parent(parent)
 
@@ -336,10 +336,10 @@ def _print_fleet(fleet: dict[str, Any], *, as_json: bool) -> int:
 
 def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, str] | None) -> int:
     """A fleet on ``settings.worker_count`` worker processes behind one API (this process)."""
-    from ._api import create_app
-    from ._server import ApiServer
-    from ._service import ServiceError
-    from ._workers import WorkerFleet
+    from .http._app import create_app
+    from .http._server import ApiServer
+    from .runtime._service import ServiceError
+    from .runtime._workers import WorkerFleet
 
     try:
         front = WorkerFleet(settings, environ=environ, json_summary=args.json)

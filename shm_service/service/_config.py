@@ -17,7 +17,7 @@ from analytics import AnalysisConfig
 from contract import is_loopback
 from estimator import StreamingSettings
 
-from ._plausibility import ValueLimits
+from ..recording._plausibility import ValueLimits
 
 __all__ = [
     "AlarmSettings",
@@ -163,7 +163,7 @@ class SimSettings(_Closed):
     @field_validator("faults")
     @classmethod
     def _faults(cls, value: tuple[str, ...]) -> tuple[str, ...]:
-        from ._faults import parse_fault
+        from .sources._faults import parse_fault
 
         for spec in value:
             parse_fault(spec)  # raises with the spec's problem

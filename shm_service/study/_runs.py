@@ -65,7 +65,7 @@ def simulate_seed(task: SimulationTask) -> str:
 
 def _load_recording(path: str) -> tuple:
     if path not in _RECORDING:
-        from ..estimation import measurements_from_recording, truth_from_recording
+        from ..processing.estimation import measurements_from_recording, truth_from_recording
         from ..recording import read_recording
 
         _RECORDING.clear()
@@ -117,7 +117,7 @@ def _truth_at(truth, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def estimate_configuration(task: EstimateTask) -> RunOutcome:
     from estimator import build_model, estimate
 
-    from ..estimation import score_against_truth
+    from ..processing.estimation import score_against_truth
 
     rig, meas, truth = _load_recording(task.recording)
     c = task.config

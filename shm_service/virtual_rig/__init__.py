@@ -4,8 +4,8 @@ It shares the FE beam model with the estimator but none of its kinematic shortcu
 """
 
 from ._record import SimulationSummary, simulate
-from ._settings import (Damage, OperationalSettings, PlantSettings, SensorErrors, SimulationSettings, WindStorm,
-                        parse_damage, settings_for_rig)
+from ._settings import (Damage, OperationalSettings, PlantSettings, SensorErrors, SimulationSettings, WindDirection,
+                        WindStorm, parse_damage, settings_for_rig)
 from ._virtual_rig import SAMPLE_RATE_HZ, SampleBlock, VirtualRig
 
 __all__ = [
@@ -18,6 +18,7 @@ __all__ = [
     "SimulationSummary",
     "SimulationSettings",
     "VirtualRig",
+    "WindDirection",
     "WindStorm",
     "parse_damage",
     "settings_for_rig",

@@ -29,6 +29,8 @@ class SimulationSummary:
     eigenfrequencies_hz: list[float]
     eigenfrequencies_after_damage_hz: list[float] | None
     wall_time_s: float
+    #: the ξ plane's eigenfrequencies of a biaxial beam (None: planar)
+    eigenfrequencies_xi_hz: list[float] | None = None
 
     def as_dict(self) -> dict:
         return {
@@ -39,7 +41,7 @@ class SimulationSummary:
             "eigenfrequencies_hz": self.eigenfrequencies_hz,
             "eigenfrequencies_after_damage_hz": self.eigenfrequencies_after_damage_hz,
             "wall_time_s": round(self.wall_time_s, 3),
-        }
+        } | ({} if self.eigenfrequencies_xi_hz is None else {"eigenfrequencies_xi_hz": self.eigenfrequencies_xi_hz})
 
 
 def encode_payloads(topic: str, values: np.ndarray) -> list[bytes]:
@@ -59,6 +61,16 @@ def encode_payloads(topic: str, values: np.ndarray) -> list[bytes]:
 
 
 def _truth_payloads(truth: dict[str, np.ndarray]) -> list[bytes]:
+    if "e_xi" in truth:  # a biaxial beam: the ξ plane's keys after the planar ones (the contract's order)
+        return encode_payloads_json([
+            {"d": d, "h": h, "phi": p, "e": e, "deflection": w, "curvature": k, "e_xi": ex, "deflection_xi": wx,
+             "curvature_xi": kx}
+            for d, h, p, e, w, k, ex, wx, kx in zip(
+                truth["d"].tolist(), truth["h"].tolist(), truth["phi"].tolist(), truth["e"].tolist(),
+                truth["deflection"].tolist(), truth["curvature"].tolist(), truth["e_xi"].tolist(),
+                truth["deflection_xi"].tolist(), truth["curvature_xi"].tolist(),
+            )
+        ])
     return encode_payloads_json([
         {"d": d, "h": h, "phi": p, "e": e, "deflection": w, "curvature": k}
         for d, h, p, e, w, k in zip(
@@ -116,4 +128,5 @@ def simulate(settings: SimulationSettings, out: str | Path, *, block_seconds: fl
         eigenfrequencies_hz=orjson.loads(metadata["eigenfrequencies_hz"]),
         eigenfrequencies_after_damage_hz=None if after is None else orjson.loads(after),
         wall_time_s=time.perf_counter() - started,
+        eigenfrequencies_xi_hz=None if "eigenfrequencies_xi_hz" not in metadata else orjson.loads(metadata["eigenfrequencies_xi_hz"]),
     )

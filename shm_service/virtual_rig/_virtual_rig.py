@@ -16,10 +16,11 @@ import scipy.signal
 from estimator import BucklingError, RigDescription, assemble_beam, natural_modes, parse_rig
 
 from ..rig_layouts import build_rig
+from ._biaxial import bending_of, biaxial_points_motion, gauge_angle, gauge_point, wind_angle, xi_twin
 from ._excitation import DistributedLoad, Excitation, OperationalExcitation, make_excitation
 from ._kinematics import points_motion
 from ._plant import Plant, build_plant, clamped_basis, integrate
-from ._settings import SimulationSettings
+from ._settings import SimulationSettings, WindDirection
 from ._wind import scaled_wind_load
 
 __all__ = ["SampleBlock", "VirtualRig", "SAMPLE_RATE_HZ", "SLOW_DIVIDER"]
@@ -71,6 +72,8 @@ def _perturbed_rig(nominal: RigDescription, settings: SimulationSettings, rng: n
         for station in data["beam"].get("sections") or ():
             if station["shape"] == "table":  # a table's EI is not E times a geometry: scale it alike
                 station["bending_stiffness"] *= stiffness
+                if bending_of(nominal) == "biaxial" and station.get("bending_stiffness_xi") is not None:
+                    station["bending_stiffness_xi"] *= stiffness
         for mass in data["point_masses"]:
             factor = 1 + plant.mass_mismatch * rng.standard_normal()
             mass["mass"] *= factor
@@ -138,6 +141,16 @@ class VirtualRig:
         )
         #: No bearing sensor: the support is fixed to the ground (d ≡ 0, the contract's fixed foundation).
         self.fixed_support = self.nominal_rig.support_fixed_to_ground
+        #: "planar" (ζ only, as the contract's default) or "biaxial" (ζ and ξ, each its own plant)
+        self.bending = bending_of(self.nominal_rig)
+        self.biaxial = self.bending == "biaxial"
+        if self.biaxial:
+            self.wind_direction: WindDirection | None = settings.wind_direction or WindDirection()
+        elif settings.wind_direction is not None:
+            raise ValueError(f"wind_direction={settings.wind_direction.model_dump()} acts on a biaxial beam "
+                             "(beam.bending = 'biaxial'); this beam bends in ζ only")
+        else:
+            self.wind_direction = None
         for damage in settings.damage:
             for x in damage.nodes:
                 if not 0 <= x <= self.nominal_rig.beam.length:
@@ -158,6 +171,7 @@ class VirtualRig:
         self._ambient_loads()
         self._sensor_setup()
         self._state = (np.zeros(self.plants[0].size), np.zeros(self.plants[0].size))
+        self._state_xi = None if not self.biaxial else (np.zeros(self.plants_xi[0].size), np.zeros(self.plants_xi[0].size))
         self._next_sample = 0
 
     def _build_plants(self) -> None:
@@ -174,6 +188,10 @@ class VirtualRig:
             self.damaged_rig = None
         _refuse_buckling_over_the_temperature_range(settings, self.plant_rig, models)
         basis = clamped_basis(models, settings.plant.modes)
+        self.plants_xi: list[Plant] = []
+        self.basis_xi = None
+        if self.biaxial:
+            self._build_xi_plants(damage_nodes, healthy_model)
         friction = 0.0 if settings.ideal else settings.plant.friction_torque
         self._critical_load_factor = float(healthy_model.critical_load_factor)
         self.plants: list[Plant] = [
@@ -182,11 +200,27 @@ class VirtualRig:
         ]
         self.basis = basis
         # RK4 keeps the highest mode accurate (frequency error (ωh)⁴/120 ≈ 0.1 %) and stable at ω·h ≤ 0.6.
-        omega_max = 2 * np.pi * max(float(p.linear_frequencies_hz.max()) for p in self.plants)
+        omega_max = 2 * np.pi * max(float(p.linear_frequencies_hz.max()) for p in (*self.plants, *self.plants_xi))
         self.substeps = max(settings.plant.substeps, int(np.ceil(omega_max * self.dt / _MAX_OMEGA_H)))
         self.damage_sample = (
             None if not settings.damage else int(round((settings.damage_at or 0.0) * SAMPLE_RATE_HZ))
         )
+
+    def _build_xi_plants(self, damage_nodes: list[float], healthy_zeta) -> None:
+        """The ξ plane's own plants: the FE beam of the ξ twin (``_biaxial.xi_twin``) of the plant as
+        built (and damaged), on the ζ plane's mesh, clamped modes of its own."""
+        settings = self.settings
+        twin = xi_twin(self.plant_rig)
+        models = [_plant_model(twin, damage_nodes, "the ξ plane of the simulated plant")]
+        if self.damaged_rig is not None:
+            models.append(_plant_model(xi_twin(self.damaged_rig), damage_nodes, "the ξ plane of the damaged plant"))
+        if not np.array_equal(models[0].nodes, healthy_zeta.nodes):
+            raise AssertionError("the ξ plane's FE mesh must be the ζ plane's (the kinematics add both planes' fields)")
+        _refuse_buckling_over_the_temperature_range(settings, twin, models)
+        self.xi_rig = xi_twin(self.nominal_rig)
+        self.basis_xi = clamped_basis(models, settings.plant.modes)
+        self.plants_xi = [build_plant(m, self.basis_xi, damping_ratios=np.array(settings.plant.damping_ratios))
+                          for m in models]
 
     def _ambient_loads(self) -> None:
         settings, basis, op = self.settings, self.basis, self.settings.operational
@@ -197,6 +231,9 @@ class VirtualRig:
         rigid[1::2] = 1.0
         T = np.column_stack([rigid, basis.dofs])
         self._load_map = T[2::2].T  # (n, nodes-1): generalized force per nodal load
+        if self.basis_xi is not None:
+            T_xi = np.column_stack([rigid, self.basis_xi.dofs])  # θ's column stays zero: the clamp holds it
+            self._load_map_xi = T_xi[2::2].T
         self._distributed_load = None
         # The wind load: the operational excitation's, and the ambient one's for a rig file (the
         # built-in sheet's ambient excitation keeps its random nodal forces).
@@ -256,6 +293,14 @@ class VirtualRig:
         self._strain_offset = scale * e.strain_offset * rng.standard_normal(len(self.gauges))
         # c(η) of each gauge: half the sheet's thickness, half a tube's outer diameter, a table's value
         self._fibre_distance = np.array([rig.beam.fibre_distance(g.position) for g in self.gauges], dtype=float)
+        # where each gauge sits around the section (angle_deg, from +ζ towards +ξ): (ζp, ξp) on the outline
+        index = {id(s): i for i, s in enumerate(rig.sensors)}
+        angles = [gauge_angle(g, index[id(g)], self.biaxial) for g in self.gauges]
+        twin = xi_twin(rig) if self.biaxial else None
+        self._gauge_points = np.array([gauge_point(rig, twin, g.position, a) for g, a in zip(self.gauges, angles)],
+                                      dtype=float).reshape(-1, 2)
+        if not self.biaxial:
+            self._fibre_distance = self._gauge_points[:, 0]  # +c on the +ζ face (as before), −c at 180°
 
     def truth_metadata(self) -> dict[str, str]:
         """The ``truth`` metadata record: the plant's exact modal figures and what was simulated."""
@@ -267,6 +312,8 @@ class VirtualRig:
 
     # -- simulation ----------------------------------------------------------------------
     def _integrate_range(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """States y, ẏ, ÿ of the ζ plant over samples [k0, k1); a biaxial rig's ξ plant integrates
+        alongside (its states in ``self._xi_range``)."""
         substeps = self.substeps
         n = k1 - k0
         fine_t = (k0 + np.arange(2 * substeps * n + 1) / (2 * substeps)) * self.dt
@@ -274,7 +321,15 @@ class VirtualRig:
         t = (k0 + np.arange(n)) * self.dt
         temperature = self.temperature(t)
         plant = self.plants[1] if (self.damage_sample is not None and k0 >= self.damage_sample) else self.plants[0]
-        if self._distributed_load is not None:
+        force_xi = None
+        if self._distributed_load is not None and self.biaxial:
+            # one along-wind load, split by the wind's veering direction between the planes
+            loads = self._distributed_load.nodal_loads(t)
+            direction = self.wind_direction
+            psi = wind_angle(t, direction.mean_deg, direction.veer_deg, direction.period_s)[:, None]
+            force = (loads * np.cos(psi)) @ self._load_map.T
+            force_xi = (loads * np.sin(psi)) @ self._load_map_xi.T
+        elif self._distributed_load is not None:
             force = self._distributed_load.nodal_loads(t) @ self._load_map.T
         elif self.excitation.ambient_force_std > 0:
             loads = self.excitation.ambient_force_std * self._rng_ambient.standard_normal((n, self._load_map.shape[1]))
@@ -293,6 +348,16 @@ class VirtualRig:
             sample_period=self.dt, substeps=substeps,
         )
         self._state = (y_end, yd_end)
+        if self.biaxial:
+            plant_xi = self.plants_xi[1] if len(self.plants) > 1 and plant is self.plants[1] else self.plants_xi[0]
+            if force_xi is None:
+                force_xi = np.zeros((n, plant_xi.size))
+            # the support moves D along ζ only: no bearing acceleration acts on the ξ plane
+            r, rd, rdd, r_end, rd_end = integrate(
+                plant_xi, self._state_xi[0], self._state_xi[1], np.zeros_like(fine_acc), temperature, force_xi,
+                sample_period=self.dt, substeps=substeps)
+            self._state_xi = (r_end, rd_end)
+            self._xi_range = (r, rd, rdd)
         return y, yd, ydd
 
     def blocks(self, block_seconds: float = 60.0) -> Iterator[SampleBlock]:
@@ -317,6 +382,13 @@ class VirtualRig:
         meas: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         delays: dict[str, np.ndarray] = {}
 
+        if self.biaxial:
+            r, rd, rdd = self._xi_range
+            self._biaxial_fast_sensors(t, (y, yd, ydd), (r, rd, rdd), d, d_acc, meas, delays)
+            self._slow_sensors(index, t, y, yd, ydd, d, d_acc, meas, delays, xi=(r, rd, rdd))
+            truth = self._truth(y, d)
+            truth.update(self._truth_xi(r))
+            return SampleBlock(times=t, measurements=meas, truth=truth, delays=delays)
         self._fast_sensors(t, y, yd, ydd, d, d_acc, meas, delays)
         self._slow_sensors(index, t, y, yd, ydd, d, d_acc, meas, delays)
         return SampleBlock(times=t, measurements=meas, truth=self._truth(y, d), delays=delays)
@@ -349,7 +421,36 @@ class VirtualRig:
             delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
 
 
-    def _slow_sensors(self, index, t, y, yd, ydd, d, d_acc, meas: dict, delays: dict) -> None:
+    def _biaxial_fast_sensors(self, t, zeta, xi, d, d_acc, meas: dict, delays: dict) -> None:
+        """The IMUs and gauges of a biaxial beam: accel z and gyro y carry the ξ motion, a gauge at
+        (ζp, ξp) reads −(ζp κζ + ξp κξ); the same error draws, in the same order, as the planar rig."""
+        n = len(t)
+        e = self.settings.errors
+        rng = self._rng_sensors
+        accel_wander = self._accel_wander.next(n)
+        gyro_wander = self._gyro_wander.next(n)
+        fast = biaxial_points_motion(self.basis, self.basis_xi, [s.position for s in (*self.imus, *self.gauges)],
+                                     tuple(a[:, 1:] for a in zeta), tuple(a[:, 1:] for a in xi),
+                                     d, d_acc, self.plants[0].gravity)
+        for i, imu in enumerate(self.imus):
+            fx, fy, fz = (fast.specific_force[k][:, i] for k in range(3))
+            mis = self._misalignment[i]
+            cm, sm = np.cos(mis), np.sin(mis)
+            accel = np.column_stack([cm * fx + sm * fy, -sm * fx + cm * fy, fz])
+            gyro = np.column_stack([np.zeros(n), fast.rate[1][:, i], fast.rate[2][:, i]])  # x: twist, noise only
+            accel = accel * self._accel_scale[i] + self._accel_bias[i] + accel_wander[:, i] + e.accel_noise * rng.standard_normal((n, 3))
+            gyro = gyro * self._gyro_scale[i] + self._gyro_bias[i] + gyro_wander[:, i] + e.gyro_noise * rng.standard_normal((n, 3))
+            meas[imu.topic] = (t, np.hstack([accel, gyro]))
+            delays[imu.topic] = e.imu_delay + e.delay_jitter * rng.random(n)
+        for i, gauge in enumerate(self.gauges):
+            j = len(self.imus) + i
+            zeta_p, xi_p = self._gauge_points[i]
+            strain = -(zeta_p * fast.curvature[:, j] + xi_p * fast.curvature_xi[:, j])
+            strain = strain + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
+            meas[gauge.topic] = (t, strain[:, None])
+            delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
+
+    def _slow_sensors(self, index, t, y, yd, ydd, d, d_acc, meas: dict, delays: dict, xi=None) -> None:
         """The ToFs, the bearing sensor (every ``SLOW_DIVIDER``-th sample) and the temperature."""
         n = len(t)
         rig = self.nominal_rig
@@ -371,10 +472,22 @@ class VirtualRig:
             d_slow, _, d_acc_slow = self.support_motion(t_slow)
         theta_slow = y_slow[:, 0]
         slow_motion = points_motion(self.basis, [s.position for s in self.tofs], y_slow, yd_slow, ydd_slow, d_slow,
-                                    d_acc_slow, plant_g) if self.tofs else None
+                                    d_acc_slow, plant_g) if self.tofs and xi is None else None
+        biaxial_motion = None
+        if self.tofs and xi is not None:
+            if e.tof_time_offset > 0:
+                raise ValueError("errors.tof_time_offset is not simulated on a biaxial beam (its ToFs sample on the grid)")
+            biaxial_motion = biaxial_points_motion(
+                self.basis, self.basis_xi, [s.position for s in self.tofs], (y_slow[:, 1:], yd_slow[:, 1:], ydd_slow[:, 1:]),
+                tuple(a[slow][:, 1:] for a in xi), d_slow, d_acc_slow, plant_g)
         for i, tof in enumerate(self.tofs):
-            zeta, slope_angle = slow_motion.inertial_zeta[:, i], slow_motion.slope_angle[:, i]
-            distance = (rig.reflector_distance - zeta) / np.cos(theta_slow + slope_angle)
+            if biaxial_motion is not None:
+                # along the sensor's +y axis (turned by both planes' slopes) to the plane ζ = reflector
+                zeta = biaxial_motion.inertial[1][:, i]
+                distance = (rig.reflector_distance - zeta) / biaxial_motion.y_axis[1][:, i]
+            else:
+                zeta, slope_angle = slow_motion.inertial_zeta[:, i], slow_motion.slope_angle[:, i]
+                distance = (rig.reflector_distance - zeta) / np.cos(theta_slow + slope_angle)
             distance = distance + self._tof_offset[i] + e.tof_noise * rng.standard_normal(distance.size)
             if e.tof_resolution > 0:
                 distance = np.round(distance / e.tof_resolution) * e.tof_resolution
@@ -389,6 +502,10 @@ class VirtualRig:
             temp = self.temperature(t[every]) + e.temperature_noise * rng.standard_normal(int(every.sum()))
             meas["/env/temperature"] = (t[every], temp[:, None])
             delays["/env/temperature"] = np.full(int(every.sum()), 0.01)
+
+    def _truth_xi(self, r) -> dict[str, np.ndarray]:
+        """The ξ plane's truth: ``e_xi``, ``deflection_xi``, ``curvature_xi`` (body frame, at the truth stations)."""
+        return _truth_xi_fields(self, r)
 
     def _truth(self, y, d) -> dict[str, np.ndarray]:
         rig = self.nominal_rig
@@ -405,6 +522,17 @@ class VirtualRig:
             "deflection": q @ deflection.T,
             "curvature": q @ curvature.T,
         }
+
+
+def _truth_xi_fields(self: VirtualRig, r: np.ndarray) -> dict[str, np.ndarray]:
+    rig = self.nominal_rig
+    stations = np.asarray(rig.truth_stations, dtype=float)
+    q = r[:, 1:]
+    return {
+        "e_xi": q @ self.basis_xi.evaluate(rig.beam.length, 0),
+        "deflection_xi": q @ self.basis_xi.evaluate(stations, 0).T,
+        "curvature_xi": q @ self.basis_xi.evaluate(stations, 2).T,
+    }
 
 
 def _truth_metadata(self: VirtualRig) -> dict[str, str]:
@@ -437,6 +565,15 @@ def _truth_metadata(self: VirtualRig) -> dict[str, str]:
         meta["eigenfrequencies_after_damage_hz"] = json.dumps(self.plants[1].linear_frequencies_hz[:8].round(6).tolist())
         meta["damage_time_s"] = json.dumps((self.damage_sample or 0) / SAMPLE_RATE_HZ)
         meta["damage"] = json.dumps([d.model_dump(mode="json", exclude_none=True) for d in self.settings.damage])
+    if self.biaxial:
+        meta["bending"] = "biaxial"
+        meta["eigenfrequencies_xi_hz"] = json.dumps(self.plants_xi[0].linear_frequencies_hz[:8].round(6).tolist())
+        meta["modal_damping_ratios_xi"] = json.dumps(self.plants_xi[0].modal_damping[:8].round(6).tolist())
+        if self.damaged_rig is not None:
+            meta["eigenfrequencies_after_damage_xi_hz"] = json.dumps(
+                self.plants_xi[1].linear_frequencies_hz[:8].round(6).tolist())
+        if self._distributed_load is not None:
+            meta["wind_direction"] = self.wind_direction.model_dump_json()
     return meta
 
 

@@ -20,7 +20,7 @@ import pytest
 from scipy import stats
 
 from shm_service.cli import main
-from shm_service.tables import read_table
+from shm_service.formats.tables import read_table
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "dropbear"
 FIRST_BENDING_HZ = (20.0, 50.0)  # the README's 25–42 Hz with a margin

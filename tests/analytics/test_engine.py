@@ -188,7 +188,7 @@ def test_bad_input_names_the_value(call, match):
 
 
 def test_a_gap_of_years_is_skipped_in_one_step_with_the_same_windows_and_counts(operational, monkeypatch):
-    """A clock that jumped decades ahead (issue 26: a wall-clock stamp in a 1970 backfill) costs
+    """A clock that jumped decades ahead (a wall-clock stamp in a 1970 backfill) costs
     one step, not one per window of the years between; a gap of minutes gives the same windows
     and counts as the window-by-window loop."""
     import time

@@ -1,4 +1,4 @@
-"""Streaming rainflow, S–N curves, Miner damage, DELs and remaining life (issue 21)."""
+"""Streaming rainflow, S–N curves, Miner damage, DELs and remaining life."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The virtual stations' DEL bands from leave-one-gauge-out residuals at the strain gauges (issue 21):
+"""The virtual stations' DEL bands from leave-one-gauge-out residuals at the strain gauges:
 hand-computable cases (DELs scale with the signal, so a gauge reading k times the virtual strain
 gives the factor k exactly) and bad input."""
 

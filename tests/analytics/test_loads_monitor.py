@@ -1,5 +1,5 @@
 """Loads in the one engine: every sample counted once whatever the chunking, the same damage as the
-record counted whole, a restart through the state, fatigue alarms through AlarmLogic (issue 21)."""
+record counted whole, a restart through the state, fatigue alarms through AlarmLogic."""
 
 from __future__ import annotations
 

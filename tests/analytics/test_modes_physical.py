@@ -1,4 +1,4 @@
-"""Issue 25: every listed mode physical, modes followed across windows, modes that move within a
+"""Every listed mode physical, modes followed across windows, modes that move within a
 window listed once. Synthetic records with exact frequencies, and the DROPBEAR trials (tests/data/
 dropbear, CC BY-SA 4.0, Vereen, Downey, Dodson & Moura 2023) under the issue's protocol: 0.5 s
 windows every 0.25 s, band 15–80 Hz, the lowest listed mode of each excited window."""
@@ -134,7 +134,7 @@ def test_bad_input_names_the_value(call, match):
 
 
 def _lowest(trial: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple]:
-    from shm_service.tables import read_table
+    from shm_service.formats.tables import read_table
 
     table = read_table(DATA / f"{trial}.txt")
     acc = table.data[:, table.channels.index("Low G Accel")]

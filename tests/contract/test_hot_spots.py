@@ -1,4 +1,4 @@
-"""Hot spots and fatigue settings of rig.json, the uniform beam's c(η) and EI(η, T) (issue 21)."""
+"""Hot spots and fatigue settings of rig.json, the uniform beam's c(η) and EI(η, T)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The documentation (issue 24): the site builds offline with ``mkdocs build --strict`` (a broken
+"""The documentation: the site builds offline with ``mkdocs build --strict`` (a broken
 link, a missing page or a generated page that fails is an error), the generated reference holds
 every command, option, configuration key, HTTP route and ``rig.json`` key of the code, the
 validation pages carry their stamp, the README stays short and its links resolve, and the numpydoc
@@ -117,6 +117,37 @@ def test_the_rig_reference_lists_every_rig_json_key():
     page = docs_reference.rig_page()
     for key, _ in _keys(contract.RigDescription):
         assert f"`{key}`" in page, key
+
+
+def test_the_rig_reference_gives_every_key_and_section_shape_a_meaning():
+    import contract
+
+    page = docs_reference.rig_page()
+    rows = [line for line in page.splitlines() if line.startswith("| `")]
+    assert rows and all(not line.rstrip().endswith("|  |") for line in rows), [r for r in rows if r.rstrip().endswith("|  |")]
+    for needed in ('`shape = "tube"`', '`shape = "table"`', '`shape = "rectangle"`', "| `beam` |", "| `fatigue` |", "`simulator`",
+                   "`sensors[].axes`"):
+        assert needed in page, needed
+    assert set(contract.EXTENSION_KEYS) <= {k for k in contract.EXTENSION_KEYS if f"`{k}`" in page}
+
+
+def test_the_channel_map_reference_lists_every_key_with_its_meaning():
+    from shm_service.formats.daq_import import ChannelMap, ClockMap, ColumnMap
+
+    page = docs_reference.channel_map_page()
+    for model in (ClockMap, ColumnMap):
+        for name, field in model.model_fields.items():
+            assert f"| `{name}` |" in page and field.description, (model.__name__, name)
+    for section in ChannelMap.model_fields:
+        assert f"[{section}" in page, section
+
+
+def test_the_reference_pages_are_in_the_checkout_as_the_code_makes_them():
+    index = (ROOT / "docs" / "reference" / "index.md").read_text()
+    for link in re.findall(r"\]\(([^)#]+\.md)", index):
+        assert (ROOT / "docs" / "reference" / link).exists(), link
+    stale = docs_reference.stale_reference_pages()
+    assert not stale, f"{stale} differ from the code: run python docs_reference.py --reference"
 
 
 def test_a_validation_page_is_stamped_or_says_it_was_not_measured(tmp_path, monkeypatch):

@@ -7,7 +7,7 @@ from simdata import NO_ERRORS, simulate
 
 from contract import parse_rig
 from estimator import build_model, calibrate_at_rest, estimate
-from shm_service.estimation import TruthSeries, score_against_truth
+from shm_service.processing.estimation import TruthSeries, score_against_truth
 
 
 def _truth_series(truth) -> TruthSeries:

@@ -1,4 +1,4 @@
-"""The gauges' model error from the combimode (issue 12, item 7): what it is and what it explains."""
+"""The gauges' model error from the combimode: what it is and what it explains."""
 
 import numpy as np
 import pytest

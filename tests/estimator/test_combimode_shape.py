@@ -1,4 +1,4 @@
-"""The combimode's shape (issue 12, item 7): a swing in the second eigenmode is read exactly.
+"""The combimode's shape: a swing in the second eigenmode is read exactly.
 
 The combimode stands for the body-frame shapes s̃₁ and s̃₂ of modes 1 and 2. Mode 1 is the
 pendulum's swing and hardly deforms the beam, so b₁ is mode 2's deformation; each path reads a

@@ -1,4 +1,4 @@
-"""Issue 23: no class over 300 lines and no function over 80 in ``shm_service/`` and ``web/`` (numba
+"""No class over 300 lines and no function over 80 in ``shm_service/`` and ``web/`` (numba
 kernels aside). Should one ever have to be over for a while, it is listed in DEBT with its size
 (shrinking only: a listed one that grows fails too)."""
 

@@ -161,7 +161,7 @@ def test_estimate_writes_estimates_and_scores_them(capsys, recording, tmp_path):
     code, out, _ = run(capsys, "inspect", str(out_path), "--json")
     assert json.loads(out)["topics"]["/estimate/state"]["accepted"] == 90 * 200
     # shm analyze of the estimates skips the warm-up after the same rest phase as of the raw recording
-    from shm_service.estimation import deformation_record
+    from shm_service.processing.estimation import deformation_record
     from shm_service.recording import read_recording
 
     rest_end = deformation_record(read_recording(out_path)).rest_end_s

@@ -26,10 +26,10 @@ import tomli_w
 
 from estimator import build_model, estimate, load_rig
 from shm_service.cli import main
-from shm_service.daq_import import MapError, import_recording, parse_channel_map
-from shm_service.estimation import measurements_from_recording, score_against_truth, truth_from_recording
+from shm_service.formats.daq_import import MapError, import_recording, parse_channel_map
+from shm_service.processing.estimation import measurements_from_recording, score_against_truth, truth_from_recording
 from shm_service.recording import inspect_recording, read_recording
-from shm_service.tables import TableError, read_table
+from shm_service.formats.tables import TableError, read_table
 from shm_service.virtual_rig import SimulationSettings, simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -1,4 +1,4 @@
-"""Issue 26: a bad value costs its channel that sample and nothing else, and is counted.
+"""A bad value costs its channel that sample and nothing else, and is counted.
 
 The faults are written into real files (text, .npz) and go through the real commands
 (``shm import``, ``shm oma``); the kept samples are compared with the clean file sample by sample.
@@ -16,12 +16,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from shm_service.cli import main
-from shm_service.daq_faults import CELL_FAULTS, modal_response, write_faulted_csv
-from shm_service.daq_import import import_recording
+from shm_service.formats.daq_faults import CELL_FAULTS, modal_response, write_faulted_csv
+from shm_service.formats.daq_import import import_recording
 from shm_service.recording import read_recording
-from shm_service.oma_input import clean_for_identification
-from shm_service.rejections import Rejections, fill_short_gaps, longest_clean_span, outliers
-from shm_service.tables import TableError, read_table
+from shm_service.formats.oma_input import clean_for_identification
+from shm_service.formats.rejections import Rejections, fill_short_gaps, longest_clean_span, outliers
+from shm_service.formats.tables import TableError, read_table
 
 FS = 200.0
 N_CH = 8

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from shm_service.demo import MARKER, DemoError, demo_timeline, prepare_demo_directory
+from shm_service.commands.demo import MARKER, DemoError, demo_timeline, prepare_demo_directory
 from shm_service.service import Storage, load_settings
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -207,7 +207,7 @@ def test_ctrl_c_in_make_demo_prints_no_make_error(tmp_path):
 def test_the_mast_demo_has_its_storm_and_its_damage_in_the_timeline():
     import argparse
 
-    from shm_service.demo import add_demo_parser, demo_overrides
+    from shm_service.commands.demo import add_demo_parser, demo_overrides
 
     parser = argparse.ArgumentParser()
     add_demo_parser(parser.add_subparsers())

@@ -13,7 +13,7 @@ import pytest
 from shm_service.recording import RecordingWriter, encode_payloads_json, read_recording
 from shm_service.recording._fastdecode import decode_template, template_codes
 from shm_service.rig_layouts import build_rig
-from shm_service.service._ingest import IngestValidator
+from shm_service.service.sources._ingest import IngestValidator
 
 
 def _decode(tokens: list[bytes], skeleton: bytes = b'{"x":#}', wrap=lambda t: b'{"x":' + t + b"}"):

@@ -1,4 +1,4 @@
-"""`shm loads` (issue 21): measured channels counted directly, virtual strain of an estimate recording."""
+"""`shm loads`: measured channels counted directly, virtual strain of an estimate recording."""
 
 from __future__ import annotations
 
@@ -113,7 +113,7 @@ def estimate_file(tmp_path_factory):
 
 def _true_dels(raw, doc) -> dict[float, float]:
     """The truth's strain DEL (m = 3) over the document's span at its stations that are truth stations."""
-    from shm_service.estimation import truth_from_recording
+    from shm_service.processing.estimation import truth_from_recording
 
     rec = read_recording(raw)
     truth = truth_from_recording(rec)
@@ -184,7 +184,7 @@ def test_a_raw_recording_leaves_each_gauge_out(capsys, estimate_file):
 
 
 def test_no_gauge_can_be_left_out_of_an_estimate_recording(estimate_file):
-    from shm_service.loads import LoadsError, loads_of_recording
+    from shm_service.commands.loads import LoadsError, loads_of_recording
 
     _raw, est = estimate_file
     with pytest.raises(LoadsError, match="is an estimate recording: no gauge can be left out of it"):
@@ -248,7 +248,7 @@ def test_estimate_analyze_and_loads_take_one_definition_of_the_model_options():
 def test_the_estimate_recording_carries_each_estimates_virtual_loads(estimate_file):
     """`shm estimate --out` writes /estimate/loads: per estimate the strain and bending moment at the
     stations its metadata names (the rig's hot spots, then 16 stations from the support), and the
-    moment at the support; ε = −c Σ b s'' and M = EI κ of the estimate's own b (issue 21)."""
+    moment at the support; ε = −c Σ b s'' and M = EI κ of the estimate's own b."""
     from contract import ESTIMATE_LOADS_TOPIC, ESTIMATE_TOPIC
     from estimator import build_model
     from shm_service.recording import read_recording
@@ -276,7 +276,7 @@ def test_the_estimate_recording_carries_each_estimates_virtual_loads(estimate_fi
 def test_damage_and_life_are_withheld_where_the_virtual_strain_does_not_hold():
     """A station whose band is wider than ±50 %, or every station once a gauge's strain disagrees with the
     virtual strain by more than its own RMS, has no damage or life figure: null, with the reason and what to change."""
-    from shm_service.loads import withhold_figures
+    from shm_service.commands.loads import withhold_figures
 
     def station(pos, width):
         return {"position_m": pos, "hot_spot": None, "band_half_width": width, "damage": 1e-6, "damage_band": [1e-7, 1e-5],

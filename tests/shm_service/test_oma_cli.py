@@ -1,4 +1,4 @@
-"""``shm oma`` on every file format ``shm_service.tables`` reads, and its errors."""
+"""``shm oma`` on every file format ``shm_service.formats.tables`` reads, and its errors."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from scipy import io
 
 from shm_service.cli import main
 from shm_service.recording import RecordingWriter
-from shm_service.tables import TableError, read_table, select_channels
+from shm_service.formats.tables import TableError, read_table, select_channels
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "analytics"))
 from oma_systems import ambient_response, three_dof  # noqa: E402
@@ -194,7 +194,7 @@ def test_bad_input_is_refused_with_a_message_naming_the_value(tmp_path, capsys, 
     bad[123, 1] = np.nan
     nan = tmp_path / "nan.csv"
     write_text(nan, bad, ",", time=True)
-    code, out, err = run(capsys, "oma", nan, *BAND)  # a NaN costs one sample, counted and filled (issue 26)
+    code, out, err = run(capsys, "oma", nan, *BAND)  # a NaN costs one sample, counted and filled
     assert code == 0 and "b: 1 rejected (1 nonfinite); first: line 125 (nonfinite)" in out, err
     code, _, err = run(capsys, "oma", short, "--fs", FS, "--channels", "0,zz")
     assert code == 2 and "unknown channel 'zz'" in err

@@ -14,7 +14,7 @@ from mcap.reader import make_reader
 
 from estimator import StreamingSettings, build_model, estimate
 from shm_service.cli import main
-from shm_service.estimation import deformation_record, measurements_from_recording
+from shm_service.processing.estimation import deformation_record, measurements_from_recording
 from shm_service.recording import ESTIMATE_TOPIC, RecordingWriter, read_recording
 from shm_service.service import MonitoringService, load_settings
 from shm_service.virtual_rig import SimulationSettings, simulate

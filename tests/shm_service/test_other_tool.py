@@ -4,7 +4,7 @@ import numpy as np
 
 from benchmarks.other_tool import write_other_tool_recording
 from estimator import build_model, estimate
-from shm_service.estimation import measurements_from_recording, score_against_truth, truth_from_recording
+from shm_service.processing.estimation import measurements_from_recording, score_against_truth, truth_from_recording
 from shm_service.recording import read_recording
 from shm_service.virtual_rig import SensorErrors, SimulationSettings
 

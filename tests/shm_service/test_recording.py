@@ -218,7 +218,7 @@ def test_nonfinite_duplicate_backwards_and_malformed_are_skipped(tmp_path: Path)
             elif i == 12:
                 payload = b'{"strain": 1e400}'
             elif i == 40:
-                payload = {"strain": 1e30}  # no strain gauge reads that: implausible (issue 26)
+                payload = {"strain": 1e30}  # no strain gauge reads that: implausible
             writer.write("/strain/g1", t, payload)
             if i == 20:
                 writer.write("/strain/g1", t, {"strain": -1e-4})  # duplicate stamp

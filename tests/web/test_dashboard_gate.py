@@ -1,4 +1,4 @@
-"""Issue 11, item 9: the dashboard off loopback. viser has no authentication; the dashboard
+"""The dashboard off loopback. viser has no authentication; the dashboard
 refuses to listen off loopback without a token, and with one puts the token gate in front of
 viser. Real servers: a ViserServer behind a TokenGate, real HTTP requests (httpx) and a real
 websocket handshake (the websockets client, as the page's own script does)."""

@@ -1,4 +1,4 @@
-"""The first run shows itself (issue 24): ``shm demo`` as ``make demo`` runs it (the defaults: the
+"""The first run shows itself: ``shm demo`` as ``make demo`` runs it (the defaults: the
 virtual rig at 4× real time, its dashboard on), in headless Chromium from the moment its dashboard's
 port opens. The panel's header, its tabs and a status line saying what the service is doing appear
 at once, and ``/api/status`` counts estimates within 30 s of the port opening: the rest phase's
@@ -24,7 +24,7 @@ FIRST_ESTIMATES_S = 30.0
 
 def _load_factor() -> float:
     return max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1))
-#: the phrases of service.progress (shm_service/service/_progress.py) before monitoring starts
+#: the phrases of service.progress (shm_service/service/runtime/_progress.py) before monitoring starts
 PHASES = ("compiling the filter", "waiting for data", "calibrating at rest", "calibrated; the filter starts",
           "waiting for the first analysis window", "learning the baseline")
 

@@ -1,4 +1,4 @@
-"""The shape of ``web/`` that its maintainers rely on (issue 23): no class over 300 lines and no
+"""The shape of ``web/`` that its maintainers rely on: no class over 300 lines and no
 function over 80, every HTML text built in ``web/_html.py``, and no import cycle between its
 modules (counting the imports made only for type checking)."""
 

@@ -9,7 +9,7 @@ import pytest
 
 from analytics import AlarmLogic, AnalysisConfig
 from contract import AlarmDocument, ChartDocument
-from shm_service.service._alarms import alarm_changes, clear_changes
+from shm_service.service.alarms._changes import alarm_changes, clear_changes
 
 
 def _chart(kind: str, level: str, score: float, mode: int | None = None) -> ChartDocument:

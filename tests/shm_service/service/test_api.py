@@ -82,7 +82,7 @@ def test_ingest_accepts_valid_and_counts_bad(running):
     with httpx.Client(base_url=url, headers=auth) as c:
         r = c.post("/api/ingest", json=_imu_batch(t0, 50))
         assert r.status_code == 200 and r.json()["accepted"] == 50
-        r = c.post("/api/ingest", json=_imu_batch(t0, 3))  # a re-sent batch (issue 26): duplicate, not backwards
+        r = c.post("/api/ingest", json=_imu_batch(t0, 3))  # a re-sent batch: duplicate, not backwards
         assert r.json()["accepted"] == 0 and r.json()["rejected_by_reason"] == {"duplicate": 3}
         r = c.post("/api/ingest", json=_imu_batch(t0 - 3 * 5_000_000 + 1, 3))  # stamps never accepted, before the last
         assert r.json()["accepted"] == 0 and r.json()["rejected_by_reason"] == {"backwards": 3}
@@ -200,7 +200,7 @@ def test_openapi_property_based(which, request):
 
 
 def test_a_future_stamped_sample_is_rejected_and_later_data_are_processed(running):
-    """Issue 11, item 1: one sample at +10 years used to stop the pipeline for good."""
+    """One sample at +10 years used to stop the pipeline for good."""
     service, url = running
     auth = {"Authorization": f"Bearer {TOKEN}"}
     t0 = time.time_ns() - 60 * 1_000_000_000

@@ -11,7 +11,7 @@ import pytest
 from svc_helpers import fast_overrides
 
 from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
-from shm_service.service._docs import ASSETS, CONTENT_SECURITY_POLICY, STATIC_URL
+from shm_service.service.http._docs import ASSETS, CONTENT_SECURITY_POLICY, STATIC_URL
 
 
 @pytest.fixture()
@@ -70,7 +70,7 @@ def test_assets_are_the_packaged_files_with_their_types(api_url):
 
 
 def test_docs_need_the_token_on_a_non_loopback_api_like_every_route(tmp_path):
-    """Issue 11, item 9: off loopback, /docs, /redoc, /openapi.json and their assets answered
+    """Off loopback, /docs, /redoc, /openapi.json and their assets answered
     without the token. A browser opens them with the token as the HTTP Basic password."""
     import base64
 

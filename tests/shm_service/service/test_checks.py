@@ -7,8 +7,8 @@ import pytest
 from pydantic import ValidationError
 
 from shm_service.recording import FollowBlock
-from shm_service.service._checks import CheckSettings, SampleChecks
-from shm_service.service._plausibility import ValueLimits
+from shm_service.service.stages._checks import CheckSettings, SampleChecks
+from shm_service.recording._plausibility import ValueLimits
 
 _MS = 1_000_000  # ns
 

@@ -86,7 +86,7 @@ def test_migrations_and_idempotent_windows(tmp_path):
 
 def test_version_1_database_keeps_its_acknowledgements(tmp_path):
     """Schema 2 spells the acknowledgement time like the alarm's other times (acknowledged_at_s)."""
-    from shm_service.service._store_schema import _MIGRATIONS
+    from shm_service.service.storage.sqlite._schema import _MIGRATIONS
 
     db = tmp_path / "v1.sqlite"
     con = sqlite3.connect(db)

@@ -1,4 +1,4 @@
-"""One service per database (issue 26): the lock beside the database, real processes."""
+"""One service per database: the lock beside the database, real processes."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from shm_service.rig_layouts import default_rig
-from shm_service.service._db_lock import DatabaseBusy, DatabaseLock
+from shm_service.service.storage.sqlite._lock import DatabaseBusy, DatabaseLock
 
 
 def test_a_second_lock_is_refused_naming_the_holder_and_released_locks_are_free(tmp_path):

@@ -1,4 +1,4 @@
-"""A long export streams (issue 26 item 5): a real ``shm serve`` over 200,000 stored trend rows
+"""A long export streams: a real ``shm serve`` over 200,000 stored trend rows
 sends them in one request, as JSON (54 MB) and as CSV (15 MB), while its resident memory grows by
 far less than the JSON's size. Built whole, as before, the same answers grew the server by 510 and
 357 MB (measured side by side with the tree before). The million-row figures are

@@ -1,5 +1,5 @@
 """Sensor faults injected for real into the running service, in-process and batch by batch
-(issue 11, items 1, 2 and 9; the long campaign is ``python -m benchmarks.fault_campaign``):
+(the long campaign is ``python -m benchmarks.fault_campaign``):
 what the service shows (health, status, /metrics) and how soon it recovers, in data seconds."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from benchmarks.fault_campaign import PHI_OK_RAD, D_OK_M, Scenario, evaluate, run
-from shm_service.service._api import _metrics
+from shm_service.service.http._app import _metrics
 
 FAULT_AT = 65.0  # after the 60 s rest: the rig moves
 

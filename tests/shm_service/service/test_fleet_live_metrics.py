@@ -13,8 +13,8 @@ import pytest
 from svc_helpers import fast_overrides, wait_for
 
 from shm_service.service import ApiServer, MonitoringService, create_app, load_settings
-from shm_service.service._live import LiveRing
-from shm_service.service._metrics import merge_expositions
+from shm_service.service.runtime._live import LiveRing
+from shm_service.service.http._metrics import merge_expositions
 
 
 def test_the_live_ring_keeps_one_estimate_per_tick_only_while_watched():

@@ -1,4 +1,4 @@
-"""Issue 11, item 8 (``follow:``), with the faults made for real on disk: a file that is not
+"""A ``follow:`` source, with the faults made for real on disk: a file that is not
 there at start-up (the API comes up meanwhile), a file replaced under the same name (new inode,
 shorter, rewritten in place), a deleted file (one problem entry with a count, not one per poll)."""
 

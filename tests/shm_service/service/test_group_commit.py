@@ -1,4 +1,4 @@
-"""The group commit of windows (issue 14, the fleet's write lock): windows handed to one
+"""The group commit of windows (the fleet's write lock): windows handed to one
 ``Storage`` by many threads while a write is under way are written in one transaction, each in
 a savepoint (a bad window fails alone), and a fault of the database fails the whole group."""
 

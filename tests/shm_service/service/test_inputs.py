@@ -10,7 +10,7 @@ import pytest
 
 from shm_service.recording import RecordingFollower, RecordingWriter
 from shm_service.rig_layouts import default_rig
-from shm_service.service._ingest import IngestError, IngestValidator, parse_body
+from shm_service.service.sources._ingest import IngestError, IngestValidator, parse_body
 
 
 def _imu(i):
@@ -97,7 +97,7 @@ def test_sim_source_takes_support_orientation_and_length_from_the_sim_table(tmp_
 
     from estimator import BucklingError
     from shm_service.service import ServiceSettings
-    from shm_service.service._sources import SimSource
+    from shm_service.service.sources._sources import SimSource
 
     cfg = tomllib.loads('[sim]\nsupport = "clamped"\norientation = "standing"\nlength_m = 1.5\n'
                         'damage = ["mass:0.05@1.5"]\ntemperature_swing_k = 0.0\n')
@@ -114,13 +114,13 @@ def test_sim_source_takes_support_orientation_and_length_from_the_sim_table(tmp_
         SimSource("sim", queue.Queue(), ServiceSettings.model_validate(mast), raw=False, truth=True)
 
 
-# -- plausibility of times and values (issue 11, items 1 and 5) ----------------------------------
+# -- plausibility of times and values ----------------------------------
 
 S = 1_000_000_000
 
 
 def test_source_clock_rejects_stamps_off_the_clock_and_keeps_the_valid_ones():
-    from shm_service.service._plausibility import SourceClock
+    from shm_service.recording._plausibility import SourceClock
 
     clock = SourceClock(window_s=3600.0, max_ahead_s=1.0, live=False)
     for topic in ("/imu/D", "/tof/s1", "/strain/g1"):
@@ -141,7 +141,7 @@ def test_source_clock_rejects_stamps_off_the_clock_and_keeps_the_valid_ones():
 
 
 def test_a_live_sources_clock_runs_on_with_the_wall_clock():
-    from shm_service.service._plausibility import SourceClock
+    from shm_service.recording._plausibility import SourceClock
 
     wall = 2_000_000 * S
     clock = SourceClock(window_s=3600.0, max_ahead_s=1.0, live=True, future_tolerance_s=60.0)
@@ -151,7 +151,7 @@ def test_a_live_sources_clock_runs_on_with_the_wall_clock():
     # two hours later (wall clock) it resumes where its clock stands now: not ahead, not off the window
     assert clock.judge_one("/imu/D", wall - 3600 * S, wall_ns=wall + 7200 * S, mono=7200.0) == 0
     # one sensor's clock alone corrected to the wall clock while the source is three hours behind
-    # (a backfill, issue 26): far from its stream's time, a clock jump of that sensor
+    # (a backfill): far from its stream's time, a clock jump of that sensor
     assert clock.judge_one("/imu/D", wall + 7200 * S, wall_ns=wall + 7200 * S, mono=7200.0) == 1
     # a source running near the wall clock: a stamp near the wall clock is on time whatever its past
     near = SourceClock(window_s=3600.0, max_ahead_s=1.0, live=True, future_tolerance_s=60.0)
@@ -165,7 +165,7 @@ def test_a_live_sources_clock_runs_on_with_the_wall_clock():
 
 
 def test_implausible_values_by_sensor_kind():
-    from shm_service.service._plausibility import ValueLimits, implausible_values
+    from shm_service.recording._plausibility import ValueLimits, implausible_values
 
     limits = ValueLimits()
     imu = np.array([[-9.81, 0.1, 0.0, 0.0, 0.0, 0.01], [2500.0, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, -250.0], [np.nan, 0, 0, 0, 0, 0]])
@@ -224,7 +224,7 @@ def test_ingest_never_fails_on_what_a_message_holds_and_moves_time_only_when_tak
 def test_all_plausible_agrees_with_the_per_sample_judgement(kind, good, bad):
     """The block shortcut of the pipeline: True exactly when no sample is implausible or
     non-finite, a single bad sample anywhere in the block making it False."""
-    from shm_service.service._plausibility import ValueLimits, all_plausible, implausible_values
+    from shm_service.recording._plausibility import ValueLimits, all_plausible, implausible_values
 
     limits = ValueLimits()
     block = np.array([good] * 50, dtype=float)
@@ -244,7 +244,7 @@ def _backfill(t0: int, n: int, topics=("/imu/D", "/tof/s1", "/strain/g1"), step=
 
 
 def test_a_wall_clock_stamp_inside_a_backfill_is_a_clock_jump_not_the_channels_new_time():
-    """Issue 26 item 4: backfilling data stamped from 1970, one /strain/g1 sample stamped with the
+    """Backfilling data stamped from 1970, one /strain/g1 sample stamped with the
     present time is rejected (a clock jump, counted), and every later g1 sample is taken."""
     wall = 1_767_225_600 * S
     v = IngestValidator(default_rig("benchmark"), max_messages=10_000)

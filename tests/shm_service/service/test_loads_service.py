@@ -1,4 +1,4 @@
-"""Loads in ``shm serve`` (issue 21): the mast's hot spots counted by the service's engine, their rows
+"""Loads in ``shm serve``: the mast's hot spots counted by the service's engine, their rows
 in SQLite, ``/api/fatigue`` and ``/api/structures/{id}/fatigue`` (JSON, CSV, OpenAPI), the
 Prometheus gauges; a SIGKILL in the middle neither loses nor double-counts a cycle (the rainflow
 residue is committed with each window); ``shm reprocess`` of the service's archive accumulates the
@@ -271,7 +271,7 @@ def test_reprocess_of_the_archive_accumulates_the_damage_the_live_service_did(se
 
 def test_the_live_view_carries_virtual_strain_stress_and_moments(served):
     """Each live estimate carries ε = −c κ, σ = E ε, M = EI κ at the hot spots and the grid, and the
-    clamped mast's root bending moment (issue 21, deliverable 1)."""
+    clamped mast's root bending moment."""
     import numpy as np
 
     from contract import LiveEstimatesDocument, load_rig

@@ -7,7 +7,7 @@ import pytest
 from pydantic import ValidationError
 
 from shm_service.recording import FollowBlock
-from shm_service.service._merge import MergeSettings, MergeStage
+from shm_service.service.stages._merge import MergeSettings, MergeStage
 
 _MS = 1_000_000
 

@@ -9,7 +9,7 @@ import time
 from svc_helpers import Receiver, wait_for
 
 from shm_service.service import AlarmChange, NotifySettings, Storage, WindowCommit
-from shm_service.service._notify import Notifier, notify_targets
+from shm_service.service.alarms._notify import Notifier, notify_targets
 
 
 def _raise(storage):
@@ -81,7 +81,7 @@ def test_email_over_smtp(tmp_path):
         controller.stop()
 
 
-# -- Alertmanager-like semantics (issue 11, item 4) ---------------------------------------------
+# -- Alertmanager-like semantics ---------------------------------------------
 
 
 
@@ -170,7 +170,7 @@ def test_retry_delays_grow_are_capped_and_jittered():
 
     import pytest
 
-    from shm_service.service._notify import classify_http, retry_delay
+    from shm_service.service.alarms._notify import classify_http, retry_delay
 
     rng = random.Random(7)
     delays = [retry_delay(k, 1.0, 60.0, rng) for k in range(1, 11)]

@@ -1,4 +1,4 @@
-"""One writer per database (issue 23 item 3): a fleet's workers hand their writes to the front's
+"""One writer per database: a fleet's workers hand their writes to the front's
 ``WriterServer`` and only read the database; a worker killed mid-stream loses no committed
 window and doubles nothing; a window sent again changes nothing."""
 
@@ -15,7 +15,7 @@ import pytest
 
 from contract import TrendRow
 from shm_service.service import AlarmChange, Storage, StorageUnavailable, WindowCommit
-from shm_service.service._store_writer import WRITER_ADDRESS, WRITER_KEY, RemoteStorage, WriterServer, open_storage
+from shm_service.service.storage._writer import WRITER_ADDRESS, WRITER_KEY, RemoteStorage, WriterServer, open_storage
 
 
 def _window(source: str, k: int, alarm: str | None = None) -> WindowCommit:
@@ -92,7 +92,7 @@ _WORKER = textwrap.dedent("""
     import sys, time
     sys.path.insert(0, {tests!r})
     from test_one_writer import _window
-    from shm_service.service._store_writer import open_storage
+    from shm_service.service.storage._writer import open_storage
     storage = open_storage({db!r})
     for k in range(100000):
         storage.commit_window(_window("k", k, alarm="raise" if k % 2 == 0 else "clear"))

@@ -1,4 +1,4 @@
-"""Issue 11, item 9 (open doors), with real requests against the real server (uvicorn on a free
+"""Open doors, with real requests against the real server (uvicorn on a free
 loopback port): the Host check against DNS rebinding, body limits on chunked bodies, the rate
 limit on wrong tokens, and the token on every route off loopback."""
 
@@ -11,7 +11,7 @@ import pytest
 from svc_helpers import fast_overrides
 
 from shm_service.service import ApiServer, MonitoringService, SettingsError, load_settings
-from shm_service.service._api import AuthLimiter, HostCheck, create_app
+from shm_service.service.http._app import AuthLimiter, HostCheck, create_app
 
 TOKEN = "test-token-123"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}

@@ -10,7 +10,7 @@ from svc_helpers import fast_overrides
 
 from contract import ServicePort, StructurePort
 from shm_service.service import MonitoringService, load_settings
-from shm_service.service._workers import WorkerFleet
+from shm_service.service.runtime._workers import WorkerFleet
 
 
 def _port_methods(port: type) -> dict[str, inspect.Signature]:

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from shm_service.service import ServeStartError, read_ready, start_serve
-from shm_service.service._processes import (
+from shm_service.service.runtime._processes import (
     DEATHSIG_ENV,
     end_with_parent,
     hold_worker_lock,
@@ -66,7 +66,7 @@ def test_a_parent_pid_must_be_positive():
 
 _CHILD = """
 import signal, sys, time
-from shm_service.service._processes import end_with_parent
+from shm_service.service.runtime._processes import end_with_parent
 signal.signal(signal.SIGTERM, lambda *a: sys.exit(0))
 end_with_parent(int(sys.argv[1]), grace_s=2.0, poll_s=0.05)
 time.sleep(600)
@@ -106,7 +106,7 @@ def test_a_child_ends_when_its_parent_is_killed(how):
 
 _FAKE_WORKER = """
 import signal, sys, time
-from shm_service.service._processes import hold_worker_lock
+from shm_service.service.runtime._processes import hold_worker_lock
 lock = hold_worker_lock(sys.argv[1])
 if sys.argv[2] == "stubborn":
     signal.signal(signal.SIGTERM, signal.SIG_IGN)

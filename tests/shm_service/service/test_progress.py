@@ -1,4 +1,4 @@
-"""service.progress (issue 24): the phases' words and their times, from a structure's state. The
+"""service.progress: the phases' words and their times, from a structure's state. The
 real service's progress is checked end to end by tests/web/test_first_run_browser.py; these pin
 each phase's text and arithmetic on hand-computable states."""
 
@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import pytest
 
 from shm_service.service import ServiceSettings
-from shm_service.service._progress import COMPILING, describe_progress
+from shm_service.service.runtime._progress import COMPILING, describe_progress
 
 NS = 1_000_000_000
 

@@ -87,7 +87,7 @@ def test_reprocess_is_analyze_per_file_idempotent_and_feeds_the_service_baseline
     assert active is not None and [m["f_ref_hz"] for m in active["modes"]] == [m["frequency_hz"] for m in learnt["modes"]]
 
     from estimator import build_model
-    from shm_service.service._stage_analysis import AnalysisStage
+    from shm_service.service.stages._analysis import AnalysisStage
 
     model = build_model(read_recording(short_recording, kinds=()).rig)
     from shm_service.service import load_settings

@@ -10,8 +10,8 @@ import pytest
 
 from contract import TrendRow
 from shm_service.service import RetentionSettings, SettingsError, Storage, WindowCommit, load_settings
-from shm_service.service._archive import parse_archive_name
-from shm_service.service._retention import RecordingFile, RetentionWorker, list_recordings, plan_recording_retention
+from shm_service.service.stages._archive import parse_archive_name
+from shm_service.service.storage._retention import RecordingFile, RetentionWorker, list_recordings, plan_recording_retention
 
 HOUR = 3600.0
 DAY = 86400.0
@@ -153,7 +153,7 @@ def test_a_running_service_applies_retention_to_its_data_directory(tmp_path):
 def test_a_recording_file_holds_at_most_rotate_s_of_data_however_much_one_write_brings(tmp_path):
     from shm_service.rig_layouts import default_rig
     from shm_service.service import ArchiveSettings
-    from shm_service.service._archive import Archive
+    from shm_service.service.stages._archive import Archive
 
     archive = Archive(ArchiveSettings(directory=str(tmp_path), rotate_s=20.0), default_rig("benchmark"), "sim", None)
     t0 = int(T0 * 1e9)

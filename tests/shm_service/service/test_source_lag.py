@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from shm_service.service._sources import Source, data_lag_s
+from shm_service.service.sources._sources import Source, data_lag_s
 
 _NS = 1_000_000_000
 SIM_START_NS = 1_767_225_600 * _NS  # 2026-01-01T00:00:00Z, the virtual rig's clock

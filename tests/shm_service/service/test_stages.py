@@ -1,4 +1,4 @@
-"""The runtime's stages on their own (issue 23 item 2) and the scheduler that steps them (item 4):
+"""The runtime's stages on their own and the scheduler that steps them (item 4):
 small inputs, exact expectations."""
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ from pydantic import ValidationError
 from svc_helpers import wait_for
 
 from shm_service.service import StorageUnavailable, WindowCommit
-from shm_service.service._pipeline import AnalysisInbox
-from shm_service.service._scheduler import Scheduler, SchedulerSettings
-from shm_service.service._stage_commit import CommitSettings, CommitStage, PendingCommit
-from shm_service.service._stage_estimate import EstimateSettings, calibration_from_dict, calibration_to_dict
-from shm_service.service._stage_outputs import OutputSettings
+from shm_service.service.stages._pipeline import AnalysisInbox
+from shm_service.service.runtime._scheduler import Scheduler, SchedulerSettings
+from shm_service.service.stages._commit import CommitSettings, CommitStage, PendingCommit
+from shm_service.service.stages._estimate import EstimateSettings, calibration_from_dict, calibration_to_dict
+from shm_service.service.stages._outputs import OutputSettings
 
 # -- the scheduler ------------------------------------------------------------------------------
 
@@ -239,7 +239,7 @@ def test_a_calibration_survives_its_stored_form():
 
 def test_queued_batches_are_joined_per_topic_in_order():
     from shm_service.recording import FollowBlock
-    from shm_service.service._pipeline import Batch
+    from shm_service.service.stages._pipeline import Batch
 
     def block(topic: str, times: list[int]) -> FollowBlock:
         t = np.asarray(times, dtype=np.int64)
@@ -264,8 +264,8 @@ def test_a_source_lane_hands_batches_on_at_their_pace_and_waits_when_told_withou
     import queue
 
     from shm_service.recording import FollowBlock
-    from shm_service.service._pipeline import Batch
-    from shm_service.service._sources import END, Source, SourceLane
+    from shm_service.service.stages._pipeline import Batch
+    from shm_service.service.sources._sources import END, Source, SourceLane
 
     def batch(t_s: float) -> Batch:
         t = np.asarray([int(t_s * 1e9)], dtype=np.int64)

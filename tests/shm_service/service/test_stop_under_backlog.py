@@ -1,5 +1,5 @@
-"""A stop (SIGTERM) under a backlog ends within seconds and loses nothing committed (issue 26
-item 4): the backlog is estimated for ``stop_drain_s``, the rest set aside — its raw samples in
+"""A stop (SIGTERM) under a backlog ends within seconds and loses nothing committed: the
+backlog is estimated for ``stop_drain_s``, the rest set aside — its raw samples in
 the recording, every window already written still in the database."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Storage faults for real (issue 11, item 3): a full disk (SQLite's own SQLITE_FULL, from
+"""Storage faults for real: a full disk (SQLite's own SQLITE_FULL, from
 ``max_page_count``) while an alarm is raised, and another process holding the write lock."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The fatigue rows (issue 21): a window's document round trip, a replayed window kept, a
+"""The fatigue rows: a window's document round trip, a replayed window kept, a
 reprocessed one replaced, the period and limit of a query, the document of a period."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import sqlite3
 import pytest
 
 from contract import HotSpotLoadsDocument, LoadsWindowDocument, StationLoadsDocument
-from shm_service.service._store_fatigue import FatigueRepository, fatigue_document
+from shm_service.service.storage._fatigue import FatigueRepository, fatigue_document
 
 
 def _window(start: float, consumed: float, rms: float = 1e-5, span: float = 4e-5) -> LoadsWindowDocument:
@@ -54,3 +54,6 @@ def test_round_trip_replay_reprocess_and_period(conn):
     assert station.strain_rms == pytest.approx(((2e-5**2 + 3e-5**2) / 2) ** 0.5, rel=1e-12)
     empty = fatigue_document("mast", [], 0, None)
     assert empty.hot_spots == [] and empty.envelope == [] and not empty.truncated and empty.design_life_years is None
+    # the rig's design life is the document's before any window was stored, and over the hot spots' own
+    assert fatigue_document("mast", [], 0, None, design_life_years=25.0).design_life_years == 25.0
+    assert fatigue_document("mast", docs[1:3], 4, docs[2], design_life_years=25.0).design_life_years == 25.0

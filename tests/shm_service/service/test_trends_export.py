@@ -1,4 +1,4 @@
-"""The list routes say what they hold and page with a cursor (issue 26): a cut answer is flagged,
+"""The list routes say what they hold and page with a cursor: a cut answer is flagged,
 counted and continued, in JSON and in the CSV's headers. Real server, real SQLite file, real
 requests."""
 

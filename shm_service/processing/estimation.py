@@ -1,0 +1,290 @@
+"""Wiring between recordings and the estimator: measurements in, estimates and scores out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from contract import (
+    ESTIMATE_LOADS_TOPIC,
+    BEARING_TOPIC,
+    IMU_PLANAR_COLUMNS,
+    TEMPERATURE_TOPIC,
+    TRUTH_TOPIC,
+    row_layout,
+)
+from contract import estimate_payloads as _estimate_payloads
+from estimator import EstimateResult, Measurements, SensorSeries
+
+from ..recording import Recording
+
+__all__ = [
+    "DeformationRecord",
+    "TruthSeries",
+    "deformation_record",
+    "estimate_payloads",
+    "estimate_recording",
+    "measurements_from_recording",
+    "score_against_truth",
+    "sensor_count_problem",
+    "truth_from_recording",
+    "write_estimates",
+]
+
+_NS = 1e-9
+
+_SENSOR_LABELS = {"imus": "peripheral IMUs", "tofs": "ToFs", "gauges": "strain gauges"}
+
+
+def sensor_count_problem(rig, kind: str, wanted: int, *, modes: int) -> str | None:
+    """Why a count of ``kind`` ("imus", "tofs", "gauges") cannot be chosen on ``rig``, with the valid
+    range, or None when it can. The estimator caps a count to what the rig has; an explicit request
+    beyond it is the user's mistake and must be refused, not capped."""
+    if kind == "imus":
+        names = [s.name for s in rig.sensors_of("imu") if s.name != "D" and (s.position or 0) > 0]
+        low = modes
+    elif kind == "tofs":
+        names, low = [s.name for s in rig.sensors_of("tof")], 0
+    elif kind == "gauges":
+        names, low = [s.name for s in rig.sensors_of("strain")], 0
+    else:
+        raise ValueError(f"{kind=} must be imus, tofs or gauges")
+    if low <= wanted <= len(names):
+        return None
+    need = f"; Γ = {modes} needs at least {modes}" if kind == "imus" else ""
+    valid = "none" if low > len(names) else str(low) if low == len(names) else f"{low}..{len(names)}"
+    return (f"the rig has {len(names)} {_SENSOR_LABELS[kind]} ({', '.join(names) or '-'}){need}: "
+            f"valid counts: {valid}")
+
+
+def measurements_from_recording(rec: Recording) -> Measurements:
+    """The planar measurements of a recording (times in s from the recording's start)."""
+    start = rec.start_ns
+
+    def series(channel, columns) -> SensorSeries:
+        return SensorSeries((channel.log_time_ns - start) * _NS, channel.values[:, columns])
+
+    imu, tof, strain, bearing = {}, {}, {}, None
+    for channel in rec.channels.values():
+        if channel.kind == "imu":
+            imu[channel.name] = series(channel, IMU_PLANAR_COLUMNS)
+        elif channel.kind == "tof":
+            tof[channel.name] = series(channel, [0])
+        elif channel.kind == "strain":
+            strain[channel.name] = series(channel, [0])
+        elif channel.kind == "bearing":
+            bearing = series(channel, [0])
+    if "D" not in imu:
+        raise ValueError(f"{rec.path}: no samples of /imu/D, the IMU at the bearing")
+    return Measurements(imu=imu, tof=tof, strain=strain, bearing=bearing)
+
+
+@dataclass(frozen=True)
+class TruthSeries:
+    t: np.ndarray
+    d: np.ndarray
+    h: np.ndarray
+    phi: np.ndarray
+    e: np.ndarray
+    deflection: np.ndarray
+    curvature: np.ndarray
+
+
+def estimate_recording(rec: Recording, model, settings=None) -> EstimateResult:
+    """Run the streaming estimator (``estimator.StreamingEstimator``, the service's policy) over a
+    raw recording, on the samples' own UNIX ns stamps as ``shm serve`` sees them: the same b(t)
+    as a replay of the file in the service. The result's ``t`` are s from the recording's start.
+
+    Raises
+    ------
+    ValueError
+        The recording has no samples of the reference IMU D.
+    """
+    from dataclasses import replace
+
+    from estimator import estimate_stream, rig_topics
+
+    topics = rig_topics(model)
+    samples = {topic: (ch.log_time_ns, ch.values) for topic, ch in rec.channels.items() if topic in topics and len(ch)}
+    result = estimate_stream(samples, model, settings, topics=topics)
+    if not samples:
+        return result
+    first = min(int(t[0]) for t, _ in samples.values())
+    epoch = first - first % 1_000_000_000  # as the service's estimator takes it
+    return replace(result, t=result.t + (epoch - int(rec.start_ns)) * _NS)
+
+
+def truth_from_recording(rec: Recording) -> TruthSeries | None:
+    channel = rec.channels.get(TRUTH_TOPIC)
+    if channel is None or len(channel) == 0:
+        return None
+    v = channel.values
+    layout = row_layout("shm.TruthState", stations=len(rec.rig.truth_stations))
+    if v.shape[1] != layout.width:
+        raise ValueError(f"{rec.path}: {TRUTH_TOPIC} rows have {v.shape[1]} values; rig.json's {len(rec.rig.truth_stations)} "
+                         f"truth stations give {layout.width}")
+    col = layout.columns
+    return TruthSeries((channel.log_time_ns - rec.start_ns) * _NS, v[:, col("d")].ravel(), v[:, col("h")].ravel(),
+                       v[:, col("phi")].ravel(), v[:, col("e")].ravel(), v[:, col("deflection")], v[:, col("curvature")])
+
+
+def score_against_truth(result: EstimateResult, truth: TruthSeries, *, after: float) -> dict:
+    """RMSE of the estimates against the truth at common sample times after ``after`` (s)."""
+    idx = np.searchsorted(truth.t, result.t)
+    idx = np.clip(idx, 0, truth.t.size - 1)
+    match = (np.abs(truth.t[idx] - result.t) < 1e-6) & (result.t >= after)
+    if not np.any(match):
+        # A recording that never leaves its rest phase has nothing to score.
+        keys = ("phi_deg", "e_m", "d_m", "deflection_m", "curvature_per_m")
+        return {"rmse": dict.fromkeys(keys), "nees": {"phi": None, "e": None}, "scored_samples": 0}
+    i = idx[match]
+    rms = lambda a: float(np.sqrt(np.mean(np.square(a))))  # noqa: E731
+    phi_err = result.phi[match] - truth.phi[i]
+    e_err = result.e[match] - truth.e[i]
+    i_phi = result.model.state_layout.phi
+    return {
+        "rmse": {
+            "phi_deg": rms(np.degrees(phi_err)),
+            "e_m": rms(e_err),
+            "d_m": rms(result.d[match] - truth.d[i]),
+            "deflection_m": rms(result.deflection()[match] - truth.deflection[i]),
+            "curvature_per_m": rms(result.curvature()[match] - truth.curvature[i]),
+        },
+        "nees": {
+            "phi": None if i_phi is None else float(np.mean(phi_err**2 / result.P_diag[match, i_phi])),
+            "e": float(np.mean(e_err**2 / result.var_e[match])),
+        },
+        "scored_samples": int(match.sum()),
+    }
+
+
+def estimate_payloads(result: EstimateResult) -> list[bytes]:
+    """``/estimate/state`` payloads (contract's shm.EstimateState) for every estimate sample."""
+    import orjson
+
+    rows = _estimate_payloads(result.model.state_layout, result.x, result.P_diag, result.e, result.deflection(),
+                              result.curvature())
+    return [orjson.dumps(row) for row in rows]
+
+
+def _virtual_loads(rig, model):
+    """analytics.VirtualLoads of the rig's hot spots and a 16-station grid, or None (no station to give)."""
+    from analytics import VirtualLoads
+
+    try:
+        return VirtualLoads.from_rig(rig, model.units.curvature)
+    except ValueError:
+        return None
+
+
+def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metadata: dict[str, str] | None = None) -> int:
+    """Write the estimates (with rig.json, the truth metadata and the temperature, bearing and strain
+    gauge channels of the source) into a new recording; returns the number of estimate messages."""
+    import json
+
+    from ..recording import ESTIMATE_TOPIC, RecordingWriter
+
+    metadata = {name: dict(values) for name, values in rec.metadata.items()}
+    metadata["estimator"] = {
+        "selection": json.dumps(result.model.selection.as_dict()),
+        "modes": str(result.model.gamma),
+        "state_names": json.dumps(result.model.state_names),
+        "calibration": json.dumps(result.calibration.as_dict()),
+        **(extra_metadata or {}),
+    }
+    stamps = rec.start_ns + np.round(result.t * 1e9).astype(np.int64)
+    loads = _virtual_loads(rec.rig, result.model)
+    if loads is not None:
+        metadata["loads"] = {"stations_m": json.dumps(loads.positions.tolist()), "names": json.dumps(loads.names),
+                             "youngs_modulus_pa": json.dumps(rec.rig.beam.youngs_modulus),
+                             "note": "stress = youngs_modulus_pa x strain (reference temperature); moments at the reference temperature"}
+    with RecordingWriter(path, rec.rig, metadata=metadata) as writer:
+        # the strain gauges too: `shm loads` of an estimate sees the modal truncation at them
+        gauge_topics = tuple(s.topic for s in rec.rig.sensors_of("strain"))
+        for topic in (TEMPERATURE_TOPIC, BEARING_TOPIC, *gauge_topics):
+            channel = rec.channels.get(topic)
+            if channel is None:
+                continue
+            key = "celsius" if topic == TEMPERATURE_TOPIC else "distance" if topic == BEARING_TOPIC else "strain"
+            for lt, pt, value in zip(channel.log_time_ns.tolist(), channel.publish_time_ns.tolist(), channel.values[:, 0].tolist()):
+                writer.write(topic, lt, {key: value}, pt)
+        for stamp, payload in zip(stamps.tolist(), estimate_payloads(result)):
+            writer.write(ESTIMATE_TOPIC, stamp, payload)
+        if loads is not None:  # each estimate's strain and moments at the hot spots and the grid
+            out = loads(result.model.state_layout.b_of(result.x))
+            root = out["root_moment_nm"] if out["root_moment_nm"] is not None else np.zeros(len(stamps))
+            for stamp, strain, moment, m0 in zip(stamps.tolist(), out["strain"].tolist(), out["moment_nm"].tolist(), root.tolist()):
+                writer.write(ESTIMATE_LOADS_TOPIC, stamp, {"strain": strain, "moment_nm": moment, "root_moment_nm": m0})
+    return len(stamps)
+
+
+@dataclass(frozen=True)
+class DeformationRecord:
+    """What the analytics need from a recording: b(t) and its context (times in s from the start).
+
+    support : the estimator's support displacement d(t) (m) on the times of b (the fused bearing
+    sensor and IMU at D: the measured input of the identification), or None. origin_ns : data
+    time of times = 0 (the recording's first message, UNIX ns). rest_end_s : end of the rest
+    phase the estimator calibrated on (s), when known.
+    """
+
+    times: np.ndarray
+    b: np.ndarray
+    units: object  # estimator.UnitDeformations
+    stations: np.ndarray
+    temperature: tuple[np.ndarray, np.ndarray] | None
+    bearing: np.ndarray | None
+    truth_metadata: dict[str, str] | None
+    estimated_here: bool
+    support: np.ndarray | None = None
+    origin_ns: int = 0
+    rest_end_s: float | None = None
+
+
+def deformation_record(rec: Recording, *, model_args: dict | None = None, settings=None) -> DeformationRecord:
+    """b(t) of a recording: from its ``/estimate/state`` if it has one, else by running the estimator.
+
+    ``model_args`` are passed to ``estimator.build_model`` when the estimator runs (and give Γ);
+    ``settings`` (``estimator.StreamingSettings``) are its calibration, chunks and restart policy.
+    """
+    from estimator import assemble_beam, build_model, unit_deformations
+
+    from ..recording import ESTIMATE_TOPIC
+
+    estimates = rec.channels.get(ESTIMATE_TOPIC)
+    rest_end = None
+    if estimates is not None and len(estimates):
+        import json
+
+        columns = [i for i, name in enumerate(estimates.fields) if name.startswith("b[")]
+        if not columns:
+            raise ValueError(f"{rec.path}: {ESTIMATE_TOPIC} carries no b")
+        times = (estimates.log_time_ns - rec.start_ns) * _NS
+        b = estimates.values[:, columns]
+        support = estimates.values[:, estimates.fields.index("d")] if "d" in estimates.fields else None
+        units = unit_deformations(assemble_beam(rec.rig), len(columns))
+        estimated_here = False
+        try:  # written by `shm estimate --out`: the rest phase the estimator calibrated on
+            calibration = json.loads(rec.metadata["estimator"]["calibration"])  # estimator.Calibration.as_dict()
+            rest_end = float(calibration["rest_end_s"] if "rest_end_s" in calibration else calibration["rest_end"])
+        except (KeyError, TypeError, ValueError):
+            rest_end = None
+    else:
+        model = build_model(rec.rig, **(model_args or {}))
+        result = estimate_recording(rec, model, settings)
+        times, b, units = result.t, result.b, model.units
+        support = result.d
+        estimated_here = True
+        rest_end = float(result.calibration.rest_end)
+    temperature = None
+    channel = rec.channels.get(TEMPERATURE_TOPIC)
+    if channel is not None and len(channel) >= 2:
+        temperature = ((channel.log_time_ns - rec.start_ns) * _NS, channel.values[:, 0])
+    bearing = None
+    channel = rec.channels.get(BEARING_TOPIC)
+    if channel is not None and len(channel) >= 2:
+        bearing = np.interp(times, (channel.log_time_ns - rec.start_ns) * _NS, channel.values[:, 0])
+    return DeformationRecord(times, b, units, np.asarray(rec.rig.truth_stations, dtype=float) if rec.rig.truth_stations
+                             else np.linspace(0.0, rec.rig.beam.length, 9)[1:], temperature, bearing,
+                             rec.metadata.get("truth"), estimated_here, support, int(rec.start_ns), rest_end)
