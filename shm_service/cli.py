@@ -371,7 +371,7 @@ def _print_loads(last: dict, note: str) -> None:
     the reason and what to change, where the band is wider than ``analytics.WITHHOLD_HALF_WIDTH``); the band's basis."""
     from analytics import WITHHOLD_HALF_WIDTH
 
-    from .loads import WITHHOLD_REMEDY
+    from .commands.loads import WITHHOLD_REMEDY
 
     print(f"loads at the last window ({last['start_s']:.0f} s):")
     for h in last["hot_spots"]:
