@@ -44,7 +44,7 @@ _BAND_METHOD = ("calibrated on the gauges' cross-validated residuals (analytics.
                 "h = {h:g} (estimate recording); the missing strain along the beam from the rig's "
                 "modes above the basis and a floor fitted to the gauges' residual variances; the log-DEL error per unit relative "
                 "residual, its 90 % conformal quantile over the gauges; ln(1+a) = that times the station's relative missing "
-                "strain, at a gauge at least its own, at least 2 %; band [DEL/(1+a), DEL*(1+a)]")
+                "strain, at least the bracketing gauges' own (beyond them the largest), at least 2 %; band [DEL/(1+a), DEL*(1+a)]")
 #: Young's modulus for plain strain channels without a rig (structural steel, Pa).
 STEEL_YOUNGS_MODULUS = 2.1e11
 
