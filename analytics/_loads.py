@@ -225,8 +225,9 @@ def outside_basis_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, f
        gauge's own the largest over its parts (the parts of one gauge are not independent); with
        fewer gauges than that coverage needs (4 gauges: 90 % needs 9) the largest score, a coverage
        of n/(n + 1) under exchangeable positions.
-    3. **The band.** ln(1 + a) = κ̂·q(η), at least ``BAND_FLOOR``; at a gauge's position at least
-       that gauge's own whole-span |ln ρ|. [DEL/(1 + a), DEL·(1 + a)].
+    3. **The band.** ln(1 + a) = κ̂·q(η), at least what the gauges saw there (whole-span |ln ρ|: at
+       a gauge its own, between two gauges the larger of the two, beyond them the largest), at least
+       ``BAND_FLOOR``. [DEL/(1 + a), DEL·(1 + a)].
 
     Where the structure lies in its basis the residuals are the estimate's noise: q and the band
     are small. Where modes above the basis carry curvature, the fitted λ put it where those modes
@@ -267,10 +268,11 @@ def outside_basis_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, f
     if isinstance(windows, bool) or not isinstance(windows, int) or windows < 1:
         raise ValueError(f"{windows=} must be an integer >= 1")
     eta = as_signal("stations", stations, min_len=1, ndim=(1,))
-    phi_g = np.asarray(outside.gauge_shapes, dtype=float).reshape(len(gauges), -1)
-    phi_s = np.asarray(outside.station_shapes, dtype=float).reshape(eta.size, -1)
+    phi_g = np.asarray(outside.gauge_shapes, dtype=float)
+    phi_s = np.asarray(outside.station_shapes, dtype=float)
     rms_s = np.asarray(outside.station_rms, dtype=float).reshape(-1)
-    if phi_g.shape[1] != phi_s.shape[1] or rms_s.size != eta.size:
+    if (phi_g.ndim != 2 or phi_s.ndim != 2 or phi_g.shape[0] != len(gauges) or phi_s.shape[0] != eta.size
+            or phi_g.shape[1] != phi_s.shape[1] or rms_s.size != eta.size):
         raise ValueError(f"outside: gauge shapes {phi_g.shape}, station shapes {phi_s.shape} and station RMS {rms_s.shape} "
                          f"disagree with {len(gauges)} gauges and {eta.size} stations")
     if not (np.all(np.isfinite(phi_g)) and np.all(np.isfinite(phi_s)) and np.all(np.isfinite(rms_s)) and np.all(rms_s >= 0)):
@@ -315,22 +317,35 @@ def outside_basis_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, f
     # 2. κ̂: the conformal quantile of the gauges' scores (each gauge's largest over its parts)
     scores = np.array([s for *_, s in used if s is not None])
     kappa = _conformal_max(scores, coverage) if scores.size else 0.0
+    order = sorted(used, key=lambda u: u[1])
+    pos_g = np.array([p for _, p, *_ in order])
+    log_g = np.array([w for _, _, _, w, _ in order])
     bands = []
     names = ", ".join(f"{gauges[k][0]} {p:g} m" for k, p, *_ in used)
     for j, x in enumerate(eta):
         q = float(np.sqrt(var_s[j]) / rms_s[j]) if rms_s[j] > 0 else (0.0 if var_s[j] == 0 else np.inf)
         log_a = kappa * q
-        at = [w for _, p, _, w, _ in used if abs(p - x) <= 1e-9]
-        if at:
-            log_a = max(log_a, max(at))
+        log_a = max(log_a, _bracketing(pos_g, log_g, float(x)))
         a = max(BAND_FLOOR, float(np.expm1(log_a)) if np.isfinite(log_a) else np.inf)
         method = (f"calibrated on the gauges' cross-validated residuals ({names}): missing strain along the beam "
                   f"from {phi_s.shape[1]} modes above the basis and a floor fitted to the gauges' residual variances; "
                   f"q = its RMS over the station's virtual strain RMS = {q:.4f}; log-DEL error per unit q, the "
-                  f"{coverage:.0%} conformal quantile over the gauges (each its worst of {windows} parts and the whole) "
-                  f"kappa = {kappa:.4f}; ln(1+a) = kappa*q, at a gauge at least its own, at least {BAND_FLOOR:.0%}: a = {a:.4f}")
+                  f"{coverage:.0%} conformal quantile over the gauges" + (f" (each its worst of {windows} parts and the whole)" if windows > 1 else "") + " "
+                  f"kappa = {kappa:.4f}; ln(1+a) = kappa*q, at least the bracketing gauges' own, at least {BAND_FLOOR:.0%}: a = {a:.4f}")
         bands.append(DelBand(1.0 / (1.0 + a), 1.0 + a, method))
     return bands, rows
+
+
+def _bracketing(positions: np.ndarray, logs: np.ndarray, x: float) -> float:
+    """The gauges' own |ln ρ| a station at ``x`` takes at least: at a gauge its own, between two the
+    larger of the two, beyond the outermost the largest of all (what the gauges saw there)."""
+    at = np.abs(positions - x) <= 1e-9
+    if at.any():
+        return float(logs[at].max())
+    if positions[0] < x < positions[-1]:
+        k = int(np.searchsorted(positions, x))
+        return float(max(logs[k - 1], logs[k]))
+    return float(logs.max())
 
 
 def _log_factor(measured: np.ndarray, virtual: np.ndarray, exponents: tuple[float, ...], n_eq: float,

@@ -367,7 +367,12 @@ def _loads_band_note(windows: list[dict]) -> str:
 
 
 def _print_loads(last: dict, note: str) -> None:
-    """The hot spots at the last window: DEL (m = 3) with its band, consumed life, remaining life; and the band's basis."""
+    """The hot spots at the last window: DEL (m = 3) with its band, consumed life, remaining life (withheld, with
+    the reason and what to change, where the band is wider than ``analytics.WITHHOLD_HALF_WIDTH``); the band's basis."""
+    from analytics import WITHHOLD_HALF_WIDTH
+
+    from .commands.loads import WITHHOLD_REMEDY
+
     print(f"loads at the last window ({last['start_s']:.0f} s):")
     for h in last["hot_spots"]:
         dels = h.get("del_pa") or {}
@@ -376,6 +381,11 @@ def _print_loads(last: dict, note: str) -> None:
         del_text = "-" if key is None else f"DEL{key} {dels[key] / 1e6:.3g} MPa" + (
             f" [{band[0] / 1e6:.3g}, {band[1] / 1e6:.3g}]" if band else " (no band)")
         remaining = h.get("remaining_years")
+        if band and key and dels[key] > 0 and band[1] / dels[key] - 1.0 > WITHHOLD_HALF_WIDTH:
+            # virtual and measured strain disagree beyond what a damage figure can carry: no life printed
+            print(f"  {h['name']:>20} at {h['position_m']:g} m: {del_text}; damage and life withheld: the band is "
+                  f"±{band[1] / dels[key] - 1.0:.0%}, wider than ±{WITHHOLD_HALF_WIDTH:.0%}; change: {WITHHOLD_REMEDY}")
+            continue
         print(f"  {h['name']:>20} at {h['position_m']:g} m: {del_text}, consumed {h['consumed']:.3e}, "
               f"remaining {'-' if remaining is None else f'{remaining:.3g} years'} ({h.get('verdict')})")
     print(f"  band: {note}")

@@ -39,11 +39,12 @@ __all__ = ["add_loads_parser", "loads_of_recording", "loads_of_table", "parse_st
 
 #: The band's method, in the document (each station's a in its band).
 _BAND_METHOD = ("calibrated on the gauges' cross-validated residuals (analytics.outside_basis_bands): at each gauge the "
-                "virtual strain from an estimate without that gauge (raw recording: the estimator run again per gauge) or the "
-                "in-sample residual r/(1-h), h = {h:g} (estimate recording); the missing strain along the beam from the rig's "
+                "virtual strain from an estimate without that gauge (raw recording: the estimator run again per gauge; each "
+                "station then takes the wider of that band and the in-sample one) or the in-sample residual r/(1-h), "
+                "h = {h:g} (estimate recording); the missing strain along the beam from the rig's "
                 "modes above the basis and a floor fitted to the gauges' residual variances; the log-DEL error per unit relative "
                 "residual, its 90 % conformal quantile over the gauges; ln(1+a) = that times the station's relative missing "
-                "strain, at a gauge at least its own, at least 2 %; band [DEL/(1+a), DEL*(1+a)]")
+                "strain, at least the bracketing gauges' own (beyond them the largest), at least 2 %; band [DEL/(1+a), DEL*(1+a)]")
 #: Young's modulus for plain strain channels without a rig (structural steel, Pa).
 STEEL_YOUNGS_MODULUS = 2.1e11
 
@@ -234,8 +235,17 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     judged = _out_of_sample(rec, compared, gauge_masks, t, used, model_args, beam) if loo else [
         (n, p, v, m, UNKNOWN_LEVERAGE if n in used else 0.0) for n, p, v, m in compared]
     beyond = outside_shapes(rig, units)
+    station_rms = np.sqrt(np.mean(strain**2, axis=0))
     bands, gauge_rows = gauge_band(judged, positions, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles,
-                                   outside_at=beyond, station_rms=np.sqrt(np.mean(strain**2, axis=0)))
+                                   outside_at=beyond, station_rms=station_rms)
+    if loo and bands is not None:
+        # the estimate's own residuals too (in sample, widened by 1/(1 - h)): an estimate without a gauge
+        # errs otherwise than the one with all of them; each station takes the wider of the two bands
+        own = [(n, p, v, m, UNKNOWN_LEVERAGE if n in used else 0.0) for n, p, v, m in compared]
+        inside, _rows = gauge_band(own, positions, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles,
+                                   outside_at=beyond, station_rms=station_rms)
+        if inside is not None:
+            bands = [x if x.high >= y.high else y for x, y in zip(bands, inside)]
 
     default_detail = None if curve is None else _detail(curve)
     design = rig.fatigue.design_life_years if rig.fatigue is not None else None

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytics import BAND_FLOOR, OutsideBasis, outside_basis_bands
+from analytics import OutsideBasis, outside_basis_bands
 
 M = np.sin(np.linspace(0.0, 60.0, 3000)) + 0.3 * np.sin(np.linspace(0.0, 222.0, 3000))
 RMS = float(np.sqrt(np.mean(M**2)))
@@ -37,13 +37,17 @@ def test_floor_only_residual_scales_with_the_station_strain():
 
 
 def test_a_mode_above_the_basis_puts_the_missing_strain_where_it_bends():
-    # the missing strain is one mode's: 0.1 m at g1 (shape 1), 0.05 m at g2 (shape 0.5); a station where
-    # the shape is 0 has only the floor (0): the band's floor; where it is 2, q doubles against g1
+    # the missing strain is one mode's: 0.1 v at g1 (shape 1), 0.05 v at g2 (shape 0.5); a station between
+    # them where the shape is 0 has no missing strain (floor 0) but takes the larger gauge's own factor,
+    # 1/(1 − 0.1/1.1) = 1.1; where the shape is 2, q doubles against g1's
     v = M / 1.1
     gauges = [("g1", 1.0, M - 0.1 * v, M, 0.0), ("g2", 2.0, M - 0.05 * v, M, 0.0)]
-    a, _, _ = _run(gauges, [0.5, 3.0], [[1.0], [0.5]], [[0.0], [2.0]], [np.sqrt(np.mean(v**2))] * 2)
-    assert a[0] == pytest.approx(BAND_FLOOR, rel=1e-9)
-    assert a[1] > 2 * 0.09  # twice g1's relative residual times its score, at least
+    rms = np.sqrt(np.mean((M - 0.1 * v) ** 2))
+    a, _, rows = _run(gauges, [1.5, 3.0], [[1.0], [0.5]], [[0.0], [2.0]], [rms, rms])
+    assert a[0] == pytest.approx(0.1, rel=1e-9)
+    kappa = max(r["score"] for r in rows)
+    assert a[1] == pytest.approx(np.expm1(kappa * 2 * rows[0]["relative_residual"]), rel=1e-6)
+    assert a[1] > a[0]
 
 
 def test_the_conformal_rank_with_many_gauges():

@@ -207,7 +207,7 @@ def test_shm_analyze_says_what_the_loads_band_rests_on(capsys, estimate_file, tm
     code, out, err = run(capsys, "analyze", *common, "--rig", str(with_gauges), "--json")
     assert code == 0, err
     doc = json.loads(out)
-    assert doc["loads"] and doc["loads_band"].startswith("leave-one-gauge-out DEL residuals at the strain gauges (g1 ")
+    assert doc["loads"] and doc["loads_band"].startswith("calibrated on the gauges' cross-validated residuals (g1 ")
     assert all(h["del_band_pa"] is not None for w in doc["loads"] for h in w["hot_spots"])
     code, out, err = run(capsys, "analyze", *common, "--rig", str(without))
     assert code == 0, err
