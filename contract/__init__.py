@@ -106,12 +106,15 @@ from ._rig import (
     parse_rig,
 )
 from ._state import Peripheral, StateIndex, StateLayout
-from ._ports import MAX_PAGE, Page, ServicePort, StructureModel, StructurePort
+from ._ports import (
+    MAX_PAGE, Lane, LanePool, NotSingleStructure, Page, ServicePort, ServiceStarting, StructureHost, StructureModel,
+    StructurePort, StructureUnavailable, Waker,
+)
 
 __all__ = [
     "is_loopback",
     # the runtime's ports (the HTTP routers and the dashboard are typed against them)
-    "MAX_PAGE", "Page", "ServicePort", "StructureModel", "StructurePort",
+    "MAX_PAGE", "Lane", "LanePool", "NotSingleStructure", "Page", "ServicePort", "ServiceStarting", "StructureHost", "StructureModel", "StructurePort", "StructureUnavailable", "Waker",
     # rig.json
     "Beam", "EXTENSION_KEYS", "Orientation", "PointMass", "RigDescription",
     "DNV_RP_C203_CURVE_NAMES", "DNV_RP_C203_ENVIRONMENTS", "EN1993_DETAIL_CATEGORIES", "EN1993_SHEAR_CATEGORIES",

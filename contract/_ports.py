@@ -35,9 +35,21 @@ from ._documents import (
 from ._rig import RigDescription
 from ._state import StateLayout
 
-__all__ = ["MAX_PAGE", "Page", "ServicePort", "StructureModel", "StructurePort"]
+__all__ = ["MAX_PAGE", "Lane", "LanePool", "NotSingleStructure", "Page", "ServicePort", "ServiceStarting", "StructureHost", "StructureModel", "StructurePort", "StructureUnavailable", "Waker"]
 
 T = TypeVar("T")
+
+
+class ServiceStarting(RuntimeError):
+    """The service is not built yet (the message says what it waits for): retry later (503)."""
+
+
+class StructureUnavailable(LookupError):
+    """The structure exists but cannot answer (its start failed: the message says why)."""
+
+
+class NotSingleStructure(LookupError):
+    """A single-structure request to a fleet (the message names the fleet's routes)."""
 
 #: The most rows one page of a list route holds (``limit``; the default is 1000). A page is
 #: streamed, so even the largest one costs the server a bounded amount of memory.
@@ -203,3 +215,47 @@ class ServicePort(StructurePort, Protocol):
 
     @property
     def done(self) -> bool: ...
+
+
+class Lane(Protocol):
+    """One lane of a structure on a pool of threads: ``ready()`` (cheap, called under the pool's
+    lock) says whether ``step()`` has work; ``step()`` does one unit of it (and handles its own
+    errors); ``finished`` removes the lane for good; ``background`` (optional, default False):
+    taken only when no other lane is ready."""
+
+    name: str
+    finished: bool
+
+    def ready(self) -> bool: ...
+    def step(self) -> None: ...
+
+
+class Waker(Protocol):
+    """Something that sleeps until there may be work: ``wake()`` says there may be some now."""
+
+    def wake(self) -> None: ...
+
+
+class LanePool(Waker, Protocol):
+    """The pool a structure's lanes (and its source's) are stepped on; ``wake()``: a lane may be
+    ready now."""
+
+    def add(self, lane: Lane) -> None: ...
+
+
+class StructureHost(Protocol):
+    """What a structure needs of the service that runs it, and nothing more: whether it is one of
+    a fleet, how long a ``follow:`` source waits for its file's rig, the pool its lanes run on and
+    the notifier its committed windows and alarms wake."""
+
+    @property
+    def fleet(self) -> bool: ...
+
+    @property
+    def rig_wait_s(self) -> float: ...
+
+    @property
+    def scheduler(self) -> LanePool: ...
+
+    @property
+    def notifier(self) -> Waker: ...

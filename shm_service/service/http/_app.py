@@ -20,14 +20,13 @@ from fastapi import Depends, FastAPI, Request
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
-from contract import ServicePort
+from contract import NotSingleStructure, ServicePort, ServiceStarting
 
 from .routes import ROUTERS
 from ._deps import everyone
 from ._docs import serve_docs_offline
 from ._gate import AuthLimiter, Gate, HostCheck
 from ._metrics import _metrics  # noqa: F401  (one structure's exposition, for the tests)
-from ..runtime._starting import ServiceStarting
 from ..storage._storage import StorageUnavailable
 
 __all__ = ["ApiService", "AuthLimiter", "HostCheck", "ROUTERS", "create_app"]
@@ -62,8 +61,6 @@ def create_app(service: ApiService, *, loopback: bool = True, max_body_bytes: in
     ``allowed_hosts`` are refused (421); more than ``auth_failures_per_minute`` wrong tokens from
     one address are answered 429 for the rest of the minute. ``start_port``: the app's lifespan
     starts and stops ``service``."""
-    from ..runtime._service import NotSingleStructure
-
     app = FastAPI(title="shm serve", version="0.1.0", lifespan=lifespan, dependencies=[Depends(everyone)],
                   description="Structural health monitoring service: status, modal trends, alarms, spectra, ingest.")
     app.state.port, app.state.loopback, app.state.start_port = service, loopback, start_port

@@ -10,7 +10,7 @@ from typing import Any, TypeVar
 
 from fastapi import HTTPException, Path
 
-from contract import ErrorDocument
+from contract import ErrorDocument, StructureUnavailable
 
 __all__ = ["AUTH_RESPONSES", "CSV_RESPONSE", "INVALID", "STRUCTURE_ID", "UNKNOWN", "error", "of_structure", "parse_time",
            "time_range"]
@@ -67,8 +67,6 @@ def time_range(from_: str | None, to: str | None) -> tuple[float | None, float |
 
 def of_structure(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
     """``fn(...)`` of one structure: an unknown id is 404, a structure that cannot answer 409."""
-    from ..runtime._service import StructureUnavailable
-
     try:
         return fn(*args, **kwargs)
     except KeyError as exc:

@@ -25,9 +25,10 @@ from __future__ import annotations
 import logging
 import threading
 from collections import deque
-from typing import Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
+
+from contract import Lane
 
 __all__ = ["Lane", "Scheduler", "SchedulerSettings"]
 
@@ -42,19 +43,6 @@ class SchedulerSettings(BaseModel):
     threads: int = Field(3, ge=1, le=64, description="pool threads stepping the structures' pipelines")
     idle_s: float = Field(0.05, gt=0, le=5, description="longest sleep of an idle pool thread (it is woken by new data), s")
     background_threads: int = Field(1, ge=1, le=64, description="most pool threads stepping background lanes (the analysis) at once")
-
-
-class Lane(Protocol):
-    """One lane of a structure: ``ready()`` (cheap, called under the scheduler's lock) says whether
-    ``step()`` has work; ``step()`` does one unit of it (and handles its own errors);
-    ``finished`` removes the lane for good; ``background`` (optional, default False): taken only
-    when no other lane is ready (see the module)."""
-
-    name: str
-    finished: bool
-
-    def ready(self) -> bool: ...
-    def step(self) -> None: ...
 
 
 class Scheduler:

@@ -134,7 +134,7 @@ class MonitoringService(_StoredRows, SingleStructureView):
                  rig_wait_s: float = 0.0) -> None:
         self.settings = settings
         self.deliver = deliver  # False in a worker process: the front delivers the fleet's notifications
-        self._rig_wait_s = rig_wait_s
+        self.rig_wait_s = rig_wait_s
         self.token = resolve_token(settings, environ)
         if not settings.server.loopback and self.token is None:
             raise ServiceError(f"server.host {settings.server.host} is not loopback: a token is required "

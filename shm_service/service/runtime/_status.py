@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from contract import (
     AlarmCountsDocument,
@@ -17,19 +17,36 @@ from contract import (
     StorageStatusDocument,
 )
 
+from .._config import ServiceSettings
+from ..alarms._notify import Notifier
+from ..stages._sinks import SinkGuard
+from ..storage._storage import Storage
 from ._progress import describe_progress
 from ._structure import Structure
 
-if TYPE_CHECKING:
-    from ._service import MonitoringService
-
-__all__ = ["VERSION", "baseline_modes", "service_state", "status_of"]
+__all__ = ["VERSION", "StatusHost", "baseline_modes", "service_state", "status_of"]
 
 log = logging.getLogger("shm.serve")
 VERSION = "0.1.0"
 
 
-def service_state(service: "MonitoringService") -> dict[str, Any]:
+class StatusHost(Protocol):
+    """What a structure's status reads of the service that runs it (its database, notifier,
+    sinks, life time), and nothing more: the status knows this, not the service."""
+
+    settings: ServiceSettings
+    fleet: bool
+    started_at: float
+    storage: Storage
+    notifier: Notifier
+    dashboard_guard: SinkGuard
+    housekeeping_guard: SinkGuard
+
+    @property
+    def done(self) -> bool: ...
+
+
+def service_state(service: StatusHost) -> dict[str, Any]:
     """What every structure's status shares: the database's counts and the notifier's (read once
     for all structures of ``/metrics``)."""
     storage = service.storage
@@ -37,7 +54,7 @@ def service_state(service: "MonitoringService") -> dict[str, Any]:
             "trend_rows": storage.count("trends"), "notifier": service.notifier.snapshot()}
 
 
-def status_of(service: "MonitoringService", structure: Structure, shared: dict[str, Any]) -> StatusDocument:
+def status_of(service: StatusHost, structure: Structure, shared: dict[str, Any]) -> StatusDocument:
     """``structure``'s status document (``shared``: ``service_state``)."""
     pipeline = structure.pipeline
     p = pipeline.status(queue_depth=structure.queue.qsize(), queue_capacity=structure.queue.maxsize)
@@ -87,7 +104,7 @@ def status_of(service: "MonitoringService", structure: Structure, shared: dict[s
         model=structure.model_document,
     )
 
-def _progress(service: "MonitoringService", structure: Structure, p: Any) -> str | None:
+def _progress(service: StatusHost, structure: Structure, p: Any) -> str | None:
     """What ``structure`` is doing now (``runtime._progress``); never breaks the status."""
     try:
         return describe_progress(structure, p, getattr(service, "compiling_since", None))

@@ -9,14 +9,17 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 
 from contract import (
     ChartLevelsDocument,
     ModelDocument,
+    NotSingleStructure,
     RigDescription,
+    StructureHost,
     StructureSummaryDocument,
+    StructureUnavailable,
     ThresholdsDocument,
     load_rig,
 )
@@ -37,9 +40,6 @@ from ..stages._commit import CommitSettings
 from ..stages._estimate import EstimateSettings
 from ..stages._outputs import OutputSettings
 from ..storage._storage import Storage
-
-if TYPE_CHECKING:
-    from ._service import MonitoringService
 
 __all__ = ["NotSingleStructure", "SingleStructureView", "RigPending", "ServiceError", "Structure", "StructureUnavailable"]
 
@@ -98,14 +98,6 @@ class RigPending(ServiceError):
     """``follow:``: the file (or its rig.json) is not there yet; the service can be made once it is."""
 
 
-class StructureUnavailable(LookupError):
-    """The structure exists but cannot answer (its start failed: the message says why)."""
-
-
-class NotSingleStructure(LookupError):
-    """A single-structure request to a fleet (the message names the fleet's routes)."""
-
-
 class _ModelCache:
     """``build_model`` once per distinct rig and estimator settings: identical structures of a
     fleet share one (immutable) model, its FE matrices and unit deformations."""
@@ -130,7 +122,7 @@ class Structure:
     with its own errors and state. A service of one structure holds one; a fleet many, each
     isolated from the others (its own threads; what it raises is caught and shown on it)."""
 
-    def __init__(self, service: "MonitoringService", settings: ServiceSettings, *, models: _ModelCache | None = None) -> None:
+    def __init__(self, service: StructureHost, settings: ServiceSettings, *, models: _ModelCache | None = None) -> None:
         self.service = service
         self.settings = settings
         src = settings.source
@@ -218,7 +210,7 @@ class Structure:
                     if kind == "follow":
                         # The model needs the rig: without source.rig, wait for the file's rig.json
                         # (``shm serve`` serves the API meanwhile and retries; see RigPending).
-                        if source.wait_for_rig(timeout=self.service._rig_wait_s) is None:
+                        if source.wait_for_rig(timeout=self.service.rig_wait_s) is None:
                             raise RigPending(f"follow: waiting for {path} and its rig.json "
                                              "(or give the rig with source.rig)")
                     else:

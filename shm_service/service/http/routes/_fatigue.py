@@ -9,7 +9,7 @@ from typing import Any, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response
 
-from contract import FatigueDocument, ServicePort
+from contract import FatigueDocument, ServicePort, StructureUnavailable
 
 from .._common import AUTH_RESPONSES as _AUTH_RESPONSES, INVALID as _INVALID, error as _error, parse_time as _parse_time
 from .._deps import service_port
@@ -57,8 +57,6 @@ def _period(from_: str | None, to: str | None) -> tuple[float | None, float | No
 
 
 def _call(fn: Any, *args: Any) -> FatigueDocument:
-    from ...runtime._service import StructureUnavailable
-
     try:
         return fn(*args)
     except KeyError as exc:

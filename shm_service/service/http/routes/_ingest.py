@@ -86,6 +86,6 @@ async def ingest(request: Request, port: ServicePort = Depends(service_port)) ->
              openapi_extra=INGEST_BODY)
 async def structure_ingest(request: Request, structure_id: str = STRUCTURE_ID,
                            port: ServicePort = Depends(service_port)) -> IngestResultDocument | JSONResponse:
-    # 404/409 before the body is read (both runtimes find a structure by id; not a port method)
-    await run_in_threadpool(of_structure, port.structure, structure_id)  # type: ignore[attr-defined]
+    # 404/409 before the body is read: its rig is the port's cheapest read that finds it by id
+    await run_in_threadpool(of_structure, port.structure_rig, structure_id)
     return await _take(request, port, structure_id)
