@@ -261,7 +261,7 @@ def _summaries(mon: ModalMonitor, windows: tuple[WindowResult, ...], B: np.ndarr
                 method, f_hz, f_std, mpc = "ssi", m.frequency_hz, m.frequency_std_hz, m.mpc
                 shape = np.asarray(m.shape)
                 mac = None if refs[i] is None else float(modal_assurance(shape[None], refs[i][None])[0, 0])
-                if math.isfinite(m.damping_ratio) and m.damping_ratio > 0:
+                if math.isfinite(m.damping_ratio) and m.damping_ratio > 0 and m.damping_std is not None:
                     damping.append(subspace_damping(m))
         if len(good) >= 2:
             # the windows' subspace frequencies, averaged: the record's estimate when the record-long

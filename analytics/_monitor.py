@@ -571,7 +571,7 @@ class ModalMonitor:
                     peaks_of[u] = find_peaks(spec, column=u, fmin=max(lo, 0.0), fmax=min(hi, self.fs / 2), min_prominence=c.min_prominence,
                                              max_peaks=12)
                 near = min(peaks_of[u], key=lambda p: abs(p.frequency_hz - m.frequency_hz), default=None)
-                tol = max(c.cross_check_bins * resolution, 3 * m.frequency_std_hz if math.isfinite(m.frequency_std_hz) else 0.0)
+                tol = max(c.cross_check_bins * resolution, 3 * m.frequency_std_hz if m.frequency_std_hz is not None else 0.0)
                 confirmed = near is not None and abs(near.frequency_hz - m.frequency_hz) <= tol
                 amp = near.amplitude if confirmed else float(np.interp(m.frequency_hz, spec.frequencies, spec.amplitude[:, u]))
                 dev = abs(math.log(m.frequency_hz / self.ref[i])) / c.search_rel

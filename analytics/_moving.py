@@ -31,9 +31,12 @@ class SubwindowTrack:
     amplitude : (k,) the fitted sinusoid's amplitude (unit of the signal).
     start_hz, end_hz : the frequency in the first and the last sub-window where the mode stands
         out (amplitude ≥ 0.3 of its largest) (Hz).
-    mean_hz : the time average of those sub-windows' frequencies (Hz); mean_std_hz its 1σ.
+    mean_hz : the time average of those sub-windows' frequencies (Hz); mean_std_hz its 1σ, None
+        when the mode stands out in one sub-window only (one estimate has no scatter).
     change_hz : the change over the window of a straight line through them (Hz);
-        change_std_hz its 1σ from the scatter about the line.
+        change_std_hz its 1σ from the scatter about the line, None with fewer than three of them
+        (a line through two points leaves no scatter).
+    standing : how many sub-windows the mode stands out in (those behind start, end and mean).
     """
 
     times_s: np.ndarray
@@ -43,16 +46,20 @@ class SubwindowTrack:
     end_hz: float
     mean_hz: float
     change_hz: float
-    change_std_hz: float
-    mean_std_hz: float
+    change_std_hz: float | None
+    mean_std_hz: float | None
+    standing: int = 0
 
     def moving(self, reference_hz: float | None = None, *, rel: float = 0.01, sigmas: float = 3.0) -> bool:
         """The mode moved: its frequency changed along the window by more than ``rel`` of it and
         ``sigmas`` of its 1σ, or its time average departs from ``reference_hz`` (the window's
         time-invariant estimate) by more than ``rel``: a mode that stepped or went and came
-        back, which a time-invariant model pins to one of its ends."""
+        back, which a time-invariant model pins to one of its ends. A mode that stands out in
+        one sub-window only has no course to follow: it is not said to move."""
+        if self.mean_std_hz is None:
+            return False
         ref = self.mean_hz if reference_hz is None else reference_hz
-        if abs(self.change_hz) > max(rel * ref, sigmas * self.change_std_hz):
+        if self.change_std_hz is not None and abs(self.change_hz) > max(rel * ref, sigmas * self.change_std_hz):
             return True
         return abs(self.mean_hz - ref) > rel * ref
 
@@ -154,15 +161,17 @@ def subwindow_frequencies(x: object, fs: float, f0_hz: float, *, lo_hz: float, h
     fk, tk = fr[keep], tm[keep]
     mean = float(np.mean(fk))
     k = fk.size
+    change: float = 0.0
+    change_std: float | None = None
     if k >= 3:
         A = np.column_stack([np.ones(k), tk - tk.mean()])
         coef, *_ = np.linalg.lstsq(A, fk, rcond=None)
         resid = fk - A @ coef
         # half-overlapping sub-windows: about half as many independent estimates
-        s2 = 2 * float(np.sum(resid ** 2)) / (k - 2) if k > 2 else 0.0
+        s2 = 2 * float(np.sum(resid ** 2)) / (k - 2)
         sxx = float(np.sum((tk - tk.mean()) ** 2))
-        change, change_std = float(coef[1]) * T, math.sqrt(s2 / sxx) * T if sxx > 0 else float("inf")
-    else:
-        change, change_std, s2 = 0.0, float("inf"), 0.0
-    mean_std = math.sqrt(2 * float(np.var(fk, ddof=1)) / k) if k > 1 else float("inf")
-    return SubwindowTrack(tm, fr, am, float(fk[0]), float(fk[-1]), mean, change, change_std, mean_std)
+        change = float(coef[1]) * T
+        # sub-windows at distinct times (k >= 3 of them half-overlapping) have sxx > 0
+        change_std = math.sqrt(s2 / sxx) * T if sxx > 0 else None
+    mean_std = math.sqrt(2 * float(np.var(fk, ddof=1)) / k) if k > 1 else None
+    return SubwindowTrack(tm, fr, am, float(fk[0]), float(fk[-1]), mean, change, change_std, mean_std, int(k))

@@ -90,8 +90,9 @@ class OmaConfig(BaseModel):
 class IdentifiedMode:
     """One mode of one window.
 
-    frequency_hz : undamped natural frequency (Hz); frequency_std_hz its 1σ (Hz).
-    damping_ratio : ζ (0.01 = 1 %); damping_std its 1σ.
+    frequency_hz : undamped natural frequency (Hz); frequency_std_hz its 1σ (Hz), None where the
+        window gives no measure of it (frequency_std_note then says why).
+    damping_ratio : ζ (0.01 = 1 %); damping_std its 1σ, None likewise (damping_std_note).
     mpc : modal phase collinearity 0 … 1 of the shape.
     shape : (l,) real mode shape over the channels (unit norm, largest component positive).
     mac : MAC of the shape against the best-matching reference shape (None without references);
@@ -99,7 +100,10 @@ class IdentifiedMode:
     contribution : share of all pole clusters' summed correlation amplitude (0 … 1): which mode dominates.
     orders : model orders the mode was stable at; order : the representative pole's order.
     statistical_std_hz, order_spread_hz : the two parts of frequency_std_hz (segment jackknife,
-        scatter across model orders), combined in quadrature.
+        scatter across model orders), combined in quadrature; statistical_std_hz is None when the
+        window is too short for three segments.
+    frequency_std_note, damping_std_note : why a 1σ is withheld (None) or only partly measured
+        (the scatter across orders alone); None when both parts are in it.
     damping_method : "ssi" (the subspace pole).
     visibility : the mode's share (0 … 1) of the modelled response spectrum at its own frequency,
         in the channel where it is largest.
@@ -112,8 +116,8 @@ class IdentifiedMode:
 
     frequency_hz: float
     damping_ratio: float
-    frequency_std_hz: float
-    damping_std: float
+    frequency_std_hz: float | None
+    damping_std: float | None
     mpc: float
     shape: tuple[float, ...]
     mac: float | None
@@ -121,7 +125,7 @@ class IdentifiedMode:
     contribution: float
     orders: int
     order: int
-    statistical_std_hz: float
+    statistical_std_hz: float | None
     order_spread_hz: float
     damping_method: str = "ssi"
     visibility: float = 1.0
@@ -130,6 +134,8 @@ class IdentifiedMode:
     end_hz: float | None = None
     sweep: tuple[tuple[float, float], ...] = ()
     track: int | None = None
+    frequency_std_note: str | None = None
+    damping_std_note: str | None = None
 
     def as_dict(self) -> dict:
         return {
@@ -139,6 +145,7 @@ class IdentifiedMode:
             "orders": self.orders, "damping_method": self.damping_method, "visibility": self.visibility,
             "moving": self.moving, "start_hz": self.start_hz, "end_hz": self.end_hz,
             "sweep": [list(p) for p in self.sweep], "track": self.track,
+            "frequency_std_note": self.frequency_std_note, "damping_std_note": self.damping_std_note,
         }
 
 
@@ -398,8 +405,13 @@ def identify_modes(
             rejected.append((f, f"buried: {100 * vis:.0f} % of the modelled response at its frequency, under the mode at "
                                 f"{clusters[j].frequency_hz:.3f} Hz ({100 * contrib[j]:.0f} % of the response)"))
             continue
+        sf: float | None
+        sz: float | None
+        why_not: str | None = None
         if jack is None:
-            sf, sz = float("nan"), float("nan")
+            sf = sz = None
+            why_not = (f"the window ({n} samples at {fsb:g} Hz, block rows {i}) holds {segs} segment(s): the statistical part "
+                       f"needs at least 3")
         elif cfg.uncertainty in ("batch", "delete-one"):
             if not batch_cache:  # each segment identified once, at the orders of the clusters' representatives
                 loo = cfg.uncertainty == "delete-one"
@@ -409,14 +421,17 @@ def identify_modes(
                                 delete_one=cfg.uncertainty == "delete-one")
         else:
             sf, sz = _pole_std(model, c, jack, orders_cache)
+        if jack is not None and not (sf is not None and sz is not None and math.isfinite(sf) and math.isfinite(sz)):
+            sf = sz = None
+            why_not = f"the {segs} segments do not re-identify the mode at {f:.3f} Hz: no statistical part"
         spread_f = c.frequency_spread_hz if c.orders > 1 else 0.0
         spread_z = c.damping_spread if c.orders > 1 else 0.0
         if cfg.uncertainty != "jackknife" and c.orders > 2:
             # a record's many orders: their scatter measured robustly, so one unconverged low order does not set it
             spread_f = _robust_scale(model.poles.frequency_hz[c.members])
             spread_z = _robust_scale(model.poles.damping_ratio[c.members])
-        fstd = math.hypot(sf, spread_f) if math.isfinite(sf) else spread_f
-        zstd = math.hypot(sz, spread_z) if math.isfinite(sz) else spread_z
+        fstd, fnote = _combined_std(sf, spread_f, c.orders, why_not)
+        zstd, znote = _combined_std(sz, spread_z, c.orders, why_not)
         shape_c = model.poles.shapes[c.representative] * scale
         shape_c = shape_c / np.linalg.norm(shape_c)
         shape = _real_shape(shape_c)
@@ -426,8 +441,8 @@ def identify_modes(
             ref = int(np.argmax(m))
             mac = float(m[ref])
         modes.append(IdentifiedMode(f, z, fstd, zstd, float(model.poles.mpc[c.representative]), tuple(float(v) for v in shape), mac, ref,
-                                    float(share), c.orders, int(model.poles.order[c.representative]), sf, spread_f,
-                                    visibility=float(vis)))
+                                    float(share), c.orders, int(model.poles.order[c.representative]), sf, float(spread_f),
+                                    visibility=float(vis), frequency_std_note=fnote, damping_std_note=znote))
         kept.append(c)
     if modes:
         modes, kept, merged = _one_mode_each(modes, kept, yb * scale, fsb, T, cfg, max(cfg.fmin_hz, 0.0), min(fmax, 0.49 * fsb))
@@ -447,6 +462,18 @@ def identify_modes(
             rejected.extend(dropped)
             kept = [c for c in kept if any(abs(c.frequency_hz - m.frequency_hz) < 1e-12 for m in modes)]
     return ModalIdentification(tuple(modes), tuple(rejected), diag, tuple(kept), fsb, i, tuple(int(o) for o in orders), exc, io_modes)
+
+
+def _combined_std(statistical: float | None, spread: float, orders: int, why_not: str | None) -> tuple[float | None, str | None]:
+    """A pole's 1σ from its statistical part and its scatter across model orders (in quadrature),
+    and a note when a part is missing: the scatter alone (a partial 1σ, said so), or None when
+    neither part was measured (a mode stable at one order has no scatter: a zero would claim an
+    exact value)."""
+    if statistical is not None:
+        return math.hypot(statistical, spread), None
+    if orders > 1 and math.isfinite(spread) and spread > 0:
+        return float(spread), f"scatter across {orders} model orders only: {why_not}"
+    return None, f"withheld: {why_not}, and the mode is stable at {orders} model order(s), no scatter across orders to measure"
 
 
 def _same_shape(a: IdentifiedMode, b: IdentifiedMode, mac_min: float = 0.9) -> bool:
@@ -503,8 +530,14 @@ def _one_mode_each(modes: list[IdentifiedMode], kept: list[PoleCluster], y: np.n
                                f"of the same shape, within the window's resolution {cfg.resolution_cycles:g}/T = {res:.3f} Hz")
         if moving:
             share = m.contribution + sum(modes[k].contribution for k in gone if k in mine)
-            std = math.hypot(track.mean_std_hz, m.statistical_std_hz) if math.isfinite(m.statistical_std_hz) else track.mean_std_hz
-            m = replace(m, frequency_hz=track.mean_hz, frequency_std_hz=max(std, m.frequency_std_hz), contribution=share, moving=True,
+            # moving() holds only for a track with a measured scatter (mean_std_hz not None)
+            track_std = float(track.mean_std_hz or 0.0)
+            std = math.hypot(track_std, m.statistical_std_hz) if m.statistical_std_hz is not None else track_std
+            fnote = None if m.statistical_std_hz is not None else (
+                f"scatter of the time average over {track.standing} sub-windows (that across model orders where larger) only: "
+                "no statistical part from the window's segments")
+            m = replace(m, frequency_hz=track.mean_hz, frequency_std_hz=max(std, m.frequency_std_hz or 0.0), contribution=share, moving=True,
+                        frequency_std_note=fnote,
                         start_hz=track.start_hz, end_hz=track.end_hz,
                         sweep=tuple((float(t), float(f)) for t, f in zip(track.times_s, track.frequency_hz)))
         out[j] = m
@@ -554,7 +587,7 @@ def _confirmed_by_frf(modes: list[IdentifiedMode], io_modes: tuple[FrfMode, ...]
     for x in io_modes:
         if modes:
             j = int(np.argmin([abs(m.frequency_hz - x.frequency_hz) for m in modes]))
-            if abs(modes[j].frequency_hz - x.frequency_hz) <= max(rel * x.frequency_hz, 3 * modes[j].frequency_std_hz):
+            if abs(modes[j].frequency_hz - x.frequency_hz) <= max(rel * x.frequency_hz, 3 * (modes[j].frequency_std_hz or 0.0)):
                 confirmed.add(j)
     for j, m in enumerate(modes):
         k = int(np.argmin(np.abs(frf.frequencies - m.frequency_hz)))
@@ -805,10 +838,12 @@ def subspace_damping(mode: IdentifiedMode) -> DampingEstimate:
     Raises
     ------
     ValueError
-        If mode is not an IdentifiedMode.
+        If mode is not an IdentifiedMode, or its damping has no 1σ (damping_std None: the note says why).
     """
     if not isinstance(mode, IdentifiedMode):
         raise ValueError(f"mode must be an IdentifiedMode, got {type(mode).__name__}")
+    if mode.damping_std is None:
+        raise ValueError(f"the damping of the mode at {mode.frequency_hz:.4f} Hz has no 1σ: {mode.damping_std_note}")
     return DampingEstimate(mode.damping_ratio, mode.damping_std, mode.frequency_hz, "ssi", 0.0)
 
 
@@ -871,7 +906,7 @@ def damping_estimates(y: object, fs: float, mode: IdentifiedMode, *, rd_cycles: 
 
     Returns
     -------
-    tuple of DampingEstimate, each with its method and 1σ.
+    tuple of DampingEstimate, each with its method and 1σ ("ssi" left out when the pole's 1σ is withheld).
 
     Raises
     ------
@@ -887,7 +922,7 @@ def damping_estimates(y: object, fs: float, mode: IdentifiedMode, *, rd_cycles: 
         raise ValueError(f"mode must be an IdentifiedMode, got {type(mode).__name__}")
     if a.shape[1] != len(mode.shape):
         raise ValueError(f"y has {a.shape[1]} channels, the mode shape {len(mode.shape)}")
-    out = [subspace_damping(mode)]
+    out = [subspace_damping(mode)] if mode.damping_std is not None else []
     try:
         out.append(random_decrement((a - a.mean(axis=0)) @ np.array(mode.shape), fs, mode.frequency_hz, duration_cycles=rd_cycles))
     except ValueError:

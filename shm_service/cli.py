@@ -560,8 +560,12 @@ def _print_oma(table: Any, clean: Any, result: Any) -> None:
           f"({table.format}); SSI-cov at {rec.fs_hz:g} Hz, {rec.block_rows} block rows, orders {rec.orders[0]}-{rec.orders[-1]}")
     print(f"{'f [Hz]':>10} {'± [Hz]':>8} {'zeta [%]':>9} {'± [%]':>7} {'MPC':>5} {'share':>6}  shape")
     for m in rec.modes:
-        print(f"{m.frequency_hz:10.4f} {m.frequency_std_hz:8.4f} {100 * m.damping_ratio:9.3f} {100 * m.damping_std:7.3f} "
+        sf = f"{m.frequency_std_hz:8.4f}" if m.frequency_std_hz is not None else f"{'-':>8}"
+        sz = f"{100 * m.damping_std:7.3f}" if m.damping_std is not None else f"{'-':>7}"
+        print(f"{m.frequency_hz:10.4f} {sf} {100 * m.damping_ratio:9.3f} {sz} "
               f"{m.mpc:5.2f} {m.contribution:6.2f}  " + " ".join(f"{v:+.2f}" for v in m.shape))
+        for note in dict.fromkeys(n for n in (m.frequency_std_note, m.damping_std_note) if n):
+            print(f"  ± of {m.frequency_hz:.4f} Hz: {note}")
     for f, why in rec.rejected:
         print(f"  not a mode: {f:.4f} Hz ({why})")
     for line in [*clean.format(table.fs_hz), *(f"problem: {p}" for p in table.problems)]:
