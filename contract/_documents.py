@@ -542,6 +542,10 @@ class EstimatorStatusDocument(_Document):
     aiding: dict[str, AidingChannelDocument] = Field(default_factory=dict)
     rejected: Count = 0
     degraded_imus: list[DegradedImuDocument] = Field(default_factory=list)
+    gauge_std: dict[str, Finite] | None = Field(
+        None, description="gauge -> the 1σ (m/m) the filter gives it, once raised above its rest calibration's because "
+                          "it reads strain outside the unit deformations (None: none raised)")
+    gauge_note: str | None = Field(None, description="why the gauges' 1σ was raised, and what would carry that motion")
 
 
 class HotSpotLoadsDocument(_Document):
