@@ -149,3 +149,4 @@ def test_a_newer_schema_is_refused_and_a_token_needs_postgres(fresh_postgres_url
             local.commit_window(_commit("mast-01", 0, 3))
     finally:
         local.close()
+
