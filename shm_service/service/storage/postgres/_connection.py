@@ -13,7 +13,8 @@ with the same meaning on both engines:
   ``GREATEST``; ``x.c IS y.c`` becomes ``IS NOT DISTINCT FROM``;
 - an ``INSERT`` into a table with an ``id`` column returns it (``lastrowid``, as SQLite gives);
 - a bare ``BEGIN`` (a page's read snapshot, ``storage._paging``) opens a REPEATABLE READ
-  read-only transaction: its counts and rows agree, as in SQLite's WAL snapshot.
+  read-only transaction: its counts and rows agree, as in SQLite's WAL snapshot; a page's
+  connection (``streaming``) reads its rows through server-side cursors, chunk by chunk.
 
 A NaN parameter is stored as NULL, as SQLite stores it. Rows answer by index and by column name
 (``row[0]``, ``row["id"]``, ``dict(row)``), as ``sqlite3.Row`` does.
@@ -30,6 +31,8 @@ from typing import Any
 
 import psycopg
 from psycopg.pq import TransactionStatus
+
+from .._paging import CHUNK_ROWS
 
 __all__ = ["PgConnection", "PgRow", "translate"]
 
@@ -135,21 +138,36 @@ class _Cursor:
         return iter(self._cursor)
 
 
+def _close(conn: psycopg.Connection, servers: list[psycopg.ServerCursor]) -> None:
+    for cursor in servers:
+        cursor.close()
+    conn.close()
+
+
 class PgConnection:
     """A psycopg connection in autocommit mode (transactions are the caller's ``BEGIN`` and
     ``COMMIT``, as with the SQLite connections) running the repositories' SQLite text."""
 
-    def __init__(self, url: str, *, connect_timeout_s: float = 5.0, application_name: str = "shm") -> None:
+    def __init__(self, url: str, *, connect_timeout_s: float = 5.0, application_name: str = "shm",
+                 streaming: bool = False) -> None:
         self.url = url
+        self.streaming = streaming
         self.conn = psycopg.connect(url, autocommit=True, connect_timeout=max(1, int(math.ceil(connect_timeout_s))),
                                     application_name=application_name)
         self.conn.row_factory = _row_factory  # type: ignore[assignment]
+        self._servers: list[psycopg.ServerCursor] = []
         # closed when this object goes, as a sqlite3 connection is (a Storage not closed leaves no session behind)
-        self._finalizer = weakref.finalize(self, self.conn.close)
+        self._finalizer = weakref.finalize(self, _close, self.conn, self._servers)
 
     def execute(self, sql: str, args: Sequence[Any] | None = None) -> _Cursor:
         text, returning = translate(sql)
-        cursor = self.conn.cursor()
+        if self.streaming and self.in_transaction and text.lstrip().upper().startswith("SELECT"):
+            # a page's rows come from the server as they are read: its memory does not grow with its length
+            cursor: psycopg.Cursor = self.conn.cursor(name=f"page_{len(self._servers)}")  # type: ignore[assignment]
+            cursor.itersize = CHUNK_ROWS
+            self._servers.append(cursor)  # type: ignore[arg-type]
+        else:
+            cursor = self.conn.cursor()
         cursor.execute(text, _params(args))  # type: ignore[arg-type]
         return _Cursor(cursor, returning)
 

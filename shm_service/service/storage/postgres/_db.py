@@ -99,7 +99,8 @@ class PgDatabase:
         self.retry(lambda: self._locked(lambda: migrate(self.db, self.path)))
 
     def _connect(self, role: str) -> PgConnection:
-        return PgConnection(self.url, connect_timeout_s=self.connect_timeout_s, application_name=f"shm-{role}")
+        return PgConnection(self.url, connect_timeout_s=self.connect_timeout_s, application_name=f"shm-{role}",
+                            streaming=role == "page")
 
     @property
     def db(self) -> PgConnection:
