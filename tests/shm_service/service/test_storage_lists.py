@@ -82,8 +82,11 @@ def test_baselines_sources_and_trend_retention(st):
     assert st.load_state("a") == {"last_window_start_s": 0.0, "data_time_s": 20.0, "monitor": None, "calibration": {"cal": 1}}
     st.save_calibration("a", {"cal": 2})
     assert st.load_state("a")["calibration"] == {"cal": 2}
-    st.touch_sources([("a", "sim", "seed 1"), ("b", "ingest", "")], 1000.0)
+    st.touch_sources([("a", "sim", "seed 1"), ("b", "ingest", ""), ("a", "sim", "seed 9")], 1000.0)  # a twice: the last
     st.touch_source("a", "sim", "seed 2", 1005.0)
+    sources = st._read(lambda db: [tuple(r) for r in db.execute(
+        "SELECT id, kind, detail, first_seen_s, last_seen_s FROM sources ORDER BY id").fetchall()])
+    assert sources == [("a", "sim", "seed 2", 1000.0, 1005.0), ("b", "ingest", "", 1000.0, 1000.0)]
     # three days of windows of "a", one of "b": rows more than a day before their source's newest go
     for day in range(3):
         st.commit_window(WindowCommit("a", 86400.0 * day, 0.0, [_row("a", 86400.0 * day, 1)], None, None))

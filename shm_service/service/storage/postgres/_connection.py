@@ -30,6 +30,7 @@ from functools import lru_cache
 from typing import Any
 
 import psycopg
+from psycopg.conninfo import conninfo_to_dict
 from psycopg.pq import TransactionStatus
 
 from .._paging import CHUNK_ROWS
@@ -138,6 +139,14 @@ class _Cursor:
         return iter(self._cursor)
 
 
+#: libpq's options that make a connection to a server gone silent (a cut network, a host that
+#: died) fail within seconds instead of hanging a write for the kernel's TCP timeout (minutes):
+#: keep-alive probes on an idle connection, and a bound on unacknowledged data of a busy one.
+#: A URL's own values of these keys win.
+_LIVENESS = {"keepalives": 1, "keepalives_idle": 5, "keepalives_interval": 2, "keepalives_count": 3,
+             "tcp_user_timeout": 10_000}
+
+
 def _close(conn: psycopg.Connection, servers: list[psycopg.ServerCursor]) -> None:
     for cursor in servers:
         cursor.close()
@@ -152,8 +161,10 @@ class PgConnection:
                  streaming: bool = False) -> None:
         self.url = url
         self.streaming = streaming
-        self.conn = psycopg.connect(url, autocommit=True, connect_timeout=max(1, int(math.ceil(connect_timeout_s))),
-                                    application_name=application_name)
+        given = conninfo_to_dict(url)
+        defaults = {"connect_timeout": max(1, int(math.ceil(connect_timeout_s))), "application_name": application_name,
+                    **_LIVENESS}
+        self.conn = psycopg.connect(url, autocommit=True, **{k: v for k, v in defaults.items() if k not in given})
         self.conn.row_factory = _row_factory  # type: ignore[assignment]
         self._servers: list[psycopg.ServerCursor] = []
         # closed when this object goes, as a sqlite3 connection is (a Storage not closed leaves no session behind)

@@ -42,10 +42,14 @@ T = TypeVar("T")
 def is_transient(exc: BaseException) -> bool:
     """Whether an error of PostgreSQL may pass when the transaction is tried again: the server
     unreachable or restarting, a serialization failure or deadlock, resources exhausted; a
-    connection closed under the client. Not an error of the statement (its SQL, a constraint)."""
+    connection closed under the client; a unique key taken by another node's concurrent commit.
+    Not an error of the statement (its SQL, another constraint)."""
     if isinstance(exc, StorageUnavailable):
         return True
-    return isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError))
+    # An alarm's events are numbered MAX(seq) + 1 in the writing transaction; two nodes writing
+    # events of one alarm at once (an acknowledgement on one, the holder's window on the other)
+    # collide on (alarm_id, seq): tried again, the number is taken after the other's commit.
+    return isinstance(exc, (psycopg.OperationalError, psycopg.InterfaceError, psycopg.errors.UniqueViolation))
 
 
 def check_fence(db: Any, structure_id: str, token: int) -> None:
