@@ -96,7 +96,7 @@ class PgRow(tuple):
 
     _names: tuple[str, ...] = ()
 
-    def __getitem__(self, key: Any) -> Any:  # type: ignore[override]
+    def __getitem__(self, key: Any) -> Any:
         if isinstance(key, str):
             try:
                 return tuple.__getitem__(self, self._names.index(key))
@@ -117,7 +117,7 @@ def _row_factory(cursor: Any) -> Any:
 class _Cursor:
     """The answer of one statement: rows (fetched), ``rowcount``, ``lastrowid``, ``description``."""
 
-    def __init__(self, cursor: psycopg.Cursor, returning: bool) -> None:
+    def __init__(self, cursor: psycopg.Cursor[Any] | psycopg.ServerCursor[Any], returning: bool) -> None:
         self._cursor = cursor
         self.lastrowid: int | None = None
         self.rowcount = cursor.rowcount
@@ -147,7 +147,7 @@ _LIVENESS = {"keepalives": 1, "keepalives_idle": 5, "keepalives_interval": 2, "k
              "tcp_user_timeout": 10_000}
 
 
-def _close(conn: psycopg.Connection, servers: list[psycopg.ServerCursor]) -> None:
+def _close(conn: psycopg.Connection[Any], servers: list[psycopg.ServerCursor[Any]]) -> None:
     for cursor in servers:
         cursor.close()
     conn.close()
@@ -162,11 +162,11 @@ class PgConnection:
         self.url = url
         self.streaming = streaming
         given = conninfo_to_dict(url)
-        defaults = {"connect_timeout": max(1, int(math.ceil(connect_timeout_s))), "application_name": application_name,
-                    **_LIVENESS}
-        self.conn = psycopg.connect(url, autocommit=True, **{k: v for k, v in defaults.items() if k not in given})
-        self.conn.row_factory = _row_factory  # type: ignore[assignment]
-        self._servers: list[psycopg.ServerCursor] = []
+        defaults: dict[str, Any] = {"connect_timeout": max(1, int(math.ceil(connect_timeout_s))),
+                                    "application_name": application_name, **_LIVENESS}
+        options = {k: v for k, v in defaults.items() if k not in given}
+        self.conn: psycopg.Connection[Any] = psycopg.connect(url, autocommit=True, row_factory=_row_factory, **options)
+        self._servers: list[psycopg.ServerCursor[Any]] = []
         # closed when this object goes, as a sqlite3 connection is (a Storage not closed leaves no session behind)
         self._finalizer = weakref.finalize(self, _close, self.conn, self._servers)
 
@@ -174,12 +174,13 @@ class PgConnection:
         text, returning = translate(sql)
         if self.streaming and self.in_transaction and text.lstrip().upper().startswith("SELECT"):
             # a page's rows come from the server as they are read: its memory does not grow with its length
-            cursor: psycopg.Cursor = self.conn.cursor(name=f"page_{len(self._servers)}")  # type: ignore[assignment]
-            cursor.itersize = CHUNK_ROWS
-            self._servers.append(cursor)  # type: ignore[arg-type]
-        else:
-            cursor = self.conn.cursor()
-        cursor.execute(text, _params(args))  # type: ignore[arg-type]
+            server = self.conn.cursor(name=f"page_{len(self._servers)}")
+            server.itersize = CHUNK_ROWS
+            self._servers.append(server)
+            server.execute(text, _params(args))
+            return _Cursor(server, returning)
+        cursor = self.conn.cursor()
+        cursor.execute(text, _params(args))
         return _Cursor(cursor, returning)
 
     def executemany(self, sql: str, rows: Sequence[Sequence[Any]]) -> None:
@@ -188,7 +189,7 @@ class PgConnection:
             return
         text, _ = translate(sql, True)
         with self.conn.cursor() as cursor:
-            cursor.executemany(text, [_params(r) for r in rows])  # type: ignore[arg-type]
+            cursor.executemany(text, [_params(r) or () for r in rows])
 
     @property
     def in_transaction(self) -> bool:
