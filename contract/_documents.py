@@ -64,6 +64,7 @@ __all__ = [
     "SensorState",
     "ServiceStatusDocument",
     "SinkStatusDocument",
+    "BrokerStatusDocument",
     "SourceStatusDocument",
     "SpectrumDocument",
     "StatusDocument",
@@ -480,9 +481,27 @@ class ServiceStatusDocument(_Document):
         "calibrating at rest and the time left, waiting for the first analysis window, learning the baseline, monitoring")
 
 
+class BrokerStatusDocument(_Document):
+    """An MQTT source's connection: where it subscribes, whether the broker holds its session."""
+
+    url: str = Field(description="the broker (mqtt.url)")
+    topic: str = Field(description="the topic subscribed with QoS 1: TOPIC_PREFIX/ID/ingest")
+    client_id: str = Field(description="the persistent session's client id")
+    connected: bool
+    session_present: bool | None = Field(None, description="whether the broker still held the session at the last "
+                                         "connect (False: what was published before was not kept for it)")
+    connects: Count = Field(0, description="connections made since the start")
+    bodies: Count = Field(0, description="bodies taken and acknowledged")
+    refused_bodies: Count = Field(0, description="bodies that were not an ingest body as a whole (acknowledged, counted "
+                                  "as rejected malformed_body)")
+    redelivered: Count = Field(0, description="bodies the broker sent again after a reconnect that had been taken "
+                               "already (acknowledged, not counted again)")
+    error: str | None = Field(None, description="why the broker cannot be reached, while it cannot")
+
+
 class SourceStatusDocument(_Document):
     id: str
-    kind: Literal["sim", "replay", "follow", "ingest"]
+    kind: Literal["sim", "replay", "follow", "ingest", "mqtt"]
     state: str
     error: str | None = None
     messages: Count
@@ -495,6 +514,7 @@ class SourceStatusDocument(_Document):
     problems: list[str]
     latency_s: Num = None
     clock_jumps: Count = Field(0, description="stamps (or batches) found off the source's clock since the start")
+    broker: BrokerStatusDocument | None = Field(None, description="mqtt: the connection to the broker")
 
 
 class RestCalibrationDocument(_Document):
@@ -699,7 +719,7 @@ class StructureSummaryDocument(_Document):
     """One structure of a fleet as ``GET /api/structures`` lists it."""
 
     id: str = Field(description="the structure id: the source of its trend rows, alarms and notifications")
-    kind: Literal["sim", "replay", "follow", "ingest"]
+    kind: Literal["sim", "replay", "follow", "ingest", "mqtt"]
     state: StructureState = Field(
         description="starting, running, degraded (running, but its batches fail, its filter diverged or its database "
         "writes wait), failed (its source or its start failed: see error), finished, stopped")
