@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from .._argtypes import number
+from .storage._url import redact
 
 __all__ = ["add_serve_parser", "run_serve"]
 
@@ -107,6 +108,8 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         settings = None  # _run_serve says what is wrong
     if settings is None or args.print_config or getattr(args, "worker_of", None) is not None:
         return _run_serve(args, environ=environ)
+    if settings.storage.url is not None:  # a shared PostgreSQL: nodes are fenced by their leases, not by a file
+        return _run_serve(args, environ=environ)
     try:
         lock = DatabaseLock.acquire(settings.db)
     except (DatabaseBusy, OSError) as exc:
@@ -132,7 +135,7 @@ def _worker_part(settings: Any, worker_of: str) -> tuple[Any, Any] | None:
     except ValueError as exc:
         print(f"shm serve: error: --worker-of {worker_of!r}: {exc}", file=sys.stderr)
         return None
-    return settings, hold_worker_lock(settings.db)
+    return settings, hold_worker_lock(settings.lock_path)
 
 
 def _wait_for_rig(args: argparse.Namespace, settings: Any, slot: Any, api: Any, stop: threading.Event, *,
@@ -230,7 +233,7 @@ def _print_where(service: Any, settings: Any, api: Any) -> None:
     what = (f"{len(service.structures)} structures" if service.fleet
             else f"source {settings.source.spec} as '{service.source.id}'")
     print(f"shm serve: API at {api.url} (docs {api.url}/docs); {what}; "
-          f"data in {settings.data_dir} (db {settings.db}, recordings "
+          f"data in {settings.data_dir} (db {redact(str(settings.db))}, recordings "
           f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
     if service.dashboard is not None:
         print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
@@ -247,7 +250,7 @@ def _serve_until_stopped(args: argparse.Namespace, settings: Any, service: Any, 
         service.start()
         _ready(args, state="serving", api=api.url, docs=f"{api.url}/docs",
                dashboard=getattr(service.dashboard, "url", None) if service.dashboard is not None else None,
-               structures=[s_.id for s_ in settings.structures] if service.fleet else [service.source.id], db=str(settings.db))
+               structures=[s_.id for s_ in settings.structures] if service.fleet else [service.source.id], db=redact(str(settings.db)))
     try:
         while not stop.is_set():
             if service.wait(0.2) and not settings.source.keep_running:
@@ -354,7 +357,7 @@ def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, 
         print(f"shm serve: error: HTTP API on {s.host}:{s.port}: {exc}", file=sys.stderr)
         return 2
     print(f"shm serve: API at {api.url} (docs {api.url}/docs); {len(settings.structures)} structures in "
-          f"{settings.worker_count} worker processes; data in {settings.data_dir} (db {settings.db}, recordings "
+          f"{settings.worker_count} worker processes; data in {settings.data_dir} (db {redact(str(settings.db))}, recordings "
           f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():
@@ -368,7 +371,7 @@ def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, 
             print(f"shm serve: dashboard at {getattr(front.dashboard, 'url', '?')}", flush=True)
         _ready(args, state="serving", api=api.url, docs=f"{api.url}/docs",
                dashboard=getattr(front.dashboard, "url", None) if front.dashboard is not None else None,
-               structures=list(front.order), db=str(settings.db), workers=[w.process.pid for w in front.workers])
+               structures=list(front.order), db=redact(str(settings.db)), workers=[w.process.pid for w in front.workers])
         while not stop.is_set():
             if front.wait(0.2) and not settings.source.keep_running:
                 break

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, Literal
+from urllib.parse import urlsplit
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -18,6 +20,7 @@ from contract import is_loopback
 from estimator import StreamingSettings
 
 from ..recording._plausibility import ValueLimits
+from .storage._url import check_postgres_url, is_postgres_url, redact
 
 __all__ = [
     "AlarmSettings",
@@ -254,6 +257,20 @@ class ArchiveSettings(_Closed):
     flush_s: float = Field(2.0, gt=0, description="flush (end a chunk) at least this often, wall-clock s")
 
 
+class StorageSettings(_Closed):
+    """Where the service stores what it computes: the SQLite file ``db`` (the default) or, with
+    ``url``, a PostgreSQL database that the nodes of a fleet share."""
+
+    url: str | None = Field(
+        None, description="PostgreSQL database, postgresql://USER[:PASSWORD]@HOST:PORT/DB (the server's other options as "
+        "URL query parameters); unset: the SQLite file db")
+
+    @field_validator("url")
+    @classmethod
+    def _url(cls, value: str | None) -> str | None:
+        return None if value is None else check_postgres_url(value, "storage.url")
+
+
 class RetentionSettings(_Closed):
     """What the service keeps of the past. Ages are in data time (the newest sample or window), so a
     replay of old data keeps what it writes. Checked at start and every ``interval_s``."""
@@ -467,7 +484,8 @@ class ServiceSettings(_Closed):
     data_dir: str | None = Field(
         None, description="directory of all of the service's files: db and archive.directory default to paths under it "
         "(default: the directory of db when db is given, else ./var)")
-    db: str | None = Field(None, description="SQLite database (trends, baseline, alarms, outbox); default DATA_DIR/shm.sqlite")
+    db: str | None = Field(None, description="SQLite database (trends, baseline, alarms, outbox); default DATA_DIR/shm.sqlite "
+                           "(with storage.url: that URL)")
     server: ServerSettings = ServerSettings()
     dashboard: DashboardSettings = DashboardSettings()
     source: SourceSettings = SourceSettings()
@@ -479,6 +497,7 @@ class ServiceSettings(_Closed):
     alarms: AlarmSettings = AlarmSettings()
     notify: NotifySettings = NotifySettings()
     mqtt: MqttSettings = MqttSettings()
+    storage: StorageSettings = StorageSettings()
     storage_sync: Literal["normal", "full"] = Field(
         "normal", description="SQLite synchronous mode of transactions that write only trend rows and state: normal "
         "survives a process crash, full also a power loss")
@@ -509,9 +528,18 @@ class ServiceSettings(_Closed):
     def _paths(self) -> "ServiceSettings":
         # One data directory holds everything; the database and the recordings default to it. The
         # resolved paths are stored, so --print-config shows where the files really go.
-        data_dir = self.data_dir or (str(Path(self.db).parent) if self.db else "var")
+        if self.storage.url is None and is_postgres_url(self.db):  # --db postgresql://...: the same as storage.url
+            object.__setattr__(self, "storage", StorageSettings(url=check_postgres_url(str(self.db), "db")))
+        url = self.storage.url
+        if url is not None and self.db is not None and self.db != url:
+            raise ValueError(f"db={self.db!r} and storage.url={redact(url)!r} are both given: the service stores in one "
+                             "database (leave db out with a PostgreSQL url)")
+        local = self.db if self.db and url is None else None
+        data_dir = self.data_dir or (str(Path(local).parent) if local else "var")
         object.__setattr__(self, "data_dir", data_dir)
-        if self.db is None:
+        if url is not None:  # every user of the database opens it by settings.db: the URL
+            object.__setattr__(self, "db", url)
+        elif self.db is None:
             object.__setattr__(self, "db", str(Path(data_dir) / "shm.sqlite"))
         if self.archive.directory is None:
             object.__setattr__(self, "archive", self.archive.model_copy(update={"directory": str(Path(data_dir) / "recordings")}))
@@ -535,6 +563,17 @@ class ServiceSettings(_Closed):
             for structure in self.structures:
                 self.for_structure(structure)  # every override is checked now, not when the structure starts
         return self
+
+    @property
+    def lock_path(self) -> str:
+        """The local file the service's locks and worker records sit beside: the SQLite file
+        ``db``, or for a PostgreSQL ``storage.url`` a name in ``data_dir`` for that database (the
+        nodes sharing it are fenced by their leases in it, not by these files)."""
+        if self.storage.url is None:
+            return str(self.db)
+        parts = urlsplit(self.storage.url)
+        name = "-".join(str(x) for x in (parts.hostname, parts.port or 5432, parts.path.lstrip("/")))
+        return str(Path(str(self.data_dir)) / f"postgresql-{re.sub(r'[^A-Za-z0-9._-]', '_', name)}")
 
     @property
     def worker_count(self) -> int:

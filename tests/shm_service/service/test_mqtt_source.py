@@ -178,7 +178,8 @@ def test_an_unreachable_broker_shows_in_the_health_and_is_reached_once_it_is_the
             gateway.publish("shm/far/ingest", bodies)
         src = service.structure("far").source
         wait_for(lambda: src.messages == _messages(bodies) or None, 30, "the bodies")
-        assert service.health().status == "ok"
+        # (the sensors fall silent after these 3 s, which the health may say by now: the broker it does not)
+        assert not any("mqtt" in r for r in service.health().reasons)
     finally:
         service.stop(drain_s=0)
         if server is not None:
