@@ -731,6 +731,8 @@ class StructureSummaryDocument(_Document):
         "the data time; None before the first data (and at speed max); 0 once a replay or simulation has ended")
     windows: Count = Field(0, description="analysis windows committed to the database")
     active_alarms: dict[str, AlarmLevel] = Field(default_factory=dict, description="chart -> level of its active alarm")
+    node: str | None = Field(None, description="the node that runs it (shm serve --node): its lease's holder; null: no "
+                             "node holds it now (one takes it within the lease), or the service has no nodes")
 
 
 class StructuresDocument(_Document):

@@ -28,6 +28,7 @@ __all__ = [
     "DashboardSettings",
     "EstimatorSettings",
     "MqttSettings",
+    "NodeSettings",
     "NotifySettings",
     "RetentionSettings",
     "ServerSettings",
@@ -349,6 +350,15 @@ class NotifySettings(_Closed):
         return value
 
 
+class NodeSettings(_Closed):
+    """The nodes of a fleet (``shm serve --node NAME`` on several machines with this configuration and
+    one PostgreSQL database, storage.url): they share the structures through leases in the database."""
+
+    lease_s: float = Field(
+        15.0, ge=3, le=3600, description="how long a node's lease of a structure holds without renewal, s (renewed every "
+        "third of it): a node that dies loses its structures to the others within this")
+
+
 MQTT_PASSWORD_ENV = "SHM_MQTT_PASSWORD"
 
 
@@ -497,6 +507,7 @@ class ServiceSettings(_Closed):
     alarms: AlarmSettings = AlarmSettings()
     notify: NotifySettings = NotifySettings()
     mqtt: MqttSettings = MqttSettings()
+    nodes: NodeSettings = NodeSettings()
     storage: StorageSettings = StorageSettings()
     storage_sync: Literal["normal", "full"] = Field(
         "normal", description="SQLite synchronous mode of transactions that write only trend rows and state: normal "
