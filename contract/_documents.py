@@ -496,6 +496,10 @@ class BrokerStatusDocument(_Document):
                                   "as rejected malformed_body)")
     redelivered: Count = Field(0, description="bodies the broker sent again after a reconnect that had been taken "
                                "already (acknowledged, not counted again)")
+    unacknowledged: Count = Field(0, description="bodies handed to the pipeline whose window is not committed yet "
+                                  "(acknowledged then; until then the broker keeps them for the next holder)")
+    acked_early: Count = Field(0, description="bodies acknowledged before their window was committed, because more "
+                               "than mqtt.receive_maximum / 2 waited")
     error: str | None = Field(None, description="why the broker cannot be reached, while it cannot")
 
 

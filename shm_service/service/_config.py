@@ -387,8 +387,9 @@ class MqttSettings(_Closed):
         7 * 86400, ge=60, le=2**32 - 2, description="how long the broker keeps a structure's session, and the messages "
         "published to it, while no node holds the structure, s")
     receive_maximum: int = Field(
-        32, ge=1, le=65535, description="bodies the broker sends a structure before it has acknowledged the first "
-        "(each is acknowledged once handed to the pipeline)")
+        2000, ge=2, le=65535, description="bodies the broker sends a structure before it has acknowledged the first; "
+        "a body is acknowledged once the window after it is committed, so half of this must hold the bodies of the "
+        "calibration, warm-up and two windows (2000: 1 s bodies)")
     reconnect_max_s: float = Field(30.0, ge=1, le=3600, description="longest wait between attempts to reach the broker, s "
                                    "(from 1 s, doubling)")
 

@@ -185,6 +185,29 @@ class Structure:
             clock=None if self.source.kind in ("ingest", "mqtt") else self._clock(live=False), limits=src.limits, analysis_lane=True,
         )
         self.pipeline.live = self.live
+        if self.source.kind == "mqtt":
+            self.source.committed_until_s = self._committed_until(storage)  # type: ignore[attr-defined]
+
+    def _committed_until(self, storage: Storage) -> Callable[[], float | None]:
+        """The data time (UNIX s) before which this structure, resumed from its committed state, needs
+        no sample again (None: nothing committed yet): it analyses from the window after the last one
+        committed, and a resumed estimator skips the windows of its first rest_end + warmup_s (its
+        filter converging), so its data must begin that much before."""
+        resumed = (storage.load_state(self.id) or {}).get("last_window_start_s")
+        a = self.settings.engine_config()
+        step_s = a.window_s * (1 - a.overlap)
+        warmup_s = self.settings.estimator.warmup_s
+        pipeline = self.pipeline
+
+        def until() -> float | None:
+            last = pipeline.commits.last_window
+            start = last.start_s if last is not None else resumed
+            calibration = pipeline.estimate.estimator.calibration
+            if start is None or calibration is None:
+                return None
+            return float(start) + step_s - float(calibration.rest_end) - warmup_s
+
+        return until
 
     # -- construction -----------------------------------------------------------------------
 

@@ -4,14 +4,20 @@ The structure subscribes ``TOPIC_PREFIX/ID/ingest`` with QoS 1 in a persistent s
 (MQTT 5, client id ``shm-TOPIC_PREFIX-ID``, no clean start, ``mqtt.session_expiry_s``): while no
 node holds the structure the broker keeps what is published for it, and hands it over to the next
 session of that client id. Each message is one ``POST /api/ingest`` body, validated and counted by
-the ingest's ``IngestValidator``; a message is acknowledged only once its batch is in the
-pipeline's queue (paho's manual acknowledgement), so a process that dies before that leaves it to
-the broker, which sends it again.
+the ingest's ``IngestValidator``. A message is acknowledged (paho's manual acknowledgement, in
+the order received) only once the structure no longer needs it after a restart: once the windows
+committed to the database reach far enough that a structure resumed from them (which analyses from
+the window after the last one, once its filter has converged) begins its data after the message's
+last sample (``committed_until_s``, the structure's). A node that dies leaves every message it has not committed to the
+broker, which sends them to the next holder of the session: nothing is lost, and the windows
+committed already are not analysed again (the pipeline resumes after the last one). Without that
+hook (or while more than ``mqtt.receive_maximum`` / 2 wait) a message is acknowledged once its
+batch is in the pipeline's queue.
 
 One thread per structure runs the connection and the hand-off. It never blocks on the queue: a
-body waits (unacknowledged) while the queue is full, and the broker sends no more than
-``mqtt.receive_maximum`` unacknowledged bodies, so back-pressure reaches the broker and the
-connection stays alive meanwhile.
+body waits while the queue is full, and the broker sends no more than ``mqtt.receive_maximum``
+unacknowledged bodies, so back-pressure reaches the broker and the connection stays alive
+meanwhile.
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ import logging
 import queue
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -93,6 +100,12 @@ class MqttSource(Source):
         self.redelivered = 0
         self._delay = 1.0
         self._client: Any = None
+        # handed on, acknowledged once committed: (connection, mid, qos, newest sample s or None)
+        self._handed: deque[tuple[int, int, int, float | None]] = deque()
+        #: data time (UNIX s) before which a structure resumed from its committed state needs no
+        #: sample again (None: nothing committed yet); unset: acknowledged once in the queue
+        self.committed_until_s: Callable[[], float | None] | None = None
+        self.acked_early = 0
 
     # -- lifecycle ----------------------------------------------------------------------------
 
@@ -117,6 +130,7 @@ class MqttSource(Source):
                         self._lost(f"connection lost: {error_string(rc)}")
                     continue
                 self._hand_on(client)
+                self._acknowledge(client)
         finally:
             if self._linked:
                 client.disconnect()  # the session stays (its expiry is the CONNECT's)
@@ -186,10 +200,12 @@ class MqttSource(Source):
 
         self._connection += 1
         self.session_present = bool(flags.session_present)
+        # The broker sends every unacknowledged body again when it kept the session (those handed on
+        # already come back as duplicates, acknowledged then); when it did not, there is nothing to
+        # acknowledge them to. Either way the earlier connection's are done with here.
+        self._handed.clear()
         if self.session_present:
-            # The broker sends every unacknowledged body again: the copies of this node's earlier
-            # connections go (none of them was handed on).
-            self._pending = deque(b for b in self._pending if b.connection == self._connection)
+            self._pending.clear()
         client.subscribe(self.topic, options=SubscribeOptions(qos=1, retainHandling=SubscribeOptions.RETAIN_DO_NOT_SEND))
         self.connected = True
         self.link_error = self.down_since = None
@@ -237,8 +253,28 @@ class MqttSource(Source):
                 self.bodies += 1
             self._pending.popleft()
             if body.connection == self._connection and self.connected:
-                client.ack(body.mid, body.qos)
+                newest = None if result is None or not result.blocks else max(int(b.log_time_ns[-1]) for b in result.blocks) / 1e9
+                self._handed.append((body.connection, body.mid, body.qos, newest))
             # else: a body of an earlier connection whose session the broker had lost: nothing to acknowledge
+
+    def _acknowledge(self, client: Any) -> None:
+        """Acknowledge, in order, the handed-on bodies the structure no longer needs (see the module)."""
+        until = None if self.committed_until_s is None else self.committed_until_s()
+        most = max(1, self.settings.receive_maximum // 2)
+        while self._handed:
+            connection, mid, qos, newest = self._handed[0]
+            if self.committed_until_s is not None and newest is not None and (until is None or newest >= until):
+                if len(self._handed) <= most:
+                    return
+                # so many wait for a window that the broker would stop sending: the oldest goes now
+                if self.acked_early == 0:
+                    log.warning("structure %s: mqtt: %d bodies wait for their window to be committed (more than "
+                                "mqtt.receive_maximum / 2): acknowledged once in the queue from now on (a crash may "
+                                "lose what is not committed); raise mqtt.receive_maximum", self.id, len(self._handed))
+                self.acked_early += 1
+            self._handed.popleft()
+            if connection == self._connection and self.connected:
+                client.ack(mid, qos)
 
     # -- what it says about itself ------------------------------------------------------------
 
@@ -254,5 +290,6 @@ class MqttSource(Source):
         broker = {"url": self.settings.url, "topic": self.topic, "client_id": self.client_id, "connected": self.connected,
                   "session_present": self.session_present, "connects": self._connection, "bodies": self.bodies,
                   "refused_bodies": self.refused_bodies, "redelivered": self.redelivered,
+                  "unacknowledged": len(self._handed), "acked_early": self.acked_early,
                   "error": None if self.connected else self.link_error}
         return {**super().status(), "clock_jumps": self.validator.clock.jump_count, "broker": broker}
