@@ -542,7 +542,13 @@ def _print_table(doc: dict[str, Any]) -> None:
                 f"D {damage}  cycles {s['cycles']:g}")
 
     for s in doc["stations"]:
-        print(row(f"{s['position_m']:.3f} m" + (f" {s['hot_spot']}" if s["hot_spot"] else ""), s))
+        # a planar station on the +ζ face reads as before; another point of the section names its angle
+        at = f" @{s['angle_deg']:g}°" + (" (worst around)" if s.get("angle_spec") == "all" else "") if s.get("angle_deg") else ""
+        print(row(f"{s['position_m']:.3f} m{at}" + (f" {s['hot_spot']}" if s["hot_spot"] else ""), s))
+    root = doc.get("root_bending_moment") or {}
+    if "resultant" in root:
+        print(f"root bending moment: Mζ rms {root['zeta']['rms_nm']:.4g} N·m, Mξ rms {root['xi']['rms_nm']:.4g} N·m, "
+              f"resultant rms {root['resultant']['rms_nm']:.4g} N·m, max {root['resultant']['max_nm']:.4g} N·m")
     for c in doc["channels"]:
         print(row(str(c["name"]), c))
 

@@ -172,3 +172,13 @@ def test_stations_parse_as_eta_at_angle_and_a_planar_beam_refuses_other_angles(b
                            record=DeformationRecord(record.times, record.b, record.units, record.stations, None, None, None, False),
                            model_args={}, stations=((1.0, 90.0),), curve=None, exponents=(3.0,), n_eq=None, half_cycles="half",
                            start_s=None, leave_one_out=False)
+
+
+def test_the_text_table_names_each_station_s_angle_and_the_root_planes(biaxial, capsys):
+    from shm_service.commands.loads import _print_table
+
+    rec, _, _, _, record = biaxial
+    _print_table(_doc(rec, record, parse_stations("1.0@90,2.0", LENGTH)))
+    text = capsys.readouterr().out
+    assert "1.000 m @90°" in text and "1.500 m @30° (worst around) girth" in text and "root bending moment: Mζ rms" in text
+    assert "2.000 m  " in text  # the +ζ face as on a planar beam
