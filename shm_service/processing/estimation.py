@@ -287,6 +287,9 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None, settin
         model = build_model(rec.rig, **(model_args or {}))
         result = estimate_recording(rec, model, settings)
         times, b, units = result.t, result.b, model.units
+        # a biaxial model's ξ plane (ImmsModel.units_xi, EstimateResult.b_xi); a planar model has none
+        units_xi = getattr(model, "units_xi", None)
+        b_xi = None if units_xi is None else result.b_xi
         support = result.d
         estimated_here = True
         rest_end = float(result.calibration.rest_end)
