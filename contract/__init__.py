@@ -91,11 +91,14 @@ from ._rig import (
     EN1993_DETAIL_CATEGORIES,
     EN1993_SHEAR_CATEGORIES,
     STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT,
+    PLANES,
     Beam,
+    Bending,
     FatigueSettings,
     HotSpot,
     check_curve_spec,
     Orientation,
+    Plane,
     PointMass,
     RigDescription,
     RigError,
@@ -117,7 +120,7 @@ __all__ = [
     # the runtime's ports (the HTTP routers and the dashboard are typed against them)
     "MAX_PAGE", "Lane", "LanePool", "NotSingleStructure", "Page", "ServicePort", "ServiceStarting", "StructureHost", "StructureModel", "StructurePort", "StructureUnavailable", "Waker",
     # rig.json
-    "Beam", "EXTENSION_KEYS", "Orientation", "PointMass", "RigDescription",
+    "Beam", "Bending", "EXTENSION_KEYS", "Orientation", "PLANES", "Plane", "PointMass", "RigDescription",
     "DNV_RP_C203_CURVE_NAMES", "DNV_RP_C203_ENVIRONMENTS", "EN1993_DETAIL_CATEGORIES", "EN1993_SHEAR_CATEGORIES",
     "FatigueSettings", "HotSpot", "check_curve_spec", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
     "STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT", "Support", "load_rig", "parse_rig",
