@@ -71,6 +71,7 @@ from ._payloads import (
     BEARING_TOPIC,
     ESTIMATE_LOADS_TOPIC,
     ESTIMATE_TOPIC,
+    IMU_BIAXIAL_COLUMNS,
     IMU_PLANAR_COLUMNS,
     NOMINAL_PERIOD_NS,
     PAYLOAD_FIELDS,
@@ -125,7 +126,7 @@ __all__ = [
     "FatigueSettings", "HotSpot", "check_curve_spec", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
     "STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT", "Support", "load_rig", "parse_rig",
     # topics and payloads
-    "BEARING_TOPIC", "ESTIMATE_LOADS_TOPIC", "ESTIMATE_TOPIC", "IMU_PLANAR_COLUMNS", "NOMINAL_PERIOD_NS", "PAYLOAD_FIELDS", "SCHEMAS",
+    "BEARING_TOPIC", "ESTIMATE_LOADS_TOPIC", "ESTIMATE_TOPIC", "IMU_BIAXIAL_COLUMNS", "IMU_PLANAR_COLUMNS", "NOMINAL_PERIOD_NS", "PAYLOAD_FIELDS", "SCHEMAS",
     "TEMPERATURE_TOPIC", "TRUTH_TOPIC", "FieldSpec", "Kind", "RowLayout", "TopicInfo", "classify_topic", "row_layout",
     # state and modes
     "ModeMap", "Peripheral", "StateIndex", "StateLayout",

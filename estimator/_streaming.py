@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from contract import IMU_PLANAR_COLUMNS, EstimatorStatusDocument, LastEstimateDocument
+from contract import IMU_BIAXIAL_COLUMNS, IMU_PLANAR_COLUMNS, EstimatorStatusDocument, LastEstimateDocument
 
 from ._filter import (
     EstimateResult,
@@ -244,11 +244,12 @@ class StreamingEstimator:
         bearing: SensorSeries | None = None
         epoch = self.epoch_ns
         assert epoch is not None
+        columns = IMU_BIAXIAL_COLUMNS if self.model.biaxial else IMU_PLANAR_COLUMNS
         for topic, (t, v) in data.items():
             kind, name = self.topics.get(topic, ("", ""))
             ts = (t - epoch) * 1e-9
             if kind == "imu":
-                imu[name] = SensorSeries(ts, v[:, IMU_PLANAR_COLUMNS])
+                imu[name] = SensorSeries(ts, v[:, columns])
             elif kind == "tof":
                 tof[name] = SensorSeries(ts, v[:, :1])
             elif kind == "strain":
@@ -485,14 +486,15 @@ def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = Filter
         raise ValueError("measurements have no IMU 'D' (the IMU at the bearing)")
     settings = settings or StreamingSettings(filter=config)
     by_name: dict[tuple[str, str], str] = {(s.kind, s.name): s.topic for s in model.rig.sensors}
-    width = max(IMU_PLANAR_COLUMNS) + 1
+    imu_columns = list(IMU_BIAXIAL_COLUMNS if model.biaxial else IMU_PLANAR_COLUMNS)
+    width = max(IMU_BIAXIAL_COLUMNS) + 1
     samples: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     topics: dict[str, tuple[str, str]] = {}
 
     def put(kind: str, name: str, series: SensorSeries, columns: list[int] | None) -> None:
         topic = by_name.get((kind, name), f"/{kind}/{name}")
         values = np.asarray(series.values, dtype=float)
-        if columns is not None:  # the planar columns back where the raw IMU payload has them
+        if columns is not None:  # the model's columns back where the raw IMU payload has them
             raw = np.zeros((len(values), width))
             raw[:, columns] = values
             values = raw
@@ -500,7 +502,7 @@ def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = Filter
         topics[topic] = (kind, name)
 
     for name, s in meas.imu.items():
-        put("imu", name, s, list(IMU_PLANAR_COLUMNS))
+        put("imu", name, s, imu_columns[:s.values.shape[1]])
     for name, s in meas.tof.items():
         put("tof", name, s, None)
     for name, s in meas.strain.items():
