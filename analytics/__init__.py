@@ -25,6 +25,7 @@ from ._oma import (
 )
 from ._moving import SubwindowTrack, subwindow_frequencies
 from ._tracks import ModeTrack, ModeTracker
+from ._usability import WINDOW_REJECTIONS, usability_document, window_rejection
 from ._peaks import Peak, find_peaks, interpolate_peak
 from ._spectrum import Spectrum, amplitude_spectrum, averaged_spectrum, cross_spectra
 from ._ssi import (
@@ -36,7 +37,7 @@ from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, st
 __all__ = [
     # the one engine: window loop, monitor, alarm path
     "AlarmEvent", "AlarmLogic", "BaselineError", "EngineWindow", "MonitoringEngine", "chart_level", "learn_baseline",
-    "support_acceleration",
+    "support_acceleration", "WINDOW_REJECTIONS", "usability_document", "window_rejection",
     "AnalysisConfig", "AnalysisResult", "Baseline", "BaselineMode", "CurvatureChange", "DamageLocation", "DampingEstimate",
     "EwmaChart", "ModalMonitor", "ModeEstimate", "ModeSummary", "Peak", "Spectrum", "WindowResult",
     "amplitude_spectrum", "analyze", "averaged_spectrum", "bandpass", "beam_third", "combine_estimates",

@@ -78,6 +78,7 @@ class AnalysisResult:
     config: AnalysisConfig | None = None
     loads: tuple = ()  # per window (contract.LoadsWindowDocument, its fatigue AlarmEvents), with hot spots
     tracks: tuple = ()  # analytics.ModeTrack: each subspace mode followed across the windows (the engine's tracker)
+    usability: dict | None = None  # analytics.usability_document of the windows: why none is usable, when none is
 
     def as_dict(self) -> dict:
         """JSON-safe {"modes": [...], "windows": [...], "flags": [...], "baseline": {...}} (None instead of NaN)."""
@@ -90,7 +91,7 @@ class AnalysisResult:
                              "charted": m.mode not in problems, "reason": problems.get(m.mode)} for m in self.baseline.modes]}
         out = {"modes": [m.as_dict() for m in self.modes], "windows": [w.as_dict() for w in self.windows],
                "flags": [dict(f) for f in self.flags], "baseline": bl, "skipped_windows": dict(self.skipped or {}),
-               "tracks": [t.as_dict() for t in self.tracks]}
+               "tracks": [t.as_dict() for t in self.tracks], "usability": self.usability}
         if self.loads:
             out["loads"] = [{**doc.model_dump(mode="json"), "alarm_events": [{"action": e.action, "chart": e.chart, "level": e.level,
                                                                                "at_s": e.at_s, "message": e.message()} for e in events]}
@@ -429,7 +430,7 @@ def analyze(
     summaries = _summaries(mon, windows, B, t, d, fs, cfg, 0.0)
     return AnalysisResult(summaries, windows, tuple(flags.values()), mon.baseline,
                           {"incomplete": engine.skipped_incomplete, "warmup": engine.skipped_warmup}, cfg, loads_windows,
-                          mon.tracker.tracks())
+                          mon.tracker.tracks(), engine.usability())
 
 
 def learn_baseline(
