@@ -37,12 +37,13 @@ from contract import (
 
 from .._config import ServiceSettings, render_toml, resolve_token
 from ._dashboard_port import StructureModel, start_dashboard
+from ._operator import acknowledge_alarm, check_token
 from ..http._metrics import fleet_metrics, merge_expositions
 from ..sources._ingest import IngestError
 from ._launch import ServeProcess, ServeStartError, start_serve
 from ..alarms._notify import Notifier, notify_targets
 from ._processes import StaleWorkers, record_workers, stop_stale_workers
-from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable, _ModelCache, _StoredRows
+from ._service import NotSingleStructure, ServiceError, StructureUnavailable, _ModelCache, _StoredRows
 from ..storage._storage import Storage
 from ..storage._writer import WriterServer
 
@@ -111,7 +112,7 @@ class WorkerFleet(_StoredRows):
         config = directory / "fleet-workers.toml"
         # an earlier front's workers (it was killed and they did not notice yet) leave the database first
         try:
-            ended = stop_stale_workers(self.settings.db, str(config))
+            ended = stop_stale_workers(self.settings.lock_path, str(config))
         except StaleWorkers as exc:
             raise ServiceError(str(exc)) from None
         if ended:
@@ -134,7 +135,7 @@ class WorkerFleet(_StoredRows):
                     args.append("--json")
                 launched.append((i, ids, start_serve(args, env=environ, stdout=subprocess.PIPE,
                                                      ready_file=directory / f"fleet-worker-{i}.ready.json", timeout=None)))
-            record_workers(self.settings.db, [started.pid for _, _, started in launched])
+            record_workers(self.settings.lock_path, [started.pid for _, _, started in launched])
             pending = [(_Worker(i, started.process, "", ids), started) for i, ids, started in launched]
             for worker, _ in pending:
                 threading.Thread(target=self._drain, args=(worker,), name=f"worker-{worker.index}-out", daemon=True).start()
@@ -240,7 +241,7 @@ class WorkerFleet(_StoredRows):
     # -- what the API needs -----------------------------------------------------------------
 
     def check_token(self, token: str | None) -> None:
-        MonitoringService.check_token(self, token)  # type: ignore[arg-type]
+        check_token(self.token, token)
 
     def health(self) -> HealthDocument:
         return _fleet_health(self)
@@ -282,10 +283,7 @@ class WorkerFleet(_StoredRows):
 
     def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         self.check_token(token)
-        alarm = self.storage.acknowledge(alarm_id, by, retry_s=min(self.settings.storage_retry_s, 3.0))
-        if alarm is None:
-            raise KeyError(f"alarm {alarm_id} does not exist")
-        return alarm
+        return acknowledge_alarm(self.storage, alarm_id, by, self.settings.storage_retry_s)
 
     def request_baseline(self, structure_id: str | None = None) -> BaselineRequestDocument:
         if structure_id is None:
