@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from shm_service.service import Storage, WindowCommit
+from shm_service.service import AlarmChange, Storage, WindowCommit
 from shm_service.service.storage.postgres import Leases, StaleLease, check_fence
 
 
@@ -83,7 +83,10 @@ def test_a_stale_tokens_commit_is_refused_and_counted_and_writes_nothing(nodes, 
         (lease_b,) = b.take_expired("node-b")
         with pytest.raises(StaleLease, match="fencing token 1 is stale"):
             store_a.commit_window(_commit("mast-01", 1, lease_a.token))
-        assert (store_a.fenced, store_b.fenced) == (1, 0)
+        raise_ = AlarmChange("raise", "mode2", "frequency", 2, "alarm", 60.0, 6.0, 5.0, "m")  # a window of its own savepoint
+        with pytest.raises(StaleLease, match="fencing token 1 is stale"):
+            store_a.commit_window(WindowCommit("mast-01", 30.0, 90.0, [], None, None, [raise_], fencing_token=lease_a.token))
+        assert (store_a.fenced, store_b.fenced) == (2, 0) and store_b.alarms() == []
         assert store_b.load_state("mast-01")["last_window_start_s"] == 0.0  # nothing of the refused window
         assert store_b.commit_window(_commit("mast-01", 1, lease_b.token)) == []
         assert store_a.load_state("mast-01")["last_window_start_s"] == 30.0
