@@ -43,6 +43,9 @@ def add_serve_parser(sub: Any) -> argparse.ArgumentParser:
                    help="worker processes hosting the [[structures]] (default: one per core, at most one per structure; "
                    "1: all in this process)")
     p.add_argument("--worker-of", metavar="I/N", help=argparse.SUPPRESS)  # internal: a worker process of a fleet
+    p.add_argument("--node", metavar="NAME",
+                   help="run as node NAME of a fleet across machines: the nodes with this configuration share its "
+                   "[[structures]] through leases in the PostgreSQL database storage.url (one process per node)")
     add_process_arguments(p)
     p.set_defaults(func=run_serve)
     return p
@@ -179,7 +182,8 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s",
                         stream=sys.stderr)
     worker_of = getattr(args, "worker_of", None)
-    if settings.worker_count > 1 and worker_of is None:
+    node = getattr(args, "node", None)
+    if settings.worker_count > 1 and worker_of is None and node is None:
         return _run_workers(settings, args, environ)
     if worker_of is not None:
         part = _worker_part(settings, worker_of)
@@ -199,7 +203,12 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
     s = settings.server
     api = None
     try:
-        service = MonitoringService(settings, environ=environ, deliver=deliver)
+        if node is not None:
+            from .runtime._node import NodeService
+
+            service = NodeService(settings, node, environ=environ)
+        else:
+            service = MonitoringService(settings, environ=environ, deliver=deliver)
         slot = ServiceSlot(service)
     except RigPending as pending:
         # follow: the file is not there yet. The API comes up now (healthz: degraded, the other
@@ -232,6 +241,8 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
 def _print_where(service: Any, settings: Any, api: Any) -> None:
     what = (f"{len(service.structures)} structures" if service.fleet
             else f"source {settings.source.spec} as '{service.source.id}'")
+    if getattr(service, "node", None) is not None:
+        what = f"node {service.node!r} of a fleet of {len(settings.structures)} structures (shared by leases)"
     print(f"shm serve: API at {api.url} (docs {api.url}/docs); {what}; "
           f"data in {settings.data_dir} (db {redact(str(settings.db))}, recordings "
           f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
@@ -316,7 +327,7 @@ def _fleet_summary(service: Any, elapsed: float) -> dict[str, Any]:
     rows = []
     for summary in service.structures_document().structures:
         row = summary.model_dump()
-        if summary.state != "failed" or summary.id in {s.id for s in service.running_structures()}:
+        if summary.id in {s.id for s in service.running_structures()}:  # (not one that failed, nor another node's)
             st = service.status(summary.id)
             p, src = st.pipeline, st.sources[0]
             row.update(messages=src.messages, estimates=p.estimates, windows=p.windows, windows_committed=p.windows_committed,
