@@ -23,14 +23,6 @@ class OutboxStore(Protocol):
     def record_attempt(self, outbox_id: int, ok: bool, detail: str, now: float, *, next_attempt_at: float | None,
                        give_up: bool, permanent: bool = False) -> None: ...
 
-    def claim(self, outbox_id: int, now: float, until: float) -> bool:
-        """Take a due pending row for one delivery attempt: it is not due again before ``until``
-        (then the attempt's record sets its state); False when it is no longer due (another
-        notifier took it, or it was delivered)."""
-        cur = self.db.execute("UPDATE outbox SET next_attempt_at=? WHERE id=? AND status='pending' AND next_attempt_at <= ?",
-                              (until, outbox_id, now))
-        return bool(cur.rowcount)
-
     def fail_pending(self, channel: str, target: str, detail: str) -> int: ...
 
     def claim(self, outbox_id: int, now: float, until: float) -> bool: ...
