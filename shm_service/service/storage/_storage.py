@@ -341,16 +341,11 @@ class Storage:
         return self._read(lambda db: OutboxRepository(db).pending_targets())
 
     def claim_notification(self, outbox_id: int, hold_s: float) -> bool:
-        """Take a due row for one delivery attempt of this notifier (it is not due to any other
-        for ``hold_s``; its attempt's record then sets its state); False: another took it. A
-        SQLite file has one service and one notifier: nothing to take, always True. On
-        PostgreSQL the nodes' notifiers share one outbox, and each row goes out once."""
+        """Take a due row for one attempt (no other notifier's for ``hold_s``); False: taken (nodes share PostgreSQL's outbox)."""
         if not (math.isfinite(hold_s) and hold_s > 0):
             raise ValueError(f"{hold_s=} must be a positive number of seconds")
-        if getattr(self.database, "dialect", "sqlite") == "sqlite":
-            return True
-        now = time.time()
-        return self._write(lambda db: OutboxRepository(db).claim(outbox_id, now, now + hold_s), durable=True)
+        return self.database.dialect == "sqlite" or self._write(
+            lambda db: OutboxRepository(db).claim(outbox_id, time.time(), hold_s), durable=True)
 
     def record_attempt(self, outbox_id: int, ok: bool, detail: str, *, next_attempt_at: float | None, give_up: bool,
                        permanent: bool = False) -> None:
