@@ -26,6 +26,7 @@ from ._documents import (
     BaselineModeDocument,
     BaselineRequestDocument,
     BaselineStatusDocument,
+    BrokerStatusDocument,
     ChartDocument,
     ChartKind,
     ChartLevelsDocument,
@@ -134,7 +135,7 @@ __all__ = [
     # documents
     "CURVATURE_CHART", "SENSOR_STATES", "AidingChannelDocument", "AlarmCountsDocument", "AlarmDocument",
     "AlarmEvent", "AlarmEventDocument", "AlarmLevel", "AlarmsDocument", "ArchiveStatusDocument", "BaselineModeDocument",
-    "BaselineRequestDocument", "BaselineStatusDocument", "ChartDocument", "ChartKind", "ChartLevelsDocument",
+    "BaselineRequestDocument", "BaselineStatusDocument", "BrokerStatusDocument", "ChartDocument", "ChartKind", "ChartLevelsDocument",
     "FATIGUE_CONDITIONS", "FatigueDocument", "HotSpotLoadsDocument", "LoadsWindowDocument", "StationLoadsDocument",
     "CurvatureDocument", "DegradedImuDocument", "ErrorDocument", "EstimateDocument", "EstimatorStatusDocument", "FlagDocument",
     "HealthDocument", "IngestErrorDocument", "IngestResultDocument", "LastEstimateDocument", "LiveEstimatesDocument", "Level", "LocationDocument", "ModeDocument",

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
-from ._argtypes import number, output_path
+from ._argtypes import database_target, number, output_path
 from .commands._common import (  # noqa: F401  (the commands' shared parts; reprocess, loads and import call them)
     DEFAULT_SENSOR_COUNT,
     CliError,
@@ -383,6 +383,11 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
                     print(f"  mode {m['mode']} not charted: {m['reason']}")
         for problem in output["recording_problems"]:
             print(f"problem: {problem}")
+        usability = output.get("usability") or {}
+        if usability.get("why_none"):
+            print(usability["why_none"])
+            for change in usability["change"]:
+                print(f"  change: {change}")
         print(f"flags: {len(output['flags'])}")
         for flag in output["flags"]:
             print("  " + ", ".join(f"{k}={v}" for k, v in flag.items()))
@@ -772,7 +777,8 @@ def _add_analyze_parser(sub: Any) -> None:
 def _add_reprocess_parser(sub: Any) -> None:
     p = sub.add_parser("reprocess", help="estimator and analysis over many recordings (dask.distributed) into a service database")
     p.add_argument("recordings", nargs="+", metavar="FILE", help="recordings (.mcap) of the contract")
-    p.add_argument("--db", required=True, type=output_path, help="the service's SQLite database (created if missing)")
+    p.add_argument("--db", required=True, type=database_target,
+                   help="the service's database: a SQLite file (created if missing) or postgresql://USER@HOST:PORT/DB")
     _add_cluster_arguments(p)
     p.add_argument("--force", action="store_true", help="reprocess files already done with this configuration")
     p.add_argument("--structure", default=None, metavar="ID",
@@ -789,7 +795,8 @@ def _add_baseline_parser(sub: Any) -> None:
                                               "it as the structure's active baseline (the service loads it at start)")
     p.add_argument("recordings", nargs="+", metavar="FILE", help="recordings (.mcap) of the healthy period")
     p.add_argument("--structure", required=True, metavar="ID", help="the source id the service monitors it as")
-    p.add_argument("--db", required=True, type=output_path, help="the service's SQLite database")
+    p.add_argument("--db", required=True, type=database_target,
+                   help="the service's database: a SQLite file or postgresql://USER@HOST:PORT/DB")
     p.add_argument("--from", dest="start", type=_time_arg, default=None, metavar="TIME",
                    help="start of the healthy period: UNIX s or ISO 8601 (default: the files' start)")
     p.add_argument("--to", dest="end", type=_time_arg, default=None, metavar="TIME",

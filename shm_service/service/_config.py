@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, Literal
+from urllib.parse import urlsplit
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -18,12 +20,15 @@ from contract import is_loopback
 from estimator import StreamingSettings
 
 from ..recording._plausibility import ValueLimits
+from .storage._url import check_postgres_url, is_postgres_url, redact
 
 __all__ = [
     "AlarmSettings",
     "ArchiveSettings",
     "DashboardSettings",
     "EstimatorSettings",
+    "MqttSettings",
+    "NodeSettings",
     "NotifySettings",
     "RetentionSettings",
     "ServerSettings",
@@ -173,12 +178,12 @@ class SimSettings(_Closed):
 class SourceSettings(_Closed):
     """Where the data comes from."""
 
-    spec: str = Field("sim", description="sim | replay:FILE.mcap | follow:FILE.mcap | ingest")
+    spec: str = Field("sim", description="sim | replay:FILE.mcap | follow:FILE.mcap | ingest | mqtt")
     id: str | None = Field(None, description="source id of the trend rows (default: sim, ingest, or the recording's file stem)")
     speed: float | Literal["max"] = Field(1.0, description="sim/replay pace: a factor of real time, or max")
     keep_running: bool = Field(False, description="keep serving the API after a replay (or sim run) ends")
-    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest, or to replace a recording's rig.json")
-    layout: Literal["benchmark", "dense"] = Field("benchmark", description="rig layout for ingest when no rig file is given")
+    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest and mqtt, or to replace a recording's rig.json")
+    layout: Literal["benchmark", "dense"] = Field("benchmark", description="rig layout for ingest and mqtt when no rig file is given")
     follow_poll_s: float = Field(0.2, gt=0, description="how often a followed file is checked for new data, s")
     follow_idle_s: float | None = Field(None, gt=0, description="stop following after this long without growth, s (None: never)")
     follow_rotations: bool = Field(
@@ -253,6 +258,20 @@ class ArchiveSettings(_Closed):
     rotate_mb: float = Field(256.0, gt=0, description="start a new file after this many MB of (uncompressed) messages")
     rotate_s: float = Field(3600.0, gt=0, description="start a new file after this much data time, s")
     flush_s: float = Field(2.0, gt=0, description="flush (end a chunk) at least this often, wall-clock s")
+
+
+class StorageSettings(_Closed):
+    """Where the service stores what it computes: the SQLite file ``db`` (the default) or, with
+    ``url``, a PostgreSQL database that the nodes of a fleet share."""
+
+    url: str | None = Field(
+        None, description="PostgreSQL database, postgresql://USER[:PASSWORD]@HOST:PORT/DB (the server's other options as "
+        "URL query parameters); unset: the SQLite file db")
+
+    @field_validator("url")
+    @classmethod
+    def _url(cls, value: str | None) -> str | None:
+        return None if value is None else check_postgres_url(value, "storage.url")
 
 
 class RetentionSettings(_Closed):
@@ -333,16 +352,123 @@ class NotifySettings(_Closed):
         return value
 
 
-_SOURCE_SPEC = "sim | replay:FILE.mcap | follow:FILE.mcap | ingest"
+class NodeSettings(_Closed):
+    """The nodes of a fleet (``shm serve --node NAME`` on several machines with this configuration and
+    one PostgreSQL database, storage.url): they share the structures through leases in the database."""
+
+    lease_s: float = Field(
+        15.0, ge=3, le=3600, description="how long a node's lease of a structure holds without renewal, s (renewed every "
+        "third of it): a node that dies loses its structures to the others within this")
+
+
+MQTT_PASSWORD_ENV = "SHM_MQTT_PASSWORD"
+
+
+class MqttSettings(_Closed):
+    """The MQTT broker that structures with ``source = "mqtt"`` take their data from: each
+    subscribes ``TOPIC_PREFIX/ID/ingest`` with QoS 1 in a persistent session of its own (client id
+    ``shm-TOPIC_PREFIX-ID``), each message's body a ``POST /api/ingest`` body. The password comes
+    from ``password_file`` or the environment variable SHM_MQTT_PASSWORD, never from this file."""
+
+    url: str | None = Field(None, description="the broker, mqtt://HOST[:PORT] (default port 1883) or mqtts://HOST[:PORT] "
+                            "(TLS, default port 8883); needed when a structure's source is mqtt")
+    topic_prefix: str = Field("shm", min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+(/[A-Za-z0-9_-]+)*$",
+                              description="a structure ID's bodies are published to TOPIC_PREFIX/ID/ingest")
+    username: str | None = Field(None, description="user name at the broker (None: anonymous)")
+    password_file: str | None = Field(None, description="file holding the broker password (first line); else the "
+                                      "environment variable SHM_MQTT_PASSWORD")
+    ca_file: str | None = Field(None, description="mqtts: CA certificates (PEM) the broker's certificate is checked "
+                                "against (default: the system's)")
+    cert_file: str | None = Field(None, description="mqtts: this client's certificate (PEM), for brokers that require one")
+    key_file: str | None = Field(None, description="mqtts: the private key (PEM) of cert_file")
+    tls_insecure: bool = Field(False, description="mqtts: accept a broker certificate whose host name does not match "
+                               "(the chain is still checked; for a broker reached by an address its certificate lacks)")
+    keepalive_s: int = Field(30, ge=5, le=3600, description="MQTT keep-alive, s: a dead connection is noticed within "
+                             "1.5 times this")
+    session_expiry_s: int = Field(
+        7 * 86400, ge=60, le=2**32 - 2, description="how long the broker keeps a structure's session, and the messages "
+        "published to it, while no node holds the structure, s")
+    receive_maximum: int = Field(
+        2000, ge=2, le=65535, description="bodies the broker sends a structure before it has acknowledged the first; "
+        "a body is acknowledged once the window after it is committed, so half of this must hold the bodies of the "
+        "calibration, warm-up and two windows (2000: 1 s bodies)")
+    reconnect_max_s: float = Field(30.0, ge=1, le=3600, description="longest wait between attempts to reach the broker, s "
+                                   "(from 1 s, doubling)")
+
+    @field_validator("url")
+    @classmethod
+    def _url(cls, value: str | None) -> str | None:
+        if value is None:
+            return None
+        from urllib.parse import urlsplit
+
+        parts = urlsplit(value)
+        if parts.scheme not in ("mqtt", "mqtts"):
+            raise ValueError(f"url {value!r} must be mqtt://HOST[:PORT] or mqtts://HOST[:PORT]")
+        try:
+            port = parts.port
+        except ValueError:
+            raise ValueError(f"url {value!r}: the port must be a number within 1-65535") from None
+        if not parts.hostname:
+            raise ValueError(f"url {value!r} has no host")
+        if port == 0 or parts.path not in ("", "/") or parts.query or parts.fragment:
+            raise ValueError(f"url {value!r} must be mqtt://HOST[:PORT] or mqtts://HOST[:PORT], nothing after the port "
+                             "(the topics come from topic_prefix)")
+        if parts.username or parts.password:
+            raise ValueError(f"url {value!r}: give the user as mqtt.username and the password in mqtt.password_file "
+                             "or SHM_MQTT_PASSWORD, not in the URL")
+        return value
+
+    @field_validator("password_file", "ca_file", "cert_file", "key_file")
+    @classmethod
+    def _file(cls, value: str | None) -> str | None:
+        if value is not None and not Path(value).is_file():
+            raise ValueError(f"{value} does not exist (or is not a file)")
+        return value
+
+    @model_validator(mode="after")
+    def _tls(self) -> "MqttSettings":
+        if (self.cert_file is None) != (self.key_file is None):
+            raise ValueError("mqtt.cert_file and mqtt.key_file come together (a client certificate and its key)")
+        tls_keys = [k for k in ("ca_file", "cert_file", "tls_insecure") if k in self.model_fields_set]
+        if tls_keys and self.url is not None and not self.url.startswith("mqtts:"):
+            raise ValueError(f"mqtt.{tls_keys[0]} needs TLS: an mqtts:// url")
+        return self
+
+    @property
+    def tls(self) -> bool:
+        return self.url is not None and self.url.startswith("mqtts:")
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) of ``url``."""
+        from urllib.parse import urlsplit
+
+        parts = urlsplit(self.url or "")
+        return parts.hostname or "", parts.port or (8883 if self.tls else 1883)
+
+    def password(self, environ: Mapping[str, str] | None = None) -> str | None:
+        """The password: the first line of ``password_file``, else SHM_MQTT_PASSWORD (None: neither)."""
+        if self.password_file is not None:
+            try:
+                text = Path(self.password_file).read_text(encoding="utf-8")
+            except OSError as exc:
+                raise SettingsError(f"mqtt.password_file: cannot read {self.password_file}: {exc}") from None
+            return text.splitlines()[0].strip() if text.strip() else ""
+        env = os.environ if environ is None else environ
+        return env.get(MQTT_PASSWORD_ENV) or None
+
+
+_SOURCE_SPEC = "sim | replay:FILE.mcap | follow:FILE.mcap | ingest | mqtt"
 
 
 def _check_spec(value: str) -> str:
     kind, _, arg = value.partition(":")
-    if kind in ("sim", "ingest") and not arg:
+    if kind in ("sim", "ingest", "mqtt") and not arg:
         return value
     if kind in ("replay", "follow") and arg:
         return value
-    raise ValueError(f"source {value!r} must be sim, ingest, replay:FILE.mcap or follow:FILE.mcap")
+    raise ValueError(f"source {value!r} must be sim, ingest, mqtt, replay:FILE.mcap or follow:FILE.mcap")
 
 
 class StructureSettings(_Closed):
@@ -353,7 +479,7 @@ class StructureSettings(_Closed):
     id: str = Field(..., min_length=1, max_length=64, pattern=r"^[a-z0-9-]+$",
                     description="structure id ([a-z0-9-]): the source id of its trend rows, alarms and notifications")
     source: str = Field("sim", description=_SOURCE_SPEC)
-    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest, or to replace a recording's rig.json")
+    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest and mqtt, or to replace a recording's rig.json")
     sim: dict[str, Any] = Field(default_factory=dict, description="keys of [sim] for this structure (e.g. seed)")
     estimator: dict[str, Any] = Field(default_factory=dict, description="keys of [estimator] for this structure")
     analytics: dict[str, Any] = Field(default_factory=dict, description="keys of [analytics] for this structure")
@@ -371,7 +497,8 @@ class ServiceSettings(_Closed):
     data_dir: str | None = Field(
         None, description="directory of all of the service's files: db and archive.directory default to paths under it "
         "(default: the directory of db when db is given, else ./var)")
-    db: str | None = Field(None, description="SQLite database (trends, baseline, alarms, outbox); default DATA_DIR/shm.sqlite")
+    db: str | None = Field(None, description="SQLite database (trends, baseline, alarms, outbox); default DATA_DIR/shm.sqlite "
+                           "(with storage.url: that URL)")
     server: ServerSettings = ServerSettings()
     dashboard: DashboardSettings = DashboardSettings()
     source: SourceSettings = SourceSettings()
@@ -382,6 +509,9 @@ class ServiceSettings(_Closed):
     retention: RetentionSettings = RetentionSettings()
     alarms: AlarmSettings = AlarmSettings()
     notify: NotifySettings = NotifySettings()
+    mqtt: MqttSettings = MqttSettings()
+    nodes: NodeSettings = NodeSettings()
+    storage: StorageSettings = StorageSettings()
     storage_sync: Literal["normal", "full"] = Field(
         "normal", description="SQLite synchronous mode of transactions that write only trend rows and state: normal "
         "survives a process crash, full also a power loss")
@@ -412,15 +542,29 @@ class ServiceSettings(_Closed):
     def _paths(self) -> "ServiceSettings":
         # One data directory holds everything; the database and the recordings default to it. The
         # resolved paths are stored, so --print-config shows where the files really go.
-        data_dir = self.data_dir or (str(Path(self.db).parent) if self.db else "var")
+        if self.storage.url is None and is_postgres_url(self.db):  # --db postgresql://...: the same as storage.url
+            object.__setattr__(self, "storage", StorageSettings(url=check_postgres_url(str(self.db), "db")))
+        url = self.storage.url
+        if url is not None and self.db is not None and self.db != url:
+            raise ValueError(f"db={self.db!r} and storage.url={redact(url)!r} are both given: the service stores in one "
+                             "database (leave db out with a PostgreSQL url)")
+        local = self.db if self.db and url is None else None
+        data_dir = self.data_dir or (str(Path(local).parent) if local else "var")
         object.__setattr__(self, "data_dir", data_dir)
-        if self.db is None:
+        if url is not None:  # every user of the database opens it by settings.db: the URL
+            object.__setattr__(self, "db", url)
+        elif self.db is None:
             object.__setattr__(self, "db", str(Path(data_dir) / "shm.sqlite"))
         if self.archive.directory is None:
             object.__setattr__(self, "archive", self.archive.model_copy(update={"directory": str(Path(data_dir) / "recordings")}))
         if self.retention.recordings_max_gb * 1e3 < 2 * self.archive.rotate_mb:
             raise ValueError(f"retention.recordings_max_gb={self.retention.recordings_max_gb} must hold at least two files of "
                              f"archive.rotate_mb={self.archive.rotate_mb} (the one being written is never deleted)")
+        takers = [s.id for s in self.structures if s.source == "mqtt"] or (
+            [] if self.structures or self.source.kind != "mqtt" else [self.source.id or "mqtt"])
+        if takers and self.mqtt.url is None:
+            raise ValueError(f"mqtt.url must be set: {'structure(s) ' + str(takers) if self.structures else 'the source'} "
+                             "take their data from the broker (source = \"mqtt\")")
         if self.structures:
             ids = [s.id for s in self.structures]
             twice = sorted({i for i in ids if ids.count(i) > 1})
@@ -433,6 +577,17 @@ class ServiceSettings(_Closed):
             for structure in self.structures:
                 self.for_structure(structure)  # every override is checked now, not when the structure starts
         return self
+
+    @property
+    def lock_path(self) -> str:
+        """The local file the service's locks and worker records sit beside: the SQLite file
+        ``db``, or for a PostgreSQL ``storage.url`` a name in ``data_dir`` for that database (the
+        nodes sharing it are fenced by their leases in it, not by these files)."""
+        if self.storage.url is None:
+            return str(self.db)
+        parts = urlsplit(self.storage.url)
+        name = "-".join(str(x) for x in (parts.hostname, parts.port or 5432, parts.path.lstrip("/")))
+        return str(Path(str(self.data_dir)) / f"postgresql-{re.sub(r'[^A-Za-z0-9._-]', '_', name)}")
 
     @property
     def worker_count(self) -> int:
