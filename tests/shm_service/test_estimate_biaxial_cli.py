@@ -23,17 +23,23 @@ def run(capsys, *argv):
     return code, out, err
 
 
-@pytest.fixture(scope="module")
-def biaxial_recording(tmp_path_factory):
-    """40 s of the example mast bending in both planes (a gauge pair at 0° and 90° per height)."""
-    folder = tmp_path_factory.mktemp("biaxial")
+def biaxial_mast() -> dict:
+    """The example mast bending in both planes, a gauge pair at 0° and 90° at each gauge's height."""
     data = json.loads(MAST.read_text())
     data["beam"]["bending"] = "biaxial"
-    data["simulator"]["rest"] = 10.0  # the wind starts after 10 s of rest
     gauges = [s for s in data["sensors"] if s["kind"] == "strain"]
     data["sensors"] = [s for s in data["sensors"] if s["kind"] != "strain"]
     for s in gauges:
         data["sensors"] += [dict(s), {**s, "name": f"{s['name']}x", "angle_deg": 90}]
+    return data
+
+
+@pytest.fixture(scope="module")
+def biaxial_recording(tmp_path_factory):
+    """40 s of the biaxial mast in its veering wind."""
+    folder = tmp_path_factory.mktemp("biaxial")
+    data = biaxial_mast()
+    data["simulator"]["rest"] = 10.0  # the wind starts after 10 s of rest
     rig = folder / "rig.json"
     rig.write_text(json.dumps(data))
     path = folder / "mast.mcap"
@@ -76,3 +82,16 @@ def test_modes_xi_on_a_planar_recording_is_refused(capsys, tmp_path):
     code, _, err = run(capsys, "estimate", str(path), "--modes-xi", "2")
     assert code == 2
     assert "modes_xi=2: unit deformations in ξ need a beam that bends in both planes" in err
+
+
+def test_the_service_configuration_sets_modes_xi_for_a_biaxial_rig_and_ignores_it_for_a_planar_one():
+    from contract import parse_rig
+    from shm_service.service._config import EstimatorSettings
+    from shm_service.service.runtime._structure import _ModelCache
+
+    planar = _ModelCache().get(parse_rig(json.loads(MAST.read_text())), EstimatorSettings(modes_xi=3))
+    assert not planar.biaxial and planar.gamma == 4 and len(planar.selection.gauges) == 4
+    data = biaxial_mast()
+    model = _ModelCache().get(parse_rig(data), EstimatorSettings(modes_xi=3))
+    assert model.gamma == 4 and model.gamma_xi == 3 and len(model.selection.gauges) == 8
+    assert _ModelCache().get(parse_rig(data), EstimatorSettings()).gamma_xi == 4  # default: as modes
