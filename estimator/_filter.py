@@ -635,7 +635,8 @@ def calibrate_at_rest(meas: Measurements, model: ImmsModel, config: FilterConfig
 
 @dataclass(frozen=True)
 class Events:
-    """Time-ordered measurement events: t (s), kind (event code), index (sensor), values (n, 3)."""
+    """Time-ordered measurement events: t (s), kind (event code), index (sensor), values (n, 3) (a biaxial
+    model's (n, 5): its IMUs' [f_x, f_y, ω_z, f_z, ω_y])."""
 
     t: np.ndarray
     kind: np.ndarray

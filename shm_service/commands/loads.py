@@ -469,7 +469,7 @@ def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: flo
 
 
 def _cmd_loads(args: argparse.Namespace) -> int:
-    from ._common import CliError, _sensor_counts
+    from ._common import CliError, model_kwargs
     from ..formats.tables import TableError, read_table, select_channels
 
     try:
@@ -491,7 +491,7 @@ def _cmd_loads(args: argparse.Namespace) -> int:
                 rec = None  # a plain MCAP of channels: counted as a table
             if rec is not None:
                 stations = parse_stations(args.stations, rec.rig.beam.length) if args.stations else None
-                model_args = dict(peripheral=args.peripheral, modes=args.modes, **_sensor_counts(rec.rig, args))
+                model_args = model_kwargs(rec.rig, args)
                 if args.aided:
                     model_args["aided"] = tuple(int(a) for a in args.aided.split(","))
                 doc = loads_of_recording(rec, model_args=model_args, stations=stations, curve=curve, exponents=exponents,
