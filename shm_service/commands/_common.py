@@ -1,7 +1,7 @@
-"""What the commands share, below the command line: the user error, JSON output, the estimator
-model and sensor counts of --modes/--imus/--tofs/--gauges, and b(t) of a recording as ``shm analyze``
-takes it. ``cli`` (which only parses), ``reprocess``, ``loads`` and ``daq_import`` call these; none
-of them imports ``cli`` (no cycle).
+"""What the commands share, below the command line: the user error, JSON output, the rig of
+--rig/--layout, a settings error in one line, the estimator model and sensor counts of
+--modes/--imus/--tofs/--gauges, and b(t) of a recording as ``shm analyze`` takes it. The command
+modules call these; none of them imports ``cli`` (no cycle).
 
 The functions take the parsed options as an object with the options' attributes (an
 ``argparse.Namespace`` or ``reprocess.AnalysisOptions.namespace()``).
@@ -134,3 +134,29 @@ def _deformations_of(path: str, args: argparse.Namespace):
         return rec, deformation_record(rec, model_args=model_args, settings=streaming)
     except ValueError as exc:
         raise CliError(f"{exc}{_cut_note(rec)}") from None
+
+
+def _rig_from_args(args: argparse.Namespace):
+    """The rig of --rig (with --support/--orientation overriding its keys) or of --layout
+    (with --length, --support, --orientation)."""
+    from estimator import RigError, load_rig, parse_rig
+
+    from ..rig_layouts import build_rig
+
+    if getattr(args, "rig", None):
+        if args.length is not None:
+            raise CliError("--length scales a --layout rig; with --rig set beam.length in the file")
+        rig = load_rig(args.rig)
+        overrides = {k: v for k, v in (("support", args.support), ("orientation", args.orientation)) if v is not None}
+        return parse_rig({**rig.model_dump(mode="json"), **overrides}, source=args.rig) if overrides else rig
+    try:
+        return build_rig(args.layout, length=args.length, support=args.support or "pinned",
+                         orientation=args.orientation or "hanging")
+    except ValueError as exc:
+        if isinstance(exc, RigError):
+            raise
+        raise CliError(str(exc)) from None
+
+
+def _pydantic_message(exc) -> str:
+    return "; ".join(f"{'.'.join(str(p) for p in e['loc']) or 'settings'}: {e['msg']}" for e in exc.errors())
