@@ -94,7 +94,7 @@ def source_of(path: str | Path) -> str:
     """The source (structure) id a recording's rows go to by default: the service's own for its
     archive files (``SOURCE-YYYYmmddTHHMMSSZ-w....mcap``), else the file's stem, as ``shm serve
     --source replay:FILE`` names it."""
-    from ..service.stages._archive import parse_archive_name
+    from ..service.storage._archive_names import parse_archive_name
 
     name = parse_archive_name(path)
     return name.source if name is not None else Path(path).stem

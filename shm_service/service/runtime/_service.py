@@ -34,7 +34,7 @@ from ..http._metrics import fleet_metrics
 from ..alarms._notify import Notifier, notify_targets
 from ..storage._retention import RetentionWorker
 from ._scheduler import Scheduler, SchedulerSettings
-from ..stages._sinks import SinkGuard
+from ..alarms._sinks import SinkGuard
 from ..sources._sources import IngestSource
 from ..storage._storage import Storage, is_transient
 from ..storage._fatigue import fatigue_document

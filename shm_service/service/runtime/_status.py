@@ -19,7 +19,7 @@ from contract import (
 
 from .._config import ServiceSettings
 from ..alarms._notify import Notifier
-from ..stages._sinks import SinkGuard
+from ..alarms._sinks import SinkGuard
 from ..storage._storage import Storage
 from ._progress import describe_progress
 from ._structure import Structure

@@ -27,18 +27,14 @@ from estimator import build_model
 
 from ...recording import RecordingError
 from ..stages._archive import Archive
-from ..stages._checks import CheckSettings
 from .._config import ServiceSettings
-from ._delegate import ReadThrough
+from .._delegate import ReadThrough
 from ._live import LiveRing
-from ..stages._merge import MergeSettings
 from ..stages._pipeline import Batch, Pipeline
 from ...recording._plausibility import SourceClock
-from ..stages._sinks import SinkGuard
+from ..alarms._sinks import SinkGuard
 from ..sources._sources import END, FileSource, IngestSource, SimSource, Source
 from ..stages._commit import CommitSettings
-from ..stages._estimate import EstimateSettings
-from ..stages._outputs import OutputSettings
 from ..storage._storage import Storage
 
 __all__ = ["NotSingleStructure", "SingleStructureView", "RigPending", "ServiceError", "Structure", "StructureUnavailable"]
@@ -174,12 +170,10 @@ class Structure:
         self.pipeline = Pipeline(
             # the alarm hysteresis of [alarms] is in the engine's configuration (one place: engine_config)
             model=self.model, source_id=self.id, storage=storage, analysis=settings.engine_config(),
-            estimate=EstimateSettings(calibration_s=est.calibration_s, chunk_s=est.chunk_s, warmup_s=est.warmup_s),
-            merge=MergeSettings(lateness_s=src.lateness_s),
-            checks=CheckSettings(stuck_after_s=src.stuck_after_s, silent_after_s=src.silent_after_s),
+            # the sections are the stages' settings: [estimator] the estimate stage's, [source] the merge's
+            # and the checks', [archive] the outputs'
+            estimate=est, merge=src, checks=src, outputs=settings.archive, record_raw=raw,
             commits=CommitSettings(retry_s=settings.storage_retry_s),
-            outputs=OutputSettings(archive_raw=raw, archive_estimates=settings.archive.estimates,
-                                   estimate_decimation=settings.archive.estimate_decimation),
             archive=self.archive, sink_guard=sink_guard,
             # ingest is judged per message by its validator (its response says what was refused)
             clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits, analysis_lane=True,

@@ -26,7 +26,7 @@ class EstimateSettings(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    calibration_s: float = Field(60.0, ge=5, le=600, description="data gathered for the rest calibration, s")
+    calibration_s: float = Field(60.0, ge=5, le=600, description="data gathered for the rest calibration before filtering, s")
     chunk_s: float = Field(2.0, gt=0, le=60, description="data per estimator call, s")
     warmup_s: float = Field(120.0, ge=0, le=3600, description="windows starting less than this after the rest phase are "
                             "not analysed (the filter converges), s")

@@ -9,17 +9,17 @@ from collections import deque
 from typing import Any, Protocol
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+
 
 from contract import estimate_payloads
 from estimator import FilterOutput, ImmsModel
 
 from ...recording import encode_payloads_json
-from ._archive import Archive
-from ._sinks import SinkGuard
+from ._archive import Archive, ArchiveSettings
+from ..alarms._sinks import SinkGuard
 from ..storage._storage import Storage
 
-__all__ = ["LiveRingLike", "OutputSettings", "OutputStage"]
+__all__ = ["LiveRingLike", "OutputStage"]
 
 log = logging.getLogger("shm.serve.pipeline")
 
@@ -31,28 +31,19 @@ class LiveRingLike(Protocol):
     def add(self, t_s: np.ndarray, x: np.ndarray, truth: Any = None) -> None: ...
 
 
-class OutputSettings(BaseModel):
-    """What the outputs record."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    archive_raw: bool = Field(False, description="record the incoming samples")
-    archive_estimates: bool = Field(True, description="record /estimate/state")
-    estimate_decimation: int = Field(1, ge=1, description="record every n-th estimate")
-
-
 class OutputStage:
     """The recording and live ring of one structure."""
 
-    def __init__(self, model: ImmsModel, source_id: str, storage: Storage, settings: OutputSettings | None = None, *,
-                 archive: Archive | None = None, sink_guard: SinkGuard | None = None) -> None:
-        self.settings = s = settings or OutputSettings()
+    def __init__(self, model: ImmsModel, source_id: str, storage: Storage, settings: ArchiveSettings | None = None, *,
+                 archive: Archive | None = None, sink_guard: SinkGuard | None = None, record_raw: bool = False) -> None:
+        self.settings = s = settings or ArchiveSettings()
         self.model = model
         self.source_id = source_id
         self.storage = storage
         self.archive = archive
-        self.archive_raw = s.archive_raw and archive is not None
-        self.archive_estimates = s.archive_estimates and archive is not None
+        # whether the incoming samples are recorded is the structure's to say ([archive] raw and its source's kind)
+        self.archive_raw = record_raw and archive is not None
+        self.archive_estimates = s.estimates and archive is not None
         self.live: LiveRingLike | None = None  # set by the service: the batches' estimates for a live view
         # A failing live ring is counted and logged once per kind; it never stops a batch.
         self.sink_guard = sink_guard or SinkGuard("dashboard", log)

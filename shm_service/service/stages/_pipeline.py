@@ -31,16 +31,16 @@ from contract import PipelineStatusDocument
 from estimator import ImmsModel
 
 from ...recording import FollowBlock
-from ._archive import Archive
+from ._archive import Archive, ArchiveSettings
 from ._checks import CheckSettings, SampleChecks
-from ..runtime._delegate import ReadThrough
+from .._delegate import ReadThrough
 from ._merge import MergeSettings, MergeStage
 from ...recording._plausibility import SourceClock, ValueLimits
-from ._sinks import SinkGuard
+from ..alarms._sinks import SinkGuard
 from ._analysis import AnalysisStage
 from ._commit import CommitSettings, CommitStage
 from ._estimate import EstimateSettings, EstimateStage, stored_calibration
-from ._outputs import OutputSettings, OutputStage
+from ._outputs import OutputStage
 from ..storage._storage import Storage
 
 __all__ = ["Batch", "Pipeline"]
@@ -173,7 +173,7 @@ class Pipeline:
     def __init__(self, *, model: ImmsModel, source_id: str, storage: Storage, analysis: AnalysisConfig,
                  estimate: EstimateSettings | None = None, merge: MergeSettings | None = None,
                  checks: CheckSettings | None = None, commits: CommitSettings | None = None,
-                 outputs: OutputSettings | None = None, archive: Archive | None = None,
+                 outputs: ArchiveSettings | None = None, archive: Archive | None = None, record_raw: bool = False,
                  sink_guard: SinkGuard | None = None, clock: SourceClock | None = None, limits: ValueLimits | None = None,
                  analysis_lane: bool = False) -> None:
         _one_blas_thread()
@@ -190,7 +190,8 @@ class Pipeline:
         baseline = None if blob.get("monitor") else storage.active_baseline(source_id)
         self.analytics = AnalysisStage(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id,
                                        baseline=baseline, loads_state=blob.get("loads"))
-        self.outputs = OutputStage(model, source_id, storage, outputs, archive=archive, sink_guard=sink_guard)
+        self.outputs = OutputStage(model, source_id, storage, outputs, archive=archive, sink_guard=sink_guard,
+                                   record_raw=record_raw)
         self.commits = CommitStage(storage, source_id, self.analytics.active(), commits)
         # the analysis lane (None: analysed inline, within ``process``)
         self.inbox = AnalysisInbox(self._handle, self._retry_commits) if analysis_lane else None

@@ -16,7 +16,7 @@ from shm_service.service.stages._pipeline import AnalysisInbox
 from shm_service.service.runtime._scheduler import Scheduler, SchedulerSettings
 from shm_service.service.stages._commit import CommitSettings, CommitStage, PendingCommit
 from shm_service.service.stages._estimate import EstimateSettings, calibration_from_dict, calibration_to_dict
-from shm_service.service.stages._outputs import OutputSettings
+from shm_service.service.stages._archive import ArchiveSettings
 
 # -- the scheduler ------------------------------------------------------------------------------
 
@@ -215,7 +215,7 @@ def test_stage_settings_name_the_bad_value():
     with pytest.raises(ValidationError, match="max_pending"):
         CommitSettings(max_pending=0)
     with pytest.raises(ValidationError, match="estimate_decimation"):
-        OutputSettings(estimate_decimation=0)
+        ArchiveSettings(estimate_decimation=0)
 
 
 def test_a_calibration_survives_its_stored_form():
