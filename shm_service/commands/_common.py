@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import TypedDict
 
 __all__ = ["DEFAULT_SENSOR_COUNT", "CliError", "add_model_arguments"]
 
@@ -89,7 +90,16 @@ def _cut_note(rec) -> str:
     return f" (the recording is cut off: {cut})"
 
 
-def _sensor_counts(rig, args: argparse.Namespace) -> dict[str, int | tuple[str, ...]]:
+
+class SensorCounts(TypedDict):
+    """--imus/--tofs/--gauges as ``estimator.build_model`` takes them: a count or the sensors' names."""
+
+    imus: int | tuple[str, ...]
+    tofs: int | tuple[str, ...]
+    gauges: int | tuple[str, ...]
+
+
+def _sensor_counts(rig, args: argparse.Namespace) -> SensorCounts:
     """--imus/--tofs/--gauges as the estimator takes them. A count the user gave must exist on the
     rig; the default (4 each) is capped to what the rig has, as the help says."""
     from ..processing.estimation import sensor_count_problem
@@ -100,7 +110,7 @@ def _sensor_counts(rig, args: argparse.Namespace) -> dict[str, int | tuple[str, 
             problem = sensor_count_problem(rig, kind, wanted, modes=args.modes)
             if problem:
                 raise CliError(f"--{kind} {wanted}: {problem} (or give names)")
-    return counts
+    return SensorCounts(imus=counts["imus"], tofs=counts["tofs"], gauges=counts["gauges"])
 
 
 def _analysis_settings(args: argparse.Namespace):

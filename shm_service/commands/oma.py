@@ -48,6 +48,8 @@ def _oma_identify(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
         step = args.step if args.step is not None else window
         if step is not None and window is None:
             raise CliError("--step needs --window")
+        if table.fs_hz is None:
+            raise CliError(f"{args.data}: no sample rate (give --fs)")
         result = OperationalModalAnalysis(config, window_s=window, step_s=step).run(clean.outputs, table.fs_hz, inputs=inputs)
     except ValidationError as exc:
         raise CliError(_pydantic_message(exc)) from None

@@ -24,7 +24,7 @@ from collections.abc import Iterator
 from contextlib import closing, contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from ._common import CliError, _print_json
 
@@ -37,7 +37,7 @@ class AnalysisOptions:
     ``shm serve`` TOML whose analytics, alarm hysteresis and warm-up are used."""
 
     rig: str | None = None
-    peripheral: str = "gyro"
+    peripheral: Literal["gyro", "acc"] = "gyro"
     modes: int = 4
     imus: str | None = None
     tofs: str | None = None

@@ -17,7 +17,7 @@ from contract import (
     row_layout,
 )
 from contract import estimate_payloads as _estimate_payloads
-from estimator import EstimateResult, Measurements, SensorSeries
+from estimator import EstimateResult, Measurements, SensorSeries, UnitDeformations
 
 from ..recording import Recording
 
@@ -234,7 +234,7 @@ class DeformationRecord:
 
     times: np.ndarray
     b: np.ndarray
-    units: object  # estimator.UnitDeformations
+    units: UnitDeformations
     stations: np.ndarray
     temperature: tuple[np.ndarray, np.ndarray] | None
     bearing: np.ndarray | None

@@ -108,7 +108,7 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
     if settings is None or args.print_config or getattr(args, "worker_of", None) is not None:
         return _run_serve(args, environ=environ)
     try:
-        lock = DatabaseLock.acquire(settings.db)
+        lock = DatabaseLock.acquire(settings.db_path)
     except (DatabaseBusy, OSError) as exc:
         print(f"shm serve: error: {exc}", file=sys.stderr)
         return 3

@@ -55,6 +55,13 @@ class _Closed(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+
+def _key_of(model: type[BaseModel], name: str) -> Any:
+    """A part's field as a key of another section, with its definition (default, bounds and
+    description): a key users know under another name has one source of truth."""
+    return copy(model.model_fields[name])
+
+
 class ServerSettings(_Closed):
     """The HTTP API."""
 
@@ -199,7 +206,7 @@ class ServiceSettings(_Closed):
         "full", description="SQLite synchronous mode of transactions that write alarms, alarm events or the "
         "notification outbox (full: they survive a power loss)")
     # the commit stage's retry under the key users know (one definition: CommitSettings.retry_s)
-    storage_retry_s: float = copy(CommitSettings.model_fields["retry_s"])
+    storage_retry_s: float = _key_of(CommitSettings, "retry_s")
     pipeline_threads: int = Field(
         3, ge=1, le=64, description="threads of a (worker) process that step its structures' pipelines, round-robin "
         "(each structure's data and analysis lanes; its source has a thread of its own)")
@@ -253,6 +260,13 @@ class ServiceSettings(_Closed):
             return int(self.workers)
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         return max(1, min(cores, len(self.structures), 64))
+
+    @property
+    def db_path(self) -> str:
+        """The database file: ``db``, which the validation resolved against ``data_dir``."""
+        if self.db is None:
+            raise SettingsError("db is not resolved (load the settings through ServiceSettings)")
+        return self.db
 
     @property
     def fleet(self) -> bool:
@@ -356,7 +370,8 @@ def render_toml(settings: ServiceSettings | None = None) -> str:
     lines = ["# shm serve configuration: every key, its default and what it means.", ""]
 
     def section(model: BaseModel, name: str | None) -> None:
-        scalars, tables = [], []
+        scalars: list[tuple[str, Any, Any]] = []
+        tables: list[tuple[str, Any, Any]] = []
         for key, info in type(model).model_fields.items():
             if key == "structures":
                 continue  # arrays of tables, after everything else

@@ -195,8 +195,9 @@ class Notifier:
             if (channel, target) not in configured:
                 n = self.storage.fail_pending(channel, target, "target no longer configured (notify settings)")
                 log.warning("%d pending notification(s) to %s %s failed: the target is no longer configured", n, channel, target)
-        for target in self.targets:
-            thread = threading.Thread(target=self._worker, args=(target,), name=f"notify-{target[0]}", daemon=True)
+        for channel_target in self.targets:
+            thread = threading.Thread(target=self._worker, args=(channel_target,), name=f"notify-{channel_target[0]}",
+                                      daemon=True)
             thread.start()
             self._threads.append(thread)
 
@@ -316,6 +317,8 @@ class Notifier:
 
     def _mail(self, to: list[str], payload: dict[str, Any]) -> DeliveryResult:
         s = self.settings
+        if s.smtp_host is None:  # start() failed every e-mail left pending when the settings had no server
+            return DeliveryResult("permanent", "no smtp_host configured")
         alarm = payload["alarm"]
         msg = EmailMessage()
         msg["Subject"] = f"[shm] {payload['level']} {payload['event']}: {alarm['message']}"

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -38,7 +39,7 @@ def calibration_to_dict(cal: RestCalibration) -> dict:
 
 def calibration_from_dict(d: dict) -> RestCalibration:
     fields = RestCalibration.__dataclass_fields__
-    kw = {}
+    kw: dict[str, Any] = {}
     for name in fields:
         value = d[name]
         kw[name] = np.asarray(value, dtype=float) if isinstance(value, list) else value

@@ -51,7 +51,7 @@ class OutputStage:
         self._estimate_maps: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def raw(self, messages: list[tuple[str, int, bytes, int]] | None) -> None:
-        if self.archive_raw and messages:
+        if self.archive_raw and messages and self.archive is not None:
             self.archive.write_many(messages)
 
     def maybe_flush(self) -> None:
@@ -78,6 +78,8 @@ class OutputStage:
         return [defl[j] if abs(int(tt[j]) - int(want)) < 50_000_000 else None for j, want in zip(k, target)]
 
     def _archive_estimates(self, epoch_ns: int, out: FilterOutput) -> None:
+        if self.archive is None:  # archive_estimates says there is one
+            return
         k = self.settings.estimate_decimation
         t, x, P = out.t[::k], out.x[::k], out.P_diag[::k]
         if not len(t):

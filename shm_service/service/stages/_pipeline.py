@@ -127,7 +127,7 @@ class _SetAside:
     def describe(self) -> str | None:
         if not self.samples and not self.chunks:
             return None
-        span = "" if self.first_ns is None else f" ({(self.last_ns - self.first_ns) / _NS:.1f} s of data from {self.first_ns / _NS:.3f})"
+        span = "" if self.first_ns is None or self.last_ns is None else f" ({(self.last_ns - self.first_ns) / _NS:.1f} s of data from {self.first_ns / _NS:.3f})"
         where = (f"{self.recorded} of them in the recording" if self.recorded
                  else "not recorded (their source's file holds them, or the recording of raw samples is off)")
         return (f"stopped under a backlog: {self.samples} samples{span} not estimated, {where}; "
@@ -284,7 +284,7 @@ class Pipeline:
     # -- the analysis lane ----------------------------------------------------------------------
 
     def _to_analysis(self, item: tuple) -> None:
-        if self.lane_started:
+        if self.lane_started and self.inbox is not None:  # a lane is started only with an inbox
             self.inbox.items.append(item)
         else:
             self._handle(item)
@@ -329,7 +329,7 @@ class Pipeline:
         for window in self.analytics.add(epoch, t, b, d, temperature, gauges):
             monitor = self.analytics.monitor
             self.commits.add(window, monitor_state=self.analytics.state(), raised=self.analytics.active(),
-                             baseline=monitor.baseline.to_dict() if window.new_baseline else None,
+                             baseline=monitor.baseline.to_dict() if window.new_baseline and monitor.baseline else None,
                              calibration=self.estimate.new_calibration())
 
     def _guarded(self, fn: Callable[..., object], *args: object) -> bool:
