@@ -159,7 +159,7 @@ class MonitoringService(_StoredRows, SingleStructureView):
                     log.error("structure %s cannot start: %s", st.id, exc)
                     self.structures[st.id] = _FailedStructure(st.id, st.source.partition(":")[0], str(exc))
         # a worker of a fleet writes through its front (one writer per database: storage._writer)
-        self.storage = open_storage(settings.db, notify_targets=notify_targets(settings.notify),
+        self.storage = open_storage(settings.db_path, notify_targets=notify_targets(settings.notify),
                                     notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
                                     notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
                                     alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
@@ -242,7 +242,7 @@ class MonitoringService(_StoredRows, SingleStructureView):
         structure's data time and pace start with its own first batch."""
         if len(paced) < 2:
             return 0.0
-        step_wall = max(s.settings.analytics.window_s * (1 - s.settings.analytics.overlap) / s.speed for s in paced)
+        step_wall = max(s.settings.analytics.window_s * (1 - s.settings.analytics.overlap) / s.speed for s in paced if s.speed)
         return min(most_s, min(step_wall, span_s) / len(paced))
 
     def _start_staggered(self, structures: list[Structure], delay_s: float) -> None:

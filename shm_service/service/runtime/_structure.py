@@ -80,7 +80,7 @@ class _AnalysisLane:
 
     def ready(self) -> bool:
         pipeline = self.structure.pipeline
-        return pipeline.lane_started and pipeline.inbox.ready()
+        return pipeline.lane_started and pipeline.inbox is not None and pipeline.inbox.ready()
 
     def step(self) -> None:
         self.structure.pipeline.step_analysis()
@@ -155,7 +155,7 @@ class Structure:
         self.model_document = ModelDocument(peripheral=m.selection.peripheral, support=m.rig.support, gamma=m.gamma,
                                             state_names=list(m.state_layout.names),
                                             unit_modes=[list(g) for g in m.mode_map.unit_modes])
-        self.pipeline: Pipeline | None = None
+        self._pipeline: Pipeline | None = None  # created by attach
         self.archive: Archive | None = None
         # its estimates for a live view, kept while watched, with their virtual strain, stress and moment
         self.live = LiveRing(self.id, list(m.state_layout.names), loads=_virtual_loads(self.rig, m))
@@ -167,7 +167,7 @@ class Structure:
         if settings.archive.enabled:
             self.archive = Archive(settings.archive, self.rig, self.id, getattr(self.source, "metadata", None))
         raw = settings.archive.raw == "always" or (settings.archive.raw == "auto" and self.source.kind in ("sim", "ingest"))
-        self.pipeline = Pipeline(
+        self._pipeline = Pipeline(
             # the alarm hysteresis of [alarms] is in the engine's configuration (one place: engine_config)
             model=self.model, source_id=self.id, storage=storage, analysis=settings.engine_config(),
             # the sections are the stages' settings: [estimator] the estimate stage's, [source] the merge's
@@ -179,6 +179,13 @@ class Structure:
             clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits, analysis_lane=True,
         )
         self.pipeline.live = self.live
+
+    @property
+    def pipeline(self) -> Pipeline:
+        """The structure's stages, wired (created by ``attach``, which comes before anything asks)."""
+        if self._pipeline is None:
+            raise RuntimeError(f"structure {self.id!r}: its pipeline is created by attach()")
+        return self._pipeline
 
     # -- construction -----------------------------------------------------------------------
 
@@ -344,8 +351,8 @@ class Structure:
 
     def stop_source(self) -> None:
         """Stop the source; the backlog is estimated and analysed for ``stop_drain_s`` more, the rest set aside."""
-        if self.pipeline is not None:
-            self.pipeline.stop_deadline = time.monotonic() + self.settings.stop_drain_s
+        if self._pipeline is not None:
+            self._pipeline.stop_deadline = time.monotonic() + self.settings.stop_drain_s
         self.source.stop()  # returns once no request of an ingest source is putting a batch any more
         self._stopping = True
 

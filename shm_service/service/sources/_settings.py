@@ -71,7 +71,7 @@ class SimSettings(BaseModel):
     def _storm(self) -> "SimSettings":
         if (self.storm_start_s is None) != (self.storm_end_s is None):
             raise ValueError("sim.storm_start_s and sim.storm_end_s come together (a storm begins and passes)")
-        if self.storm_start_s is not None and not self.storm_start_s < self.storm_end_s:
+        if self.storm_start_s is not None and self.storm_end_s is not None and not self.storm_start_s < self.storm_end_s:
             raise ValueError(f"sim.storm_start_s={self.storm_start_s} must come before sim.storm_end_s={self.storm_end_s}")
         return self
 
