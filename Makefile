@@ -21,7 +21,8 @@ demo: $(STAMP)
 	$(PY) -m shm_service.warmup  # at once when cached; after a pull that changed the kernels, compiles them first
 	$(VENV)/bin/shm demo $(DEMO_ARGS)
 
-# The lint and the types ([tool.ruff], [tool.mypy] in pyproject.toml: strict on contract, estimator, analytics).
+# The lint and the types ([tool.ruff], [tool.mypy] in pyproject.toml: strict on contract, estimator, analytics,
+# web and tools; every function body of shm_service checked).
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
