@@ -265,12 +265,16 @@ def _summaries(mon: ModalMonitor, windows: tuple[WindowResult, ...], B: np.ndarr
                     damping.append(subspace_damping(m))
         if len(good) >= 2:
             # the windows' subspace frequencies, averaged: the record's estimate when the record-long
-            # identification found no pole, or one it states less precisely than they agree (a weak
-            # mode whose record-long pole a neighbouring one pulls: the windows' spread is the measure)
+            # identification found no pole, or when its pole lies off the windows' consensus by more
+            # than its own 1σ and states that 1σ less precisely than they agree (a weak mode whose
+            # record-long pole a neighbouring one pulls). A pole that agrees within its 1σ stays: it
+            # is the primary estimate, and its shape and damping belong to it.
             fv = np.array([e.frequency_hz for e in good])
+            w_mean = float(np.mean(fv))
             w_std = float(np.std(fv, ddof=1) / math.sqrt(max(1.0, len(good) * indep)))
-            if f_hz is None or not (f_std is not None and math.isfinite(f_std) and f_std <= w_std):
-                method, f_hz, f_std = "ssi_windows", float(np.mean(fv)), w_std
+            stated = f_std is not None and math.isfinite(f_std)
+            if f_hz is None or f_std is None or not stated or (f_std > w_std and abs(f_hz - w_mean) > f_std):
+                method, f_hz, f_std = "ssi_windows", w_mean, w_std
         spectral = None
         if avg is not None:
             ref = f_hz or mon.f0[i]

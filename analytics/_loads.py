@@ -81,6 +81,19 @@ PREDICTION_COVERAGE = 0.8
 UNKNOWN_LEVERAGE = 0.5
 
 
+def _held_out_strain(name: str, virtual: object, measured: object, leverage: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """(h, measured, held-out virtual strain) of a gauge: the virtual strain's residual widened by
+    1/(1 − h), as if the estimate had not seen this gauge (h: its leverage, in [0, 1))."""
+    h = float(leverage)
+    if not 0.0 <= h < 1.0:
+        raise ValueError(f"leverage of gauge {name} must be in [0, 1), got {leverage}")
+    m = _finite_samples(f"strain gauge {name}", measured)
+    v = _finite_samples(f"virtual strain at {name}", virtual)
+    if m.size != v.size or m.size == 0:
+        raise ValueError(f"gauge {name}: virtual strain has {v.size} samples, measured {m.size} (must agree, > 0)")
+    return h, m, m - (m - v) / (1.0 - h)
+
+
 def gauge_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, float]], stations: object, *,
                 exponents: tuple[float, ...], n_eq: float,
                 half_cycles: HalfCyclePolicy = "half") -> tuple[list[DelBand] | None, list[dict]]:
@@ -122,14 +135,7 @@ def gauge_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, float]], 
     eta = as_signal("stations", stations, min_len=1, ndim=(1,))
     rows, found = [], []
     for name, position, virtual, measured, leverage in gauges:
-        h = float(leverage)
-        if not 0.0 <= h < 1.0:
-            raise ValueError(f"leverage of gauge {name} must be in [0, 1), got {leverage}")
-        m = _finite_samples(f"strain gauge {name}", measured)
-        v = _finite_samples(f"virtual strain at {name}", virtual)
-        if m.size != v.size or m.size == 0:
-            raise ValueError(f"gauge {name}: virtual strain has {v.size} samples, measured {m.size} (must agree, > 0)")
-        loo = m - (m - v) / (1.0 - h)
+        h, m, loo = _held_out_strain(name, virtual, measured, leverage)
         g = signal_loads(m, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain gauge {name}")
         w = signal_loads(loo, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"virtual strain at {name}")
         ratios = [(mx, dg / dv if dv > 0 else np.inf) for (mx, _, dg), (_, _, dv) in zip(g.dels, w.dels) if dg > 0]
@@ -279,14 +285,7 @@ def outside_basis_bands(gauges: list[tuple[str, float, np.ndarray, np.ndarray, f
         raise ValueError("outside: shapes and station RMS must be finite (RMS >= 0)")
     rows, used = [], []
     for k, (name, position, virtual, measured, leverage) in enumerate(gauges):
-        h = float(leverage)
-        if not 0.0 <= h < 1.0:
-            raise ValueError(f"leverage of gauge {name} must be in [0, 1), got {leverage}")
-        m = _finite_samples(f"strain gauge {name}", measured)
-        v = _finite_samples(f"virtual strain at {name}", virtual)
-        if m.size != v.size or m.size == 0:
-            raise ValueError(f"gauge {name}: virtual strain has {v.size} samples, measured {m.size} (must agree, > 0)")
-        loo = m - (m - v) / (1.0 - h)
+        h, m, loo = _held_out_strain(name, virtual, measured, leverage)
         e = m - loo
         rms_v = float(np.sqrt(np.mean(loo**2)))
         rms_e = float(np.sqrt(np.mean(e**2)))

@@ -194,9 +194,7 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     is made here."""
     import numpy as np
 
-    from analytics import UNKNOWN_LEVERAGE, bending_moment, signal_loads, virtual_strain
-
-    from ..processing.estimation import outside_shapes
+    from analytics import UNKNOWN_LEVERAGE, bending_moment, virtual_strain
 
     from ..processing.estimation import deformation_record
 
@@ -230,22 +228,9 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     moment = bending_moment(kappa, beam.bending_stiffness(eta)) * factor[:, None]
 
     compared, gauge_masks = _gauge_comparisons(rec, t, b[keep], units, beam)
-    used = _gauges_used(rec, record, model_args)
-    loo = record.estimated_here if leave_one_out is None else leave_one_out
-    judged = _out_of_sample(rec, compared, gauge_masks, t, used, model_args, beam) if loo else [
-        (n, p, v, m, UNKNOWN_LEVERAGE if n in used else 0.0) for n, p, v, m in compared]
-    beyond = outside_shapes(rig, units)
-    station_rms = np.sqrt(np.mean(strain**2, axis=0))
-    bands, gauge_rows = gauge_band(judged, positions, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles,
-                                   outside_at=beyond, station_rms=station_rms)
-    if loo and bands is not None:
-        # the estimate's own residuals too (in sample, widened by 1/(1 - h)): an estimate without a gauge
-        # errs otherwise than the one with all of them; each station takes the wider of the two bands
-        own = [(n, p, v, m, UNKNOWN_LEVERAGE if n in used else 0.0) for n, p, v, m in compared]
-        inside, _rows = gauge_band(own, positions, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles,
-                                   outside_at=beyond, station_rms=station_rms)
-        if inside is not None:
-            bands = [x if x.high >= y.high else y for x, y in zip(bands, inside)]
+    judged, bands, gauge_rows, beyond = _station_bands(rec, record, model_args, leave_one_out, compared, gauge_masks, t, units, positions,
+                                                       np.sqrt(np.mean(strain**2, axis=0)), exponents=exponents, n_eq=n_eq_value,
+                                                       half_cycles=half_cycles)
 
     default_detail = None if curve is None else _detail(curve)
     design = rig.fatigue.design_life_years if rig.fatigue is not None else None
@@ -253,12 +238,8 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     out_stations = [_station_doc(pos, spots.get(pos), strain[:, j], moment[:, j], beam, default_detail,
                                  band=None if bands is None else bands[j], **stress_of) for j, pos in enumerate(positions)]
 
-    channels = []
-    for name, position, _virtual, measured, _h in judged:
-        gl = signal_loads(measured, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, name=f"strain gauge {name}",
-                          detail=default_detail if beam.youngs_modulus is not None else None, to_stress=beam.youngs_modulus or 1.0)
-        gdoc = _signal_doc(gl, to_stress=beam.youngs_modulus)
-        channels.append({"name": name, "position_m": position, **gdoc, **_life(gdoc["damage"], duration, design)})
+    channels = _channel_docs(judged, beam, default_detail, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles,
+                             duration=duration, design=design)
 
     withheld = withhold_figures(out_stations, gauge_rows)
     root = _root_moment(b[keep], units, beam, factor, exponents, n_eq_value, half_cycles) if rig.support == "clamped" else None
@@ -276,6 +257,47 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         "windows": None if window_s is None else _windows(t, strain, judged, gauge_masks, positions, window_s, exponents=exponents, outside_at=beyond,
                                                           half_cycles=half_cycles, origin=float(times[0])),
     }
+
+
+def _station_bands(rec: Any, record: Any, model_args: dict, leave_one_out: bool | None, compared: list, gauge_masks: list, t: Any,
+                   units: Any, positions: list[float], station_rms: Any, *, exponents: tuple[float, ...], n_eq: float,
+                   half_cycles: str) -> tuple[list, Any, Any, Any]:
+    """The gauges as judged (out of sample where the estimate is made here), the stations' bands, the
+    gauges' rows and the modes above the basis at the stations."""
+    from analytics import UNKNOWN_LEVERAGE
+
+    from ..processing.estimation import outside_shapes
+
+    beam = rec.rig.beam
+    used = _gauges_used(rec, record, model_args)
+    loo = record.estimated_here if leave_one_out is None else leave_one_out
+    own = [(n, p, v, m, UNKNOWN_LEVERAGE if n in used else 0.0) for n, p, v, m in compared]
+    judged = _out_of_sample(rec, compared, gauge_masks, t, used, model_args, beam) if loo else own
+    beyond = outside_shapes(rec.rig, units)
+    bands, gauge_rows = gauge_band(judged, positions, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles,
+                                   outside_at=beyond, station_rms=station_rms)
+    if loo and bands is not None:
+        # the estimate's own residuals too (in sample, widened by 1/(1 - h)): an estimate without a gauge
+        # errs otherwise than the one with all of them; each station takes the wider of the two bands
+        inside, _rows = gauge_band(own, positions, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles,
+                                   outside_at=beyond, station_rms=station_rms)
+        if inside is not None:
+            bands = [x if x.high >= y.high else y for x, y in zip(bands, inside)]
+    return judged, bands, gauge_rows, beyond
+
+
+def _channel_docs(judged: list, beam: Any, default_detail: Any, *, exponents: tuple[float, ...], n_eq: float, half_cycles: str,
+                  duration: float, design: float | None) -> list[dict[str, Any]]:
+    """The measured gauges' own loads and life, beside the virtual ones."""
+    from analytics import signal_loads
+
+    channels = []
+    for name, position, _virtual, measured, _h in judged:
+        gl = signal_loads(measured, exponents=exponents, n_eq=n_eq, half_cycles=half_cycles, name=f"strain gauge {name}",
+                          detail=default_detail if beam.youngs_modulus is not None else None, to_stress=beam.youngs_modulus or 1.0)
+        gdoc = _signal_doc(gl, to_stress=beam.youngs_modulus)
+        channels.append({"name": name, "position_m": position, **gdoc, **_life(gdoc["damage"], duration, design)})
+    return channels
 
 
 def _gauge_comparisons(rec: Any, t: Any, b: Any, units: Any, beam: Any) -> tuple[list[tuple[str, float, Any, Any]], list[Any]]:

@@ -384,124 +384,14 @@ class VirtualRig:
 
         if self.biaxial:
             r, rd, rdd = self._xi_range
-            self._biaxial_fast_sensors(t, (y, yd, ydd), (r, rd, rdd), d, d_acc, meas, delays)
-            self._slow_sensors(index, t, y, yd, ydd, d, d_acc, meas, delays, xi=(r, rd, rdd))
+            _biaxial_fast_sensors(self, t, (y, yd, ydd), (r, rd, rdd), d, d_acc, meas, delays)
+            _slow_sensors(self, index, t, y, yd, ydd, d, d_acc, meas, delays, xi=(r, rd, rdd))
             truth = self._truth(y, d)
             truth.update(self._truth_xi(r))
             return SampleBlock(times=t, measurements=meas, truth=truth, delays=delays)
-        self._fast_sensors(t, y, yd, ydd, d, d_acc, meas, delays)
-        self._slow_sensors(index, t, y, yd, ydd, d, d_acc, meas, delays)
+        _fast_sensors(self, t, y, yd, ydd, d, d_acc, meas, delays)
+        _slow_sensors(self, index, t, y, yd, ydd, d, d_acc, meas, delays)
         return SampleBlock(times=t, measurements=meas, truth=self._truth(y, d), delays=delays)
-
-    def _fast_sensors(self, t, y, yd, ydd, d, d_acc, meas: dict, delays: dict) -> None:
-        """The IMUs and strain gauges at the sample rate."""
-        n = len(t)
-        e = self.settings.errors
-        rng = self._rng_sensors
-        accel_wander = self._accel_wander.next(n)
-        gyro_wander = self._gyro_wander.next(n)
-        # every sensor's kinematics in one pass (fields (n, sensors)), its own column taken below
-        fast = points_motion(self.basis, [s.position for s in (*self.imus, *self.gauges)], y, yd, ydd, d, d_acc,
-                             self.plants[0].gravity)
-        for i, imu in enumerate(self.imus):
-            fx, fy = fast.specific_force_x[:, i], fast.specific_force_y[:, i]
-            mis = self._misalignment[i]
-            cm, sm = np.cos(mis), np.sin(mis)
-            accel = np.column_stack([cm * fx + sm * fy, -sm * fx + cm * fy, np.zeros(n)])
-            gyro = np.column_stack([np.zeros(n), np.zeros(n), fast.rate[:, i]])
-            accel = accel * self._accel_scale[i] + self._accel_bias[i] + accel_wander[:, i] + e.accel_noise * rng.standard_normal((n, 3))
-            gyro = gyro * self._gyro_scale[i] + self._gyro_bias[i] + gyro_wander[:, i] + e.gyro_noise * rng.standard_normal((n, 3))
-            meas[imu.topic] = (t, np.hstack([accel, gyro]))
-            delays[imu.topic] = e.imu_delay + e.delay_jitter * rng.random(n)
-
-        for i, gauge in enumerate(self.gauges):
-            curvature = fast.curvature[:, len(self.imus) + i]
-            strain = -self._fibre_distance[i] * curvature + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
-            meas[gauge.topic] = (t, strain[:, None])
-            delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
-
-
-    def _biaxial_fast_sensors(self, t, zeta, xi, d, d_acc, meas: dict, delays: dict) -> None:
-        """The IMUs and gauges of a biaxial beam: accel z and gyro y carry the ξ motion, a gauge at
-        (ζp, ξp) reads −(ζp κζ + ξp κξ); the same error draws, in the same order, as the planar rig."""
-        n = len(t)
-        e = self.settings.errors
-        rng = self._rng_sensors
-        accel_wander = self._accel_wander.next(n)
-        gyro_wander = self._gyro_wander.next(n)
-        fast = biaxial_points_motion(self.basis, self.basis_xi, [s.position for s in (*self.imus, *self.gauges)],
-                                     tuple(a[:, 1:] for a in zeta), tuple(a[:, 1:] for a in xi),
-                                     d, d_acc, self.plants[0].gravity)
-        for i, imu in enumerate(self.imus):
-            fx, fy, fz = (fast.specific_force[k][:, i] for k in range(3))
-            mis = self._misalignment[i]
-            cm, sm = np.cos(mis), np.sin(mis)
-            accel = np.column_stack([cm * fx + sm * fy, -sm * fx + cm * fy, fz])
-            gyro = np.column_stack([np.zeros(n), fast.rate[1][:, i], fast.rate[2][:, i]])  # x: twist, noise only
-            accel = accel * self._accel_scale[i] + self._accel_bias[i] + accel_wander[:, i] + e.accel_noise * rng.standard_normal((n, 3))
-            gyro = gyro * self._gyro_scale[i] + self._gyro_bias[i] + gyro_wander[:, i] + e.gyro_noise * rng.standard_normal((n, 3))
-            meas[imu.topic] = (t, np.hstack([accel, gyro]))
-            delays[imu.topic] = e.imu_delay + e.delay_jitter * rng.random(n)
-        for i, gauge in enumerate(self.gauges):
-            j = len(self.imus) + i
-            zeta_p, xi_p = self._gauge_points[i]
-            strain = -(zeta_p * fast.curvature[:, j] + xi_p * fast.curvature_xi[:, j])
-            strain = strain + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
-            meas[gauge.topic] = (t, strain[:, None])
-            delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
-
-    def _slow_sensors(self, index, t, y, yd, ydd, d, d_acc, meas: dict, delays: dict, xi=None) -> None:
-        """The ToFs, the bearing sensor (every ``SLOW_DIVIDER``-th sample) and the temperature."""
-        n = len(t)
-        rig = self.nominal_rig
-        e = self.settings.errors
-        rng = self._rng_sensors
-        plant_g = self.plants[0].gravity
-        slow = index % SLOW_DIVIDER == 0
-        t_slow = t[slow]
-        y_slow, yd_slow, ydd_slow = y[slow], yd[slow], ydd[slow]
-        d_slow, d_acc_slow = d[slow], d_acc[slow]
-        if e.tof_time_offset > 0:
-            # Off-grid samples: states by cubic Hermite interpolation to the next sample (O(dt⁴)).
-            k = np.nonzero(slow)[0]
-            k1 = np.minimum(k + 1, n - 1)
-            s = np.where(k1 > k, e.tof_time_offset / self.dt, 0.0)[:, None]
-            h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
-            y_slow = h00 * y[k] + h10 * self.dt * yd[k] + h01 * y[k1] + h11 * self.dt * yd[k1]
-            t_slow = t_slow + s[:, 0] * self.dt
-            d_slow, _, d_acc_slow = self.support_motion(t_slow)
-        theta_slow = y_slow[:, 0]
-        slow_motion = points_motion(self.basis, [s.position for s in self.tofs], y_slow, yd_slow, ydd_slow, d_slow,
-                                    d_acc_slow, plant_g) if self.tofs and xi is None else None
-        biaxial_motion = None
-        if self.tofs and xi is not None:
-            if e.tof_time_offset > 0:
-                raise ValueError("errors.tof_time_offset is not simulated on a biaxial beam (its ToFs sample on the grid)")
-            biaxial_motion = biaxial_points_motion(
-                self.basis, self.basis_xi, [s.position for s in self.tofs], (y_slow[:, 1:], yd_slow[:, 1:], ydd_slow[:, 1:]),
-                tuple(a[slow][:, 1:] for a in xi), d_slow, d_acc_slow, plant_g)
-        for i, tof in enumerate(self.tofs):
-            if biaxial_motion is not None:
-                # along the sensor's +y axis (turned by both planes' slopes) to the plane ζ = reflector
-                zeta = biaxial_motion.inertial[1][:, i]
-                distance = (rig.reflector_distance - zeta) / biaxial_motion.y_axis[1][:, i]
-            else:
-                zeta, slope_angle = slow_motion.inertial_zeta[:, i], slow_motion.slope_angle[:, i]
-                distance = (rig.reflector_distance - zeta) / np.cos(theta_slow + slope_angle)
-            distance = distance + self._tof_offset[i] + e.tof_noise * rng.standard_normal(distance.size)
-            if e.tof_resolution > 0:
-                distance = np.round(distance / e.tof_resolution) * e.tof_resolution
-            meas[tof.topic] = (t_slow, distance[:, None])
-            delays[tof.topic] = e.tof_delay + e.delay_jitter * rng.random(t_slow.size)
-        if rig.sensors_of("bearing"):
-            bearing = d_slow + e.bearing_noise * rng.standard_normal(t_slow.size)
-            meas["/bearing/displacement"] = (t_slow, bearing[:, None])
-            delays["/bearing/displacement"] = e.tof_delay + e.delay_jitter * rng.random(t_slow.size)
-        if rig.sensors_of("temperature"):
-            every = index % TEMPERATURE_DIVIDER == 0
-            temp = self.temperature(t[every]) + e.temperature_noise * rng.standard_normal(int(every.sum()))
-            meas["/env/temperature"] = (t[every], temp[:, None])
-            delays["/env/temperature"] = np.full(int(every.sum()), 0.01)
 
     def _truth_xi(self, r) -> dict[str, np.ndarray]:
         """The ξ plane's truth: ``e_xi``, ``deflection_xi``, ``curvature_xi`` (body frame, at the truth stations)."""
@@ -522,6 +412,117 @@ class VirtualRig:
             "deflection": q @ deflection.T,
             "curvature": q @ curvature.T,
         }
+
+
+def _fast_sensors(self: VirtualRig, t, y, yd, ydd, d, d_acc, meas: dict, delays: dict) -> None:
+    """The IMUs and strain gauges at the sample rate."""
+    n = len(t)
+    e = self.settings.errors
+    rng = self._rng_sensors
+    accel_wander = self._accel_wander.next(n)
+    gyro_wander = self._gyro_wander.next(n)
+    # every sensor's kinematics in one pass (fields (n, sensors)), its own column taken below
+    fast = points_motion(self.basis, [s.position for s in (*self.imus, *self.gauges)], y, yd, ydd, d, d_acc,
+                         self.plants[0].gravity)
+    for i, imu in enumerate(self.imus):
+        fx, fy = fast.specific_force_x[:, i], fast.specific_force_y[:, i]
+        mis = self._misalignment[i]
+        cm, sm = np.cos(mis), np.sin(mis)
+        accel = np.column_stack([cm * fx + sm * fy, -sm * fx + cm * fy, np.zeros(n)])
+        gyro = np.column_stack([np.zeros(n), np.zeros(n), fast.rate[:, i]])
+        accel = accel * self._accel_scale[i] + self._accel_bias[i] + accel_wander[:, i] + e.accel_noise * rng.standard_normal((n, 3))
+        gyro = gyro * self._gyro_scale[i] + self._gyro_bias[i] + gyro_wander[:, i] + e.gyro_noise * rng.standard_normal((n, 3))
+        meas[imu.topic] = (t, np.hstack([accel, gyro]))
+        delays[imu.topic] = e.imu_delay + e.delay_jitter * rng.random(n)
+
+    for i, gauge in enumerate(self.gauges):
+        curvature = fast.curvature[:, len(self.imus) + i]
+        strain = -self._fibre_distance[i] * curvature + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
+        meas[gauge.topic] = (t, strain[:, None])
+        delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
+
+
+def _biaxial_fast_sensors(self: VirtualRig, t, zeta, xi, d, d_acc, meas: dict, delays: dict) -> None:
+    """The IMUs and gauges of a biaxial beam: accel z and gyro y carry the ξ motion, a gauge at
+    (ζp, ξp) reads −(ζp κζ + ξp κξ); the same error draws, in the same order, as the planar rig."""
+    n = len(t)
+    e = self.settings.errors
+    rng = self._rng_sensors
+    accel_wander = self._accel_wander.next(n)
+    gyro_wander = self._gyro_wander.next(n)
+    fast = biaxial_points_motion(self.basis, self.basis_xi, [s.position for s in (*self.imus, *self.gauges)],
+                                 tuple(a[:, 1:] for a in zeta), tuple(a[:, 1:] for a in xi),
+                                 d, d_acc, self.plants[0].gravity)
+    for i, imu in enumerate(self.imus):
+        fx, fy, fz = (fast.specific_force[k][:, i] for k in range(3))
+        mis = self._misalignment[i]
+        cm, sm = np.cos(mis), np.sin(mis)
+        accel = np.column_stack([cm * fx + sm * fy, -sm * fx + cm * fy, fz])
+        gyro = np.column_stack([np.zeros(n), fast.rate[1][:, i], fast.rate[2][:, i]])  # x: twist, noise only
+        accel = accel * self._accel_scale[i] + self._accel_bias[i] + accel_wander[:, i] + e.accel_noise * rng.standard_normal((n, 3))
+        gyro = gyro * self._gyro_scale[i] + self._gyro_bias[i] + gyro_wander[:, i] + e.gyro_noise * rng.standard_normal((n, 3))
+        meas[imu.topic] = (t, np.hstack([accel, gyro]))
+        delays[imu.topic] = e.imu_delay + e.delay_jitter * rng.random(n)
+    for i, gauge in enumerate(self.gauges):
+        j = len(self.imus) + i
+        zeta_p, xi_p = self._gauge_points[i]
+        strain = -(zeta_p * fast.curvature[:, j] + xi_p * fast.curvature_xi[:, j])
+        strain = strain + self._strain_offset[i] + e.strain_noise * rng.standard_normal(n)
+        meas[gauge.topic] = (t, strain[:, None])
+        delays[gauge.topic] = e.strain_delay + e.delay_jitter * rng.random(n)
+
+def _slow_sensors(self: VirtualRig, index, t, y, yd, ydd, d, d_acc, meas: dict, delays: dict, xi=None) -> None:
+    """The ToFs, the bearing sensor (every ``SLOW_DIVIDER``-th sample) and the temperature."""
+    n = len(t)
+    rig = self.nominal_rig
+    e = self.settings.errors
+    rng = self._rng_sensors
+    plant_g = self.plants[0].gravity
+    slow = index % SLOW_DIVIDER == 0
+    t_slow = t[slow]
+    y_slow, yd_slow, ydd_slow = y[slow], yd[slow], ydd[slow]
+    d_slow, d_acc_slow = d[slow], d_acc[slow]
+    if e.tof_time_offset > 0:
+        # Off-grid samples: states by cubic Hermite interpolation to the next sample (O(dt⁴)).
+        k = np.nonzero(slow)[0]
+        k1 = np.minimum(k + 1, n - 1)
+        s = np.where(k1 > k, e.tof_time_offset / self.dt, 0.0)[:, None]
+        h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+        y_slow = h00 * y[k] + h10 * self.dt * yd[k] + h01 * y[k1] + h11 * self.dt * yd[k1]
+        t_slow = t_slow + s[:, 0] * self.dt
+        d_slow, _, d_acc_slow = self.support_motion(t_slow)
+    theta_slow = y_slow[:, 0]
+    slow_motion = points_motion(self.basis, [s.position for s in self.tofs], y_slow, yd_slow, ydd_slow, d_slow,
+                                d_acc_slow, plant_g) if self.tofs and xi is None else None
+    biaxial_motion = None
+    if self.tofs and xi is not None:
+        if e.tof_time_offset > 0:
+            raise ValueError("errors.tof_time_offset is not simulated on a biaxial beam (its ToFs sample on the grid)")
+        biaxial_motion = biaxial_points_motion(
+            self.basis, self.basis_xi, [s.position for s in self.tofs], (y_slow[:, 1:], yd_slow[:, 1:], ydd_slow[:, 1:]),
+            tuple(a[slow][:, 1:] for a in xi), d_slow, d_acc_slow, plant_g)
+    for i, tof in enumerate(self.tofs):
+        if biaxial_motion is not None:
+            # along the sensor's +y axis (turned by both planes' slopes) to the plane ζ = reflector
+            zeta = biaxial_motion.inertial[1][:, i]
+            distance = (rig.reflector_distance - zeta) / biaxial_motion.y_axis[1][:, i]
+        else:
+            zeta, slope_angle = slow_motion.inertial_zeta[:, i], slow_motion.slope_angle[:, i]
+            distance = (rig.reflector_distance - zeta) / np.cos(theta_slow + slope_angle)
+        distance = distance + self._tof_offset[i] + e.tof_noise * rng.standard_normal(distance.size)
+        if e.tof_resolution > 0:
+            distance = np.round(distance / e.tof_resolution) * e.tof_resolution
+        meas[tof.topic] = (t_slow, distance[:, None])
+        delays[tof.topic] = e.tof_delay + e.delay_jitter * rng.random(t_slow.size)
+    if rig.sensors_of("bearing"):
+        bearing = d_slow + e.bearing_noise * rng.standard_normal(t_slow.size)
+        meas["/bearing/displacement"] = (t_slow, bearing[:, None])
+        delays["/bearing/displacement"] = e.tof_delay + e.delay_jitter * rng.random(t_slow.size)
+    if rig.sensors_of("temperature"):
+        every = index % TEMPERATURE_DIVIDER == 0
+        temp = self.temperature(t[every]) + e.temperature_noise * rng.standard_normal(int(every.sum()))
+        meas["/env/temperature"] = (t[every], temp[:, None])
+        delays["/env/temperature"] = np.full(int(every.sum()), 0.01)
 
 
 def _truth_xi_fields(self: VirtualRig, r: np.ndarray) -> dict[str, np.ndarray]:

@@ -143,7 +143,10 @@ def test_dashboard_in_headless_chromium(chromium, live_dashboard, tmp_path):
         # Pause freezes this browser's view and, with no live browser left, the live reads.
         page.get_by_text("Spectra", exact=True).first.click()
         page.get_by_text("Pause live view").first.click()
-        visible(page, "PAUSED").wait_for(timeout=10_000)
+        # the click travels over the websocket to the view, and the header comes back on its next
+        # render: on a loaded machine each leg may take seconds, so the server side is waited for first
+        wait(lambda: view.paused, 30, "the pause to reach the view", poll=0.05)
+        visible(page, "PAUSED").wait_for(timeout=30_000)
         time.sleep(1.0)
         live0 = dash.poller.polls.get("live", 0)
         time.sleep(2.0)

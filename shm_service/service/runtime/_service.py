@@ -3,7 +3,6 @@ and the dashboard, and implements the ``contract.ServicePort`` the API and the d
 
 from __future__ import annotations
 
-import hmac
 import logging
 import threading
 import time
@@ -30,6 +29,7 @@ from contract import (
 
 from .._config import ServiceSettings, SettingsError, resolve_token
 from ._dashboard_port import StructureModel, start_dashboard
+from ._operator import acknowledge_alarm, check_token
 from ..http._metrics import fleet_metrics
 from ..alarms._notify import Notifier, notify_targets
 from ..storage._retention import RetentionWorker
@@ -323,10 +323,7 @@ class MonitoringService(_StoredRows, SingleStructureView):
 
     def check_token(self, token: str | None) -> None:
         """Raise PermissionError unless ``token`` is the configured one."""
-        if self.token is None:
-            raise PermissionError("no API token is configured (server.token_file or SHM_TOKEN); this action is disabled")
-        if not token or not hmac.compare_digest(token.encode(), self.token.encode()):
-            raise PermissionError("missing or wrong token")
+        check_token(self.token, token)
 
     def health(self) -> HealthDocument:
         """``/healthz``: cheap (no query of the database), "degraded" with the reasons why (of a
@@ -364,10 +361,7 @@ class MonitoringService(_StoredRows, SingleStructureView):
 
     def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         self.check_token(token)
-        alarm = self.storage.acknowledge(alarm_id, by, retry_s=min(self.settings.storage_retry_s, 3.0))
-        if alarm is None:
-            raise KeyError(f"alarm {alarm_id} does not exist")
-        return alarm
+        return acknowledge_alarm(self.storage, alarm_id, by, self.settings.storage_retry_s)
 
     def request_baseline(self, structure_id: str | None = None) -> BaselineRequestDocument:
         """Learn a new baseline of the single structure (or of ``structure_id``) from its next windows."""

@@ -7,7 +7,6 @@ with ``Retry-After`` (``ServiceStarting``), until the service replaces this stan
 
 from __future__ import annotations
 
-import hmac
 import time
 from collections.abc import Mapping
 from typing import Any, Generic, Protocol
@@ -15,6 +14,7 @@ from typing import Any, Generic, Protocol
 from contract import HealthDocument, ServicePort, ServiceStarting
 
 from .._config import ServiceSettings, resolve_token
+from ._operator import check_token
 
 __all__ = ["ServiceSlot", "ServiceStarting", "StartingService", "port_methods"]
 
@@ -36,10 +36,7 @@ class StartingService:
         self.started_at = time.time()
 
     def check_token(self, token: str | None) -> None:
-        if self.token is None:
-            raise PermissionError("no API token is configured (server.token_file or SHM_TOKEN); this action is disabled")
-        if not token or not hmac.compare_digest(token.encode(), self.token.encode()):
-            raise PermissionError("missing or wrong token")
+        check_token(self.token, token)
 
     def health(self) -> HealthDocument:
         return HealthDocument(status="degraded", uptime_s=round(time.time() - self.started_at, 1),

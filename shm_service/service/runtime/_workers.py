@@ -37,12 +37,13 @@ from contract import (
 
 from .._config import ServiceSettings, render_toml, resolve_token
 from ._dashboard_port import StructureModel, start_dashboard
+from ._operator import acknowledge_alarm, check_token
 from ..http._metrics import fleet_metrics, merge_expositions
 from ..sources._ingest import IngestError
 from ._launch import ServeProcess, ServeStartError, start_serve
 from ..alarms._notify import Notifier, notify_targets
 from ._processes import StaleWorkers, record_workers, stop_stale_workers
-from ._service import MonitoringService, NotSingleStructure, ServiceError, StructureUnavailable, _StoredRows
+from ._service import NotSingleStructure, ServiceError, StructureUnavailable, _StoredRows
 from ._structure import _ModelCache
 from ..storage._storage import Storage
 from ..storage._writer import WriterServer
@@ -243,7 +244,7 @@ class WorkerFleet(_StoredRows):
     # -- what the API needs -----------------------------------------------------------------
 
     def check_token(self, token: str | None) -> None:
-        MonitoringService.check_token(self, token)  # type: ignore[arg-type]
+        check_token(self.token, token)
 
     def health(self) -> HealthDocument:
         return _fleet_health(self)
@@ -285,10 +286,7 @@ class WorkerFleet(_StoredRows):
 
     def acknowledge(self, alarm_id: int, token: str, by: str) -> AlarmDocument:
         self.check_token(token)
-        alarm = self.storage.acknowledge(alarm_id, by, retry_s=min(self.settings.storage_retry_s, 3.0))
-        if alarm is None:
-            raise KeyError(f"alarm {alarm_id} does not exist")
-        return alarm
+        return acknowledge_alarm(self.storage, alarm_id, by, self.settings.storage_retry_s)
 
     def request_baseline(self, structure_id: str | None = None) -> BaselineRequestDocument:
         if structure_id is None:
