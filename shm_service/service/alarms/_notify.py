@@ -178,10 +178,6 @@ class Notifier:
     def sent(self) -> int:
         return self.outcomes["sent"]
 
-    @property
-    def failed_attempts(self) -> int:
-        return self.outcomes["retry"] + self.outcomes["permanent"] + self.outcomes["given_up"]
-
     def snapshot(self) -> tuple[Counter, Any]:
         """(outcomes of this run, the notifier sink's status) read at one instant."""
         with self._lock:

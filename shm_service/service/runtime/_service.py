@@ -7,7 +7,6 @@ import logging
 import threading
 import time
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 
@@ -279,8 +278,8 @@ class MonitoringService(_StoredRows, SingleStructureView):
             stale = self.storage.mark_stale(now - a.stale_after_s, now)
             if stale:
                 log.warning("alarm(s) %s marked stale: their source has delivered no data for %.0f s", stale, a.stale_after_s)
-            if a.repeat_interval_s is not None and self.storage.renotify_due(a.repeat_interval_s, now):
-                pass
+            if a.repeat_interval_s is not None:  # queues a re-notification of each alarm still firing since then
+                self.storage.renotify_due(a.repeat_interval_s, now)
             self.notifier.wake()
         except Exception as exc:
             if is_transient(exc):  # the database locked or full for a while: expected, no traceback
@@ -410,8 +409,4 @@ class MonitoringService(_StoredRows, SingleStructureView):
         result = structure.source.submit(document)
         return None if result is None else IngestResultDocument(**result.as_dict())
 
-
-def _check(settings: ServiceSettings) -> None:
-    if settings.source.kind == "replay" and not Path(settings.source.path or "").is_file():
-        raise SettingsError(f"replay: {settings.source.path} does not exist")
 

@@ -393,9 +393,6 @@ class Pipeline:
     def pending_commits(self) -> int:
         return len(self.commits.pending)
 
-    def flush_commits(self, retry_s: float | None = None) -> bool:
-        return self.commits.flush(retry_s)
-
     def stuck_sensors(self) -> list[str]:
         """Topics whose readings have stayed exactly the same for ``stuck_after_s`` and more."""
         return self.checks.stuck_sensors()
