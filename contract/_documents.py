@@ -64,6 +64,7 @@ __all__ = [
     "SensorState",
     "ServiceStatusDocument",
     "SinkStatusDocument",
+    "BrokerStatusDocument",
     "SourceStatusDocument",
     "SpectrumDocument",
     "StatusDocument",
@@ -480,9 +481,31 @@ class ServiceStatusDocument(_Document):
         "calibrating at rest and the time left, waiting for the first analysis window, learning the baseline, monitoring")
 
 
+class BrokerStatusDocument(_Document):
+    """An MQTT source's connection: where it subscribes, whether the broker holds its session."""
+
+    url: str = Field(description="the broker (mqtt.url)")
+    topic: str = Field(description="the topic subscribed with QoS 1: TOPIC_PREFIX/ID/ingest")
+    client_id: str = Field(description="the persistent session's client id")
+    connected: bool
+    session_present: bool | None = Field(None, description="whether the broker still held the session at the last "
+                                         "connect (False: what was published before was not kept for it)")
+    connects: Count = Field(0, description="connections made since the start")
+    bodies: Count = Field(0, description="bodies taken and acknowledged")
+    refused_bodies: Count = Field(0, description="bodies that were not an ingest body as a whole (acknowledged, counted "
+                                  "as rejected malformed_body)")
+    redelivered: Count = Field(0, description="bodies the broker sent again after a reconnect that had been taken "
+                               "already (acknowledged, not counted again)")
+    unacknowledged: Count = Field(0, description="bodies handed to the pipeline whose window is not committed yet "
+                                  "(acknowledged then; until then the broker keeps them for the next holder)")
+    acked_early: Count = Field(0, description="bodies acknowledged before their window was committed, because more "
+                               "than mqtt.receive_maximum / 2 waited")
+    error: str | None = Field(None, description="why the broker cannot be reached, while it cannot")
+
+
 class SourceStatusDocument(_Document):
     id: str
-    kind: Literal["sim", "replay", "follow", "ingest"]
+    kind: Literal["sim", "replay", "follow", "ingest", "mqtt"]
     state: str
     error: str | None = None
     messages: Count
@@ -495,6 +518,7 @@ class SourceStatusDocument(_Document):
     problems: list[str]
     latency_s: Num = None
     clock_jumps: Count = Field(0, description="stamps (or batches) found off the source's clock since the start")
+    broker: BrokerStatusDocument | None = Field(None, description="mqtt: the connection to the broker")
 
 
 class RestCalibrationDocument(_Document):
@@ -542,6 +566,10 @@ class EstimatorStatusDocument(_Document):
     aiding: dict[str, AidingChannelDocument] = Field(default_factory=dict)
     rejected: Count = 0
     degraded_imus: list[DegradedImuDocument] = Field(default_factory=list)
+    gauge_std: dict[str, Finite] | None = Field(
+        None, description="gauge -> the 1σ (m/m) the filter gives it, once raised above its rest calibration's because "
+                          "it reads strain outside the unit deformations (None: none raised)")
+    gauge_note: str | None = Field(None, description="why the gauges' 1σ was raised, and what would carry that motion")
 
 
 class HotSpotLoadsDocument(_Document):
@@ -584,6 +612,12 @@ class PipelineStatusDocument(_Document):
     windows_committed: Count
     windows_skipped_incomplete: Count
     windows_skipped_warmup: Count
+    windows_usable: Count = Field(0, description="analysed windows with an identified mode (those that learn the baseline and feed "
+                                                 "the charts)")
+    windows_rejected: dict[str, Count] = Field(default_factory=dict, description="analysed windows that are not usable, by reason "
+                                               "(quiet, forced, no_mode_identified: analytics.WINDOW_REJECTIONS)")
+    no_usable_window: str | None = Field(None, description="when windows were analysed or skipped but none is usable: why (each "
+                                         "reason counted) and what to change; None otherwise")
     baseline: Literal["learning", "active"]
     data_time_s: Num = None
     processed_data_s: Num = None
@@ -699,7 +733,7 @@ class StructureSummaryDocument(_Document):
     """One structure of a fleet as ``GET /api/structures`` lists it."""
 
     id: str = Field(description="the structure id: the source of its trend rows, alarms and notifications")
-    kind: Literal["sim", "replay", "follow", "ingest"]
+    kind: Literal["sim", "replay", "follow", "ingest", "mqtt"]
     state: StructureState = Field(
         description="starting, running, degraded (running, but its batches fail, its filter diverged or its database "
         "writes wait), failed (its source or its start failed: see error), finished, stopped")
@@ -711,6 +745,8 @@ class StructureSummaryDocument(_Document):
         "the data time; None before the first data (and at speed max); 0 once a replay or simulation has ended")
     windows: Count = Field(0, description="analysis windows committed to the database")
     active_alarms: dict[str, AlarmLevel] = Field(default_factory=dict, description="chart -> level of its active alarm")
+    node: str | None = Field(None, description="the node that runs it (shm serve --node): its lease's holder; null: no "
+                             "node holds it now (one takes it within the lease), or the service has no nodes")
 
 
 class StructuresDocument(_Document):

@@ -49,6 +49,19 @@ def _time_arg(text: str) -> float:
     return (moment if moment.tzinfo else moment.replace(tzinfo=timezone.utc)).timestamp()
 
 
+def _database_target(text: str) -> str:
+    """An argparse ``type`` for the service's database: a PostgreSQL URL (checked for a host and
+    a database) or a SQLite file (as ``output_path``)."""
+    from .service.storage._url import check_postgres_url, is_postgres_url
+
+    if is_postgres_url(text) or "://" in text:
+        try:
+            return check_postgres_url(text, "--db")
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    return output_path(text)
+
+
 def _add_analysis_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=None, help="a `shm serve` configuration (TOML): the same analytics, alarm hysteresis and warm-up")
     add_model_arguments(p, aided=False)
@@ -197,7 +210,8 @@ def _add_analyze_parser(sub: Any) -> None:
 def _add_reprocess_parser(sub: Any) -> None:
     p = sub.add_parser("reprocess", help="estimator and analysis over many recordings (dask.distributed) into a service database")
     p.add_argument("recordings", nargs="+", metavar="FILE", help="recordings (.mcap) of the contract")
-    p.add_argument("--db", required=True, type=output_path, help="the service's SQLite database (created if missing)")
+    p.add_argument("--db", required=True, type=_database_target,
+                   help="the service's database: a SQLite file (created if missing) or postgresql://USER@HOST:PORT/DB")
     _add_cluster_arguments(p)
     p.add_argument("--force", action="store_true", help="reprocess files already done with this configuration")
     p.add_argument("--structure", default=None, metavar="ID",
@@ -214,7 +228,8 @@ def _add_baseline_parser(sub: Any) -> None:
                                               "it as the structure's active baseline (the service loads it at start)")
     p.add_argument("recordings", nargs="+", metavar="FILE", help="recordings (.mcap) of the healthy period")
     p.add_argument("--structure", required=True, metavar="ID", help="the source id the service monitors it as")
-    p.add_argument("--db", required=True, type=output_path, help="the service's SQLite database")
+    p.add_argument("--db", required=True, type=_database_target,
+                   help="the service's database: a SQLite file or postgresql://USER@HOST:PORT/DB")
     p.add_argument("--from", dest="start", type=_time_arg, default=None, metavar="TIME",
                    help="start of the healthy period: UNIX s or ISO 8601 (default: the files' start)")
     p.add_argument("--to", dest="end", type=_time_arg, default=None, metavar="TIME",

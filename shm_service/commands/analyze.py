@@ -71,6 +71,11 @@ def cmd_analyze(args: argparse.Namespace) -> int:
                     print(f"  mode {m['mode']} not charted: {m['reason']}")
         for problem in output["recording_problems"]:
             print(f"problem: {problem}")
+        usability = output.get("usability") or {}
+        if usability.get("why_none"):
+            print(usability["why_none"])
+            for change in usability["change"]:
+                print(f"  change: {change}")
         print(f"flags: {len(output['flags'])}")
         for flag in output["flags"]:
             print("  " + ", ".join(f"{k}={v}" for k, v in flag.items()))

@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from .._argtypes import number
+from .storage._url import redact
 
 __all__ = ["add_serve_parser", "run_serve"]
 
@@ -42,6 +43,9 @@ def add_serve_parser(sub: Any) -> argparse.ArgumentParser:
                    help="worker processes hosting the [[structures]] (default: one per core, at most one per structure; "
                    "1: all in this process)")
     p.add_argument("--worker-of", metavar="I/N", help=argparse.SUPPRESS)  # internal: a worker process of a fleet
+    p.add_argument("--node", metavar="NAME",
+                   help="run as node NAME of a fleet across machines: the nodes with this configuration share its "
+                   "[[structures]] through leases in the PostgreSQL database storage.url (one process per node)")
     add_process_arguments(p)
     p.set_defaults(func=run_serve)
     return p
@@ -107,6 +111,8 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
         settings = None  # _run_serve says what is wrong
     if settings is None or args.print_config or getattr(args, "worker_of", None) is not None:
         return _run_serve(args, environ=environ)
+    if settings.storage.url is not None:  # a shared PostgreSQL: nodes are fenced by their leases, not by a file
+        return _run_serve(args, environ=environ)
     try:
         lock = DatabaseLock.acquire(settings.db_path)
     except (DatabaseBusy, OSError) as exc:
@@ -132,7 +138,7 @@ def _worker_part(settings: Any, worker_of: str) -> tuple[Any, Any] | None:
     except ValueError as exc:
         print(f"shm serve: error: --worker-of {worker_of!r}: {exc}", file=sys.stderr)
         return None
-    return settings, hold_worker_lock(settings.db)
+    return settings, hold_worker_lock(settings.lock_path)
 
 
 def _wait_for_rig(args: argparse.Namespace, settings: Any, slot: Any, api: Any, stop: threading.Event, *,
@@ -176,7 +182,8 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s",
                         stream=sys.stderr)
     worker_of = getattr(args, "worker_of", None)
-    if settings.worker_count > 1 and worker_of is None:
+    node = getattr(args, "node", None)
+    if settings.worker_count > 1 and worker_of is None and node is None:
         return _run_workers(settings, args, environ)
     if worker_of is not None:
         part = _worker_part(settings, worker_of)
@@ -196,7 +203,12 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
     s = settings.server
     api = None
     try:
-        service = MonitoringService(settings, environ=environ, deliver=deliver)
+        if node is not None:
+            from .runtime._node import NodeService
+
+            service: MonitoringService | None = NodeService(settings, node, environ=environ)
+        else:
+            service = MonitoringService(settings, environ=environ, deliver=deliver)
         slot = ServiceSlot(service)
     except RigPending as pending:
         # follow: the file is not there yet. The API comes up now (healthz: degraded, the other
@@ -229,8 +241,10 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
 def _print_where(service: Any, settings: Any, api: Any) -> None:
     what = (f"{len(service.structures)} structures" if service.fleet
             else f"source {settings.source.spec} as '{service.source.id}'")
+    if getattr(service, "node", None) is not None:
+        what = f"node {service.node!r} of a fleet of {len(settings.structures)} structures (shared by leases)"
     print(f"shm serve: API at {api.url} (docs {api.url}/docs); {what}; "
-          f"data in {settings.data_dir} (db {settings.db}, recordings "
+          f"data in {settings.data_dir} (db {redact(str(settings.db))}, recordings "
           f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
     if service.dashboard is not None:
         print(f"shm serve: dashboard at {getattr(service.dashboard, 'url', '?')}", flush=True)
@@ -247,7 +261,7 @@ def _serve_until_stopped(args: argparse.Namespace, settings: Any, service: Any, 
         service.start()
         _ready(args, state="serving", api=api.url, docs=f"{api.url}/docs",
                dashboard=getattr(service.dashboard, "url", None) if service.dashboard is not None else None,
-               structures=[s_.id for s_ in settings.structures] if service.fleet else [service.source.id], db=str(settings.db))
+               structures=[s_.id for s_ in settings.structures] if service.fleet else [service.source.id], db=redact(str(settings.db)))
     try:
         while not stop.is_set():
             if service.wait(0.2) and not settings.source.keep_running:
@@ -313,7 +327,7 @@ def _fleet_summary(service: Any, elapsed: float) -> dict[str, Any]:
     rows = []
     for summary in service.structures_document().structures:
         row = summary.model_dump()
-        if summary.state != "failed" or summary.id in {s.id for s in service.running_structures()}:
+        if summary.id in {s.id for s in service.running_structures()}:  # (not one that failed, nor another node's)
             st = service.status(summary.id)
             p, src = st.pipeline, st.sources[0]
             row.update(messages=src.messages, estimates=p.estimates, windows=p.windows, windows_committed=p.windows_committed,
@@ -354,7 +368,7 @@ def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, 
         print(f"shm serve: error: HTTP API on {s.host}:{s.port}: {exc}", file=sys.stderr)
         return 2
     print(f"shm serve: API at {api.url} (docs {api.url}/docs); {len(settings.structures)} structures in "
-          f"{settings.worker_count} worker processes; data in {settings.data_dir} (db {settings.db}, recordings "
+          f"{settings.worker_count} worker processes; data in {settings.data_dir} (db {redact(str(settings.db))}, recordings "
           f"{settings.archive.directory if settings.archive.enabled else 'off'})", flush=True)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():
@@ -368,7 +382,7 @@ def _run_workers(settings: Any, args: argparse.Namespace, environ: Mapping[str, 
             print(f"shm serve: dashboard at {getattr(front.dashboard, 'url', '?')}", flush=True)
         _ready(args, state="serving", api=api.url, docs=f"{api.url}/docs",
                dashboard=getattr(front.dashboard, "url", None) if front.dashboard is not None else None,
-               structures=list(front.order), db=str(settings.db), workers=[w.process.pid for w in front.workers])
+               structures=list(front.order), db=redact(str(settings.db)), workers=[w.process.pid for w in front.workers])
         while not stop.is_set():
             if front.wait(0.2) and not settings.source.keep_running:
                 break

@@ -4,7 +4,7 @@ is injectable (tests pass a dict).
 
 The configuration is made of the parts' own settings: a section is the settings model of the part
 it configures, defined in that part's package (``[archive]`` the archive's, ``[retention]``
-retention's, ``[notify]`` the notifier's, ``[sim]`` and ``[source]`` the sources', the latter
+retention's, ``[notify]`` the notifier's, ``[sim]``, ``[source]`` and ``[mqtt]`` the sources', ``[source]``
 made of the merge's and the checks'; ``[estimator]`` extends the estimate stage's), so each key
 has one definition and one default, and the parts never import this module."""
 
@@ -12,11 +12,13 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import re
 import tomllib
 from collections.abc import Mapping
 from copy import copy
 from pathlib import Path
 from typing import Annotated, Any, Literal
+from urllib.parse import urlsplit
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -25,16 +27,18 @@ from contract import is_loopback
 from estimator import StreamingSettings
 
 from .alarms._notify import NotifySettings
-from .sources._settings import SOURCE_SPEC, SimSettings, SourceSettings, check_spec
+from .sources._settings import SOURCE_SPEC, MqttSettings, SimSettings, SourceSettings, check_spec
 from .stages._archive import ArchiveSettings
 from .stages._commit import CommitSettings
 from .stages._estimate import EstimateSettings
 from .storage._retention import RetentionSettings
+from .storage._url import check_postgres_url, is_postgres_url, redact
 
 __all__ = [
     "AlarmSettings",
     "DashboardSettings",
     "EstimatorSettings",
+    "NodeSettings",
     "ServerSettings",
     "ServiceSettings",
     "SettingsError",
@@ -162,6 +166,29 @@ class AlarmSettings(_Closed):
     notify_stale: bool = Field(True, description="notify when an alarm goes stale (its source went silent)")
 
 
+class StorageSettings(_Closed):
+    """Where the service stores what it computes: the SQLite file ``db`` (the default) or, with
+    ``url``, a PostgreSQL database that the nodes of a fleet share."""
+
+    url: str | None = Field(
+        None, description="PostgreSQL database, postgresql://USER[:PASSWORD]@HOST:PORT/DB (the server's other options as "
+        "URL query parameters); unset: the SQLite file db")
+
+    @field_validator("url")
+    @classmethod
+    def _url(cls, value: str | None) -> str | None:
+        return None if value is None else check_postgres_url(value, "storage.url")
+
+
+class NodeSettings(_Closed):
+    """The nodes of a fleet (``shm serve --node NAME`` on several machines with this configuration and
+    one PostgreSQL database, storage.url): they share the structures through leases in the database."""
+
+    lease_s: float = Field(
+        15.0, ge=3, le=3600, description="how long a node's lease of a structure holds without renewal, s (renewed every "
+        "third of it): a node that dies loses its structures to the others within this")
+
+
 class StructureSettings(_Closed):
     """One structure of a fleet (``[[structures]]``). Its tables ``sim``, ``estimator``,
     ``analytics`` and ``alarms`` override the keys of the service's tables of the same name for
@@ -170,7 +197,7 @@ class StructureSettings(_Closed):
     id: str = Field(..., min_length=1, max_length=64, pattern=r"^[a-z0-9-]+$",
                     description="structure id ([a-z0-9-]): the source id of its trend rows, alarms and notifications")
     source: str = Field("sim", description=SOURCE_SPEC)
-    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest, or to replace a recording's rig.json")
+    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest and mqtt, or to replace a recording's rig.json")
     sim: dict[str, Any] = Field(default_factory=dict, description="keys of [sim] for this structure (e.g. seed)")
     estimator: dict[str, Any] = Field(default_factory=dict, description="keys of [estimator] for this structure")
     analytics: dict[str, Any] = Field(default_factory=dict, description="keys of [analytics] for this structure")
@@ -188,7 +215,8 @@ class ServiceSettings(_Closed):
     data_dir: str | None = Field(
         None, description="directory of all of the service's files: db and archive.directory default to paths under it "
         "(default: the directory of db when db is given, else ./var)")
-    db: str | None = Field(None, description="SQLite database (trends, baseline, alarms, outbox); default DATA_DIR/shm.sqlite")
+    db: str | None = Field(None, description="SQLite database (trends, baseline, alarms, outbox); default DATA_DIR/shm.sqlite "
+                           "(with storage.url: that URL)")
     server: ServerSettings = ServerSettings()
     dashboard: DashboardSettings = DashboardSettings()
     source: SourceSettings = SourceSettings()
@@ -199,6 +227,9 @@ class ServiceSettings(_Closed):
     retention: RetentionSettings = RetentionSettings()
     alarms: AlarmSettings = AlarmSettings()
     notify: NotifySettings = NotifySettings()
+    mqtt: MqttSettings = MqttSettings()
+    nodes: NodeSettings = NodeSettings()
+    storage: StorageSettings = StorageSettings()
     storage_sync: Literal["normal", "full"] = Field(
         "normal", description="SQLite synchronous mode of transactions that write only trend rows and state: normal "
         "survives a process crash, full also a power loss")
@@ -228,15 +259,29 @@ class ServiceSettings(_Closed):
     def _paths(self) -> "ServiceSettings":
         # One data directory holds everything; the database and the recordings default to it. The
         # resolved paths are stored, so --print-config shows where the files really go.
-        data_dir = self.data_dir or (str(Path(self.db).parent) if self.db else "var")
+        if self.storage.url is None and is_postgres_url(self.db):  # --db postgresql://...: the same as storage.url
+            object.__setattr__(self, "storage", StorageSettings(url=check_postgres_url(str(self.db), "db")))
+        url = self.storage.url
+        if url is not None and self.db is not None and self.db != url:
+            raise ValueError(f"db={self.db!r} and storage.url={redact(url)!r} are both given: the service stores in one "
+                             "database (leave db out with a PostgreSQL url)")
+        local = self.db if self.db and url is None else None
+        data_dir = self.data_dir or (str(Path(local).parent) if local else "var")
         object.__setattr__(self, "data_dir", data_dir)
-        if self.db is None:
+        if url is not None:  # every user of the database opens it by settings.db: the URL
+            object.__setattr__(self, "db", url)
+        elif self.db is None:
             object.__setattr__(self, "db", str(Path(data_dir) / "shm.sqlite"))
         if self.archive.directory is None:
             object.__setattr__(self, "archive", self.archive.model_copy(update={"directory": str(Path(data_dir) / "recordings")}))
         if self.retention.recordings_max_gb * 1e3 < 2 * self.archive.rotate_mb:
             raise ValueError(f"retention.recordings_max_gb={self.retention.recordings_max_gb} must hold at least two files of "
                              f"archive.rotate_mb={self.archive.rotate_mb} (the one being written is never deleted)")
+        takers = [s.id for s in self.structures if s.source == "mqtt"] or (
+            [] if self.structures or self.source.kind != "mqtt" else [self.source.id or "mqtt"])
+        if takers and self.mqtt.url is None:
+            raise ValueError(f"mqtt.url must be set: {'structure(s) ' + str(takers) if self.structures else 'the source'} "
+                             "take their data from the broker (source = \"mqtt\")")
         if self.structures:
             ids = [s.id for s in self.structures]
             twice = sorted({i for i in ids if ids.count(i) > 1})
@@ -249,6 +294,17 @@ class ServiceSettings(_Closed):
             for structure in self.structures:
                 self.for_structure(structure)  # every override is checked now, not when the structure starts
         return self
+
+    @property
+    def lock_path(self) -> str:
+        """The local file the service's locks and worker records sit beside: the SQLite file
+        ``db``, or for a PostgreSQL ``storage.url`` a name in ``data_dir`` for that database (the
+        nodes sharing it are fenced by their leases in it, not by these files)."""
+        if self.storage.url is None:
+            return str(self.db)
+        parts = urlsplit(self.storage.url)
+        name = "-".join(str(x) for x in (parts.hostname, parts.port or 5432, parts.path.lstrip("/")))
+        return str(Path(str(self.data_dir)) / f"postgresql-{re.sub(r'[^A-Za-z0-9._-]', '_', name)}")
 
     @property
     def worker_count(self) -> int:

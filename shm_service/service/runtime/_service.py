@@ -26,7 +26,7 @@ from contract import (
     WindowDocument,
 )
 
-from .._config import ServiceSettings, SettingsError, resolve_token
+from .._config import ServiceSettings, SettingsError, StructureSettings, resolve_token
 from ._dashboard_port import StructureModel, start_dashboard
 from ._operator import acknowledge_alarm, check_token
 from ..http._metrics import fleet_metrics
@@ -144,19 +144,8 @@ class MonitoringService(_StoredRows, SingleStructureView):
                                "127.0.0.1, or --no-dashboard")
         self.started_at = time.time()
         self.fleet = settings.fleet
-        models = _ModelCache()
-        self.structures: dict[str, Structure | _FailedStructure] = {}
-        if not self.fleet:
-            primary = Structure(self, settings, models=models)
-            self.structures[primary.id] = primary
-        else:
-            for st in settings.structures:
-                try:
-                    self.structures[st.id] = Structure(self, settings.for_structure(st), models=models)
-                except (ServiceError, SettingsError, OSError, ValueError) as exc:
-                    # One structure's bad file or rig must not keep the others from monitoring.
-                    log.error("structure %s cannot start: %s", st.id, exc)
-                    self.structures[st.id] = _FailedStructure(st.id, st.source.partition(":")[0], str(exc))
+        self.models = _ModelCache()
+        self.structures: dict[str, Structure | _FailedStructure] = self._build_structures(settings)
         # a worker of a fleet writes through its front (one writer per database: storage._writer)
         self.storage = open_storage(settings.db_path, notify_targets=notify_targets(settings.notify),
                                     notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
@@ -184,6 +173,22 @@ class MonitoringService(_StoredRows, SingleStructureView):
         self._stopping = threading.Event()
         self._starting = threading.Lock()
         self.api = None
+
+    def _build_structures(self, settings: ServiceSettings) -> dict[str, Structure | _FailedStructure]:
+        """The structures this service runs: the one of [source], or every one of the fleet."""
+        if not self.fleet:
+            primary = Structure(self, settings, models=self.models)
+            return {primary.id: primary}
+        return {st.id: self.build_structure(st) for st in settings.structures}
+
+    def build_structure(self, st: StructureSettings) -> Structure | _FailedStructure:
+        """One structure of the fleet (its failure to start as a ``_FailedStructure``)."""
+        try:
+            return Structure(self, self.settings.for_structure(st), models=self.models)
+        except (ServiceError, SettingsError, OSError, ValueError) as exc:
+            # One structure's bad file or rig must not keep the others from monitoring.
+            log.error("structure %s cannot start: %s", st.id, exc)
+            return _FailedStructure(st.id, st.source.partition(":")[0], str(exc))
 
     def running_structures(self) -> list[Structure]:
         return [s for s in self.structures.values() if isinstance(s, Structure)]

@@ -21,6 +21,7 @@ from .._config import ServiceSettings
 from ..alarms._notify import Notifier
 from ..alarms._sinks import SinkGuard
 from ..storage._storage import Storage
+from ..storage._url import redact
 from ._progress import describe_progress
 from ._structure import Structure
 
@@ -93,7 +94,7 @@ def status_of(service: StatusHost, structure: Structure, shared: dict[str, Any])
                                                  + outcomes["given_up"],
                                                  outcomes_this_run=dict(outcomes),
                                                  last_error=service.notifier.last_error),
-        storage=StorageStatusDocument(db=str(service.settings.db), schema_version=service.storage.schema_version,
+        storage=StorageStatusDocument(db=redact(str(service.settings.db)), schema_version=service.storage.schema_version,
                                       trend_rows=shared["trend_rows"],
                                       archive=None if pipeline.archive is None else pipeline.archive.status(),
                                       write_retries=service.storage.retries, write_failures=service.storage.failures,

@@ -134,7 +134,7 @@ class Structure:
         except ValueError as exc:
             raise ServiceError(f"estimator model: {exc}") from None
         speed = src.speed
-        self.speed = None if speed == "max" or self.kind in ("follow", "ingest") else float(speed)
+        self.speed = None if speed == "max" or self.kind in ("follow", "ingest", "mqtt") else float(speed)
         self.started_wall: float | None = None
         self.first_data_ns: int | None = None
         self.pipeline_error: str | None = None  # the last batch's error; None once a batch succeeds again
@@ -166,7 +166,7 @@ class Structure:
         storage.touch_source(self.id, self.source.kind, src.spec, time.time())
         if settings.archive.enabled:
             self.archive = Archive(settings.archive, self.rig, self.id, getattr(self.source, "metadata", None))
-        raw = settings.archive.raw == "always" or (settings.archive.raw == "auto" and self.source.kind in ("sim", "ingest"))
+        raw = settings.archive.raw == "always" or (settings.archive.raw == "auto" and self.source.kind in ("sim", "ingest", "mqtt"))
         self._pipeline = Pipeline(
             # the alarm hysteresis of [alarms] is in the engine's configuration (one place: engine_config)
             model=self.model, source_id=self.id, storage=storage, analysis=settings.engine_config(),
@@ -175,10 +175,38 @@ class Structure:
             estimate=est, merge=src, checks=src, outputs=settings.archive, record_raw=raw,
             commits=CommitSettings(retry_s=settings.storage_retry_s),
             archive=self.archive, sink_guard=sink_guard,
-            # ingest is judged per message by its validator (its response says what was refused)
-            clock=None if self.source.kind == "ingest" else self._clock(live=False), limits=src.limits, analysis_lane=True,
+            # ingest and mqtt are judged per message by their validator (which counts what it refused)
+            clock=None if self.source.kind in ("ingest", "mqtt") else self._clock(live=False), limits=src.limits, analysis_lane=True,
         )
         self.pipeline.live = self.live
+        if self.source.kind == "mqtt":
+            self.source.committed_until_s = self._committed_until(storage)  # type: ignore[attr-defined]
+
+    def _committed_until(self, storage: Storage) -> Callable[[], float | None]:
+        """The data time (UNIX s) before which this structure, resumed from its committed state, needs
+        no sample again (None: nothing committed yet): it analyses from the window after the last one
+        committed, and a resumed estimator skips the windows of its first rest_end + warmup_s (its
+        filter converging), so its data must begin that much before."""
+        resumed = (storage.load_state(self.id) or {}).get("last_window_start_s")
+        a = self.settings.engine_config()
+        step_s = a.window_s * (1 - a.overlap)
+        warmup_s = self.settings.estimator.warmup_s
+        pipeline = self.pipeline
+
+        def until() -> float | None:
+            last = pipeline.commits.last_window
+            start = last.start_s if last is not None else resumed
+            calibration = pipeline.estimate.estimator.calibration
+            if start is None or calibration is None:
+                return None
+            return float(start) + step_s - float(calibration.rest_end) - warmup_s
+
+        return until
+
+    @property
+    def attached(self) -> bool:
+        """Whether ``attach`` created the pipeline."""
+        return self._pipeline is not None
 
     @property
     def pipeline(self) -> Pipeline:
@@ -224,6 +252,14 @@ class Structure:
                 return IngestSource(src.id or "ingest", self.queue, rig, max_messages=s.server.max_ingest_messages,
                                     wait_s=s.server.ingest_wait_s, raw=s.archive.enabled and s.archive.raw != "never",
                                     clock=self._clock(live=True), limits=src.limits)
+            if kind == "mqtt":
+                from ...rig_layouts import default_rig
+                from ..sources._mqtt import MqttSource
+
+                return MqttSource(src.id or "mqtt", self.queue, rig_override or default_rig(src.layout), s.mqtt,
+                                  max_messages=s.server.max_ingest_messages,
+                                  raw=s.archive.enabled and s.archive.raw != "never", clock=self._clock(live=True),
+                                  limits=src.limits, password=s.mqtt.password())
         except (RecordingError, FileNotFoundError, ValueError) as exc:
             raise ServiceError(str(exc)) from None
         raise ServiceError(f"unknown source {src.spec!r}")
@@ -379,7 +415,7 @@ class Structure:
         if newest is None:
             return None
         now = time.time() if now is None else now
-        if self.kind in ("follow", "ingest"):
+        if self.kind in ("follow", "ingest", "mqtt"):
             return round(now - newest / 1e9, 3)
         if self.speed is None or self.started_wall is None or self.first_data_ns is None:
             return None

@@ -113,7 +113,7 @@ class WorkerFleet(_StoredRows):
         config = directory / "fleet-workers.toml"
         # an earlier front's workers (it was killed and they did not notice yet) leave the database first
         try:
-            ended = stop_stale_workers(self.settings.db_path, str(config))
+            ended = stop_stale_workers(self.settings.lock_path, str(config))
         except StaleWorkers as exc:
             raise ServiceError(str(exc)) from None
         if ended:
@@ -136,7 +136,7 @@ class WorkerFleet(_StoredRows):
                     args.append("--json")
                 launched.append((i, ids, start_serve(args, env=environ, stdout=subprocess.PIPE,
                                                      ready_file=directory / f"fleet-worker-{i}.ready.json", timeout=None)))
-            record_workers(self.settings.db_path, [started.pid for _, _, started in launched])
+            record_workers(self.settings.lock_path, [started.pid for _, _, started in launched])
             pending = [(_Worker(i, started.process, "", ids), started) for i, ids, started in launched]
             for worker, _ in pending:
                 threading.Thread(target=self._drain, args=(worker,), name=f"worker-{worker.index}-out", daemon=True).start()

@@ -6,6 +6,9 @@ default."""
 
 from __future__ import annotations
 
+import os
+from collections.abc import Mapping
+from pathlib import Path
 from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -14,19 +17,19 @@ from ...recording._plausibility import ValueLimits
 from ..stages._checks import CheckSettings
 from ..stages._merge import MergeSettings
 
-__all__ = ["SOURCE_SPEC", "SimSettings", "SourceConfig", "SourceSettings", "check_spec"]
+__all__ = ["MQTT_PASSWORD_ENV", "SOURCE_SPEC", "MqttSettings", "SimSettings", "SourceConfig", "SourceSettings", "check_spec"]
 
 
-SOURCE_SPEC = "sim | replay:FILE.mcap | follow:FILE.mcap | ingest"
+SOURCE_SPEC = "sim | replay:FILE.mcap | follow:FILE.mcap | ingest | mqtt"
 
 
 def check_spec(value: str) -> str:
     kind, _, arg = value.partition(":")
-    if kind in ("sim", "ingest") and not arg:
+    if kind in ("sim", "ingest", "mqtt") and not arg:
         return value
     if kind in ("replay", "follow") and arg:
         return value
-    raise ValueError(f"source {value!r} must be sim, ingest, replay:FILE.mcap or follow:FILE.mcap")
+    raise ValueError(f"source {value!r} must be sim, ingest, mqtt, replay:FILE.mcap or follow:FILE.mcap")
 
 
 class SimSettings(BaseModel):
@@ -94,12 +97,12 @@ class SourceSettings(MergeSettings, CheckSettings):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    spec: str = Field("sim", description="sim | replay:FILE.mcap | follow:FILE.mcap | ingest")
+    spec: str = Field("sim", description="sim | replay:FILE.mcap | follow:FILE.mcap | ingest | mqtt")
     id: str | None = Field(None, description="source id of the trend rows (default: sim, ingest, or the recording's file stem)")
     speed: float | Literal["max"] = Field(1.0, description="sim/replay pace: a factor of real time, or max")
     keep_running: bool = Field(False, description="keep serving the API after a replay (or sim run) ends")
-    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest, or to replace a recording's rig.json")
-    layout: Literal["benchmark", "dense"] = Field("benchmark", description="rig layout for ingest when no rig file is given")
+    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest and mqtt, or to replace a recording's rig.json")
+    layout: Literal["benchmark", "dense"] = Field("benchmark", description="rig layout for ingest and mqtt when no rig file is given")
     follow_poll_s: float = Field(0.2, gt=0, description="how often a followed file is checked for new data, s")
     follow_idle_s: float | None = Field(None, gt=0, description="stop following after this long without growth, s (None: never)")
     follow_rotations: bool = Field(
@@ -141,6 +144,106 @@ class SourceSettings(MergeSettings, CheckSettings):
     def path(self) -> str | None:
         return self.spec.partition(":")[2] or None
 
+
+
+MQTT_PASSWORD_ENV = "SHM_MQTT_PASSWORD"
+
+
+class MqttSettings(BaseModel):
+    """The MQTT broker that structures with ``source = "mqtt"`` take their data from: each
+    subscribes ``TOPIC_PREFIX/ID/ingest`` with QoS 1 in a persistent session of its own (client id
+    ``shm-TOPIC_PREFIX-ID``), each message's body a ``POST /api/ingest`` body. The password comes
+    from ``password_file`` or the environment variable SHM_MQTT_PASSWORD, never from this file."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    url: str | None = Field(None, description="the broker, mqtt://HOST[:PORT] (default port 1883) or mqtts://HOST[:PORT] "
+                            "(TLS, default port 8883); needed when a structure's source is mqtt")
+    topic_prefix: str = Field("shm", min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+(/[A-Za-z0-9_-]+)*$",
+                              description="a structure ID's bodies are published to TOPIC_PREFIX/ID/ingest")
+    username: str | None = Field(None, description="user name at the broker (None: anonymous)")
+    password_file: str | None = Field(None, description="file holding the broker password (first line); else the "
+                                      "environment variable SHM_MQTT_PASSWORD")
+    ca_file: str | None = Field(None, description="mqtts: CA certificates (PEM) the broker's certificate is checked "
+                                "against (default: the system's)")
+    cert_file: str | None = Field(None, description="mqtts: this client's certificate (PEM), for brokers that require one")
+    key_file: str | None = Field(None, description="mqtts: the private key (PEM) of cert_file")
+    tls_insecure: bool = Field(False, description="mqtts: accept a broker certificate whose host name does not match "
+                               "(the chain is still checked; for a broker reached by an address its certificate lacks)")
+    keepalive_s: int = Field(30, ge=5, le=3600, description="MQTT keep-alive, s: a dead connection is noticed within "
+                             "1.5 times this")
+    session_expiry_s: int = Field(
+        7 * 86400, ge=60, le=2**32 - 2, description="how long the broker keeps a structure's session, and the messages "
+        "published to it, while no node holds the structure, s")
+    receive_maximum: int = Field(
+        2000, ge=2, le=65535, description="bodies the broker sends a structure before it has acknowledged the first; "
+        "a body is acknowledged once the window after it is committed, so half of this must hold the bodies of the "
+        "calibration, warm-up and two windows (2000: 1 s bodies)")
+    reconnect_max_s: float = Field(30.0, ge=1, le=3600, description="longest wait between attempts to reach the broker, s "
+                                   "(from 1 s, doubling)")
+
+    @field_validator("url")
+    @classmethod
+    def _url(cls, value: str | None) -> str | None:
+        if value is None:
+            return None
+        from urllib.parse import urlsplit
+
+        parts = urlsplit(value)
+        if parts.scheme not in ("mqtt", "mqtts"):
+            raise ValueError(f"url {value!r} must be mqtt://HOST[:PORT] or mqtts://HOST[:PORT]")
+        try:
+            port = parts.port
+        except ValueError:
+            raise ValueError(f"url {value!r}: the port must be a number within 1-65535") from None
+        if not parts.hostname:
+            raise ValueError(f"url {value!r} has no host")
+        if port == 0 or parts.path not in ("", "/") or parts.query or parts.fragment:
+            raise ValueError(f"url {value!r} must be mqtt://HOST[:PORT] or mqtts://HOST[:PORT], nothing after the port "
+                             "(the topics come from topic_prefix)")
+        if parts.username or parts.password:
+            raise ValueError(f"url {value!r}: give the user as mqtt.username and the password in mqtt.password_file "
+                             "or SHM_MQTT_PASSWORD, not in the URL")
+        return value
+
+    @field_validator("password_file", "ca_file", "cert_file", "key_file")
+    @classmethod
+    def _file(cls, value: str | None) -> str | None:
+        if value is not None and not Path(value).is_file():
+            raise ValueError(f"{value} does not exist (or is not a file)")
+        return value
+
+    @model_validator(mode="after")
+    def _tls(self) -> "MqttSettings":
+        if (self.cert_file is None) != (self.key_file is None):
+            raise ValueError("mqtt.cert_file and mqtt.key_file come together (a client certificate and its key)")
+        tls_keys = [k for k in ("ca_file", "cert_file", "tls_insecure") if k in self.model_fields_set]
+        if tls_keys and self.url is not None and not self.url.startswith("mqtts:"):
+            raise ValueError(f"mqtt.{tls_keys[0]} needs TLS: an mqtts:// url")
+        return self
+
+    @property
+    def tls(self) -> bool:
+        return self.url is not None and self.url.startswith("mqtts:")
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) of ``url``."""
+        from urllib.parse import urlsplit
+
+        parts = urlsplit(self.url or "")
+        return parts.hostname or "", parts.port or (8883 if self.tls else 1883)
+
+    def password(self, environ: Mapping[str, str] | None = None) -> str | None:
+        """The password: the first line of ``password_file``, else SHM_MQTT_PASSWORD (None: neither)."""
+        if self.password_file is not None:
+            try:
+                text = Path(self.password_file).read_text(encoding="utf-8")
+            except OSError as exc:
+                raise ValueError(f"mqtt.password_file: cannot read {self.password_file}: {exc}") from None
+            return text.splitlines()[0].strip() if text.strip() else ""
+        env = os.environ if environ is None else environ
+        return env.get(MQTT_PASSWORD_ENV) or None
 
 
 class SourceConfig(Protocol):

@@ -10,7 +10,7 @@ from typing import cast
 
 import numpy as np
 
-from analytics import AnalysisConfig, Baseline, EngineWindow, LoadsMonitor, ModalMonitor, MonitoringEngine, WindowResult
+from analytics import AnalysisConfig, Baseline, EngineWindow, LoadsMonitor, ModalMonitor, MonitoringEngine, WindowResult, usability_document
 from contract import LoadsWindowDocument, SpectrumDocument, TrendRow
 from estimator import DamageSignatures, ImmsModel, damage_signatures
 
@@ -162,6 +162,10 @@ class AnalysisStage:
     @property
     def skipped_warmup(self) -> int:
         return 0 if self.engine is None else self.engine.skipped_warmup
+
+    def usability(self) -> dict:
+        """The engine's windows: usable, rejected by reason, and why none is usable (``analytics.usability_document``)."""
+        return usability_document(0, {}) if self.engine is None else self.engine.usability()
 
     @property
     def next_start(self) -> float | None:

@@ -75,6 +75,8 @@ class CommitStage:
         self.storage_errors = 0  # commits that failed (and wait to be retried)
         self.trend_rows_dropped = 0  # rows of waiting windows dropped beyond max_pending (their alarms kept)
         self.windows_committed = 0
+        # the lease's fencing token of a node's structure (None: no nodes): each window's transaction checks it
+        self.fencing_token: int | None = None
         self.last_window: WindowDocument | None = None
         self.last_loads: LoadsWindowDocument | None = None  # of the newest written window
 
@@ -87,7 +89,7 @@ class CommitStage:
         commit = WindowCommit(
             source=self.source_id, window_start_s=window.start_s, data_time_s=res.end_s, rows=window.rows,
             monitor_state=monitor_state, calibration=calibration, alarm_changes=window.alarm_changes, baseline=baseline,
-            loads=window.loads,
+            loads=window.loads, fencing_token=self.fencing_token,
         )
         self.pending.append(PendingCommit(commit, raised, document, window.spectrum))
         if len(self.pending) > self.settings.max_pending:
@@ -112,7 +114,8 @@ class CommitStage:
                 elif c.action == "clear":
                     active.pop(c.chart, None)
         changes = clear_changes(active.values(), at_s)
-        commit = WindowCommit(self.source_id, window_start_s, at_s, [], {**state, "monitor": None}, None, changes)
+        commit = WindowCommit(self.source_id, window_start_s, at_s, [], {**state, "monitor": None}, None, changes,
+                              fencing_token=self.fencing_token)
         self.pending.append(PendingCommit(commit, {}))
         self.flush()
 

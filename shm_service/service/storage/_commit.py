@@ -31,12 +31,17 @@ from dataclasses import dataclass, field
 from contract import LoadsWindowDocument, TrendRow
 
 from ._alarms import AlarmChange, AlarmRepository, NotifyPolicy
-from .sqlite._db import Database, StorageUnavailable, is_transient
+from .sqlite._db import Database, StorageUnavailable
 from ._fatigue import FatigueRepository
 from ._state import STATE_COLUMNS, STATE_UPSERT, StateRepository
 from ._trends import TREND_COLUMNS, TrendRepository
 
-__all__ = ["WindowCommit", "WindowWriter"]
+__all__ = ["StaleLease", "WindowCommit", "WindowWriter"]
+
+
+class StaleLease(RuntimeError):
+    """A commit or a renewal with a fencing token that is no longer the structure's (another
+    node took its lease, ``storage.postgres._leases``): nothing of it was written."""
 
 
 @dataclass
@@ -52,6 +57,7 @@ class WindowCommit:
     alarm_changes: list[AlarmChange] = field(default_factory=list)
     baseline: dict | None = None  # a newly learnt baseline to store as active
     loads: LoadsWindowDocument | None = None  # the hot spots' loads of the window (its residue is in monitor_state)
+    fencing_token: int | None = None  # the token of the node's lease of the source (PostgreSQL): checked in the transaction
 
 
 @dataclass(eq=False)
@@ -82,7 +88,12 @@ class WindowWriter:
         self._leading = False
         self.groups = 0  # group transactions written
         self.grouped_windows = 0  # windows written in them
-        self._stage()
+        self.fenced = 0  # windows refused for a stale fencing token
+        # The staging of plain windows answers SQLite's GIL-bound lock (see the module's text);
+        # PostgreSQL's writers do not share a lock: every window there is a savepoint of the group.
+        self.staged = getattr(database, "dialect", "sqlite") == "sqlite"
+        if self.staged:
+            self._stage()
 
     def _stage(self) -> None:
         """The writing connection's TEMP tables and trigger of the plain windows: staged rows are
@@ -115,6 +126,9 @@ class WindowWriter:
         for r in commit.rows:
             if r.source != commit.source:
                 raise ValueError(f"trend row of source {r.source!r} in a commit of source {commit.source!r}")
+        token = commit.fencing_token
+        if token is not None and self.staged:
+            raise ValueError(f"fencing_token={token}: leases need the PostgreSQL storage (a SQLite file has one service)")
         # What needs no database is made before the transaction: the write lock, which the other
         # processes of a fleet wait for, is held for the statements only.
         rows = [tuple(getattr(r, c) for c in TREND_COLUMNS) for r in commit.rows]
@@ -123,6 +137,8 @@ class WindowWriter:
         state = (commit.source, commit.window_start_s, commit.data_time_s, monitor, calibration)  # STATE_COLUMNS
 
         def run(db: sqlite3.Connection) -> list[int]:
+            if token is not None:  # first: a refused window writes nothing
+                self.database.check_fence(db, commit.source, token)  # type: ignore[attr-defined]
             now = time.time()
             TrendRepository(db).insert(rows, now)
             stored = StateRepository(db)
@@ -136,7 +152,8 @@ class WindowWriter:
             events = [alarms.apply(commit.source, change, now) for change in commit.alarm_changes]
             return [e for e in events if e is not None]
 
-        plain = (rows, state) if not commit.alarm_changes and commit.baseline is None and commit.loads is None else None
+        simple = not commit.alarm_changes and commit.baseline is None and commit.loads is None
+        plain = (rows, state) if simple and self.staged else None
         return self._group_commit(_Ticket(run, bool(commit.alarm_changes), float(retry_s), plain))
 
     def _group_commit(self, ticket: _Ticket) -> list[int]:
@@ -227,21 +244,22 @@ class WindowWriter:
             for t in batch:
                 t.result, t.error = None, None
             for t in batch:
-                db.execute("SAVEPOINT window")
+                db.execute("SAVEPOINT window_commit")  # not "window": a reserved word of PostgreSQL
                 try:
                     t.result = t.run(db)
                 except Exception as exc:
-                    if is_transient(exc):
+                    if self.database.is_transient(exc):
                         raise
-                    db.execute("ROLLBACK TO window")
+                    db.execute("ROLLBACK TO window_commit")
                     t.error = exc
-                db.execute("RELEASE window")
+                db.execute("RELEASE window_commit")
 
         try:
             if batch:
                 self.database.write(run, durable=any(t.durable for t in batch), retry_s=max(t.retry_s for t in batch))
                 self.groups += 1
                 self.grouped_windows += len(batch)
+                self.fenced += sum(isinstance(t.error, StaleLease) for t in batch)
         except BaseException as exc:
             for t in batch:
                 t.result, t.error = None, exc

@@ -1,5 +1,7 @@
-"""SQLite storage of the service (WAL): trends, baselines, monitor state, alarms, the
-notification outbox and its attempt log, and the ledger of reprocessed recordings.
+"""Storage of the service: trends, baselines, monitor state, alarms, the notification outbox
+and its attempt log, and the ledger of reprocessed recordings, in a SQLite file (WAL; the
+default) or a PostgreSQL database (``path`` a ``postgresql://`` URL: ``storage.postgres``, the
+same repositories and transactions; a fleet's nodes share it).
 
 ``Storage`` is a thin facade: each method is one transaction (or one read) over the repositories,
 each a class over a connection behind a Protocol that a second backend could implement:
@@ -41,13 +43,27 @@ from ._fatigue import FatigueRepository
 from ._ledger import ReprocessLedger
 from ._outbox import OutboxRepository
 from ._paging import decode_cursor, open_page
-from .sqlite._schema import SCHEMA_VERSION, migrate
+from .sqlite._schema import SCHEMA_VERSION
 from ._state import StateRepository
 from ._trends import TREND_COLUMNS, TrendQuery, TrendRepository
+from ._url import is_postgres_url, redact
 
 __all__ = ["AlarmChange", "SCHEMA_VERSION", "Storage", "StorageUnavailable", "WindowCommit", "is_transient"]
 
 T = TypeVar("T")
+
+
+def _open_database(target: str | Path, **kwargs: Any) -> Any:
+    """The engine ``target`` names: a ``postgresql://`` URL (``storage.postgres``, whose client is
+    imported only then: it is an optional dependency), else a SQLite file (or ``:memory:``)."""
+    if is_postgres_url(target):
+        try:
+            from .postgres._db import PgDatabase
+        except ImportError as exc:
+            raise RuntimeError(f"storage url {redact(str(target))!r} needs PostgreSQL's client psycopg 3, which is not "
+                               f"installed ({exc}): pip install 'psycopg[binary]' (the package's 'cluster' extra)") from None
+        return PgDatabase(str(target), **kwargs)
+    return Database(target, **kwargs)
 
 
 class Storage:
@@ -63,8 +79,8 @@ class Storage:
                  notify_levels: Sequence[str] = ("warning", "alarm"), notify_cleared: bool = True, notify_stale: bool = True,
                  sync: str = "normal", alarm_sync: str = "full", retry_s: float = 10.0, retry_initial_s: float = 0.05,
                  busy_timeout_s: float = 0.5) -> None:
-        self.database = Database(path, sync=sync, alarm_sync=alarm_sync, retry_s=retry_s, retry_initial_s=retry_initial_s,
-                                 busy_timeout_s=busy_timeout_s)
+        self.database = _open_database(path, sync=sync, alarm_sync=alarm_sync, retry_s=retry_s,
+                                       retry_initial_s=retry_initial_s, busy_timeout_s=busy_timeout_s)
         self.path = self.database.path
         self._instance = self._read(lambda db: str(db.execute("SELECT value FROM meta WHERE key='instance'").fetchone()[0]))
         self.policy = NotifyPolicy(self._instance, tuple(notify_targets), tuple(notify_levels), bool(notify_cleared),
@@ -91,6 +107,7 @@ class Storage:
     retries = property(lambda self: self.database.retries, doc="transient errors retried since the start")
     failures = property(lambda self: self.database.failures, doc="transactions given up after retry_s")
     last_error = property(lambda self: self.database.last_error)
+    fenced = property(lambda self: self.windows.fenced, doc="windows refused for a stale fencing token (StaleLease)")
     groups = property(lambda self: self.windows.groups, doc="group transactions of windows written")
     grouped_windows = property(lambda self: self.windows.grouped_windows, doc="windows written in them")
     schema_version = property(lambda self: self.database.schema_version,
@@ -98,8 +115,7 @@ class Storage:
 
     def migrate(self) -> None:
         """Bring the schema to ``SCHEMA_VERSION``; refuses a database of a newer version."""
-        with self.database.lock:
-            migrate(self.database.db, self.path)
+        self.database.migrate()
 
     @contextmanager
     def transaction(self, *, durable: bool = False) -> Iterator[sqlite3.Connection]:

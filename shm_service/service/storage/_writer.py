@@ -37,6 +37,7 @@ from multiprocessing.connection import Client, Connection, Listener
 from pathlib import Path
 from typing import Any
 
+from ._commit import StaleLease
 from .sqlite._db import StorageUnavailable
 from ._storage import Storage
 
@@ -55,7 +56,8 @@ WRITES = frozenset({"commit_window", "commit_reprocessed", "touch_source", "touc
 
 #: the errors that cross the channel as themselves (any other: RuntimeError naming it)
 _KINDS: dict[str, type[Exception]] = {"StorageUnavailable": StorageUnavailable, "ValueError": ValueError,
-                                      "KeyError": KeyError, "PermissionError": PermissionError}
+                                      "KeyError": KeyError, "PermissionError": PermissionError,
+                                      "StaleLease": StaleLease}
 
 
 class WriterServer:

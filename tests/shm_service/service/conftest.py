@@ -24,3 +24,12 @@ def receiver():
     r = Receiver()
     yield r
     r.close()
+
+
+@pytest.fixture(params=["sqlite", "postgres"])
+def storage_target(request, tmp_path) -> str:
+    """Where a storage test's database lives: a SQLite file, or a PostgreSQL database of its own
+    in the session's server (``fresh_postgres_url``): the same test runs against both engines."""
+    if request.param == "sqlite":
+        return str(tmp_path / "s.sqlite")
+    return request.getfixturevalue("fresh_postgres_url")

@@ -47,8 +47,8 @@ def _commit_in_threads(st: Storage, commits: list[WindowCommit]) -> tuple[list[t
     return threads, outcome
 
 
-def test_windows_of_many_threads_are_written_in_one_transaction(tmp_path):
-    st = Storage(tmp_path / "s.sqlite")
+def test_windows_of_many_threads_are_written_in_one_transaction(storage_target):
+    st = Storage(storage_target)
     commits = [_row_commit(f"mast-{i:02d}", i) for i in range(12)]
     with st._lock:  # a write under way: the windows arriving meanwhile queue
         threads, outcome = _commit_in_threads(st, commits)
@@ -62,8 +62,8 @@ def test_windows_of_many_threads_are_written_in_one_transaction(tmp_path):
     assert st.integrity_check() == "ok" and not st.windows._leading and st.windows._queued == []
 
 
-def test_a_bad_window_fails_alone_in_its_group(tmp_path):
-    st = Storage(tmp_path / "s.sqlite")
+def test_a_bad_window_fails_alone_in_its_group(storage_target):
+    st = Storage(storage_target)
     good = AlarmChange("raise", "mode2", "frequency", 2, "alarm", 40.0, 6.0, 5.0, "m")
     bad = AlarmChange("bogus", "mode3", "frequency", 3, "alarm", 40.0, 6.0, 5.0, "m")
     commits = [_row_commit("a", 0), _row_commit("b", 1, [good]), _row_commit("c", 2, [good, bad]), _row_commit("d", 3, [good])]

@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TypeVar
 
-from ._schema import migrate
+from ._schema import SCHEMA_VERSION, migrate
 
 __all__ = ["Database", "StorageUnavailable", "is_transient"]
 
@@ -57,6 +57,9 @@ class Database:
 
     ``sync`` is the synchronous mode of ordinary transactions, ``alarm_sync`` that of the
     ``durable`` ones (alarms, their events, the outbox: they survive a power loss)."""
+
+    dialect = "sqlite"
+    schema_latest = SCHEMA_VERSION  # the version this program migrates a database to
 
     def __init__(self, path: str | Path, *, sync: str = "normal", alarm_sync: str = "full", retry_s: float = 10.0,
                  retry_initial_s: float = 0.05, busy_timeout_s: float = 0.5) -> None:
@@ -95,6 +98,15 @@ class Database:
         db = sqlite3.connect(str(self.path), check_same_thread=False, isolation_level=None, timeout=self.busy_timeout_s)
         db.row_factory = sqlite3.Row
         return db
+
+    @staticmethod
+    def is_transient(exc: BaseException) -> bool:
+        return is_transient(exc)
+
+    def migrate(self) -> None:
+        """Bring the schema to ``SCHEMA_VERSION``; refuses a database of a newer version."""
+        with self.lock:
+            migrate(self.db, self.path)
 
     def _locked(self, fn: Callable[[], T]) -> T:
         with self.lock:
