@@ -27,6 +27,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         "realtime_factor": round(float((result.t[-1] - result.t[0]) / max(result.filter_seconds, 1e-9)), 1),
         "selection": result.model.selection.as_dict(),
         "modes": result.model.gamma,
+        **({"modes_xi": result.model.gamma_xi} if result.model.biaxial else {}),
         "rest_end_s": round(float(result.calibration.rest_end), 3),
         "diagnostics": result.diagnostics,
         **_recording_problems(rec),
