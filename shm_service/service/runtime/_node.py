@@ -175,7 +175,7 @@ class NodeService(MonitoringService):
         if structure is None:
             return
         structure.stop_source()
-        if lost and isinstance(structure, Structure) and structure.pipeline is not None:
+        if lost and isinstance(structure, Structure) and structure.attached:
             structure.pipeline.stop_deadline = time.monotonic()
         if structure.started:
             structure.wait(30.0)
