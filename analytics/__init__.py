@@ -15,6 +15,7 @@ from ._engine import EngineWindow, MonitoringEngine
 from ._fatigue import SECONDS_PER_YEAR, FatigueDetail, HotSpotFatigue, LifeEstimate, LoadsWindow, remaining_life
 from ._loads_monitor import GaugeSpec, HotSpotSpec, LoadsConfig, LoadsMonitor
 from ._loads import BAND_COVERAGE, BAND_FLOOR, UNKNOWN_LEVERAGE, WITHHOLD_HALF_WIDTH, DelBand, OutsideBasis, outside_basis_bands, SignalLoads, VirtualLoads, bending_moment, gauge_bands, signal_loads, virtual_strain
+from ._section_loads import AROUND_STEP_DEG, around_angles, resultant_moment, section_strain, worst_around
 from ._rainflow import Cycles, HalfCyclePolicy, RainflowCounter, RainflowResidue, cycles_by_range, rainflow_cycles
 from ._sn_curves import DNV_RP_C203_CURVES, EN1993_DETAIL_CATEGORIES, SnCurve, damage_equivalent_range, miner_damage, sn_curve
 from ._monitor import Baseline, BaselineError, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model, support_acceleration
@@ -24,6 +25,7 @@ from ._oma import (
 )
 from ._moving import SubwindowTrack, subwindow_frequencies
 from ._tracks import ModeTrack, ModeTracker
+from ._usability import WINDOW_REJECTIONS, usability_document, window_rejection
 from ._peaks import Peak, find_peaks, interpolate_peak
 from ._spectrum import Spectrum, amplitude_spectrum, averaged_spectrum, cross_spectra
 from ._ssi import (
@@ -35,7 +37,7 @@ from ._stabilisation import PoleCluster, StabilisationDiagram, cluster_poles, st
 __all__ = [
     # the one engine: window loop, monitor, alarm path
     "AlarmEvent", "AlarmLogic", "BaselineError", "EngineWindow", "MonitoringEngine", "chart_level", "learn_baseline",
-    "support_acceleration",
+    "support_acceleration", "WINDOW_REJECTIONS", "usability_document", "window_rejection",
     "AnalysisConfig", "AnalysisResult", "Baseline", "BaselineMode", "CurvatureChange", "DamageLocation", "DampingEstimate",
     "EwmaChart", "ModalMonitor", "ModeEstimate", "ModeSummary", "Peak", "Spectrum", "WindowResult",
     "amplitude_spectrum", "analyze", "averaged_spectrum", "bandpass", "beam_third", "combine_estimates",
@@ -55,5 +57,6 @@ __all__ = [
     "Cycles", "DNV_RP_C203_CURVES", "EN1993_DETAIL_CATEGORIES", "FatigueDetail", "HalfCyclePolicy", "HotSpotFatigue",
     "LifeEstimate", "LoadsWindow", "RainflowCounter", "RainflowResidue", "SECONDS_PER_YEAR", "SnCurve", "cycles_by_range",
     "damage_equivalent_range", "miner_damage", "rainflow_cycles", "remaining_life", "sn_curve",
-    "BAND_COVERAGE", "BAND_FLOOR", "UNKNOWN_LEVERAGE", "WITHHOLD_HALF_WIDTH", "DelBand", "OutsideBasis", "outside_basis_bands", "SignalLoads", "VirtualLoads", "bending_moment", "gauge_bands", "signal_loads", "virtual_strain", "GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor",
+    "BAND_COVERAGE", "BAND_FLOOR", "UNKNOWN_LEVERAGE", "WITHHOLD_HALF_WIDTH", "DelBand", "OutsideBasis", "outside_basis_bands", "SignalLoads", "VirtualLoads", "bending_moment", "gauge_bands", "signal_loads", "virtual_strain",
+    "AROUND_STEP_DEG", "around_angles", "resultant_moment", "section_strain", "worst_around", "GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor",
 ]

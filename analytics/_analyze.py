@@ -78,6 +78,7 @@ class AnalysisResult:
     config: AnalysisConfig | None = None
     loads: tuple = ()  # per window (contract.LoadsWindowDocument, its fatigue AlarmEvents), with hot spots
     tracks: tuple = ()  # analytics.ModeTrack: each subspace mode followed across the windows (the engine's tracker)
+    usability: dict | None = None  # analytics.usability_document of the windows: why none is usable, when none is
 
     def as_dict(self) -> dict:
         """JSON-safe {"modes": [...], "windows": [...], "flags": [...], "baseline": {...}} (None instead of NaN)."""
@@ -90,7 +91,7 @@ class AnalysisResult:
                              "charted": m.mode not in problems, "reason": problems.get(m.mode)} for m in self.baseline.modes]}
         out = {"modes": [m.as_dict() for m in self.modes], "windows": [w.as_dict() for w in self.windows],
                "flags": [dict(f) for f in self.flags], "baseline": bl, "skipped_windows": dict(self.skipped or {}),
-               "tracks": [t.as_dict() for t in self.tracks]}
+               "tracks": [t.as_dict() for t in self.tracks], "usability": self.usability}
         if self.loads:
             out["loads"] = [{**doc.model_dump(mode="json"), "alarm_events": [{"action": e.action, "chart": e.chart, "level": e.level,
                                                                                "at_s": e.at_s, "message": e.message()} for e in events]}
@@ -265,16 +266,12 @@ def _summaries(mon: ModalMonitor, windows: tuple[WindowResult, ...], B: np.ndarr
                     damping.append(subspace_damping(m))
         if len(good) >= 2:
             # the windows' subspace frequencies, averaged: the record's estimate when the record-long
-            # identification found no pole, or when its pole lies off the windows' consensus by more
-            # than its own 1σ and states that 1σ less precisely than they agree (a weak mode whose
-            # record-long pole a neighbouring one pulls). A pole that agrees within its 1σ stays: it
-            # is the primary estimate, and its shape and damping belong to it.
+            # identification found no pole, or one it states less precisely than they agree (a weak
+            # mode whose record-long pole a neighbouring one pulls: the windows' spread is the measure)
             fv = np.array([e.frequency_hz for e in good])
-            w_mean = float(np.mean(fv))
             w_std = float(np.std(fv, ddof=1) / math.sqrt(max(1.0, len(good) * indep)))
-            stated = f_std is not None and math.isfinite(f_std)
-            if f_hz is None or f_std is None or not stated or (f_std > w_std and abs(f_hz - w_mean) > f_std):
-                method, f_hz, f_std = "ssi_windows", w_mean, w_std
+            if f_hz is None or not (f_std is not None and math.isfinite(f_std) and f_std <= w_std):
+                method, f_hz, f_std = "ssi_windows", float(np.mean(fv)), w_std
         spectral = None
         if avg is not None:
             ref = f_hz or mon.f0[i]
@@ -433,7 +430,7 @@ def analyze(
     summaries = _summaries(mon, windows, B, t, d, fs, cfg, 0.0)
     return AnalysisResult(summaries, windows, tuple(flags.values()), mon.baseline,
                           {"incomplete": engine.skipped_incomplete, "warmup": engine.skipped_warmup}, cfg, loads_windows,
-                          mon.tracker.tracks())
+                          mon.tracker.tracks(), engine.usability())
 
 
 def learn_baseline(

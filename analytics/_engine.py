@@ -22,6 +22,7 @@ import numpy as np
 
 from ._loads_monitor import LoadsMonitor
 from ._monitor import ModalMonitor, WindowResult
+from ._usability import usability_document, window_rejection
 from ._validate import as_signal
 
 __all__ = ["EngineWindow", "MonitoringEngine"]
@@ -148,6 +149,8 @@ class MonitoringEngine:
         self.windows = 0
         self.skipped_incomplete = 0
         self.skipped_warmup = 0
+        self.usable = 0  # analysed windows that carry an identified mode
+        self.rejected: dict[str, int] = {}  # analysed windows that do not, by reason (analytics.window_rejection)
         self._gamma: int | None = None
         self._with_support: bool | None = None
 
@@ -289,6 +292,11 @@ class MonitoringEngine:
             self.skipped_incomplete += 1
             return None
         self.windows += 1
+        reason = window_rejection(res, self.monitor.config)
+        if reason is None:
+            self.usable += 1
+        else:
+            self.rejected[reason] = self.rejected.get(reason, 0) + 1
         loads, events = None, ()
         if self.loads is not None:
             n_step = min(self.n, int(round(self.step_ns * self.fs / _NS)))
@@ -316,6 +324,11 @@ class MonitoringEngine:
         if not isinstance(monitor, ModalMonitor):
             raise ValueError(f"monitor must be a ModalMonitor, got {type(monitor).__name__}")
         self.monitor = monitor
+
+    def usability(self) -> dict:
+        """The windows so far: usable, each rejection reason counted (the skipped ones too) and, when
+        none is usable, why and what to change (:func:`analytics.usability_document`)."""
+        return usability_document(self.usable, {"warmup": self.skipped_warmup, "incomplete": self.skipped_incomplete, **self.rejected})
 
     @property
     def step_s(self) -> float:

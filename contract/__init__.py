@@ -71,6 +71,7 @@ from ._payloads import (
     BEARING_TOPIC,
     ESTIMATE_LOADS_TOPIC,
     ESTIMATE_TOPIC,
+    IMU_BIAXIAL_COLUMNS,
     IMU_PLANAR_COLUMNS,
     NOMINAL_PERIOD_NS,
     PAYLOAD_FIELDS,
@@ -91,11 +92,14 @@ from ._rig import (
     EN1993_DETAIL_CATEGORIES,
     EN1993_SHEAR_CATEGORIES,
     STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT,
+    PLANES,
     Beam,
+    Bending,
     FatigueSettings,
     HotSpot,
     check_curve_spec,
     Orientation,
+    Plane,
     PointMass,
     RigDescription,
     RigError,
@@ -117,12 +121,12 @@ __all__ = [
     # the runtime's ports (the HTTP routers and the dashboard are typed against them)
     "MAX_PAGE", "Lane", "LanePool", "NotSingleStructure", "Page", "ServicePort", "ServiceStarting", "StructureHost", "StructureModel", "StructurePort", "StructureUnavailable", "Waker",
     # rig.json
-    "Beam", "EXTENSION_KEYS", "Orientation", "PointMass", "RigDescription",
+    "Beam", "Bending", "EXTENSION_KEYS", "Orientation", "PLANES", "Plane", "PointMass", "RigDescription",
     "DNV_RP_C203_CURVE_NAMES", "DNV_RP_C203_ENVIRONMENTS", "EN1993_DETAIL_CATEGORIES", "EN1993_SHEAR_CATEGORIES",
     "FatigueSettings", "HotSpot", "check_curve_spec", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
     "STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT", "Support", "load_rig", "parse_rig",
     # topics and payloads
-    "BEARING_TOPIC", "ESTIMATE_LOADS_TOPIC", "ESTIMATE_TOPIC", "IMU_PLANAR_COLUMNS", "NOMINAL_PERIOD_NS", "PAYLOAD_FIELDS", "SCHEMAS",
+    "BEARING_TOPIC", "ESTIMATE_LOADS_TOPIC", "ESTIMATE_TOPIC", "IMU_BIAXIAL_COLUMNS", "IMU_PLANAR_COLUMNS", "NOMINAL_PERIOD_NS", "PAYLOAD_FIELDS", "SCHEMAS",
     "TEMPERATURE_TOPIC", "TRUTH_TOPIC", "FieldSpec", "Kind", "RowLayout", "TopicInfo", "classify_topic", "row_layout",
     # state and modes
     "ModeMap", "Peripheral", "StateIndex", "StateLayout",

@@ -566,6 +566,10 @@ class EstimatorStatusDocument(_Document):
     aiding: dict[str, AidingChannelDocument] = Field(default_factory=dict)
     rejected: Count = 0
     degraded_imus: list[DegradedImuDocument] = Field(default_factory=list)
+    gauge_std: dict[str, Finite] | None = Field(
+        None, description="gauge -> the 1σ (m/m) the filter gives it, once raised above its rest calibration's because "
+                          "it reads strain outside the unit deformations (None: none raised)")
+    gauge_note: str | None = Field(None, description="why the gauges' 1σ was raised, and what would carry that motion")
 
 
 class HotSpotLoadsDocument(_Document):
@@ -608,6 +612,12 @@ class PipelineStatusDocument(_Document):
     windows_committed: Count
     windows_skipped_incomplete: Count
     windows_skipped_warmup: Count
+    windows_usable: Count = Field(0, description="analysed windows with an identified mode (those that learn the baseline and feed "
+                                                 "the charts)")
+    windows_rejected: dict[str, Count] = Field(default_factory=dict, description="analysed windows that are not usable, by reason "
+                                               "(quiet, forced, no_mode_identified: analytics.WINDOW_REJECTIONS)")
+    no_usable_window: str | None = Field(None, description="when windows were analysed or skipped but none is usable: why (each "
+                                         "reason counted) and what to change; None otherwise")
     baseline: Literal["learning", "active"]
     data_time_s: Num = None
     processed_data_s: Num = None

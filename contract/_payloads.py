@@ -16,6 +16,7 @@ __all__ = [
     "BEARING_TOPIC",
     "ESTIMATE_LOADS_TOPIC",
     "ESTIMATE_TOPIC",
+    "IMU_BIAXIAL_COLUMNS",
     "IMU_PLANAR_COLUMNS",
     "NOMINAL_PERIOD_NS",
     "PAYLOAD_FIELDS",
@@ -285,3 +286,5 @@ _IMU = row_layout("shm.Imu")
 #: Columns of an IMU row that the planar model uses: f_x, f_y (specific force in the beam's plane,
 #: m/s²) and ω_z (rate about the axis normal to the plane, rad/s).
 IMU_PLANAR_COLUMNS: Final[tuple[int, int, int]] = (_IMU.column("accel", 0), _IMU.column("accel", 1), _IMU.column("gyro", 2))
+#: A biaxial beam's IMU columns: the planar three, then accel z and gyro y (the ξ plane's).
+IMU_BIAXIAL_COLUMNS: Final[tuple[int, int, int, int, int]] = (*IMU_PLANAR_COLUMNS, _IMU.column("accel", 2), _IMU.column("gyro", 1))

@@ -21,7 +21,10 @@ __all__ = [
     "DNV_RP_C203_ENVIRONMENTS",
     "EN1993_DETAIL_CATEGORIES",
     "EN1993_SHEAR_CATEGORIES",
+    "PLANES",
     "Beam",
+    "Bending",
+    "Plane",
     "check_curve_spec",
     "FatigueSettings",
     "HotSpot",
@@ -40,6 +43,10 @@ __all__ = [
 SensorKind = Literal["imu", "tof", "strain", "bearing", "temperature"]
 Support = Literal["pinned", "clamped"]
 Orientation = Literal["hanging", "standing"]
+Bending = Literal["planar", "biaxial"]
+#: The two bending planes: ζ (the planar contract's) and ξ = η × ζ (a biaxial beam's second).
+Plane = Literal["zeta", "xi"]
+PLANES: tuple[str, ...] = ("zeta", "xi")
 
 # Kinds whose sensors sit on the beam and therefore need a position.
 _POSITIONED_KINDS = ("imu", "tof", "strain")
@@ -177,6 +184,10 @@ class TableSection(_ContractModel):
     mass_per_length: float = Field(gt=0.0, allow_inf_nan=False, description="μ = ρA, kg/m")
     fibre_distance: float = Field(gt=0.0, allow_inf_nan=False, description="c, the distance of the outer fibre from the neutral axis, m "
                                   "(strain ε = −c·κ)")
+    bending_stiffness_xi: float | None = Field(None, gt=0.0, allow_inf_nan=False, description="EI for bending in ξ at the reference "
+                                               "temperature, N·m² (required for a biaxial beam, ignored for a planar one)")
+    fibre_distance_xi: float | None = Field(None, gt=0.0, allow_inf_nan=False, description="c_ξ, the outline's half-side along ξ, m "
+                                            "(required for a biaxial beam, ignored for a planar one)")
 
 
 Section = Annotated[RectangleSection | TubeSection | TableSection, Field(discriminator="shape")]
@@ -187,6 +198,42 @@ _SECTION_DIMENSIONS = {
     "tube": ("outer_diameter", "wall_thickness"),
     "table": ("bending_stiffness", "mass_per_length", "fibre_distance"),
 }
+#: The keys a table station of a biaxial beam adds (they vary linearly along a taper too).
+_TABLE_XI_KEYS = ("bending_stiffness_xi", "fibre_distance_xi")
+#: An angle within this many degrees of a multiple of 90 is taken as that multiple, so the faces
+#: (0, 90, 180, 270) get exact cosines and sines and a planar beam's strain stays −c·κ bit for bit.
+_QUADRANT_TOLERANCE_DEG = 1e-9
+
+
+def _cos_sin_deg(angle_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of angles in degrees, exact (0, ±1) at the multiples of 90."""
+    angle = np.asarray(angle_deg, dtype=float)
+    quarter = np.round(angle / 90.0)
+    on_face = np.abs(angle - 90.0 * quarter) <= _QUADRANT_TOLERANCE_DEG
+    radians = np.radians(angle)
+    cos, sin = np.cos(radians), np.sin(radians)
+    k = np.mod(quarter, 4).astype(int)
+    cos = np.where(on_face, np.array([1.0, 0.0, -1.0, 0.0])[k], cos)
+    sin = np.where(on_face, np.array([0.0, 1.0, 0.0, -1.0])[k], sin)
+    return cos, sin
+
+
+def _planar_angle(angle: float) -> bool:
+    """True for the angles a planar beam accepts: the +ζ face (0) and the −ζ face (180), modulo 360."""
+    return math.isfinite(angle) and float(np.mod(angle, 360.0)) in (0.0, 180.0)
+
+
+def _require_table_xi(stations: tuple[Any, ...], indices: Any = None, error: type[ValueError] = ValueError) -> None:
+    """A biaxial beam's table stations (those at ``indices``, default all) give their ξ properties:
+    ``error`` naming the station and the key."""
+    for index in range(len(stations)) if indices is None else indices:
+        station = stations[index]
+        for key in _TABLE_XI_KEYS if station.shape == "table" else ():
+            if getattr(station, key) is None:
+                raise error(
+                    f"beam.sections[{index}].{key} is required: a table station of a biaxial beam "
+                    "(beam.bending='biaxial') gives its ξ plane's bending_stiffness_xi and fibre_distance_xi"
+                )
 
 
 def _as_positions(positions: Any, length: float) -> tuple[np.ndarray, bool]:
@@ -230,6 +277,8 @@ class Beam(_ContractModel):
     sections: tuple[Section, ...] | None = Field(None, description="the cross-section along the beam: stations of shape rectangle, "
                                                  "tube or table ordered from 0 to length, linear tapers between neighbours, a step where "
                                                  "two share a position; None: the uniform rectangle width × thickness")
+    bending: Bending = Field("planar", description='"planar": bending in ζ only (the other axes carry only noise); "biaxial": '
+                             "bending in ζ and in ξ = η × ζ (needs support='clamped'; a rectangle's width lies along ξ)")
 
     @model_validator(mode="after")
     def _sections_consistent(self) -> Beam:
@@ -275,7 +324,14 @@ class Beam(_ContractModel):
         for key in ("youngs_modulus", "density"):
             if getattr(self, key) is None and shapes & {"rectangle", "tube"}:
                 raise ValueError(f"beam.{key} is required: it applies to the rectangle and tube sections")
+        if self.bending == "biaxial":
+            _require_table_xi(stations)
         return self
+
+    @property
+    def biaxial(self) -> bool:
+        """True when the beam bends in both planes (``bending == "biaxial"``)."""
+        return self.bending == "biaxial"
 
     # -- the uniform rectangle -----------------------------------------------------------
     def _uniform(self, what: str) -> None:
@@ -300,6 +356,12 @@ class Beam(_ContractModel):
         """I of the rectangular section for bending across the thickness (m^4)."""
         self._uniform("second_moment_of_area")
         return self.width * self.thickness**3 / 12.0
+
+    @property
+    def second_moment_of_area_xi(self) -> float:
+        """I_ξ of the rectangular section for bending in ξ, across the width (m^4): thickness·width³/12."""
+        self._uniform("second_moment_of_area_xi")
+        return self.thickness * self.width**3 / 12.0
 
     @property
     def mass_per_length(self) -> float:
@@ -343,12 +405,19 @@ class Beam(_ContractModel):
             return np.zeros(0)
         return np.array([station.position for station in self.sections], dtype=float)
 
-    def _properties(self, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(EI at the reference temperature, μ, c) at arc lengths ``eta`` already on the beam."""
+    def _properties(self, eta: np.ndarray, plane: str = "zeta") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(EI at the reference temperature, μ, c) of ``plane`` ("zeta" or "xi") at arc lengths ``eta`` already on the beam.
+
+        In ξ a rectangle bends across its width (EI_ξ = E·thickness·width³/12, c_ξ = width/2), a tube
+        as in ζ, a table by its ``bending_stiffness_xi`` and ``fibre_distance_xi``.
+        """
+        if plane not in PLANES:
+            raise RigError(f"plane={plane!r} must be one of {PLANES}")
+        xi = plane == "xi"
         if self.sections is None:
             ones = np.ones_like(eta)
-            return (self.youngs_modulus * self.second_moment_of_area * ones, self.mass_per_length * ones,
-                    0.5 * self.thickness * ones)
+            inertia, c = (self.second_moment_of_area_xi, 0.5 * self.width) if xi else (self.second_moment_of_area, 0.5 * self.thickness)
+            return self.youngs_modulus * inertia * ones, self.mass_per_length * ones, c * ones
         stations = self.sections
         positions = self.station_positions
         last = len(stations) - 1
@@ -361,9 +430,14 @@ class Beam(_ContractModel):
             b = stations[min(j + 1, last)]
             span = b.position - a.position
             t = np.zeros(int(at.sum())) if j == last or span <= 0 else (eta[at] - a.position) / span
-            dims = {key: getattr(a, key) + t * (getattr(b, key) - getattr(a, key)) for key in _SECTION_DIMENSIONS[a.shape]}
+            keys = _SECTION_DIMENSIONS[a.shape] + (_TABLE_XI_KEYS if xi and a.shape == "table" else ())
+            if xi and a.shape == "table":
+                _require_table_xi(stations, (j, min(j + 1, last)), RigError)
+            dims = {key: getattr(a, key) + t * (getattr(b, key) - getattr(a, key)) for key in keys}
             if a.shape == "rectangle":
                 w, h = dims["width"], dims["thickness"]
+                if xi:
+                    w, h = h, w  # bending in ξ: across the width
                 stiffness[at] = self.youngs_modulus * w * h**3 / 12.0
                 mass[at] = self.density * w * h
                 fibre[at] = 0.5 * h
@@ -374,9 +448,9 @@ class Beam(_ContractModel):
                 mass[at] = self.density * np.pi / 4.0 * (outer**2 - inner**2)
                 fibre[at] = 0.5 * outer
             elif a.shape == "table":
-                stiffness[at] = dims["bending_stiffness"]
+                stiffness[at] = dims["bending_stiffness_xi" if xi else "bending_stiffness"]
                 mass[at] = dims["mass_per_length"]
-                fibre[at] = dims["fibre_distance"]
+                fibre[at] = dims["fibre_distance_xi" if xi else "fibre_distance"]
             else:
                 raise RigError(f"beam.sections[{j}].shape={a.shape!r} must be 'rectangle', 'tube' or 'table'")
         return stiffness, mass, fibre
@@ -430,6 +504,37 @@ class Beam(_ContractModel):
         values = self._properties(eta)[2]
         return float(values[0]) if scalar else values
 
+    def bending_stiffness_xi(self, positions: Any, temperature_c: float | None = None) -> np.ndarray | float:
+        """EI_ξ(η, T) in N·m² for bending in ξ, as ``bending_stiffness`` is for ζ: a rectangle's
+        E·thickness·width³/12, a tube's EI, a table's ``bending_stiffness_xi`` (RigError without it)."""
+        eta, scalar = _as_positions(positions, self.length)
+        values = self._properties(eta, "xi")[0] * self.stiffness_factor_at(temperature_c)
+        return float(values[0]) if scalar else values
+
+    def fibre_distance_xi(self, positions: Any) -> np.ndarray | float:
+        """c_ξ(η) in m, the outline's half-side along ξ: half a rectangle's width, half a tube's outer
+        diameter, a table's ``fibre_distance_xi`` (RigError without it); at a step the section beyond it."""
+        eta, scalar = _as_positions(positions, self.length)
+        values = self._properties(eta, "xi")[2]
+        return float(values[0]) if scalar else values
+
+    def section_point(self, positions: Any, angle_deg: Any) -> tuple[np.ndarray | float, np.ndarray | float]:
+        """(ζp, ξp) in m: where the ray from the section's centre at ``angle_deg`` (degrees from +ζ
+        towards +ξ) meets the outline at arc lengths ``positions`` (m); the strain there is
+        ε = −(ζp·κζ + ξp·κξ). The outline of a tube is its outer circle, of a rectangle or a table
+        station the rectangle of half-sides c (along ζ) and c_ξ (along ξ). Floats for scalar inputs,
+        else arrays of the broadcast shape. RigError for a position off the beam, an angle not
+        finite, or an angle other than 0 ((c, 0)) and 180 ((−c, 0)) on a planar beam.
+
+        >>> from contract import parse_rig
+        >>> beam = parse_rig({"beam": {"length": 2.0, "width": 0.06, "thickness": 0.02, "youngs_modulus": 2.1e11,
+        ...                            "density": 7850.0, "bending": "biaxial"}, "gravity": 0.0, "support": "clamped",
+        ...                   "sensors": []}).beam
+        >>> beam.section_point(1.0, 0.0), beam.section_point(1.0, 90.0), beam.section_point(1.0, 180.0)
+        ((0.01, 0.0), (0.0, 0.03), (-0.01, 0.0))
+        """
+        return _section_point(self, positions, angle_deg)
+
     def _segment_integrals(self, moment: int) -> np.ndarray:
         """∫ μ(η) η^moment dη over each stretch between neighbouring stations (exact: μ is a polynomial of degree ≤ 2)."""
         xi, weights = np.polynomial.legendre.leggauss(4)
@@ -445,6 +550,49 @@ class Beam(_ContractModel):
         return out
 
 
+def _shapes_at(beam: Beam, eta: np.ndarray) -> np.ndarray:
+    """The shape of the section at each arc length (the uniform beam's is "rectangle"; at a step the one beyond it)."""
+    if beam.sections is None:
+        return np.full(eta.shape, "rectangle", dtype=object)
+    start = np.clip(np.searchsorted(beam.station_positions, eta, side="right") - 1, 0, len(beam.sections) - 1)
+    return np.array([beam.sections[j].shape for j in start], dtype=object).reshape(eta.shape)
+
+
+def _section_point(beam: Beam, positions: Any, angle_deg: Any) -> tuple[np.ndarray | float, np.ndarray | float]:
+    """``Beam.section_point``."""
+    eta, scalar_eta = _as_positions(positions, beam.length)
+    scalar = scalar_eta and np.ndim(angle_deg) == 0
+    try:
+        angle = np.asarray(angle_deg, dtype=float)
+    except (TypeError, ValueError):
+        raise RigError(f"angle_deg={angle_deg!r} must be degrees (numbers)") from None
+    if not np.all(np.isfinite(angle)):
+        raise RigError(f"angle_deg={angle_deg!r} must be finite degrees")
+    if scalar_eta:
+        eta = eta.reshape(())
+    eta, angle = np.broadcast_arrays(eta, angle)
+    cos, sin = _cos_sin_deg(angle)
+    c_zeta = beam._properties(eta.ravel())[2].reshape(eta.shape)
+    if not beam.biaxial:
+        bad = [float(a) for a in np.atleast_1d(angle).ravel() if not _planar_angle(float(a))]
+        if bad:
+            raise RigError(f"angle_deg={bad[0]:g}: a planar beam accepts only 0 and 180 (beam.bending='planar')")
+        zeta_p, xi_p = c_zeta * cos, np.zeros_like(c_zeta)
+    else:
+        c_xi = beam._properties(eta.ravel(), "xi")[2].reshape(eta.shape)
+        round_ = _shapes_at(beam, eta.ravel()).reshape(eta.shape) == "tube"
+        # The rectangle: the ray leaves through a ζ face (|ζp| = c) unless it reaches a ξ face first.
+        through_zeta = np.abs(sin) * c_zeta <= np.abs(cos) * c_xi
+        with np.errstate(divide="ignore", invalid="ignore"):
+            zeta_rect = np.where(through_zeta, np.copysign(c_zeta, cos), c_xi * cos / np.abs(sin))
+            xi_rect = np.where(through_zeta, c_zeta * sin / np.abs(cos), np.copysign(c_xi, sin))
+        zeta_p = np.where(round_, c_zeta * cos, zeta_rect)
+        xi_p = np.where(round_, c_zeta * sin, xi_rect)
+    if scalar:
+        return float(zeta_p), float(xi_p)
+    return zeta_p, xi_p
+
+
 class HotSpot(_ContractModel):
     """A named position with a fatigue detail: its S–N curve, stress concentration and partial factors."""
 
@@ -455,6 +603,16 @@ class HotSpot(_ContractModel):
     scf: float = Field(default=1.0, gt=0.0, description="stress concentration factor on the nominal stress")
     gamma_Ff: float = Field(default=1.0, gt=0.0, description="partial factor on the stress ranges (loads)")
     gamma_Mf: float = Field(default=1.0, gt=0.0, description="partial factor on the fatigue strength (material)")
+    angle_deg: float | Literal["all"] = Field(default=0.0, description='where around the section, degrees from +ζ towards +ξ (0: the '
+                                              '+ζ face); "all": the worst point around the circumference (a girth weld; biaxial '
+                                              "beams only); a planar beam accepts only 0 and 180")
+
+    @field_validator("angle_deg")
+    @classmethod
+    def _finite_angle(cls, value: Any) -> Any:
+        if value != "all" and not math.isfinite(value):
+            raise ValueError(f"angle_deg={value!r} must be finite degrees or 'all'")
+        return value
 
     @field_validator("curve")
     @classmethod
@@ -478,9 +636,11 @@ class PointMass(_ContractModel):
 
 class Sensor(_ContractModel):
     name: str = Field(min_length=1, description="unique within its kind; the topic's NAME (/imu/NAME); the IMU at the support is D")
-    kind: SensorKind = Field(description="imu (accel + gyro), tof (distance to the reflector), strain (a gauge on the +ζ face), "
+    kind: SensorKind = Field(description="imu (accel + gyro), tof (distance to the reflector), strain (a gauge, on the +ζ face unless its angle_deg says otherwise), "
                              "bearing (the support's displacement d), temperature")
     position: float | None = Field(None, description="arc length from D, m (required for imu, tof and strain)")
+    angle_deg: float = Field(0.0, allow_inf_nan=False, description="a strain gauge's place around the section, degrees from +ζ "
+                             "towards +ξ (0: the +ζ face, 90: the +ξ face); a planar beam accepts only 0 and 180")
 
     @property
     def topic(self) -> str:
@@ -515,6 +675,11 @@ class RigDescription(_ContractModel):
     @model_validator(mode="after")
     def _consistent(self) -> "RigDescription":
         length = self.beam.length
+        if self.beam.biaxial and self.support != "clamped":
+            raise ValueError(
+                f"beam.bending='biaxial' needs support='clamped', got support={self.support!r}: the support must hold the "
+                "beam in both planes (a pinned bearing turns freely in ξ)"
+            )
         if self.support == "pinned" and self.orientation == "standing":
             raise ValueError(
                 "support='pinned' with orientation='standing' is an inverted pendulum, unstable at any length: "
@@ -539,6 +704,7 @@ class RigDescription(_ContractModel):
                         f"sensors[{index}] ({sensor.kind} {sensor.name!r}): position={sensor.position} "
                         f"is outside the beam [0, {length}]"
                     )
+        self._angles_fit_bending()
         for index, mass in enumerate(self.point_masses):
             if mass.position > length:
                 raise ValueError(f"point_masses[{index}]: position={mass.position} is outside the beam [0, {length}]")
@@ -556,6 +722,24 @@ class RigDescription(_ContractModel):
                 raise ValueError(f"hot_spots[{index}]: name {spot.name!r} is not unique")
             spot_names.add(spot.name)
         return self
+
+    def _angles_fit_bending(self) -> None:
+        """A planar beam knows only the ζ faces: its gauges and hot spots sit at 0 or 180 degrees."""
+        if self.beam.biaxial:
+            return
+        for index, sensor in enumerate(self.sensors):
+            if sensor.kind == "strain" and not _planar_angle(sensor.angle_deg):
+                raise ValueError(
+                    f"sensors[{index}] (strain {sensor.name!r}): angle_deg={sensor.angle_deg:g}, but a planar beam accepts only 0 and 180 "
+                    "(beam.bending='planar'; other angles need beam.bending='biaxial')"
+                )
+        for index, spot in enumerate(self.hot_spots):
+            if spot.angle_deg == "all" or not _planar_angle(spot.angle_deg):
+                angle = repr(spot.angle_deg) if spot.angle_deg == "all" else format(spot.angle_deg, "g")
+                raise ValueError(
+                    f"hot_spots[{index}] ({spot.name!r}): angle_deg={angle}, but a planar beam accepts only 0 and 180 "
+                    "(beam.bending='planar'; other angles and 'all' need beam.bending='biaxial')"
+                )
 
     @property
     def support_fixed_to_ground(self) -> bool:
@@ -579,6 +763,16 @@ class RigDescription(_ContractModel):
         for key in ("width", "thickness", "youngs_modulus", "density", "sections"):
             if data["beam"].get(key, 0) is None:
                 del data["beam"][key]
+        # The biaxial keys at their defaults are left out too: a planar rig's description reads as before.
+        if data["beam"].get("bending") == "planar":
+            del data["beam"]["bending"]
+        for station in data["beam"].get("sections") or ():
+            for key in _TABLE_XI_KEYS:
+                if key in station and station[key] is None:
+                    del station[key]
+        for item in (*data["sensors"], *data["hot_spots"]):
+            if item.get("angle_deg") == 0.0:
+                del item["angle_deg"]
         if data.get("reflector_distance", 0) is None:
             del data["reflector_distance"]
         return json.dumps(data, indent=2)

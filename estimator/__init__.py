@@ -31,6 +31,8 @@ from ._health import (
     StateBounds,
     aiding_window,
     assess_health,
+    gauge_disagreement,
+    gauges_beyond_basis,
     physical_bounds,
     restart_state,
 )
@@ -70,6 +72,8 @@ __all__ = [
     "assess_health",
     "physical_bounds",
     "restart_state",
+    "gauge_disagreement",
+    "gauges_beyond_basis",
     "EstimateResult",
     "Events",
     "FilterConfig",

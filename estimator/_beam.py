@@ -30,7 +30,7 @@ import scipy.linalg
 import scipy.optimize
 import scipy.special
 
-from contract import RigDescription, RigError
+from contract import PLANES, RigDescription, RigError
 
 __all__ = [
     "GREENHILL_COEFFICIENT",
@@ -153,6 +153,7 @@ class BeamModel:
     temperature_c: float | None
     free_dofs: np.ndarray = field(repr=False)
     critical_load_factor: float = float("inf")  # gravity-load multiplier at which it buckles (inf: no compression)
+    plane: str = "zeta"  # the bending plane: "zeta" (w = Δζ) or "xi" (w = Δξ of a biaxial beam, EI_ξ)
 
     @property
     def gravity(self) -> float:
@@ -345,6 +346,7 @@ def assemble_beam(
     temperature_c: float | None = None,
     elements: int = 40,
     extra_nodes: Sequence[float] = (),
+    plane: str = "zeta",
 ) -> BeamModel:
     """Assemble the FE matrices of the beam described by ``rig`` at ``temperature_c`` (°C).
 
@@ -352,21 +354,34 @@ def assemble_beam(
     stiffness-segment ends and ``extra_nodes`` (m; e.g. where a later damage will sit, so two
     models share one mesh). ``temperature_c=None`` uses the beam's reference temperature.
 
+    ``plane`` is the bending plane the model's lateral field w lies in: ``"zeta"`` (the planar
+    contract's, the default) or ``"xi"`` (the second plane of a biaxial beam). The ξ model differs
+    only by its bending stiffness EI_ξ (``Beam.bending_stiffness_xi``): the mass, the attached masses
+    and their rotary inertia, the axial load's geometric stiffness and the clamp are the same.
+
     Raises
     ------
     BucklingError
         A standing beam whose weight and attached masses exceed its critical load (λ_cr ≤ 1).
+    RigError
+        ``plane="xi"`` for a planar beam (it does not bend in ξ); a table station without ``bending_stiffness_xi``.
     """
     if not isinstance(elements, (int, np.integer)) or elements < 2:
         raise ValueError(f"{elements=} must be an integer >= 2")
+    if plane not in PLANES:
+        raise ValueError(f"plane={plane!r} must be one of {PLANES}")
     beam = rig.beam
+    xi = plane == "xi"
+    if xi and not beam.biaxial:
+        raise RigError("plane='xi' is the second bending plane of a biaxial beam; this beam has beam.bending='planar'")
     nodes = _mesh(rig, int(elements), extra_nodes)
     n_dof = 2 * len(nodes)
     length = beam.length
     uniform = beam.uniform
+    stiffness_along = beam.bending_stiffness_xi if xi else beam.bending_stiffness
     if uniform:
         E = beam.youngs_modulus_at(temperature_c)
-        EI = E * beam.second_moment_of_area
+        EI = E * (beam.second_moment_of_area_xi if xi else beam.second_moment_of_area)
         mu = beam.mass_per_length
     else:
         E = None if beam.youngs_modulus is None else beam.youngs_modulus_at(temperature_c)
@@ -411,7 +426,7 @@ def assemble_beam(
         else:
             # The section varies within the element: EI and μ at the Gauss points (exact for the
             # polynomial tapers of rectangles, tubes and tables, so a taper converges with the mesh).
-            EI_g = beam.bending_stiffness(x) * stiffness_factor
+            EI_g = stiffness_along(x) * stiffness_factor
             mu_g = beam.mass_per_length_at(x)
             M[sl] += np.einsum("g,g,gi,gj->ij", w, mu_g, N0, N0)
             K[sl] += factor * np.einsum("g,g,gi,gj->ij", w, EI_g, N2, N2)
@@ -436,7 +451,7 @@ def assemble_beam(
         at = "" if temperature_c is None else f" at {temperature_c:g} °C"
         load = "its own weight and attached masses" if any(m.mass > 0 and m.position > 0 for m in rig.point_masses) else "its own weight"
         message = (
-            f"the standing beam buckles under {load}{at}: its critical load factor is "
+            f"the standing beam buckles{' in the ξ plane' if xi else ''} under {load}{at}: its critical load factor is "
             f"λ_cr = {factor:.4g} (it would stand only up to {factor * rig.gravity:.4g} m/s² of the {rig.gravity:g} m/s² "
             "gravity)"
         )
@@ -462,6 +477,7 @@ def assemble_beam(
         temperature_c=temperature_c,
         free_dofs=free,
         critical_load_factor=factor,
+        plane=plane,
     )
 
 

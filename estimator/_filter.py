@@ -31,7 +31,7 @@ from ._imms import (
     run_events,
     tip_variance,
 )
-from ._observability import observability_problem
+from ._observability import biaxial_observability_problem, observability_problem
 from ._selection import SensorSelection, select_sensors
 from ._unit_deformations import UnitDeformations, unit_deformations, with_residual_modes
 
@@ -128,8 +128,9 @@ class SensorSeries:
 class Measurements:
     """Measurements of one recording, times in s from a common origin.
 
-    imu values are [f_x, f_y, ω_z] (sensor frame, m/s² and rad/s); tof, strain and bearing
-    values are the distance (m), strain (m/m) and bearing displacement (m).
+    imu values are [f_x, f_y, ω_z] (sensor frame, m/s² and rad/s), for a biaxial beam
+    [f_x, f_y, ω_z, f_z, ω_y] (``contract.IMU_BIAXIAL_COLUMNS``); tof, strain and bearing values
+    are the distance (m), strain (m/m) and bearing displacement (m).
     """
 
     imu: Mapping[str, SensorSeries]
@@ -155,6 +156,11 @@ class ImmsModel:
     (None: R = 0), whose participation p of the support's lateral acceleration (r̈ + … + ω² r =
     −p a_D) is ``residual_participation``. Deflection, tip deflection and curvature are read from
     all of them.
+
+    A biaxial beam (``beam.bending = "biaxial"``) adds its ξ plane: ``units_xi`` (Γξ unit
+    deformations of the ξ FE model), ``modal_units_xi`` (with its Rξ residual modes) and
+    ``residual_participation_xi``; ``gauge_angle`` are the selected gauges' places around the
+    section (degrees from +ζ towards +ξ). A planar model has ``units_xi = None``.
     """
 
     rig: RigDescription
@@ -167,6 +173,45 @@ class ImmsModel:
     modal_units: UnitDeformations | None = None
     residual_participation: tuple[float, ...] = ()
     combimode_pair: UnitDeformations | None = None
+    units_xi: UnitDeformations | None = None
+    modal_units_xi: UnitDeformations | None = None
+    residual_participation_xi: tuple[float, ...] = ()
+    gauge_angle: np.ndarray | None = None
+
+    @property
+    def biaxial(self) -> bool:
+        """The model carries the ξ plane (a biaxial beam)."""
+        return self.units_xi is not None
+
+    @property
+    def gamma_xi(self) -> int:
+        """Γξ, the unit deformations in ξ (0 for a planar model)."""
+        return 0 if self.units_xi is None else self.units_xi.count
+
+    @property
+    def modal_xi(self) -> UnitDeformations | None:
+        """The Γξ + Rξ shapes of the ξ modal block (None for a planar model)."""
+        return self.units_xi if self.modal_units_xi is None else self.modal_units_xi
+
+    @property
+    def residual_xi(self) -> int:
+        """Rξ, the residual modes carried in ξ."""
+        modal = self.modal_xi
+        return 0 if modal is None else modal.count - self.gamma_xi
+
+    def gauge_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """(ζp, ξp) (G,) in m of the selected gauges: where on the outline each sits
+        (``Beam.section_point``); a planar model's are (±c(η), 0) of the +ζ and −ζ faces."""
+        eta = self.gauge_eta
+        angle = np.zeros(eta.size) if self.gauge_angle is None else np.asarray(self.gauge_angle, dtype=float)
+        if eta.size == 0:
+            return np.zeros(0), np.zeros(0)
+        if not self.biaxial:
+            # ±c exactly (a gauge on the −ζ face reads the opposite strain): planar strain stays −c·κ bit for bit
+            face = np.where(np.mod(angle, 360.0) == 180.0, -1.0, 1.0)
+            return face * np.asarray(self.rig.beam.fibre_distance(eta), dtype=float), np.zeros(eta.size)
+        zeta_p, xi_p = self.rig.beam.section_point(eta, angle)
+        return np.asarray(zeta_p, dtype=float), np.asarray(xi_p, dtype=float)
 
     def combimode_strain_errors(self) -> np.ndarray:
         """The strain the combimode cannot represent of the two modes it merges, per unit b_1, at
@@ -219,7 +264,8 @@ class ImmsModel:
     def state_layout(self) -> StateLayout:
         """Which entry of the state vector is what (the one layout every consumer reads)."""
         return StateLayout(self.selection.peripheral, self.gamma, len(self.selection.imus), attitude=self.has_attitude,
-                           imu_names=tuple(self.selection.imus), residual=self.residual)
+                           imu_names=tuple(self.selection.imus), residual=self.residual, gamma_xi=self.gamma_xi,
+                           residual_xi=self.residual_xi)
 
     @property
     def has_attitude(self) -> bool:
@@ -264,10 +310,18 @@ class ImmsModel:
 
     def strain_matrix(self) -> np.ndarray:
         """Eq. (19) with the section's fibre distance: ε = −c(η) S'' [b, r] (c = h*/2 for the paper's
-        sheet), rows for the selected gauges (Γ + R columns)."""
+        sheet), rows for the selected gauges (Γ + R columns). A biaxial model's gauge at θ sees both
+        planes, ε = −(ζp κζ + ξp κξ): Γ + R + Γξ + Rξ columns, [b, r] then [bξ, rξ]."""
+        n_xi = 0 if self.modal_xi is None else self.modal_xi.count
         if self.gauge_eta.size == 0:
-            return np.zeros((0, self.modal.count))
-        return -self.rig.beam.fibre_distance(self.gauge_eta)[:, None] * self.modal.curvature(self.gauge_eta)
+            return np.zeros((0, self.modal.count + n_xi))
+        if not self.biaxial and (self.gauge_angle is None or not np.any(self.gauge_angle)):
+            return -self.rig.beam.fibre_distance(self.gauge_eta)[:, None] * self.modal.curvature(self.gauge_eta)
+        zeta_p, xi_p = self.gauge_points()
+        blocks = [-zeta_p[:, None] * self.modal.curvature(self.gauge_eta)]
+        if self.modal_xi is not None:
+            blocks.append(-xi_p[:, None] * self.modal_xi.curvature(self.gauge_eta))
+        return np.hstack(blocks)
 
     def tip_deflection(self, x: np.ndarray) -> np.ndarray:
         """e = Δ(L) (m) of state(s) ``x`` (…, n), residual modes included."""
@@ -283,6 +337,29 @@ class ImmsModel:
         eta = self.stations if eta is None else np.asarray(eta, dtype=float)
         return self.state_layout.check(x)[..., self.state_layout.modal] @ self.modal.curvature(eta).T
 
+    def _xi_block(self, x: np.ndarray) -> tuple[np.ndarray, UnitDeformations]:
+        modal = self.modal_xi
+        if modal is None:
+            raise ValueError("this model is planar (beam.bending='planar'): it has no ξ plane")
+        return self.state_layout.check(x)[..., self.state_layout.modal_xi], modal
+
+    def tip_deflection_xi(self, x: np.ndarray) -> np.ndarray:
+        """eξ = Δξ(L) (m) of state(s) ``x`` (…, n), residual modes included; ValueError for a planar model."""
+        block, modal = self._xi_block(x)
+        return block @ modal.shape(self.rig.beam.length)
+
+    def deflection_xi(self, x: np.ndarray, eta: np.ndarray | None = None) -> np.ndarray:
+        """Δξ(η) (m) of state(s) ``x`` at ``eta`` (default: the truth stations); ValueError for a planar model."""
+        eta = self.stations if eta is None else np.asarray(eta, dtype=float)
+        block, modal = self._xi_block(x)
+        return block @ modal.shape(eta).T
+
+    def curvature_xi(self, x: np.ndarray, eta: np.ndarray | None = None) -> np.ndarray:
+        """κξ = ∂²Δξ/∂η² (1/m) of state(s) ``x`` at ``eta`` (default: the truth stations); ValueError for a planar model."""
+        eta = self.stations if eta is None else np.asarray(eta, dtype=float)
+        block, modal = self._xi_block(x)
+        return block @ modal.curvature(eta).T
+
 
 def build_model(
     rig: RigDescription,
@@ -296,6 +373,7 @@ def build_model(
     temperature_c: float | None = None,
     residual_modes: int | None = None,
     check_observable: bool = True,
+    modes_xi: int | None = None,
 ) -> ImmsModel:
     """Unit deformations (Γ = ``modes``) of the rig's FE model and the selected sensors (EfI for counts).
 
@@ -319,6 +397,12 @@ def build_model(
     selection whose peripheral IMUs cannot tell the Γ unit deformations apart or whose aiding (ToFs,
     aided gauges) does not see all of them (``observability_problem``); False builds such a model
     anyway (to inspect its layout, not to estimate with it).
+
+    A biaxial beam (``beam.bending = "biaxial"``, clamped) bends in ξ too: Γξ = ``modes_xi`` unit
+    deformations (None: the same as ``modes``) of its ξ FE model (``assemble_beam(plane="xi")``),
+    with as many residual modes as ζ, in the same filter; its accel z and gyro y read the ξ plane
+    and a gauge at an angle sees both. The observability check is made per plane and a refusal
+    names the plane. ``modes_xi`` on a planar beam is refused.
     """
     if rig.support not in ("pinned", "clamped"):
         raise ValueError(f"support={rig.support!r} must be 'pinned' or 'clamped'")
@@ -335,26 +419,45 @@ def build_model(
     if residual_modes and rig.support != "clamped":
         raise ValueError(f"{residual_modes=}: residual modes are modelled for a clamped support (one that only "
                          f"translates); support={rig.support!r} turns with the beam")
+    biaxial = bool(getattr(rig.beam, "biaxial", False))
+    if modes_xi is not None and not biaxial:
+        raise ValueError(f"{modes_xi=}: unit deformations in ξ need a beam that bends in both planes "
+                         "(beam.bending='biaxial'); this beam bends in ζ only")
     beam = assemble_beam(rig, temperature_c=temperature_c)
     units = unit_deformations(beam, modes)
     modal_units = with_residual_modes(beam, modes, int(residual_modes)) if residual_modes else None
-    participation: tuple[float, ...] = ()
-    if modal_units is not None:
-        # r̈ + ω² r = −p a_D: the support's acceleration loads every mass with −m a_D (M s_r · t / M s_r · s_r).
-        t = beam.uniform_translation()
-        shapes = modal_units.shapes.dofs[:, modes:]
-        participation = tuple(float((s @ beam.mass @ t) / (s @ beam.mass @ s)) for s in shapes.T)
-    selection = select_sensors(rig, units, peripheral=peripheral, imus=imus, tofs=tofs, gauges=gauges, aided=aided)
+    participation = _participation(beam, modal_units, modes)
+    units_xi = modal_units_xi = None
+    participation_xi: tuple[float, ...] = ()
+    if biaxial:
+        gamma_xi = modes if modes_xi is None else modes_xi
+        if isinstance(gamma_xi, bool) or not isinstance(gamma_xi, (int, np.integer)) or gamma_xi < 1:
+            raise ValueError(f"modes_xi={gamma_xi!r} must be an integer >= 1 (the unit deformations in ξ)")
+        beam_xi = assemble_beam(rig, temperature_c=temperature_c, plane="xi")
+        units_xi = unit_deformations(beam_xi, int(gamma_xi))
+        modal_units_xi = with_residual_modes(beam_xi, int(gamma_xi), int(residual_modes)) if residual_modes else None
+        participation_xi = _participation(beam_xi, modal_units_xi, int(gamma_xi))
+    selection = select_sensors(rig, units, peripheral=peripheral, imus=imus, tofs=tofs, gauges=gauges, aided=aided,
+                               units_xi=units_xi)
     # The two body-frame modes the combimode merges, each on its own (for its model error).
     pair = unit_deformations(beam, 2, combimode=False) if units.modes and units.modes[0] == (1, 2) else None
     by_name = {(s.kind, s.name): s for s in rig.sensors}
     imu_eta = np.array([by_name["imu", n].position for n in selection.imus], dtype=float)
     tof_eta = np.array([by_name["tof", n].position for n in selection.tofs], dtype=float)
     gauge_eta = np.array([by_name["strain", n].position for n in selection.gauges], dtype=float)
+    gauge_angle = np.array([by_name["strain", n].angle_deg for n in selection.gauges], dtype=float) if biaxial else None
     if check_observable:
-        problem = observability_problem(units, selection, imu_eta=imu_eta, tof_eta=tof_eta, gauge_eta=gauge_eta)
-        if problem:
-            raise ValueError(f"this rig cannot be estimated with Γ={units.count}: {problem}")
+        if biaxial:
+            zeta_p, xi_p = (np.asarray(v, dtype=float).reshape(-1) for v in rig.beam.section_point(gauge_eta, gauge_angle)) \
+                if gauge_eta.size else (np.zeros(0), np.zeros(0))
+            problem = biaxial_observability_problem(units, units_xi, selection, imu_eta=imu_eta, tof_eta=tof_eta,
+                                                    gauge_eta=gauge_eta, gauge_points=(zeta_p, xi_p))
+            if problem:
+                raise ValueError(f"this rig cannot be estimated with Γ={units.count}, Γξ={units_xi.count}: {problem}")
+        else:
+            problem = observability_problem(units, selection, imu_eta=imu_eta, tof_eta=tof_eta, gauge_eta=gauge_eta)
+            if problem:
+                raise ValueError(f"this rig cannot be estimated with Γ={units.count}: {problem}")
     return ImmsModel(
         rig=rig,
         units=units,
@@ -366,7 +469,21 @@ def build_model(
         modal_units=modal_units,
         residual_participation=participation,
         combimode_pair=pair,
+        units_xi=units_xi,
+        modal_units_xi=modal_units_xi,
+        residual_participation_xi=participation_xi,
+        gauge_angle=gauge_angle,
     )
+
+
+def _participation(beam, modal_units: UnitDeformations | None, modes: int) -> tuple[float, ...]:
+    """p of each residual mode of ``modal_units`` (after the ``modes`` unit deformations):
+    r̈ + ω² r = −p a_D, the support's acceleration loading every mass with −m a_D (M s_r · t / M s_r · s_r)."""
+    if modal_units is None:
+        return ()
+    t = beam.uniform_translation()
+    shapes = modal_units.shapes.dofs[:, modes:]
+    return tuple(float((s @ beam.mass @ t) / (s @ beam.mass @ s)) for s in shapes.T)
 
 
 @dataclass(frozen=True)
@@ -375,10 +492,10 @@ class RestCalibration:
 
     rest_end: float  # s (same origin as the measurements); equal to the start if there was no rest
     rested: bool
-    bias_D: np.ndarray  # [f_x, f_y, ω_z]
-    bias_imu: np.ndarray  # (ν, 3)
-    noise_D: np.ndarray  # (3,) std
-    noise_imu: np.ndarray  # (ν, 3)
+    bias_D: np.ndarray  # [f_x, f_y, ω_z] (a biaxial model's [f_x, f_y, ω_z, f_z, ω_y])
+    bias_imu: np.ndarray  # (ν, 3) (biaxial: (ν, 5))
+    noise_D: np.ndarray  # (3,) std (biaxial: (5,))
+    noise_imu: np.ndarray  # (ν, 3) (biaxial: (ν, 5))
     tof_offset: np.ndarray
     tof_std: np.ndarray
     strain_offset: np.ndarray
@@ -413,10 +530,14 @@ def _rest_end(meas: Measurements, config: FilterConfig, model: ImmsModel | None 
     # no motion seen: the rest lasted to the end of the data at most (a calibration on its first seconds)
     end = min(limit, float(t[-1]))
     watched: list[tuple[SensorSeries, int, float]] = [(d_imu, 1, 0.05), (d_imu, 2, 0.01)]
+    if model is not None and model.biaxial and d_imu.values.shape[1] >= 5:
+        watched += [(d_imu, 3, 0.05), (d_imu, 4, 0.01)]
     if model is not None and model.fixed_support:
         for name in model.selection.imus:
             if name in meas.imu:
                 watched += [(meas.imu[name], 1, 0.05), (meas.imu[name], 2, 0.01)]
+                if model.biaxial and meas.imu[name].values.shape[1] >= 5:
+                    watched += [(meas.imu[name], 3, 0.05), (meas.imu[name], 4, 0.01)]
         watched += [(meas.strain[name], 0, 2e-6) for name in model.selection.gauges if name in meas.strain]
     for series, column, floor in watched:
         ts = series.times
@@ -455,8 +576,9 @@ def calibrate_at_rest(meas: Measurements, model: ImmsModel, config: FilterConfig
     end = _rest_end(meas, config, model)
     rested = end - start >= config.rest_min_s
     # Specific force along the beam at rest (−g hanging, +g standing: x points from D along the
-    # beam, up a mast), nothing across, no rate.
-    expected = np.array([-g_eta, 0.0, 0.0])
+    # beam, up a mast), nothing across, no rate; a biaxial model's IMUs add [f_z, ω_y].
+    width = 5 if model.biaxial else 3
+    expected = np.array([-g_eta, 0.0, 0.0, 0.0, 0.0][:width])
 
     def stats(series: SensorSeries | None, columns: int) -> tuple[np.ndarray, np.ndarray]:
         if series is None or not rested:
@@ -468,15 +590,16 @@ def calibrate_at_rest(meas: Measurements, model: ImmsModel, config: FilterConfig
         return part.mean(axis=0)[:columns], part.std(axis=0)[:columns]
 
     def floor(std: np.ndarray) -> np.ndarray:
-        floors = np.array([config.accel_noise_floor, config.accel_noise_floor, config.gyro_noise_floor])
+        a, w = config.accel_noise_floor, config.gyro_noise_floor
+        floors = np.array([a, a, w, a, w][:width])
         return np.where(np.isfinite(std), np.maximum(std, floors), floors * 4)
 
-    mean_D, std_D = stats(meas.imu["D"], 3)
+    mean_D, std_D = stats(meas.imu["D"], width)
     bias_D = np.where(rested, mean_D - expected, 0.0)
-    bias_imu = np.zeros((len(model.selection.imus), 3))
-    noise_imu = np.zeros((len(model.selection.imus), 3))
+    bias_imu = np.zeros((len(model.selection.imus), width))
+    noise_imu = np.zeros((len(model.selection.imus), width))
     for i, name in enumerate(model.selection.imus):
-        mean, std = stats(meas.imu.get(name), 3)
+        mean, std = stats(meas.imu.get(name), width)
         bias_imu[i] = mean - expected if rested and np.all(np.isfinite(std)) else 0.0
         noise_imu[i] = floor(std)
     bearing_mean, bearing_std = stats(meas.bearing, 1)
@@ -522,27 +645,34 @@ class Events:
         return self.t.shape[0]
 
     @staticmethod
-    def empty() -> "Events":
-        return Events(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
+    def empty(width: int = 3) -> "Events":
+        return Events(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, width)))
 
     def slice(self, lo: int, hi: int) -> "Events":
         return Events(self.t[lo:hi], self.kind[lo:hi], self.index[lo:hi], self.values[lo:hi])
 
 
 def build_events(meas: Measurements, model: ImmsModel) -> Events:
-    """Merge the selected sensors' samples into one stream ordered by time (inputs before aiding)."""
+    """Merge the selected sensors' samples into one stream ordered by time (inputs before aiding).
+
+    Values have 3 columns, a biaxial model's 5 (its IMUs' [f_x, f_y, ω_z, f_z, ω_y]); ValueError for
+    a biaxial model whose IMU samples lack f_z and ω_y."""
     parts: list[tuple[np.ndarray, int, int, np.ndarray]] = []
+    width = 5 if model.biaxial else 3
 
     def add(series: SensorSeries | None, kind: int, index: int, columns: int) -> None:
         if series is None or series.times.size == 0:
             return
-        values = np.zeros((series.times.size, 3))
+        if series.values.shape[1] < columns:
+            raise ValueError(f"IMU samples have {series.values.shape[1]} columns; the biaxial model reads {columns}: "
+                             "[f_x, f_y, ω_z, f_z, ω_y] (contract.IMU_BIAXIAL_COLUMNS)")
+        values = np.zeros((series.times.size, width))
         values[:, :columns] = series.values[:, :columns]
         parts.append((series.times, kind, index, values))
 
-    add(meas.imu.get("D"), EVENT_IMU_D, 0, 3)
+    add(meas.imu.get("D"), EVENT_IMU_D, 0, width)
     for i, name in enumerate(model.selection.imus):
-        add(meas.imu.get(name), EVENT_IMU_PERIPHERAL, i, 3)
+        add(meas.imu.get(name), EVENT_IMU_PERIPHERAL, i, width)
     for i, name in enumerate(model.selection.tofs):
         add(meas.tof.get(name), EVENT_TOF, i, 1)
     for i, name in enumerate(model.selection.gauges):
@@ -557,7 +687,7 @@ def build_events(meas: Measurements, model: ImmsModel) -> Events:
     else:
         add(meas.bearing, EVENT_BEARING, 0, 1)
     if not parts:
-        return Events.empty()
+        return Events.empty(width)
     t = np.concatenate([p[0] for p in parts])
     kind = np.concatenate([np.full(p[0].size, p[1], dtype=np.int64) for p in parts])
     index = np.concatenate([np.full(p[0].size, p[2], dtype=np.int64) for p in parts])
@@ -613,6 +743,7 @@ def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterC
         q_beta_peripheral=cfg.q_beta_peripheral, q_residual=cfg.q_residual,
         # A pseudo-measurement states a fact of the rig: the gate never refuses it.
         bearing_gate=1e300 if m.fixed_support else cfg.gate,
+        sigma_f_d_z=float(noise_D[3]) if m.biaxial else 0.0,
     )
     gamma = units.count
     empty = np.zeros((0, gamma))
@@ -621,6 +752,21 @@ def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterC
     aided[[a - 1 for a in m.selection.aided]] = 1.0
     if m.selection.gauges:
         aided[m.gamma:] = 1.0  # the gauges see the residual modes' strain: they must correct them
+    units_xi = m.modal_xi
+    nu = m.imu_eta.size
+    if units_xi is None:
+        imu_S_xi = imu_S1_xi = sig_xi = np.zeros((nu, 0))
+        res_xi: list[float] = []
+    else:
+        aided_xi = np.zeros(units_xi.count)
+        aided_xi[[a - 1 for a in m.selection.aided_xi]] = 1.0
+        if m.selection.gauges:
+            aided_xi[m.gamma_xi:] = 1.0
+        aided = np.concatenate([aided, aided_xi])
+        imu_S_xi = units_xi.shape(m.imu_eta) if nu else np.zeros((0, units_xi.count))
+        imu_S1_xi = units_xi.slope(m.imu_eta) if nu else np.zeros((0, units_xi.count))
+        sig_xi = c.noise_imu[:, 3:5]
+        res_xi = [2 * np.pi * f for group in units_xi.frequencies_hz[m.gamma_xi:] for f in group]
 
     def arr(value: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(value, dtype=np.float64)
@@ -647,9 +793,12 @@ def model_arrays(model: ImmsModel, calibration: RestCalibration, config: FilterC
         aided=arr(aided),
         tip_row=arr(units.shape(m.rig.beam.length)),
         strain_pair=arr(cfg.combimode_error_scale * pair_errors if cfg.combimode_error_scale > 0 else pair_errors[:, :0]),
-        res_omega=arr([2 * np.pi * f for group in units.frequencies_hz[m.gamma:] for f in group]),
-        res_damping=arr(np.full(m.residual, cfg.residual_damping)),
-        res_participation=arr(m.residual_participation),
+        res_omega=arr([2 * np.pi * f for group in units.frequencies_hz[m.gamma:] for f in group] + res_xi),
+        res_damping=arr(np.full(m.residual + m.residual_xi, cfg.residual_damping)),
+        res_participation=arr(m.residual_participation + m.residual_participation_xi),
+        imu_S_xi=arr(imu_S_xi),
+        imu_S1_xi=arr(imu_S1_xi),
+        sig_xi=arr(sig_xi),
     )
 
 
@@ -663,14 +812,17 @@ class ImmsFilter:
         n = model.state_size
         nu = len(model.selection.imus)
         g = model.gravity_eta
+        # the rest guess of the inputs: [f_x, f_y] (a biaxial model's [f_x, f_y, f_z] at D, [f_x, f_y, f_z, ω_y] peripheral)
+        rest_D = [-g, 0.0, 0.0] if model.biaxial else [-g, 0.0]
+        rest_j = [-g, 0.0, 0.0, 0.0] if model.biaxial else [-g, 0.0]
         self.state = FilterState(
             x=np.zeros(n), P=np.eye(n) * config.initial_std**2, clock=np.array([float(t0), float(t0), np.nan]),
-            held_fD=np.array([-g, 0.0]), held_wD=np.zeros(1), held_fj=np.tile([-g, 0.0], (nu, 1)), held_wj=np.zeros(nu),
-            prev_fD=np.array([-g, 0.0]), prev_wD=np.zeros(1), prev_fj=np.tile([-g, 0.0], (nu, 1)), prev_wj=np.zeros(nu),
+            held_fD=np.array(rest_D), held_wD=np.zeros(1), held_fj=np.tile(rest_j, (nu, 1)), held_wj=np.zeros(nu),
+            prev_fD=np.array(rest_D), prev_wD=np.zeros(1), prev_fj=np.tile(rest_j, (nu, 1)), prev_wj=np.zeros(nu),
             held_real=np.zeros(1, dtype=np.bool_),
             last_seen=np.full(nu, float(t0)), active=np.ones(nu, dtype=np.bool_), pending=np.zeros(1, dtype=np.bool_),
         )
-        self._tail = Events.empty()
+        self._tail = Events.empty(5 if model.biaxial else 3)
         n_channels = len(model.aiding_channels)
         self.counters = AidingCounters(
             accepted=np.zeros(n_channels, dtype=np.int64), rejected=np.zeros(n_channels, dtype=np.int64),
@@ -744,7 +896,7 @@ class ImmsFilter:
         """Process what waits for a next IMU sample and output the last state."""
         n = self.model.state_size
         if len(self._tail):
-            out = self.process(Events.empty(), final=True)
+            out = self.process(Events.empty(self._tail.values.shape[1]), final=True)
             return FilterOutput.concatenate([out, self.flush()], n)
         if not self.state.pending[0]:
             return FilterOutput.concatenate([], n)
@@ -818,6 +970,24 @@ class EstimateResult:
     def curvature(self, eta: np.ndarray | None = None) -> np.ndarray:
         """∂²Δ/∂η² (1/m) at ``eta`` (default: the truth stations), residual modes included."""
         return self.model.curvature(self.x, eta)
+
+    @property
+    def b_xi(self) -> np.ndarray:
+        """bξ (N, Γξ); (N, 0) for a planar model."""
+        return self.model.state_layout.b_xi_of(self.x)
+
+    @property
+    def e_xi(self) -> np.ndarray:
+        """Tip deflection Δξ(L) in the body frame (m); ValueError for a planar model."""
+        return self.model.tip_deflection_xi(self.x)
+
+    def deflection_xi(self, eta: np.ndarray | None = None) -> np.ndarray:
+        """Δξ(η) (m) at ``eta`` (default: the truth stations); ValueError for a planar model."""
+        return self.model.deflection_xi(self.x, eta)
+
+    def curvature_xi(self, eta: np.ndarray | None = None) -> np.ndarray:
+        """κξ (1/m) at ``eta`` (default: the truth stations); ValueError for a planar model."""
+        return self.model.curvature_xi(self.x, eta)
 
 
 def support_position_problem(bearing: SensorSeries | None, model: ImmsModel) -> str | None:

@@ -30,7 +30,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from ._filter import ImmsModel, Measurements, RestCalibration
 
 __all__ = ["AidingWindow", "HealthConfig", "HealthVerdict", "StateBounds", "assess_health", "aiding_window",
-           "physical_bounds", "restart_state"]
+           "gauge_disagreement", "gauges_beyond_basis", "physical_bounds", "restart_state"]
 
 
 class HealthConfig(BaseModel):
@@ -46,6 +46,10 @@ class HealthConfig(BaseModel):
     tip_max_beam_lengths: float = Field(1.0, gt=0, description="|e| beyond this many beam lengths is not physical")
     confirm_s: float = Field(5.0, ge=0, description="a restarted filter is healthy again after this long without a sign, s")
     settle_s: float = Field(10.0, ge=0, description="windows starting before a restart plus this are not analysed, s")
+    gauge_error_growth: float = Field(
+        3.0, gt=1, description="after a divergence the strain gauges drove (their own NIS or refusals), the gauges' model "
+        "error grows by this factor for the filters that follow: they see strain outside the unit deformations")
+    gauge_error_max: float = Field(1e-3, gt=0, description="the largest gauge model error it grows to, m/m")
 
 
 @dataclass(frozen=True)
@@ -159,6 +163,72 @@ def assess_health(window: AidingWindow | None, d: np.ndarray, phi: np.ndarray, e
         return HealthVerdict(True, "rejections", f"the gate refused {int(window.rejected[refusing].sum())} of "
                                                  f"{int(total[refusing].sum())} updates of {', '.join(names)}")
     return HealthVerdict(False)
+
+
+def gauges_beyond_basis(window: AidingWindow | None, config: HealthConfig = HealthConfig()) -> tuple[str, ...]:
+    """The strain-gauge channels of ``window`` that disagree with the filter on their own: a mean
+    NIS of their accepted updates above ``config.nis_limit``, or the gate refusing at least
+    ``config.reject_fraction`` of them (each with at least ``config.min_updates`` updates).
+
+    A gauge reads the whole curvature; the filter predicts only that of its unit deformations. When
+    modes above them carry much of the strain, the gauges alone disagree, and a new filter from the
+    same measurements would disagree the same way: their model error, not the state, is what is wrong.
+
+    Parameters
+    ----------
+    window : the aiding updates of a window (None: nothing to judge).
+    config : HealthConfig
+
+    Returns
+    -------
+    tuple of str
+        The channels (``/strain/<name>``), in the window's order; empty when none disagrees.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> w = AidingWindow(("/tof/t1", "/strain/g1", "/strain/g2"), np.array([50, 50, 0]), np.array([0, 0, 40]),
+    ...                  np.array([50.0, 900.0, 0.0]))
+    >>> gauges_beyond_basis(w)
+    ('/strain/g1', '/strain/g2')
+    """
+    if window is None:
+        return ()
+    out = []
+    for k, channel in enumerate(window.channels):
+        if not channel.startswith("/strain/"):
+            continue
+        accepted, rejected = int(window.accepted[k]), int(window.rejected[k])
+        if accepted + rejected < config.min_updates:
+            continue
+        high_nis = accepted >= config.min_updates and window.nis_sum[k] / accepted > config.nis_limit
+        if high_nis or rejected >= config.reject_fraction * (accepted + rejected):
+            out.append(channel)
+    return tuple(out)
+
+
+def gauge_disagreement(window: AidingWindow, channels: tuple[str, ...], gate: float) -> float:
+    """How many times its expected variance the worst of ``channels`` saw: its accepted updates'
+    mean NIS, or ``gate`` for a channel the gate refused at least a tenth of the time (the refused
+    updates' NIS is above the gate; the accepted ones' mean understates it).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> w = AidingWindow(("/strain/g1", "/strain/g2"), np.array([100, 50]), np.array([0, 50]), np.array([1200.0, 400.0]))
+    >>> gauge_disagreement(w, ("/strain/g1",), 30.0), gauge_disagreement(w, ("/strain/g1", "/strain/g2"), 30.0)
+    (12.0, 30.0)
+    """
+    worst = 1.0
+    for k, channel in enumerate(window.channels):
+        if channel not in channels:
+            continue
+        accepted, rejected = float(window.accepted[k]), float(window.rejected[k])
+        if rejected >= 0.1 * (accepted + rejected):
+            worst = max(worst, gate)
+        elif accepted > 0:
+            worst = max(worst, float(window.nis_sum[k]) / accepted)
+    return worst
 
 
 def restart_state(meas: Measurements, model: ImmsModel, calibration: RestCalibration) -> np.ndarray:

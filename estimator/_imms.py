@@ -29,6 +29,11 @@ beam, −g for a standing one), so the model holds for both orientations.
 Events (``kind``): 0 IMU at D, 1 peripheral IMU, 2 ToF, 3 strain gauge, 4 bearing displacement.
 IMU values are [f_x, f_y, ω_z] in the sensor frame; the others carry their value in column 0.
 
+A biaxial beam (``StateIndex.gamma_xi`` > 0, clamped) carries its ξ plane in the same state
+(bξ, rξ right after b, r; vξ, ṙξ and the gyro-y biases beside their ζ twins): IMU values are then
+[f_x, f_y, ω_z, f_z, ω_y]; accel z relates to Δξ as accel y to Δζ and gyro y is minus the ξ
+tangent's rate (``_propagate_xi_into``); a gauge's row covers both modal blocks (ε = −(ζp κζ + ξp κξ)).
+
 The event loop takes named structures (numba-compiled namedtuples), not long positional lists:
 ``EventArrays`` (the batch), ``ModelArrays`` (the model, calibration and tuning: read only),
 ``FilterState`` (the state and the held inputs: updated in place), ``FilterOutputs`` (the
@@ -98,6 +103,7 @@ class FilterParams(NamedTuple):
     q_beta_peripheral: float
     q_residual: float  # random walk of the residual modes' rates (model error of their dynamics), 1/s³
     bearing_gate: float  # gate of the bearing channel: ``gate`` for a sensor, 1e300 for the fixed support's d = 0
+    sigma_f_d_z: float = 0.0  # m/s², noise of the D accelerometer's z axis (a biaxial beam's ξ support acceleration)
 
 
 class ModelArrays(NamedTuple):
@@ -114,6 +120,12 @@ class ModelArrays(NamedTuple):
     error Σ_k ψ_k strain_pair[:, k] b_1, ψ_k ~ N(0, 1) (a correlated error, not one per gauge); res_omega,
     res_damping, res_participation (R,) are the residual modes' ω (rad/s), damping ratio and
     participation p of the support's lateral acceleration.
+
+    A biaxial beam (``index.gamma_xi`` > 0) adds its ξ plane: imu_S_xi, imu_S1_xi (ν, Γξ + Rξ) the ξ
+    shapes and slopes at the IMUs, sig_xi (ν, 2) the noise of accel z and gyro y; the residual
+    arrays hold the R ζ modes, then the Rξ ξ modes (driven by the support's ξ acceleration, accel z
+    at D); strain_K and aided have Γ + R + Γξ + Rξ columns (a gauge at θ sees both planes). A planar
+    model has zero-width ξ arrays.
     """
 
     index: StateIndex
@@ -140,11 +152,14 @@ class ModelArrays(NamedTuple):
     res_omega: np.ndarray
     res_damping: np.ndarray
     res_participation: np.ndarray
+    imu_S_xi: np.ndarray
+    imu_S1_xi: np.ndarray
+    sig_xi: np.ndarray
 
 
 class EventArrays(NamedTuple):
     """A batch of events in time order: t (N,) s, kind (N,) event code, index (N,) sensor,
-    values (N, 3); next_d (N,) the index of the first D-IMU event at or after each (−1: none)."""
+    values (N, 3) (a biaxial model's (N, 5): IMUs [f_x, f_y, ω_z, f_z, ω_y]); next_d (N,) the index of the first D-IMU event at or after each (−1: none)."""
 
     t: np.ndarray
     kind: np.ndarray
@@ -159,7 +174,8 @@ class FilterState(NamedTuple):
     NaN: none); the held inputs held_fD (2,), held_wD (1,), held_fj (ν, 2), held_wj (ν,) and the
     ones before them prev_fD, prev_wD, prev_fj, prev_wj (same shapes); held_real (1,) the held
     inputs are a sample (not the initial rest guess); last_seen (ν,) s; active (ν,) peripheral IMUs in
-    the solution; pending (1,) a D sample whose state is not output yet."""
+    the solution; pending (1,) a D sample whose state is not output yet. A biaxial model holds its ξ
+    inputs beside the ζ ones: held_fD (3,) [f_x, f_y, f_z], held_fj (ν, 4) [f_x, f_y, f_z, ω_y]."""
 
     x: np.ndarray
     P: np.ndarray
@@ -201,12 +217,16 @@ class AidingCounters(NamedTuple):
 class LeastSquares(NamedTuple):
     """The least-squares map of the active peripheral IMUs: Pinv (Γ, ν) = S⁺ (zero columns for
     inactive sensors), null_proj (Γ, Γ) the projector on what they cannot see, c_acc (Γ,) = S⁺η,
-    c_res (Γ, R) = S⁺ S_r, what the residual modes' readings add to the solution."""
+    c_res (Γ, R) = S⁺ S_r, what the residual modes' readings add to the solution. The ξ plane's
+    Pinv_xi (Γξ, ν), null_proj_xi (Γξ, Γξ) and c_res_xi (Γξ, Rξ) likewise (zero-size when planar)."""
 
     Pinv: np.ndarray
     null_proj: np.ndarray
     c_acc: np.ndarray
     c_res: np.ndarray
+    Pinv_xi: np.ndarray
+    null_proj_xi: np.ndarray
+    c_res_xi: np.ndarray
 
 
 @numba.njit(cache=True, inline="always")
@@ -232,6 +252,51 @@ def input_weights(tau, t_prev, t_held, t_next):
         return w_prev, w_held, w_next
     w = (tau - t_held) / h1
     return 0.0, 1.0 - w, w
+
+
+@numba.njit(cache=True, inline="always")
+def _residual_modes_into(m, x, dt, a_lat, first, count, i_r, i_vr, column, xn, F, Q, Gm, res_ws):
+    """The ``count`` residual modes from entry ``first`` of the model's residual arrays (states at
+    ``i_r``, rates at ``i_vr``) over dt: r̈ + 2ζω ṙ + ω² r = −p a_lat, exactly for the held lateral
+    acceleration ``a_lat`` of the support (input column ``column`` of Gm); what the least squares
+    needs of the step goes into rows first.. of ``res_ws``."""
+    p = m.params
+    for i in range(count):
+        w = m.res_omega[first + i]
+        zeta = m.res_damping[first + i]
+        part = m.res_participation[first + i]
+        sigma = zeta * w
+        wd = w * np.sqrt(1.0 - zeta * zeta)
+        decay = np.exp(-sigma * dt)
+        c, s = np.cos(wd * dt), np.sin(wd * dt)
+        f00 = decay * (c + sigma / wd * s)
+        f01 = decay * s / wd
+        f10 = -decay * w * w * s / wd
+        f11 = decay * (c - sigma / wd * s)
+        static = -part * a_lat / (w * w)  # the deflection the acceleration holds
+        r0, v0 = x[i_r + i], x[i_vr + i]
+        r1 = f00 * (r0 - static) + f01 * v0 + static
+        v1 = f10 * (r0 - static) + f11 * v0
+        xn[i_r + i] = r1
+        xn[i_vr + i] = v1
+        F[i_r + i, i_r + i] = f00
+        F[i_r + i, i_vr + i] = f01
+        F[i_vr + i, i_r + i] = f10
+        F[i_vr + i, i_vr + i] = f11
+        dr_da = -part * (1.0 - f00) / (w * w)
+        dv_da = part * f10 / (w * w)
+        Gm[i_r + i, column] = dr_da
+        Gm[i_vr + i, column] = dv_da
+        Q[i_vr + i, i_vr + i] += p.q_residual * dt
+        row = first + i
+        res_ws[row, 0] = f00 - 1.0
+        res_ws[row, 1] = f01
+        res_ws[row, 2] = f10
+        res_ws[row, 3] = f11 - 1.0
+        res_ws[row, 4] = r1 - r0  # ∫ṙ over the step
+        res_ws[row, 5] = v1 - v0  # ∫r̈ over the step
+        res_ws[row, 6] = dr_da
+        res_ws[row, 7] = dv_da
 
 
 @numba.njit(cache=True, inline="always")
@@ -308,40 +373,7 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
     Gm[i_hr, 1] = -dt * sp
     # Residual modes: r̈ + 2ζω ṙ + ω² r = −p a_D over the step, a_D = f_D,y (held constant), exactly.
     i_r, i_vr = i_b + gamma, ix.residual_rate
-    for i in range(n_res):
-        w = m.res_omega[i]
-        zeta = m.res_damping[i]
-        sigma = zeta * w
-        wd = w * np.sqrt(1.0 - zeta * zeta)
-        decay = np.exp(-sigma * dt)
-        c, s = np.cos(wd * dt), np.sin(wd * dt)
-        f00 = decay * (c + sigma / wd * s)
-        f01 = decay * s / wd
-        f10 = -decay * w * w * s / wd
-        f11 = decay * (c - sigma / wd * s)
-        static = -m.res_participation[i] * fD[1] / (w * w)  # the deflection the acceleration holds
-        r0, v0 = x[i_r + i], x[i_vr + i]
-        r1 = f00 * (r0 - static) + f01 * v0 + static
-        v1 = f10 * (r0 - static) + f11 * v0
-        xn[i_r + i] = r1
-        xn[i_vr + i] = v1
-        F[i_r + i, i_r + i] = f00
-        F[i_r + i, i_vr + i] = f01
-        F[i_vr + i, i_r + i] = f10
-        F[i_vr + i, i_vr + i] = f11
-        dr_da = -m.res_participation[i] * (1.0 - f00) / (w * w)
-        dv_da = m.res_participation[i] * f10 / (w * w)
-        Gm[i_r + i, 1] = dr_da
-        Gm[i_vr + i, 1] = dv_da
-        Q[i_vr + i, i_vr + i] += p.q_residual * dt
-        res_ws[i, 0] = f00 - 1.0
-        res_ws[i, 1] = f01
-        res_ws[i, 2] = f10
-        res_ws[i, 3] = f11 - 1.0
-        res_ws[i, 4] = r1 - r0  # ∫ṙ over the step
-        res_ws[i, 5] = v1 - v0  # ∫r̈ over the step
-        res_ws[i, 6] = dr_da
-        res_ws[i, 7] = dv_da
+    _residual_modes_into(m, x, dt, fD[1], 0, n_res, i_r, i_vr, 1, xn, F, Q, Gm, res_ws)
     if m.kind == KIND_GYRO:
         # Eq. (9): ω_j − ω_D = Σ ḃ s'_χ(η_j), solved in the least-squares sense.
         ibj = ix.peripheral_bias
@@ -450,6 +482,8 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
         for k in range(gamma):
             for mm in range(gamma):
                 Q[i_b + k, i_b + mm] += p.q_null * dt * null_proj[k, mm]
+    if ix.gamma_xi > 0:
+        _propagate_xi_into(m, x, dt, fD, fj, active, lsq, xn, F, Q, Gm, sig, acc_ws, res_ws, 3 + (nu if m.kind == KIND_GYRO else 2 * nu))
     for i in range(n_in):
         s2 = sig[i] * sig[i]
         if s2 == 0.0:
@@ -466,9 +500,122 @@ def propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, Gm, 
         Q[i_bd, i_bd] += p.q_beta * dt
 
 
+@numba.njit(cache=True, inline="always")
+def _propagate_xi_into(m, x, dt, fD, fj, active, lsq, xn, F, Q, Gm, sig, acc_ws, res_ws, c_fdz):
+    """The ξ plane of a biaxial beam over dt, into xn, F, Q and the input map Gm, sig (its columns
+    from ``c_fdz``: accel z at D, then per peripheral IMU gyro y (gyro) or accel z (acc)).
+
+    A biaxial beam is clamped, so the body frame does not turn (ω ≡ 0) and D moves along ζ only:
+    accel z at D is the support's ξ vibration. Accel z relates to Δξ as accel y to Δζ:
+    Δ̈ξ_j = sin αξ_j f_j,x + cos αξ_j f_j,z − f_D,z with αξ_j = Δξ'(η_j); gyro y is minus the
+    turn of the ξ tangent: ω_j,y = −Σ ḃξ s'ξ(η_j) (the contract's signs, recording-format.md).
+    fD is [f_x, f_y, f_z], fj (ν, 4) [f_x, f_y, f_z, ω_y], bias-corrected.
+    """
+    ix = m.index
+    p = m.params
+    gamma = ix.gamma_xi
+    n_res = ix.residual_xi
+    n_modal = gamma + n_res
+    nu = fj.shape[0]
+    i_b = ix.b_xi
+    i_r, i_vr = i_b + gamma, ix.residual_rate_xi
+    S1 = m.imu_S1_xi  # the slopes: gyro y's least squares (its map is lsq's), accel z's tilt
+    Pinv, null_proj, c_res = lsq.Pinv_xi, lsq.null_proj_xi, lsq.c_res_xi
+    r0 = ix.residual  # the ξ residual modes' rows in the residual arrays and res_ws
+    half = 0.5 * dt * dt
+    sig[c_fdz] = p.sigma_f_d_z
+    _residual_modes_into(m, x, dt, fD[2], r0, n_res, i_r, i_vr, c_fdz, xn, F, Q, Gm, res_ws)
+    if m.kind == KIND_GYRO:
+        ibj = ix.peripheral_bias_xi
+        for k in range(gamma):
+            bdot = 0.0
+            for j in range(nu):
+                if active[j]:
+                    bdot -= Pinv[k, j] * (fj[j, 3] - x[ibj + j])
+                Gm[i_b + k, c_fdz + 1 + j] = -dt * Pinv[k, j]
+                F[i_b + k, ibj + j] = dt * Pinv[k, j]
+            xn[i_b + k] = x[i_b + k] + dt * bdot
+            for i in range(n_res):
+                cr = c_res[k, i]
+                xn[i_b + k] -= cr * res_ws[r0 + i, 4]
+                F[i_b + k, i_r + i] -= cr * res_ws[r0 + i, 0]
+                F[i_b + k, i_vr + i] -= cr * res_ws[r0 + i, 1]
+                Gm[i_b + k, c_fdz] -= cr * res_ws[r0 + i, 6]
+            Q[i_b + k, i_b + k] += p.q_b * dt
+        for j in range(nu):
+            sig[c_fdz + 1 + j] = m.sig_xi[j, 1]
+            Q[ibj + j, ibj + j] += p.q_beta_peripheral * dt
+    else:
+        iv = ix.v_xi
+        for k in range(gamma):
+            for mm in range(n_modal + 1):
+                acc_ws[k, mm] = 0.0  # [dB (Γξ + Rξ) | b̈ξ]
+        for j in range(nu):
+            if not active[j]:
+                continue
+            alpha = 0.0
+            for k in range(n_modal):
+                # α at the step's midpoint, as in ζ (the tilt g·α is as large as the elastic acceleration)
+                rate = x[iv + k] if k < gamma else x[i_vr + k - gamma]
+                alpha += S1[j, k] * (x[i_b + k] + 0.5 * dt * rate)
+            ca, sa = np.cos(alpha), np.sin(alpha)
+            ddelta = sa * fj[j, 0] + ca * fj[j, 2] - fD[2]
+            tilt = ca * fj[j, 0] - sa * fj[j, 2]
+            sig[c_fdz + 1 + j] = m.sig_xi[j, 0]
+            for k in range(gamma):
+                pk = Pinv[k, j]
+                acc_ws[k, n_modal] += pk * ddelta
+                for mm in range(n_modal):
+                    acc_ws[k, mm] += pk * tilt * S1[j, mm]
+                Gm[iv + k, 3 + 2 * j] = dt * pk * sa  # accel x: the input the ζ plane reads too
+                Gm[iv + k, c_fdz + 1 + j] = dt * pk * ca
+        for k in range(gamma):
+            v = x[iv + k]
+            bddot = acc_ws[k, n_modal]
+            xn[i_b + k] = x[i_b + k] + dt * v + half * bddot
+            xn[iv + k] = v + dt * bddot
+            F[i_b + k, iv + k] += dt
+            for mm in range(n_modal):
+                F[i_b + k, i_b + mm] += half * acc_ws[k, mm]
+                F[iv + k, i_b + mm] += dt * acc_ws[k, mm]
+                col = iv + mm if mm < gamma else i_vr + mm - gamma
+                F[i_b + k, col] += half * acc_ws[k, mm] * 0.5 * dt
+                F[iv + k, col] += dt * acc_ws[k, mm] * 0.5 * dt
+            for i in range(n_res):
+                cr = c_res[k, i]
+                xn[i_b + k] -= cr * (res_ws[r0 + i, 4] - dt * x[i_vr + i])
+                xn[iv + k] -= cr * res_ws[r0 + i, 5]
+                F[i_b + k, i_r + i] -= cr * res_ws[r0 + i, 0]
+                F[i_b + k, i_vr + i] -= cr * (res_ws[r0 + i, 1] - dt)
+                F[iv + k, i_r + i] -= cr * res_ws[r0 + i, 2]
+                F[iv + k, i_vr + i] -= cr * res_ws[r0 + i, 3]
+                Gm[i_b + k, c_fdz] -= cr * res_ws[r0 + i, 6]
+                Gm[iv + k, c_fdz] -= cr * res_ws[r0 + i, 7]
+            row_sum = 0.0
+            for j in range(nu):
+                row_sum += Pinv[k, j]
+            Gm[iv + k, c_fdz] += -dt * row_sum  # f_D,z enters every Δ̈ξ_j with −1
+            Q[i_b + k, i_b + k] += p.q_b * dt
+            Q[iv + k, iv + k] += p.q_v * dt
+    if p.q_null > 0:
+        for k in range(gamma):
+            for mm in range(gamma):
+                Q[i_b + k, i_b + mm] += p.q_null * dt * null_proj[k, mm]
+
+
 @numba.njit(cache=True)
 def _input_count(m, nu):
-    return 3 + (nu if m.kind == KIND_GYRO else 2 * nu)
+    planar = 3 + (nu if m.kind == KIND_GYRO else 2 * nu)
+    return planar + (1 + nu if m.index.gamma_xi > 0 else 0)
+
+
+@numba.njit(cache=True)
+def _work_buffers(ix):
+    """The scratch buffers acc_ws and res_ws of ``propagate_into`` for state index ``ix`` (sized for
+    the larger plane; the ξ residual modes' rows follow the ζ ones)."""
+    rows = max(ix.gamma, ix.gamma_xi)
+    cols = max(ix.gamma + ix.residual, ix.gamma_xi + ix.residual_xi) + 2
+    return np.empty((rows, cols)), np.empty((ix.residual + ix.residual_xi, 8))
 
 
 @numba.njit(cache=True)
@@ -476,12 +623,11 @@ def propagate(m, x, dt, fD, omegaD, fj, omegaj, active, lsq):
     """Pure form of ``propagate_into``: returns (x⁺, F, Q) as new arrays."""
     n = x.shape[0]
     n_in = _input_count(m, fj.shape[0])
-    gamma, n_res = m.index.gamma, m.index.residual
     xn = np.empty(n)
     F = np.empty((n, n))
     Q = np.empty((n, n))
-    propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, np.empty((n, n_in)), np.empty(n_in),
-                   np.empty((gamma, gamma + n_res + 2)), np.empty((n_res, 8)))
+    acc_ws, res_ws = _work_buffers(m.index)
+    propagate_into(m, x, dt, fD, omegaD, fj, omegaj, active, lsq, xn, F, Q, np.empty((n, n_in)), np.empty(n_in), acc_ws, res_ws)
     return xn, F, Q
 
 
@@ -573,7 +719,16 @@ def least_squares_map(m, active):
     if m.kind == KIND_ACC:
         c_acc = Pinv @ m.imu_eta
     c_res = Pinv @ np.ascontiguousarray(S_all[:, gamma:])
-    return LeastSquares(Pinv, null_proj, c_acc, c_res)
+    gamma_xi = m.index.gamma_xi
+    nu = S_all.shape[0]
+    if gamma_xi > 0:
+        # ξ: gyro y sees minus the slopes (its sign is the kernel's), accel z the deflections, as in ζ.
+        S_xi = m.imu_S1_xi if m.kind == KIND_GYRO else m.imu_S_xi
+        Pinv_xi, null_xi = _least_squares_map(np.ascontiguousarray(S_xi[:, :gamma_xi]), active, gamma_xi)
+        c_res_xi = Pinv_xi @ np.ascontiguousarray(S_xi[:, gamma_xi:])
+    else:
+        Pinv_xi, null_xi, c_res_xi = np.zeros((0, nu)), np.zeros((0, 0)), np.zeros((0, 0))
+    return LeastSquares(Pinv, null_proj, c_acc, c_res, Pinv_xi, null_xi, c_res_xi)
 
 
 @numba.njit(cache=True, inline="always")
@@ -604,7 +759,8 @@ def run_events(ev, m, st, out, counters):
     """
     ix = m.index
     p = m.params
-    gamma = ix.gamma + ix.residual  # the modal block (b and r) the aiding equations see
+    gamma = m.strain_K.shape[1]  # the modal blocks (b and r; a biaxial beam's bξ and rξ too) the gauges see
+    wide = ix.gamma_xi > 0  # a biaxial model: IMU events carry f_z and ω_y in columns 3 and 4
     nu = ix.nu
     n_tof = m.tof_eta.shape[0]  # channels: [ToF..., strain..., bearing, pseudo h, pseudo ḣ]
     i_b = ix.b
@@ -630,11 +786,12 @@ def run_events(ev, m, st, out, counters):
     i_bear = n_tof + m.strain_K.shape[0]
     n = x.shape[0]
     n_ev = t_ev.shape[0]
-    next_fD = np.zeros(2)
-    next_fj = np.zeros((nu, 2))
+    n_fD, n_fj = held_fD.shape[0], held_fj.shape[1]  # 2 and 2; biaxial 3 and 4
+    next_fD = np.zeros(n_fD)
+    next_fj = np.zeros((nu, n_fj))
     next_wj = np.zeros(nu)
-    u_fD = np.zeros(2)
-    u_fj = np.zeros((nu, 2))
+    u_fD = np.zeros(n_fD)
+    u_fj = np.zeros((nu, n_fj))
     u_wj = np.zeros(nu)
     # Work buffers: the loop allocates nothing per event.
     n_in = _input_count(m, nu)
@@ -643,8 +800,7 @@ def run_events(ev, m, st, out, counters):
     Q = np.empty((n, n))
     Gm = np.empty((n, n_in))
     sig = np.empty(n_in)
-    acc_ws = np.empty((ix.gamma, gamma + 2))
-    res_ws = np.empty((ix.residual, 8))
+    acc_ws, res_ws = _work_buffers(ix)
     work = np.empty((n, n))
     H = np.zeros(n)
     ubuf = np.empty(n)
@@ -677,9 +833,13 @@ def run_events(ev, m, st, out, counters):
                 next_fD[0] = values_ev[nd, 0] - bias_D[0]
                 next_fD[1] = values_ev[nd, 1] - bias_D[1]
                 next_wD = values_ev[nd, 2] - bias_D[2]
-                if not (np.isfinite(next_fD[0]) and np.isfinite(next_fD[1]) and np.isfinite(next_wD)):
-                    next_fD[0] = held_fD[0]
-                    next_fD[1] = held_fD[1]
+                ok_D = np.isfinite(next_fD[0]) and np.isfinite(next_fD[1]) and np.isfinite(next_wD)
+                if wide:
+                    next_fD[2] = values_ev[nd, 3] - bias_D[3]
+                    ok_D = ok_D and np.isfinite(next_fD[2])
+                if not ok_D:
+                    for c in range(n_fD):
+                        next_fD[c] = held_fD[c]
                     next_wD = held_wD[0]
                 next_fj[:, :] = held_fj
                 next_wj[:] = held_wj
@@ -689,10 +849,19 @@ def run_events(ev, m, st, out, counters):
                     a0 = values_ev[q, 0] - bias_j[jj, 0]
                     a1 = values_ev[q, 1] - bias_j[jj, 1]
                     a2 = values_ev[q, 2] - bias_j[jj, 2]
-                    if np.isfinite(a0) and np.isfinite(a1) and np.isfinite(a2):
+                    ok_j = np.isfinite(a0) and np.isfinite(a1) and np.isfinite(a2)
+                    a3 = a4 = 0.0
+                    if wide:
+                        a3 = values_ev[q, 3] - bias_j[jj, 3]
+                        a4 = values_ev[q, 4] - bias_j[jj, 4]
+                        ok_j = ok_j and np.isfinite(a3) and np.isfinite(a4)
+                    if ok_j:
                         next_fj[jj, 0] = a0
                         next_fj[jj, 1] = a1
                         next_wj[jj] = a2
+                        if wide:
+                            next_fj[jj, 2] = a3
+                            next_fj[jj, 3] = a4
                     q += 1
             start = t_now
             remaining = t - t_now
@@ -700,16 +869,16 @@ def run_events(ev, m, st, out, counters):
                 dt = remaining if remaining < max_step else max_step
                 if have_next:
                     wp, wh, wn = input_weights(start + 0.5 * dt, clock[2], held_t, t_next)
-                    u_fD[0] = wp * prev_fD[0] + wh * held_fD[0] + wn * next_fD[0]
-                    u_fD[1] = wp * prev_fD[1] + wh * held_fD[1] + wn * next_fD[1]
+                    for c in range(n_fD):
+                        u_fD[c] = wp * prev_fD[c] + wh * held_fD[c] + wn * next_fD[c]
                     u_wD = wp * prev_wD[0] + wh * held_wD[0] + wn * next_wD
                     for jj in range(nu):
-                        u_fj[jj, 0] = wp * prev_fj[jj, 0] + wh * held_fj[jj, 0] + wn * next_fj[jj, 0]
-                        u_fj[jj, 1] = wp * prev_fj[jj, 1] + wh * held_fj[jj, 1] + wn * next_fj[jj, 1]
+                        for c in range(n_fj):
+                            u_fj[jj, c] = wp * prev_fj[jj, c] + wh * held_fj[jj, c] + wn * next_fj[jj, c]
                         u_wj[jj] = wp * prev_wj[jj] + wh * held_wj[jj] + wn * next_wj[jj]
                 else:
-                    u_fD[0] = held_fD[0]
-                    u_fD[1] = held_fD[1]
+                    for c in range(n_fD):
+                        u_fD[c] = held_fD[c]
                     u_wD = held_wD[0]
                     u_fj[:, :] = held_fj
                     u_wj[:] = held_wj
@@ -725,14 +894,21 @@ def run_events(ev, m, st, out, counters):
             v0 = values_ev[e, 0] - bias_D[0]
             v1 = values_ev[e, 1] - bias_D[1]
             v2 = values_ev[e, 2] - bias_D[2]
-            if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2):
+            ok = np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2)
+            v3 = 0.0
+            if wide:
+                v3 = values_ev[e, 3] - bias_D[3]
+                ok = ok and np.isfinite(v3)
+            if ok:
                 # The held sample becomes the previous one (for the quadratic of the inputs).
-                prev_fD[0] = held_fD[0]
-                prev_fD[1] = held_fD[1]
+                for c in range(n_fD):
+                    prev_fD[c] = held_fD[c]
                 prev_wD[0] = held_wD[0]
                 clock[2] = clock[1] if held_real[0] else np.nan
                 held_fD[0] = v0
                 held_fD[1] = v1
+                if wide:
+                    held_fD[2] = v3
                 held_wD[0] = v2
                 held_real[0] = True
             else:
@@ -751,16 +927,25 @@ def run_events(ev, m, st, out, counters):
             v0 = values_ev[e, 0] - bias_j[j, 0]
             v1 = values_ev[e, 1] - bias_j[j, 1]
             v2 = values_ev[e, 2] - bias_j[j, 2]
-            if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2):
+            ok = np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2)
+            v3 = v4 = 0.0
+            if wide:
+                v3 = values_ev[e, 3] - bias_j[j, 3]
+                v4 = values_ev[e, 4] - bias_j[j, 4]
+                ok = ok and np.isfinite(v3) and np.isfinite(v4)
+            if ok:
                 if not active[j]:
                     degraded_time[j] += t - last_seen[j]
                     active[j] = True
                     lsq = least_squares_map(m, active)
-                prev_fj[j, 0] = held_fj[j, 0]
-                prev_fj[j, 1] = held_fj[j, 1]
+                for c in range(n_fj):
+                    prev_fj[j, c] = held_fj[j, c]
                 prev_wj[j] = held_wj[j]
                 held_fj[j, 0] = v0
                 held_fj[j, 1] = v1
+                if wide:
+                    held_fj[j, 2] = v3
+                    held_fj[j, 3] = v4
                 held_wj[j] = v2
                 last_seen[j] = t
         elif k == EVENT_TOF:

@@ -68,10 +68,14 @@ class SensorSelection:
     tofs: tuple[str, ...]
     gauges: tuple[str, ...]
     aided: tuple[int, ...]  # 1-based unit deformations aided by the gauges
+    aided_xi: tuple[int, ...] = ()  # a biaxial model's ξ unit deformations aided by the gauges (1-based)
 
     def as_dict(self) -> dict:
-        return {"peripheral": self.peripheral, "imus": list(self.imus), "tofs": list(self.tofs),
-                "gauges": list(self.gauges), "aided": list(self.aided)}
+        out = {"peripheral": self.peripheral, "imus": list(self.imus), "tofs": list(self.tofs),
+               "gauges": list(self.gauges), "aided": list(self.aided)}
+        if self.aided_xi:
+            out["aided_xi"] = list(self.aided_xi)
+        return out
 
 
 def _choose(kind: str, candidates: Sequence, wanted, sensitivity) -> tuple[str, ...]:
@@ -103,10 +107,14 @@ def select_sensors(
     tofs: int | Sequence[str] | None = 4,
     gauges: int | Sequence[str] | None = 4,
     aided: Sequence[int] | None = None,
+    units_xi: UnitDeformations | None = None,
 ) -> SensorSelection:
     """Choose the sensors of one configuration: counts are filled by EfI, names are taken as given.
 
     A count larger than what the rig has is capped to the rig (``None`` = all of that kind).
+    ``units_xi``: a biaxial beam's ξ unit deformations; EfI then weighs both planes (the IMUs' ξ
+    slopes or deflections beside the ζ ones, a gauge's strain ε = −(ζp κζ + ξp κξ) at its place
+    around the section) and the gauges aid every ξ unit deformation (``aided_xi``).
     """
     if peripheral not in ("gyro", "acc"):
         raise ValueError(f"{peripheral=} must be 'gyro' or 'acc'")
@@ -119,6 +127,9 @@ def select_sensors(
         return min(value, len(available)) if isinstance(value, (int, np.integer)) else value
 
     imu_sensitivity = units.slope if peripheral == "gyro" else units.shape
+    if units_xi is not None:
+        zeta_rows, xi_rows = imu_sensitivity, (units_xi.slope if peripheral == "gyro" else units_xi.shape)
+        imu_sensitivity = lambda eta: np.hstack([zeta_rows(eta), xi_rows(eta)])  # noqa: E731
     chosen_imus = _choose("imus", peripheral_imus, cap(imus, peripheral_imus), imu_sensitivity)
     if rig.support == "pinned":
         tof_sensitivity = lambda eta: np.column_stack([eta, units.shape(eta)])  # noqa: E731 (φ moves ζ by η)
@@ -136,12 +147,21 @@ def select_sensors(
     if n_gauges and not aided_units:
         raise ValueError("strain gauges are selected but no unit deformation is aided")
     columns = [a - 1 for a in aided_units] or list(range(gamma))
-    chosen_gauges = _choose("gauges", gauge_sensors, cap(gauges, gauge_sensors),
-                            lambda eta: units.curvature(eta)[:, columns])
+    gauge_sensitivity = lambda eta: units.curvature(eta)[:, columns]  # noqa: E731
+    aided_xi: tuple[int, ...] = ()
+    if units_xi is not None:
+        aided_xi = tuple(range(1, units_xi.count + 1)) if n_gauges else ()
+        angles = np.array([s.angle_deg for s in gauge_sensors], dtype=float)
+
+        def gauge_sensitivity(eta: np.ndarray) -> np.ndarray:
+            zeta_p, xi_p = (np.asarray(v, dtype=float).reshape(-1) for v in rig.beam.section_point(eta, angles))
+            return np.hstack([-zeta_p[:, None] * units.curvature(eta)[:, columns], -xi_p[:, None] * units_xi.curvature(eta)])
+    chosen_gauges = _choose("gauges", gauge_sensors, cap(gauges, gauge_sensors), gauge_sensitivity)
+    gamma = max(gamma, units_xi.count if units_xi is not None else 0)  # the peripheral IMUs serve both planes
     if len(chosen_imus) < gamma:
         raise ValueError(
             f"Γ={gamma} unit deformations need at least {gamma} peripheral IMUs ({peripheral}), "
             f"got {len(chosen_imus)} (the rig has {len(peripheral_imus)}): add {gamma - len(chosen_imus)} peripheral "
             f"IMU(s) or lower the unit deformations (--modes) to {len(chosen_imus)}"
         )
-    return SensorSelection(peripheral, chosen_imus, chosen_tofs, chosen_gauges, tuple(sorted(aided_units)))
+    return SensorSelection(peripheral, chosen_imus, chosen_tofs, chosen_gauges, tuple(sorted(aided_units)), aided_xi)

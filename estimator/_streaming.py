@@ -11,6 +11,7 @@ the health check judges each chunk.
 from __future__ import annotations
 
 import logging
+import math
 from collections import Counter
 from collections.abc import Mapping
 from typing import Any
@@ -18,7 +19,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from contract import IMU_PLANAR_COLUMNS, EstimatorStatusDocument, LastEstimateDocument
+from contract import IMU_BIAXIAL_COLUMNS, IMU_PLANAR_COLUMNS, EstimatorStatusDocument, LastEstimateDocument
 
 from ._filter import (
     EstimateResult,
@@ -33,7 +34,15 @@ from ._filter import (
     calibrate_at_rest,
     support_position_problem,
 )
-from ._health import HealthConfig, aiding_window, assess_health, physical_bounds, restart_state
+from ._health import (
+    HealthConfig,
+    aiding_window,
+    assess_health,
+    gauge_disagreement,
+    gauges_beyond_basis,
+    physical_bounds,
+    restart_state,
+)
 
 __all__ = ["REFERENCE_IMU_TOPIC", "StreamingEstimator", "StreamingSettings", "TopicSamples", "estimate", "estimate_stream",
            "rig_topics"]
@@ -131,6 +140,11 @@ class StreamingEstimator:
         self._counters: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.last_estimate: tuple[float, float, float, float] | None = None  # (UNIX s, d, φ, e)
         self._tip = model.tip_row()
+        # each gauge's variance as the filters see it, once raised (the strain outside the unit
+        # deformations); kept across restarts, the filters' own from the calibration until then
+        self._gauge_var: np.ndarray | None = None
+        self.gauge_error_raised = 0
+        self.gauge_note: str | None = None
 
     # -- feeding ---------------------------------------------------------------------------------
 
@@ -230,11 +244,12 @@ class StreamingEstimator:
         bearing: SensorSeries | None = None
         epoch = self.epoch_ns
         assert epoch is not None
+        columns = IMU_BIAXIAL_COLUMNS if self.model.biaxial else IMU_PLANAR_COLUMNS
         for topic, (t, v) in data.items():
             kind, name = self.topics.get(topic, ("", ""))
             ts = (t - epoch) * 1e-9
             if kind == "imu":
-                imu[name] = SensorSeries(ts, v[:, IMU_PLANAR_COLUMNS])
+                imu[name] = SensorSeries(ts, v[:, columns])
             elif kind == "tof":
                 tof[name] = SensorSeries(ts, v[:, :1])
             elif kind == "strain":
@@ -282,6 +297,8 @@ class StreamingEstimator:
         if self.filter is None:
             start = min(s.times[0] for s in meas.imu.values()) if meas.imu else min(int(v[0][0]) for v in data.values())
             self.filter = ImmsFilter(self.model, self.calibration, self.settings.filter, t0=float(start))
+            if self._gauge_var is not None:
+                self.filter.arrays.strain_var[:] = self._gauge_var
             if self._from_measurements:
                 self.filter.state.x[:] = restart_state(meas, self.model, self.calibration)
                 self._from_measurements = False
@@ -292,6 +309,41 @@ class StreamingEstimator:
         events = events.slice(int(np.searchsorted(events.t, self.filter.t)), len(events))
         out = self.filter.process(events)
         return self._judge(out)
+
+    def _raise_gauge_error(self, window: Any, gauges: tuple[str, ...]) -> str:
+        """Raise the variance of each of ``gauges`` in the running filter (and the ones after it) by
+        what it saw beyond the filter's expectation; the words that say so (empty when none could
+        be raised: none disagreed, or each is at ``gauge_error_max`` already).
+
+        A gauge that reads strain outside the unit deformations disagrees with any state; a restart
+        would disagree the same way, so the filter goes on with that gauge trusted less. Its
+        variance grows by its disagreement k (times the variance expected; at least
+        ``gauge_error_growth``² times), at once: raised by too little, the gate refuses it and the
+        estimate drifts without a sign to restart on."""
+        if not gauges or self.filter is None:
+            return ""
+        hc = self.health_config
+        names = [f"/strain/{g}" for g in self.model.selection.gauges]
+        var = self.filter.arrays.strain_var
+        cap = hc.gauge_error_max**2
+        changed = []
+        for channel in gauges:
+            j = names.index(channel)
+            k = gauge_disagreement(window, (channel,), self.settings.filter.gate)
+            new = min(cap, var[j] * max(k, hc.gauge_error_growth**2))
+            if new > var[j]:
+                var[j] = new
+                changed.append(f"{channel.rsplit('/', 1)[-1]} to {math.sqrt(new) * 1e6:.3g} µε")
+        if not changed:
+            return ""
+        self._gauge_var = var.copy()
+        self.gauge_error_raised += 1
+        words = (f"strain outside the {self.model.gamma} unit deformations at the gauges: their noise raised "
+                 f"({', '.join(changed)}); more unit deformations (--modes) or more IMUs would carry that motion")
+        if self.gauge_error_raised <= 3 or self.gauge_error_raised % 100 == 0:
+            log.warning("estimator: %s", words)
+        self.gauge_note = words
+        return words
 
     def _judge(self, out: FilterOutput) -> FilterOutput | None:
         """The health check of one chunk: restart on a sign of divergence, else pass it on."""
@@ -306,7 +358,8 @@ class StreamingEstimator:
         b = out.x[:, ix.b:ix.b + self.model.gamma]
         phi = out.x[:, ix.phi] if ix.phi >= 0 else np.zeros(len(out.t))
         verdict = assess_health(window, out.x[:, ix.d], phi, b @ self._tip, self.bounds, self.health_config)
-        if verdict.diverged:
+        raised = self._raise_gauge_error(window, gauges_beyond_basis(window, self.health_config)) if window is not None else ""
+        if verdict.diverged and not (raised and verdict.kind in ("nis", "rejections")):
             self._restart(verdict.reason or verdict.kind or "diverged", verdict.kind or "diverged", float(out.t[-1]))
             return None
         if self.health == "diverged":
@@ -336,7 +389,9 @@ class StreamingEstimator:
                                                                                             "degraded_imus": []}
         diag["rejected"] = int(diag["rejected"]) + self._rejected_before
         diag.update(filter_restarts=self.resets, filter_restarts_by_reason=dict(self.resets_by_reason),
-                    dropped_samples=self.dropped)
+                    dropped_samples=self.dropped, gauge_error_raised=self.gauge_error_raised,
+                    gauge_std={g: math.sqrt(float(v)) for g, v in zip(self.model.selection.gauges, self._gauge_var)}
+                    if self._gauge_var is not None else None, gauge_note=self.gauge_note)
         return diag
 
     def health_problems(self) -> list[str]:
@@ -353,7 +408,9 @@ class StreamingEstimator:
         return EstimatorStatusDocument(
             state=self.state, dropped_samples=self.dropped, filter_restarts=self.resets,
             filter_restarts_by_reason=dict(self.resets_by_reason), health=self.health, health_reason=self.health_reason,
-            last_estimate=last,
+            last_estimate=last, gauge_note=self.gauge_note,
+            gauge_std=None if self._gauge_var is None else {g: math.sqrt(float(v)) for g, v in zip(self.model.selection.gauges,
+                                                                                                    self._gauge_var)},
             rest_calibration=None if self.calibration is None else self.calibration.as_dict(), **diag)
 
 
@@ -429,14 +486,15 @@ def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = Filter
         raise ValueError("measurements have no IMU 'D' (the IMU at the bearing)")
     settings = settings or StreamingSettings(filter=config)
     by_name: dict[tuple[str, str], str] = {(s.kind, s.name): s.topic for s in model.rig.sensors}
-    width = max(IMU_PLANAR_COLUMNS) + 1
+    imu_columns = list(IMU_BIAXIAL_COLUMNS if model.biaxial else IMU_PLANAR_COLUMNS)
+    width = max(IMU_BIAXIAL_COLUMNS) + 1
     samples: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     topics: dict[str, tuple[str, str]] = {}
 
     def put(kind: str, name: str, series: SensorSeries, columns: list[int] | None) -> None:
         topic = by_name.get((kind, name), f"/{kind}/{name}")
         values = np.asarray(series.values, dtype=float)
-        if columns is not None:  # the planar columns back where the raw IMU payload has them
+        if columns is not None:  # the model's columns back where the raw IMU payload has them
             raw = np.zeros((len(values), width))
             raw[:, columns] = values
             values = raw
@@ -444,7 +502,7 @@ def estimate(meas: Measurements, model: ImmsModel, config: FilterConfig = Filter
         topics[topic] = (kind, name)
 
     for name, s in meas.imu.items():
-        put("imu", name, s, list(IMU_PLANAR_COLUMNS))
+        put("imu", name, s, imu_columns[:s.values.shape[1]])
     for name, s in meas.tof.items():
         put("tof", name, s, None)
     for name, s in meas.strain.items():

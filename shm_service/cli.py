@@ -54,20 +54,29 @@ def _rig_from_args(args: argparse.Namespace):
 
 
 # -- shm modes ---------------------------------------------------------------------------
+def _plane_modes(rig, temperature_c, count: int, plane: str = "zeta"):
+    """The FE model of one bending plane, its first ``count`` frequencies (Hz) and the unit
+    deformation (1-based) each mode belongs to."""
+    from estimator import assemble_beam, natural_modes, unit_deformations
+
+    model = assemble_beam(rig, temperature_c=temperature_c, plane=plane)
+    modes = natural_modes(model, max(count, 6))
+    units = unit_deformations(modes, 5)
+    unit_of_mode = {m: i + 1 for i, group in enumerate(units.modes) for m in group}
+    return model, modes.frequencies_hz[:count], units, unit_of_mode
+
+
 def _cmd_modes(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from estimator import TABLE1_HZ, assemble_beam, natural_modes, unit_deformations
+    from estimator import TABLE1_HZ
 
     if args.calibration:
         return _print_calibration(args)
     rig = _rig_from_args(args)
-    model = assemble_beam(rig, temperature_c=args.temperature)
-    count = max(args.count, 6)
-    modes = natural_modes(model, count)
-    freqs = modes.frequencies_hz[: args.count]
-    units = unit_deformations(modes, 5)
-    unit_of_mode = {m: i + 1 for i, group in enumerate(units.modes) for m in group}
+    model, freqs, units, unit_of_mode = _plane_modes(rig, args.temperature, args.count)
+    # A biaxial beam bends in ξ too: its own frequencies from EI_ξ (a round tube: the same as ζ's).
+    xi = _plane_modes(rig, args.temperature, args.count, "xi") if rig.beam.biaxial else None
     # Table 1 is the paper's pinned, hanging sheet: only that configuration is compared with it.
     paper = rig.support == "pinned" and rig.orientation == "hanging"
     table = np.array(TABLE1_HZ)
@@ -84,10 +93,14 @@ def _cmd_modes(args: argparse.Namespace) -> int:
             "gravity": rig.gravity,
             "critical_load_factor": None if not np.isfinite(critical) else round(float(critical), 6),
             "unit_deformations": [list(group) for group in units.modes],
+            **({} if xi is None else _modes_xi_json(xi[0], xi[1], xi[2])),
         })
         return 0
     print(f"{rig.support}, {rig.orientation} beam of {rig.beam.length:g} m, g = {rig.gravity:g} m/s²"
           + (f"; critical load factor {critical:.4g} (it buckles under {critical:.4g} × its weight)" if np.isfinite(critical) else ""))
+    if xi is not None:
+        _print_biaxial_modes(freqs, unit_of_mode, xi[1], xi[3])
+        return 0
     print(f"{'mode':>4} {'f [Hz]':>9}" + (f" {'Table 1':>8} {'error':>8}" if paper else "") + "  unit deformation")
     for k, f in enumerate(freqs, start=1):
         compared = ""
@@ -97,6 +110,27 @@ def _cmd_modes(args: argparse.Namespace) -> int:
             compared = f" {t} {r}"
         print(f"{k:4d} {f:9.4f}{compared}  {unit_of_mode.get(k, '-')}")
     return 0
+
+
+def _modes_xi_json(model, freqs, units) -> dict:
+    """The ξ plane's keys of ``shm modes --json`` for a biaxial beam."""
+    import numpy as np
+
+    critical = model.critical_load_factor
+    return {
+        "bending": "biaxial",
+        "frequencies_xi_hz": [round(float(f), 6) for f in freqs],
+        "critical_load_factor_xi": None if not np.isfinite(critical) else round(float(critical), 6),
+        "unit_deformations_xi": [list(group) for group in units.modes],
+    }
+
+
+def _print_biaxial_modes(freqs, unit_of_mode: dict, freqs_xi, unit_of_mode_xi: dict) -> None:
+    """Both planes' frequencies side by side, each mode with its plane's unit deformation."""
+    print("biaxial: bending in ζ and in ξ")
+    print(f"{'mode':>4} {'f ζ [Hz]':>10} {'unit ζ':>6} {'f ξ [Hz]':>10} {'unit ξ':>6}")
+    for k, (f, f_xi) in enumerate(zip(freqs, freqs_xi), start=1):
+        print(f"{k:4d} {f:10.4f} {unit_of_mode.get(k, '-')!s:>6} {f_xi:10.4f} {unit_of_mode_xi.get(k, '-')!s:>6}")
 
 
 def _print_calibration(args: argparse.Namespace) -> int:
@@ -348,6 +382,11 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
                     print(f"  mode {m['mode']} not charted: {m['reason']}")
         for problem in output["recording_problems"]:
             print(f"problem: {problem}")
+        usability = output.get("usability") or {}
+        if usability.get("why_none"):
+            print(usability["why_none"])
+            for change in usability["change"]:
+                print(f"  change: {change}")
         print(f"flags: {len(output['flags'])}")
         for flag in output["flags"]:
             print("  " + ", ".join(f"{k}={v}" for k, v in flag.items()))

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .._argtypes import number
+from ._around import XI_MISSING, parse_station_points, root_planes, station_points, station_signals, virtual_at_gauge, xi_of
 from ._common import add_model_arguments
 
 if TYPE_CHECKING:
@@ -53,23 +54,9 @@ class LoadsError(ValueError):
     """Bad input to ``shm loads`` (names the value)."""
 
 
-def parse_stations(text: str, length: float) -> tuple[float, ...]:
-    """'0.5,1.0,2' → stations (m), each within [0, length]."""
-    values = []
-    for part in text.split(","):
-        part = part.strip()
-        if not part:
-            continue
-        try:
-            v = float(part)
-        except ValueError:
-            raise LoadsError(f"--stations: {part!r} is not a number (m)") from None
-        if not (math.isfinite(v) and 0.0 <= v <= length):
-            raise LoadsError(f"--stations: {part} is outside the beam [0, {length}]")
-        values.append(v)
-    if not values:
-        raise LoadsError(f"--stations {text!r} names no station")
-    return tuple(values)
+def parse_stations(text: str, length: float) -> tuple[tuple[float, float], ...]:
+    """'0.5,1.0@90,2' → stations (η m within [0, length], angle degrees; a plain η is at 0, the +ζ face)."""
+    return parse_station_points(text, length, LoadsError)
 
 
 def _exponents(text: str) -> tuple[float, ...]:
@@ -183,7 +170,7 @@ def withhold_figures(stations: list[dict[str, Any]], gauges: list[dict[str, Any]
     return out
 
 
-def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[float, ...] | None, curve: Any, exponents: tuple[float, ...],
+def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[Any, ...] | None, curve: Any, exponents: tuple[float, ...],
                        n_eq: float | None, half_cycles: str, start_s: float | None, window_s: float | None = None,
                        leave_one_out: bool | None = None) -> dict[str, Any]:
     """The ``shm loads`` document of a contract recording (raw or estimate); with ``window_s`` also
@@ -191,10 +178,11 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
 
     ``leave_one_out``: re-run the estimator on ``rec`` (raw: its IMUs and aiding) with ``model_args``
     once per gauge the estimate used, without that gauge, for the band; default: when the estimate
-    is made here."""
+    is made here. ``stations``: positions (m, the +ζ face) or (η, angle in degrees) pairs."""
     import numpy as np
 
-    from analytics import UNKNOWN_LEVERAGE, bending_moment, virtual_strain
+    from analytics import UNKNOWN_LEVERAGE
+    from contract import RigError
 
     from ..processing.estimation import deformation_record
 
@@ -211,13 +199,9 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
     t = times[keep]
     n_eq_value = n_eq if n_eq is not None else duration  # 1 Hz equivalent
 
-    spots = {round(h.position, 9): h for h in rig.hot_spots}
-    grid = stations if stations is not None else tuple(np.linspace(0.0, beam.length, 17)[1:-1])
-    positions = sorted({round(p, 9) for p in grid} | set(spots))
-    eta = np.asarray(positions, dtype=float)
-    shapes = units.curvature(eta)
-    strain = virtual_strain(b[keep], shapes, beam.fibre_distance(eta))
-    kappa = b[keep] @ shapes.T
+    points, spots = station_points(rig, stations)
+    positions = [p for p, _ in points]
+    xi = xi_of(record, keep)
     # E(T) and EI(T) follow the temperature through the beam's coefficient
     factor = np.ones(t.size)
     if record.temperature is not None:
@@ -225,24 +209,32 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         factor = 1.0 + beam.youngs_modulus_temperature_coefficient * (temp - beam.reference_temperature)
     # stress is E·ε for rectangles and tubes; a beam of table sections only has no E: strain and moment only
     youngs = None if beam.youngs_modulus is None else beam.youngs_modulus * factor
-    moment = bending_moment(kappa, beam.bending_stiffness(eta)) * factor[:, None]
+    default_detail = None if curve is None else _detail(curve)
+    try:
+        strain, moment, around = station_signals(
+            beam, b[keep], units, xi, points, spots, factor, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles,
+            detail_of=lambda spot: default_detail if spot is None else _detail(spot.curve, spot.scf, spot.gamma_Ff, spot.gamma_Mf))
+    except RigError as exc:  # an angle a planar beam does not have
+        raise LoadsError(f"--stations: {exc}") from None
 
-    compared, gauge_masks = _gauge_comparisons(rec, t, b[keep], units, beam)
+    compared, gauge_masks = _gauge_comparisons(rec, t, b[keep], units, beam, xi)
     judged, bands, gauge_rows, beyond = _station_bands(rec, record, model_args, leave_one_out, compared, gauge_masks, t, units, positions,
                                                        np.sqrt(np.mean(strain**2, axis=0)), exponents=exponents, n_eq=n_eq_value,
                                                        half_cycles=half_cycles)
 
-    default_detail = None if curve is None else _detail(curve)
     design = rig.fatigue.design_life_years if rig.fatigue is not None else None
     stress_of = dict(youngs=youngs, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, duration=duration, design=design)
-    out_stations = [_station_doc(pos, spots.get(pos), strain[:, j], moment[:, j], beam, default_detail,
-                                 band=None if bands is None else bands[j], **stress_of) for j, pos in enumerate(positions)]
+    out_stations = [{**_station_doc(pos, spots.get(key), strain[:, j], moment[:, j], beam, default_detail,
+                                   band=None if bands is None else bands[j], **stress_of), **around[j]}
+                    for j, (pos, key) in enumerate(zip(positions, points))]
 
     channels = _channel_docs(judged, beam, default_detail, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles,
                              duration=duration, design=design)
 
     withheld = withhold_figures(out_stations, gauge_rows)
     root = _root_moment(b[keep], units, beam, factor, exponents, n_eq_value, half_cycles) if rig.support == "clamped" else None
+    if root is not None and xi is not None:
+        root = root_planes(root, b[keep], units, xi, beam, factor, exponents, n_eq_value, half_cycles)
     return {
         "start_s": span_start, "duration_s": duration, "source": "virtual strain from the estimate" + (
             " (estimated here)" if record.estimated_here else ""),
@@ -255,7 +247,8 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[fl
         "channels": channels,
         "root_bending_moment": root,
         "windows": None if window_s is None else _windows(t, strain, judged, gauge_masks, positions, window_s, exponents=exponents, outside_at=beyond,
-                                                          half_cycles=half_cycles, origin=float(times[0])),
+                                                          half_cycles=half_cycles, origin=float(times[0]), angles=[a["angle_deg"] for a in around]),
+        **({"warnings": [XI_MISSING]} if beam.biaxial and xi is None else {}),
     }
 
 
@@ -300,12 +293,12 @@ def _channel_docs(judged: list, beam: Any, default_detail: Any, *, exponents: tu
     return channels
 
 
-def _gauge_comparisons(rec: Any, t: Any, b: Any, units: Any, beam: Any) -> tuple[list[tuple[str, float, Any, Any]], list[Any]]:
-    """The gauges' measured strain against the virtual strain at their positions, on the estimate's
-    times ``t`` (s) inside each gauge's span: ([(name, position, virtual, measured)], [masks of t])."""
+def _gauge_comparisons(rec: Any, t: Any, b: Any, units: Any, beam: Any,
+                       xi: tuple[Any, Any] | None = None) -> tuple[list[tuple[str, float, Any, Any]], list[Any]]:
+    """The gauges' measured strain against the virtual strain at their points of the section, on the
+    estimate's times ``t`` (s) inside each gauge's span: ([(name, position, virtual, measured)], [masks of t]);
+    ``xi``: (b_ξ, ξ unit deformations) of a biaxial estimate."""
     import numpy as np
-
-    from analytics import virtual_strain
 
     gauges, gauge_masks = [], []
     for sensor in rec.rig.sensors_of("strain"):
@@ -317,8 +310,7 @@ def _gauge_comparisons(rec: Any, t: Any, b: Any, units: Any, beam: Any) -> tuple
         if inside.sum() < 2:
             continue
         measured = np.interp(t[inside], tg, channel.values[:, 0])
-        virtual = virtual_strain(b[inside], units.curvature(np.array([sensor.position])),
-                                 beam.fibre_distance([sensor.position]))[:, 0]
+        virtual = virtual_at_gauge(beam, sensor, b[inside], units, None if xi is None else (xi[0][inside], xi[1]))
         gauges.append((sensor.name, float(sensor.position), virtual, measured))
         gauge_masks.append(inside)
     return gauges, gauge_masks
@@ -366,7 +358,7 @@ def _root_moment(b: Any, units: Any, beam: Any, factor: Any, exponents: Any, n_e
 
 
 def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, exponents, half_cycles: str, origin: float,
-             outside_at: Any = None) -> list[dict[str, Any]]:
+             outside_at: Any = None, angles: Any = None) -> list[dict[str, Any]]:
     """Per window of ``window_s`` (1 Hz equivalent): each station's strain DEL with the band of that window's gauges."""
     import numpy as np
 
@@ -387,7 +379,8 @@ def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, expo
         for j, pos in enumerate(positions):
             band = None if bands is None else bands[j]
             sl = signal_loads(strain[sel, j], exponents=exponents, n_eq=duration, half_cycles=half_cycles, name=f"strain at {pos} m")
-            rows.append({"position_m": pos, "band_half_width": None if band is None else band.high - 1.0,
+            rows.append({"position_m": pos, **({} if angles is None else {"angle_deg": angles[j]}),
+                         "band_half_width": None if band is None else band.high - 1.0,
                          "del": [{"m": m, "n_eq": n, "strain_range": v, "band": None if band is None else [v * band.low, v * band.high]}
                                  for m, n, v in sl.dels]})
         out.append({"start_s": float(a - origin), "duration_s": duration,
@@ -401,12 +394,10 @@ def _out_of_sample(rec: Any, gauges: list, gauge_masks: list, t: Any, used: tupl
     run again on ``rec`` without that gauge (the rest of ``model_args`` kept; the aided unit
     deformations left to the estimator, which picks them for the gauges it has). A gauge the
     estimate did not use is out of sample already. (name, position, virtual, measured, leverage 0)."""
-    import numpy as np
-
-    from analytics import virtual_strain
 
     from ..processing.estimation import deformation_record
 
+    sensors = {s.name: s for s in rec.rig.sensors_of("strain")}
     out = []
     for (name, position, virtual, measured), mask in zip(gauges, gauge_masks):
         if name in used:
@@ -418,10 +409,18 @@ def _out_of_sample(rec: Any, gauges: list, gauge_masks: list, t: Any, used: tupl
                 raise LoadsError(f"the band's re-estimate without gauge {name}: {exc}") from None
             if not again.estimated_here:  # an estimate recording gives its own b again: that is not out of sample
                 raise LoadsError(f"{rec.path} is an estimate recording: no gauge can be left out of it (give the raw recording)")
-            b = np.column_stack([np.interp(t[mask], again.times, again.b[:, k]) for k in range(again.b.shape[1])])
-            virtual = virtual_strain(b, again.units.curvature(np.array([position])), beam.fibre_distance([position]))[:, 0]
+            xi = xi_of(again)
+            virtual = virtual_at_gauge(beam, sensors[name], _resampled(t[mask], again.times, again.b), again.units,
+                                       None if xi is None else (_resampled(t[mask], again.times, xi[0]), xi[1]))
         out.append((name, position, virtual, measured, 0.0))
     return out
+
+
+def _resampled(t: Any, times: Any, values: Any) -> Any:
+    """Columns of ``values`` (on ``times``) interpolated onto ``t`` (s)."""
+    import numpy as np
+
+    return np.column_stack([np.interp(t, times, values[:, k]) for k in range(values.shape[1])])
 
 
 def _gauges_used(rec, record, model_args: dict) -> tuple[str, ...]:
@@ -543,7 +542,13 @@ def _print_table(doc: dict[str, Any]) -> None:
                 f"D {damage}  cycles {s['cycles']:g}")
 
     for s in doc["stations"]:
-        print(row(f"{s['position_m']:.3f} m" + (f" {s['hot_spot']}" if s["hot_spot"] else ""), s))
+        # a planar station on the +ζ face reads as before; another point of the section names its angle
+        at = f" @{s['angle_deg']:g}°" + (" (worst around)" if s.get("angle_spec") == "all" else "") if s.get("angle_deg") else ""
+        print(row(f"{s['position_m']:.3f} m{at}" + (f" {s['hot_spot']}" if s["hot_spot"] else ""), s))
+    root = doc.get("root_bending_moment") or {}
+    if "resultant" in root:
+        print(f"root bending moment: Mζ rms {root['zeta']['rms_nm']:.4g} N·m, Mξ rms {root['xi']['rms_nm']:.4g} N·m, "
+              f"resultant rms {root['resultant']['rms_nm']:.4g} N·m, max {root['resultant']['max_nm']:.4g} N·m")
     for c in doc["channels"]:
         print(row(str(c["name"]), c))
 
@@ -553,8 +558,10 @@ def add_loads_parser(sub) -> None:
     p = sub.add_parser("loads", help="strain, stress, rainflow cycles, DELs and fatigue damage: virtual strain at stations of a "
                                      "contract recording, or measured channels in any format shm oma reads")
     p.add_argument("data", help="a contract recording (raw or estimate .mcap) or measured channels (.npy/.npz, CSV/TSV/text, .mat, HDF5, .mcap)")
-    p.add_argument("--stations", default=None, metavar="η,...",
-                   help="stations, m from D (default: the rig's hot spots and 15 stations at L/16 steps)")
+    p.add_argument("--stations", default=None, metavar="η[@θ],...",
+                   help="stations, m from D, each optionally @ its angle around the section in degrees from +ζ towards +ξ "
+                        "(5.0@45; a plain 5.0 is the +ζ face; a planar beam has only 0 and 180) (default: the rig's hot spots "
+                        "and 15 stations at L/16 steps)")
     p.add_argument("--channels", default=None, help="measured channels to count, names or column indices: A,B,...")
     p.add_argument("--fs", type=number(low=0, low_open=True, unit="Hz"), default=None, help="sample rate, Hz (without a time column)")
     p.add_argument("--quantity", choices=("strain", "stress"), default="strain", help="what plain channels hold: strain (m/m) or stress (Pa)")

@@ -243,6 +243,10 @@ class DeformationRecord:
     support: np.ndarray | None = None
     origin_ns: int = 0
     rest_end_s: float | None = None
+    #: a biaxial beam's ξ plane: b_ξ(t) on ``times`` and its unit deformations (None: planar, or an
+    #: estimate that did not estimate ξ)
+    b_xi: np.ndarray | None = None
+    units_xi: object | None = None
 
 
 def deformation_record(rec: Recording, *, model_args: dict | None = None, settings=None) -> DeformationRecord:
@@ -257,6 +261,7 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None, settin
 
     estimates = rec.channels.get(ESTIMATE_TOPIC)
     rest_end = None
+    b_xi = units_xi = None
     if estimates is not None and len(estimates):
         import json
 
@@ -267,6 +272,11 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None, settin
         b = estimates.values[:, columns]
         support = estimates.values[:, estimates.fields.index("d")] if "d" in estimates.fields else None
         units = unit_deformations(assemble_beam(rec.rig), len(columns))
+        # a biaxial estimate's ξ plane: its b_xi columns on the ξ beam's unit deformations
+        columns_xi = [i for i, name in enumerate(estimates.fields) if name.startswith("b_xi[")]
+        if columns_xi and rec.rig.beam.biaxial:
+            b_xi = estimates.values[:, columns_xi]
+            units_xi = unit_deformations(assemble_beam(rec.rig, plane="xi"), len(columns_xi))
         estimated_here = False
         try:  # written by `shm estimate --out`: the rest phase the estimator calibrated on
             calibration = json.loads(rec.metadata["estimator"]["calibration"])  # estimator.Calibration.as_dict()
@@ -277,6 +287,9 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None, settin
         model = build_model(rec.rig, **(model_args or {}))
         result = estimate_recording(rec, model, settings)
         times, b, units = result.t, result.b, model.units
+        # a biaxial model's ξ plane (ImmsModel.units_xi, EstimateResult.b_xi); a planar model has none
+        units_xi = getattr(model, "units_xi", None)
+        b_xi = None if units_xi is None else result.b_xi
         support = result.d
         estimated_here = True
         rest_end = float(result.calibration.rest_end)
@@ -290,7 +303,7 @@ def deformation_record(rec: Recording, *, model_args: dict | None = None, settin
         bearing = np.interp(times, (channel.log_time_ns - rec.start_ns) * _NS, channel.values[:, 0])
     return DeformationRecord(times, b, units, np.asarray(rec.rig.truth_stations, dtype=float) if rec.rig.truth_stations
                              else np.linspace(0.0, rec.rig.beam.length, 9)[1:], temperature, bearing,
-                             rec.metadata.get("truth"), estimated_here, support, int(rec.start_ns), rest_end)
+                             rec.metadata.get("truth"), estimated_here, support, int(rec.start_ns), rest_end, b_xi, units_xi)
 
 
 #: Modes above the basis the band's missing strain is fitted with (at most the gauges less one).

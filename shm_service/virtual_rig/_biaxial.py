@@ -71,6 +71,10 @@ def xi_twin(rig: RigDescription) -> RigDescription:
     data = rig.model_dump(mode="json")
     beam = data["beam"]
     beam.pop("bending", None)
+    # The twin serves its FE beam only: its gauges' and hot spots' angles around the section (which a
+    # planar description refuses) do not belong to it.
+    for item in (*data["sensors"], *data.get("hot_spots", ())):
+        item.pop("angle_deg", None)
     if beam.get("sections") is None:
         beam["width"], beam["thickness"] = beam["thickness"], beam["width"]
     else:

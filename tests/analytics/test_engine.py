@@ -95,7 +95,8 @@ def test_a_randomly_moving_support_is_an_input_and_the_modes_come_out(operationa
     assert all(w.trusted and w.kind == "ambient" for w in res.windows)
     assert all(w.excitation is not None and w.excitation.kind != "deterministic_near_mode" for w in res.windows)
     for m, f in zip(res.modes, MODES):
-        assert m.method == "ssi" and m.frequency_hz == pytest.approx(f, rel=2e-3)
+        # the record-long subspace pole, or the windows' subspace mean where they state the smaller 1σ
+        assert m.method in ("ssi", "ssi_windows") and m.frequency_hz == pytest.approx(f, rel=2e-3)
         assert {"ssi", "random_decrement"} <= {e.method for e in m.damping}
         assert m.damping_ratio == pytest.approx(0.01, rel=0.3) and m.damping_std > 0
     window = res.windows[5].estimates[1]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from contract import IMU_PLANAR_COLUMNS
+from contract import IMU_BIAXIAL_COLUMNS, IMU_PLANAR_COLUMNS
 from estimator import Measurements, SensorSeries
 from shm_service.virtual_rig import SensorErrors, SimulationSettings, VirtualRig
 
@@ -12,7 +12,8 @@ NO_ERRORS = SensorErrors(**{name: 0.0 for name in SensorErrors.model_fields if n
 
 
 def simulate(duration=40.0, *, rest=10.0, seed=1, ideal=True, errors=None, rig=None, **settings):
-    """Run the virtual rig; returns (Measurements, truth dict with "t", VirtualRig)."""
+    """Run the virtual rig; returns (Measurements, truth dict with "t", VirtualRig). A biaxial rig's
+    IMUs carry [f_x, f_y, ω_z, f_z, ω_y] (``IMU_BIAXIAL_COLUMNS``)."""
     kwargs = dict(duration=duration, rest=rest, seed=seed, ideal=ideal, **settings)
     if errors is not None:
         kwargs["errors"] = errors
@@ -22,7 +23,8 @@ def simulate(duration=40.0, *, rest=10.0, seed=1, ideal=True, errors=None, rig=N
     data = {t: (np.concatenate([b.measurements[t][0] for b in blocks]), np.concatenate([b.measurements[t][1] for b in blocks])) for t in topics}
     truth = {k: np.concatenate([b.truth[k] for b in blocks]) for k in blocks[0].truth}
     truth["t"] = np.concatenate([b.times for b in blocks])
-    imu = {t.split("/")[-1]: SensorSeries(v[0], v[1][:, IMU_PLANAR_COLUMNS]) for t, v in data.items() if t.startswith("/imu/")}
+    columns = IMU_BIAXIAL_COLUMNS if vr.plant_rig.beam.biaxial else IMU_PLANAR_COLUMNS
+    imu = {t.split("/")[-1]: SensorSeries(v[0], v[1][:, columns]) for t, v in data.items() if t.startswith("/imu/")}
     tof = {t.split("/")[-1]: SensorSeries(*v) for t, v in data.items() if t.startswith("/tof/")}
     strain = {t.split("/")[-1]: SensorSeries(*v) for t, v in data.items() if t.startswith("/strain/")}
     bearing = SensorSeries(*data["/bearing/displacement"]) if "/bearing/displacement" in data else None  # none: fixed support

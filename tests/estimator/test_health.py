@@ -94,3 +94,24 @@ def test_a_restart_begins_from_the_current_measurements():
     assert np.all(rest == 0)
     # without the sensors, the states they would give stay 0
     assert np.all(restart_state(Measurements(imu={}), model, cal) == 0)
+
+
+def test_the_gauges_that_disagree_on_their_own():
+    from estimator import gauge_disagreement, gauges_beyond_basis
+
+    # g1's own NIS is 12 (its updates accepted), the ToFs agree; the aggregate would still pass
+    w = _window([50, 50, 200, 50, 0, 0], [0, 0, 0, 0, 0, 0], [50, 50, 2400, 50, 0, 0])
+    assert gauges_beyond_basis(w) == ("/strain/g1",)
+    assert gauge_disagreement(w, ("/strain/g1",), 30.0) == pytest.approx(12.0)
+    # refused at least a tenth of the time: the gate's value (the refused NIS lies above it)
+    w = _window([50, 50, 150, 50, 0, 0], [0, 0, 50, 0, 0, 0], [50, 50, 300, 50, 0, 0])
+    assert gauge_disagreement(w, ("/strain/g1",), 30.0) == 30.0
+    assert gauges_beyond_basis(w) == ()  # 25 % refused, a mean NIS of 2: not on its own
+    # a ToF that disagrees is not a gauge; too few updates are not judged
+    assert gauges_beyond_basis(_window([50, 50, 200, 50, 0, 0], [0, 0, 0, 0, 0, 0], [900, 50, 200, 50, 0, 0])) == ()
+    assert gauges_beyond_basis(_window([0, 0, 10, 0, 0, 0], [0, 0, 0, 0, 0, 0], [0, 0, 1000, 0, 0, 0])) == ()
+    assert gauges_beyond_basis(None) == ()
+    # a channel of the window that is not asked about leaves the figure at 1
+    assert gauge_disagreement(w, ("/strain/g9",), 30.0) == 1.0
+    with pytest.raises(ValueError):
+        HealthConfig(gauge_error_growth=1.0)

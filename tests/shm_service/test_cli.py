@@ -274,3 +274,13 @@ def test_a_closed_pipe_in_process_returns_141_and_writes_nothing_more(monkeypatc
     finally:
         monkeypatch.undo()
         stdout.close()
+
+
+def test_analyze_says_why_no_window_is_usable_and_what_to_change(capsys, recording):
+    # 90 s: rest phase, then the filter's 120 s warm-up covers every 60 s window on the grid
+    code, out, _ = run(capsys, "analyze", str(recording), "--json")
+    doc = json.loads(out)["usability"]
+    assert code == 0 and doc["usable"] == 0 and doc["rejected"] == {"warmup": 2}
+    assert doc["why_none"].startswith("no usable window: 2 warmup") and doc["change"][0].startswith("warmup: record longer")
+    code, out, _ = run(capsys, "analyze", str(recording))
+    assert code == 0 and "no usable window: 2 warmup" in out and "  change: warmup: record longer" in out

@@ -45,7 +45,9 @@ def describe_progress(structure: Any, pipeline_status: Any, compiling_since: flo
     speed = getattr(structure, "speed", None)
     est = pipeline.estimator
     if structure.done:
-        return f"finished: {pipeline_status.windows} windows analysed"
+        none_usable = getattr(pipeline_status, "no_usable_window", None)
+        why = f"; {none_usable}" if none_usable else ""
+        return f"finished: {pipeline_status.windows} windows analysed{why}"
     if est.epoch_ns is None:
         return "waiting for data from the source"
     if est.calibration is None:
@@ -60,6 +62,9 @@ def describe_progress(structure: Any, pipeline_status: Any, compiling_since: flo
     step = a.window_s * (1.0 - a.overlap)
     first_start = math.ceil((float(est.calibration.rest_end) + settings.estimator.warmup_s) / step) * step
     first_end = first_start + a.window_s
+    none_usable = getattr(pipeline_status, "no_usable_window", None)  # why no window so far is usable
+    if pipeline_status.baseline == "learning" and none_usable:
+        return f"monitoring, but {none_usable}"
     if pipeline_status.windows == 0:
         now = 0.0 if pipeline_status.processed_data_s is None else float(pipeline_status.processed_data_s)
         return (f"estimating; waiting for the first analysis window at t = {first_end:.0f} s "

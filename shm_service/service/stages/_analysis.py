@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analytics import AnalysisConfig, Baseline, EngineWindow, LoadsMonitor, ModalMonitor, MonitoringEngine, WindowResult
+from analytics import AnalysisConfig, Baseline, EngineWindow, LoadsMonitor, ModalMonitor, MonitoringEngine, WindowResult, usability_document
 from contract import LoadsWindowDocument, SpectrumDocument, TrendRow
 from estimator import ImmsModel, damage_signatures
 
@@ -161,6 +161,10 @@ class AnalysisStage:
     @property
     def skipped_warmup(self) -> int:
         return 0 if self.engine is None else self.engine.skipped_warmup
+
+    def usability(self) -> dict:
+        """The engine's windows: usable, rejected by reason, and why none is usable (``analytics.usability_document``)."""
+        return usability_document(0, {}) if self.engine is None else self.engine.usability()
 
     @property
     def next_start(self) -> float | None:

@@ -91,6 +91,14 @@ class Batch:
 _blas_limit = None
 
 
+def _no_usable(usability: dict) -> str | None:
+    """Why none of the windows so far is usable and what to change, or None (some are, or none ended
+    yet, or only the filter's warm-up was skipped: the normal start)."""
+    if usability["usable"] or not set(usability["rejected"]) - {"warmup"}:
+        return None
+    return f"{usability['why_none']}; change: " + "; ".join(usability["change"])
+
+
 def _one_blas_thread() -> None:
     """Run BLAS/LAPACK single-threaded in this process (once; an explicit OPENBLAS_NUM_THREADS or
     OMP_NUM_THREADS is left alone).
@@ -425,6 +433,7 @@ class Pipeline:
         epoch = self.estimator.epoch_ns
         span = None if epoch is None or self.processed_ns is None else (self.processed_ns - epoch) / _NS
         a = self.analytics
+        usability = a.usability()
         return PipelineStatusDocument(
             queue_depth=queue_depth, queue_capacity=queue_capacity,
             samples=sum(self.samples.values()), samples_by_topic=dict(self.samples),
@@ -432,6 +441,7 @@ class Pipeline:
             estimates=self.estimates, estimator=self.estimator.diagnostics(),
             windows=a.windows, windows_committed=self.windows_committed,
             windows_skipped_incomplete=a.skipped_incomplete, windows_skipped_warmup=a.skipped_warmup,
+            windows_usable=usability["usable"], windows_rejected=usability["rejected"], no_usable_window=_no_usable(usability),
             baseline="learning" if a.learning_baseline else "active",
             data_time_s=None if self.newest_ns is None else self.newest_ns / _NS, processed_data_s=span,
             realtime_factor=None if span is None else round(span / elapsed, 2),

@@ -34,8 +34,8 @@ class ReprocessLedger:
         """The file's ledger row, and its source's span of data."""
         self.db.execute(
             "INSERT INTO sources (id, kind, detail, first_seen_s, last_seen_s) VALUES (?, 'reprocess', ?, ?, ?) "
-            "ON CONFLICT(id) DO UPDATE SET first_seen_s=MIN(first_seen_s, excluded.first_seen_s), "
-            "last_seen_s=MAX(last_seen_s, excluded.last_seen_s)",
+            "ON CONFLICT(id) DO UPDATE SET first_seen_s=MIN(sources.first_seen_s, excluded.first_seen_s), "
+            "last_seen_s=MAX(sources.last_seen_s, excluded.last_seen_s)",
             (source, path, start_s if start_s is not None else now, end_s if end_s is not None else now))
         self.db.execute(
             "INSERT OR REPLACE INTO reprocessed (key, path, source, content_sha256, configuration, windows, start_s, end_s, "

@@ -55,7 +55,10 @@ class StateRepository:
         clock). One statement of many rows: outside a transaction, the write lock is taken and
         released inside one call into SQLite (an executemany would wait for the GIL after every
         row while holding it). Chunks keep within SQLite's variables."""
-        rows = [(source, kind, detail, seen_at, seen_at) for source, kind, detail in sources]
+        # one row per source (the last given, as successive upserts would leave it): PostgreSQL
+        # refuses a statement that upserts one key twice
+        latest = {source: (kind, detail) for source, kind, detail in sources}
+        rows = [(source, kind, detail, seen_at, seen_at) for source, (kind, detail) in latest.items()]
         for start in range(0, len(rows), 1000):
             chunk = rows[start:start + 1000]
             self.db.execute(

@@ -62,7 +62,7 @@ def _open_database(target: str | Path, **kwargs: Any) -> Any:
         except ImportError as exc:
             raise RuntimeError(f"storage url {redact(str(target))!r} needs PostgreSQL's client psycopg 3, which is not "
                                f"installed ({exc}): pip install 'psycopg[binary]' (the package's 'cluster' extra)") from None
-        return PgDatabase(target, **kwargs)
+        return PgDatabase(str(target), **kwargs)
     return Database(target, **kwargs)
 
 

@@ -256,7 +256,7 @@ def test_shm_serve_of_a_fleet_prints_each_structure(tmp_path, short_recording, c
     assert rows["blade-2"]["state"] == "failed" and "gone.mcap" in rows["blade-2"]["error"]
 
 
-def test_a_fleet_on_worker_processes_behind_one_api(tmp_path, short_recording):
+def test_a_fleet_on_worker_processes_behind_one_api(tmp_path, short_recording, storage_target):
     """``workers = 2``: two worker processes host every other structure on one database; the
     front answers /api/structures for all, forwards a structure's live routes to its worker,
     serves the stored rows itself; a structure's fault stays on it."""
@@ -270,7 +270,8 @@ def test_a_fleet_on_worker_processes_behind_one_api(tmp_path, short_recording):
         f'[[structures]]\nid = "a"\nsource = "replay:{short_recording}"\n'
         '[[structures]]\nid = "b"\nsource = "ingest"\n'
         f'[[structures]]\nid = "c"\nsource = "replay:{tmp_path / "gone.mcap"}"\n', encoding="utf-8")
-    args = ["--config", str(config), "--port", "0", "--speed", "max", "--db", str(tmp_path / "shm.sqlite"),
+    db = storage_target if not storage_target.endswith(".sqlite") else str(tmp_path / "shm.sqlite")  # --db: a file or a URL
+    args = ["--config", str(config), "--port", "0", "--speed", "max", "--db", db, "--data-dir", str(tmp_path),
             "--keep-running", "--json"]
     env = {**__import__("os").environ, "SHM_TOKEN": TOKEN}
     serve = start_serve(args, env=env, stdout=subprocess.PIPE, timeout=300, ready_file=tmp_path / "ready.json")

@@ -17,11 +17,11 @@ def _raise(storage):
     storage.commit_window(WindowCommit("src", 980.0, 1000.0, [], None, None, [change]))
 
 
-def test_webhook_retries_with_backoff_and_logs_every_attempt(tmp_path):
+def test_webhook_retries_with_backoff_and_logs_every_attempt(storage_target):
     rx = Receiver(fail_first=2)
     try:
         settings = NotifySettings(webhooks=(rx.url,), retry_initial_s=0.05, retry_max_s=0.2)
-        st = Storage(tmp_path / "s.sqlite", notify_targets=notify_targets(settings))
+        st = Storage(storage_target, notify_targets=notify_targets(settings))
         _raise(st)
         n = Notifier(st, settings, environ={})
         deadline = time.monotonic() + 10
@@ -37,10 +37,10 @@ def test_webhook_retries_with_backoff_and_logs_every_attempt(tmp_path):
         rx.close()
 
 
-def test_gives_up_after_max_attempts(tmp_path):
+def test_gives_up_after_max_attempts(storage_target):
     settings = NotifySettings(webhooks=("http://127.0.0.1:9/none",), retry_initial_s=0.01, retry_max_s=0.01, max_attempts=2,
                               webhook_timeout_s=0.5)
-    st = Storage(tmp_path / "s.sqlite", notify_targets=notify_targets(settings))
+    st = Storage(storage_target, notify_targets=notify_targets(settings))
     _raise(st)
     n = Notifier(st, settings, environ={})
     for _ in range(20):
@@ -100,11 +100,11 @@ def test_an_unparsable_webhook_url_is_a_configuration_error_naming_the_key():
             load_settings(None, {"notify": {"webhooks": [url]}})
 
 
-def test_4xx_is_permanent_and_reported_5xx_and_429_are_retried(tmp_path):
+def test_4xx_is_permanent_and_reported_5xx_and_429_are_retried(storage_target):
     rx = Receiver(script=[400, 503, 429, 200])
     try:
         settings = NotifySettings(webhooks=(rx.url,), retry_initial_s=0.02, retry_max_s=0.05)
-        st = Storage(tmp_path / "s.sqlite", notify_targets=notify_targets(settings))
+        st = Storage(storage_target, notify_targets=notify_targets(settings))
         st.commit_window(WindowCommit("src", 0.0, 20.0, [], None, None, [_change("raise", 20.0, "mode1")]))
         st.commit_window(WindowCommit("src", 0.0, 40.0, [], None, None, [_change("raise", 40.0, "mode3")]))
         n = Notifier(st, settings, environ={})
@@ -120,12 +120,12 @@ def test_4xx_is_permanent_and_reported_5xx_and_429_are_retried(tmp_path):
         rx.close()
 
 
-def test_each_target_gets_an_alarms_events_in_order_whatever_the_retries(tmp_path):
+def test_each_target_gets_an_alarms_events_in_order_whatever_the_retries(storage_target):
     # 'raised' fails once and backs off; 'cleared' (committed meanwhile) must not overtake it
     rx = Receiver(script=[lambda doc: 500 if doc["event"] == "raised" else 200])
     try:
         settings = NotifySettings(webhooks=(rx.url,), retry_initial_s=0.3, retry_max_s=0.3)
-        st = Storage(tmp_path / "s.sqlite", notify_targets=notify_targets(settings))
+        st = Storage(storage_target, notify_targets=notify_targets(settings))
         st.commit_window(WindowCommit("src", 0.0, 20.0, [], None, None, [_change("raise", 20.0)]))
         n = Notifier(st, settings, environ={})
         n.deliver_due()  # raised: 500, due again in 0.15-0.3 s
@@ -186,11 +186,11 @@ def test_retry_delays_grow_are_capped_and_jittered():
         classify_http(42)
 
 
-def test_a_firing_alarm_is_renotified_and_a_silent_sources_alarms_go_stale(tmp_path):
+def test_a_firing_alarm_is_renotified_and_a_silent_sources_alarms_go_stale(storage_target):
     rx = Receiver()
     try:
         settings = NotifySettings(webhooks=(rx.url,))
-        st = Storage(tmp_path / "s.sqlite", notify_targets=notify_targets(settings))
+        st = Storage(storage_target, notify_targets=notify_targets(settings))
         st.touch_source("src", "sim", "sim", 1000.0)
         st.commit_window(WindowCommit("src", 0.0, 20.0, [], None, None, [_change("raise", 20.0)]))
         assert st.renotify_due(0.5) == []  # not yet

@@ -77,3 +77,22 @@ def test_the_warmup_command_refuses_unknown_arguments(args):
     with pytest.raises(SystemExit) as exc:
         warmup.main(args)
     assert exc.value.code == 2
+
+
+def test_no_usable_window_is_said_with_its_reasons_while_learning_and_when_finished():
+    from shm_service.service.stages._pipeline import _no_usable
+
+    doc = {"usable": 0, "rejected": {"quiet": 3}, "why_none": "no usable window: 3 quiet (b barely moves)", "change": ["quiet: excite it"]}
+    why = _no_usable(doc)
+    assert why == "no usable window: 3 quiet (b barely moves); change: quiet: excite it"
+    # some usable, or only the warm-up skipped so far (the normal start): nothing to say
+    assert _no_usable({**doc, "usable": 1}) is None
+    assert _no_usable({**doc, "rejected": {"warmup": 2}}) is None
+    s = _structure(epoch=0, calibration=SimpleNamespace(rest_end=60.0), state="running")
+    status = SimpleNamespace(estimates=1, windows=3, processed_data_s=None, baseline="learning", no_usable_window=why)
+    assert describe_progress(s, status) == f"monitoring, but {why}"
+    # every window skipped for gaps (the filter restarting): said, not "waiting for the first window"
+    status.windows = 0
+    assert describe_progress(s, status) == f"monitoring, but {why}"
+    s.done = True
+    assert describe_progress(s, status) == f"finished: 0 windows analysed; {why}"

@@ -23,14 +23,15 @@ def _close(a, b, rel: float) -> bool:
 
 
 @pytest.mark.slow
-def test_reprocess_is_analyze_per_file_idempotent_and_feeds_the_service_baseline(short_recording, tmp_path, capsys):
+def test_reprocess_is_analyze_per_file_idempotent_and_feeds_the_service_baseline(short_recording, tmp_path, capsys,
+                                                                                 storage_target):
     from distributed import LocalCluster
 
     tiny = tmp_path / "tiny.mcap"  # shorter than one analysis window: still done
     simulate(SimulationSettings(duration=30.0, rest=10.0, excitation="ambient", seed=5), tiny)
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(b"\x89MCAP0\r\nthis is not a recording")
-    db = tmp_path / "shm.sqlite"
+    db = storage_target  # a SQLite file or a PostgreSQL database: the same commands
     files = [str(short_recording), str(tiny), str(bad)]
     # the tests' short windows and warm-up (the recording is 150 s): one configuration for all
     config = tmp_path / "shm.toml"

@@ -17,14 +17,17 @@ import pytest
 from svc_helpers import fast_overrides
 
 from shm_service.recording import read_recording
-from shm_service.service import ArchiveSettings, MonitoringService, load_settings
+from shm_service.service import ArchiveSettings, MonitoringService, Storage, load_settings
 
 ROOT = Path(__file__).resolve().parents[3]
 
 
-def _replay(tmp_path, recording, **extra):
-    settings = load_settings(None, fast_overrides(tmp_path, **{"source.spec": f"replay:{recording}", "source.speed": "max",
-                                                                 **extra}))
+def _replay(tmp_path, recording, url=None, **extra):
+    overrides = fast_overrides(tmp_path, **{"source.spec": f"replay:{recording}", "source.speed": "max", **extra})
+    if url is not None:  # the PostgreSQL storage instead of the data directory's SQLite file
+        del overrides["db"]
+        overrides["storage"] = {"url": url}
+    settings = load_settings(None, overrides)
     service = MonitoringService(settings, environ={})
     service.start()
     assert service.wait(120)
@@ -33,22 +36,26 @@ def _replay(tmp_path, recording, **extra):
     return status
 
 
-def test_replay_stores_trends_once_and_records_estimates(tmp_path, short_recording):
-    st = _replay(tmp_path, short_recording)
+def _stored(db: str) -> tuple[list[tuple], int]:
+    storage = Storage(db)
+    try:
+        return [(r.window_start_s, r.mode, r.frequency_hz) for r in storage.trends()], storage.count("alarms")
+    finally:
+        storage.close()
+
+
+def test_replay_stores_trends_once_and_records_estimates(tmp_path, short_recording, storage_target):
+    url = None if storage_target.endswith(".sqlite") else storage_target
+    db = url or str(tmp_path / "shm.sqlite")
+    st = _replay(tmp_path, short_recording, url)
     assert st.sources[0].state == "finished" and st.service.pipeline_error is None and st.service.pipeline_errors == 0
-    con = sqlite3.connect(tmp_path / "shm.sqlite")
-    rows = con.execute("SELECT window_start_s, mode, frequency_hz FROM trends ORDER BY window_start_s, mode").fetchall()
+    rows, alarms = _stored(db)
     starts = sorted({r[0] for r in rows})
     assert len(starts) >= 8 and max(abs(b - a) for a, b in zip(starts, starts[1:])) <= 300
     assert {r[1] for r in rows} == {1, 2, 3, 4, 5}
-    alarms = con.execute("SELECT COUNT(*) FROM alarms").fetchone()[0]
-    con.close()
-    st2 = _replay(tmp_path, short_recording, **{"archive.enabled": False})
+    st2 = _replay(tmp_path, short_recording, url, **{"archive.enabled": False})
     assert st2.pipeline.windows == 0  # every window already stored
-    con = sqlite3.connect(tmp_path / "shm.sqlite")
-    assert con.execute("SELECT window_start_s, mode, frequency_hz FROM trends ORDER BY window_start_s, mode").fetchall() == rows
-    assert con.execute("SELECT COUNT(*) FROM alarms").fetchone()[0] == alarms
-    con.close()
+    assert _stored(db) == (rows, alarms)
     files = sorted((tmp_path / "recordings").glob("*.mcap"))
     assert files
     rec = read_recording(files[0])

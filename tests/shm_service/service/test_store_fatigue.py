@@ -22,11 +22,20 @@ def _window(start: float, consumed: float, rms: float = 1e-5, span: float = 4e-5
                                                               stress_range_max_pa=span * 2.1e11)])
 
 
-@pytest.fixture()
-def conn():
-    c = sqlite3.connect(":memory:")
-    FatigueRepository.create_schema(c)
-    FatigueRepository.create_schema(c)  # idempotent
+@pytest.fixture(params=["sqlite", "postgres"])
+def conn(request):
+    """A connection to the fatigue tables: SQLite's, or PostgreSQL's as its schema migrations make them."""
+    if request.param == "sqlite":
+        c = sqlite3.connect(":memory:")
+        FatigueRepository.create_schema(c)
+        FatigueRepository.create_schema(c)  # idempotent
+    else:
+        from shm_service.service import Storage
+        from shm_service.service.storage.postgres._connection import PgConnection
+
+        url = request.getfixturevalue("fresh_postgres_url")
+        Storage(url).close()  # the schema
+        c = PgConnection(url)
     yield c
     c.close()
 

@@ -12,8 +12,19 @@ from shm_service.service import ApiServer, MonitoringService, create_app, load_s
 
 
 @pytest.fixture()
-def running(tmp_path):
-    settings = load_settings(None, fast_overrides(tmp_path, **{"source.spec": "ingest"}))
+def served_db(storage_target, tmp_path) -> str:
+    """The running service's database: the SQLite file of its data directory, or a PostgreSQL database."""
+    return str(tmp_path / "shm.sqlite") if storage_target.endswith(".sqlite") else storage_target
+
+
+@pytest.fixture()
+def running(tmp_path, served_db):
+    overrides = fast_overrides(tmp_path, **{"source.spec": "ingest"})
+    if not served_db.endswith(".sqlite"):
+        overrides["storage"] = {"url": served_db}
+        del overrides["db"]
+    settings = load_settings(None, overrides)
+    assert settings.db == served_db
     service = MonitoringService(settings, environ={"SHM_TOKEN": "t0ken-for-tests"})
     service.start()
     with service.storage.transaction() as db:  # five windows of one mode
@@ -78,12 +89,12 @@ def test_a_cursor_of_another_list_or_not_ours_is_refused(running):
             assert r.status_code == 422 and bad[:20] in r.json()["detail"], bad
 
 
-def test_alarms_page_newest_first(running, tmp_path):
+def test_alarms_page_newest_first(running, served_db):
     import time
 
     from shm_service.service import AlarmChange, Storage, WindowCommit
 
-    storage = Storage(tmp_path / "shm.sqlite")
+    storage = Storage(served_db)
     for k in range(5):
         change = AlarmChange("raise", f"mode{k + 1}", "frequency", k + 1, "warning", 100.0 + k, 1.0, 0.5, f"alarm {k}")
         storage.commit_window(WindowCommit("ingest", 100.0 + k, time.time(), [], None, None, [change]))

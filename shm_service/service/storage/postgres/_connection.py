@@ -13,7 +13,8 @@ with the same meaning on both engines:
   ``GREATEST``; ``x.c IS y.c`` becomes ``IS NOT DISTINCT FROM``;
 - an ``INSERT`` into a table with an ``id`` column returns it (``lastrowid``, as SQLite gives);
 - a bare ``BEGIN`` (a page's read snapshot, ``storage._paging``) opens a REPEATABLE READ
-  read-only transaction: its counts and rows agree, as in SQLite's WAL snapshot.
+  read-only transaction: its counts and rows agree, as in SQLite's WAL snapshot; a page's
+  connection (``streaming``) reads its rows through server-side cursors, chunk by chunk.
 
 A NaN parameter is stored as NULL, as SQLite stores it. Rows answer by index and by column name
 (``row[0]``, ``row["id"]``, ``dict(row)``), as ``sqlite3.Row`` does.
@@ -29,7 +30,10 @@ from functools import lru_cache
 from typing import Any
 
 import psycopg
+from psycopg.conninfo import conninfo_to_dict
 from psycopg.pq import TransactionStatus
+
+from .._paging import CHUNK_ROWS
 
 __all__ = ["PgConnection", "PgRow", "translate"]
 
@@ -92,7 +96,7 @@ class PgRow(tuple):
 
     _names: tuple[str, ...] = ()
 
-    def __getitem__(self, key: Any) -> Any:  # type: ignore[override]
+    def __getitem__(self, key: Any) -> Any:
         if isinstance(key, str):
             try:
                 return tuple.__getitem__(self, self._names.index(key))
@@ -113,7 +117,7 @@ def _row_factory(cursor: Any) -> Any:
 class _Cursor:
     """The answer of one statement: rows (fetched), ``rowcount``, ``lastrowid``, ``description``."""
 
-    def __init__(self, cursor: psycopg.Cursor, returning: bool) -> None:
+    def __init__(self, cursor: psycopg.Cursor[Any] | psycopg.ServerCursor[Any], returning: bool) -> None:
         self._cursor = cursor
         self.lastrowid: int | None = None
         self.rowcount = cursor.rowcount
@@ -135,22 +139,48 @@ class _Cursor:
         return iter(self._cursor)
 
 
+#: libpq's options that make a connection to a server gone silent (a cut network, a host that
+#: died) fail within seconds instead of hanging a write for the kernel's TCP timeout (minutes):
+#: keep-alive probes on an idle connection, and a bound on unacknowledged data of a busy one.
+#: A URL's own values of these keys win.
+_LIVENESS = {"keepalives": 1, "keepalives_idle": 5, "keepalives_interval": 2, "keepalives_count": 3,
+             "tcp_user_timeout": 10_000}
+
+
+def _close(conn: psycopg.Connection[Any], servers: list[psycopg.ServerCursor[Any]]) -> None:
+    for cursor in servers:
+        cursor.close()
+    conn.close()
+
+
 class PgConnection:
     """A psycopg connection in autocommit mode (transactions are the caller's ``BEGIN`` and
     ``COMMIT``, as with the SQLite connections) running the repositories' SQLite text."""
 
-    def __init__(self, url: str, *, connect_timeout_s: float = 5.0, application_name: str = "shm") -> None:
+    def __init__(self, url: str, *, connect_timeout_s: float = 5.0, application_name: str = "shm",
+                 streaming: bool = False) -> None:
         self.url = url
-        self.conn = psycopg.connect(url, autocommit=True, connect_timeout=max(1, int(math.ceil(connect_timeout_s))),
-                                    application_name=application_name)
-        self.conn.row_factory = _row_factory  # type: ignore[assignment]
+        self.streaming = streaming
+        given = conninfo_to_dict(url)
+        defaults: dict[str, Any] = {"connect_timeout": max(1, int(math.ceil(connect_timeout_s))),
+                                    "application_name": application_name, **_LIVENESS}
+        options = {k: v for k, v in defaults.items() if k not in given}
+        self.conn: psycopg.Connection[Any] = psycopg.connect(url, autocommit=True, row_factory=_row_factory, **options)
+        self._servers: list[psycopg.ServerCursor[Any]] = []
         # closed when this object goes, as a sqlite3 connection is (a Storage not closed leaves no session behind)
-        self._finalizer = weakref.finalize(self, self.conn.close)
+        self._finalizer = weakref.finalize(self, _close, self.conn, self._servers)
 
     def execute(self, sql: str, args: Sequence[Any] | None = None) -> _Cursor:
         text, returning = translate(sql)
+        if self.streaming and self.in_transaction and text.lstrip().upper().startswith("SELECT"):
+            # a page's rows come from the server as they are read: its memory does not grow with its length
+            server = self.conn.cursor(name=f"page_{len(self._servers)}")
+            server.itersize = CHUNK_ROWS
+            self._servers.append(server)
+            server.execute(text, _params(args))
+            return _Cursor(server, returning)
         cursor = self.conn.cursor()
-        cursor.execute(text, _params(args))  # type: ignore[arg-type]
+        cursor.execute(text, _params(args))
         return _Cursor(cursor, returning)
 
     def executemany(self, sql: str, rows: Sequence[Sequence[Any]]) -> None:
@@ -159,7 +189,7 @@ class PgConnection:
             return
         text, _ = translate(sql, True)
         with self.conn.cursor() as cursor:
-            cursor.executemany(text, [_params(r) for r in rows])  # type: ignore[arg-type]
+            cursor.executemany(text, [_params(r) or () for r in rows])
 
     @property
     def in_transaction(self) -> bool:

@@ -192,14 +192,14 @@ def migrate(db: Any, where: str) -> None:
             conn.execute("SELECT pg_advisory_xact_lock(%s)", (ADVISORY_KEY,))
             conn.execute("CREATE TABLE IF NOT EXISTS schema_version (version INTEGER PRIMARY KEY, applied_at "
                          "DOUBLE PRECISION NOT NULL)")
-            version = int(conn.execute("SELECT COALESCE(MAX(version), 0) FROM schema_version").fetchone()[0])  # type: ignore[index]
+            version = int(conn.execute("SELECT COALESCE(MAX(version), 0) FROM schema_version").fetchone()[0])
             if version > SCHEMA_VERSION:
                 raise RuntimeError(f"{where}: schema version {version} is newer than this program's {SCHEMA_VERSION}")
             if version < SCHEMA_VERSION:  # another node may have migrated while this one waited for the lock
                 version += 1
                 for statement in (s.strip() for s in _MIGRATIONS[version - 1].split(";")):
                     if statement:
-                        conn.execute(statement)  # type: ignore[call-overload]
+                        conn.execute(statement)
                 conn.execute("INSERT INTO schema_version (version, applied_at) VALUES (%s, EXTRACT(EPOCH FROM clock_timestamp()))",
                              (version,))
             conn.execute("COMMIT")
