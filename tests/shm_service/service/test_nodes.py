@@ -55,6 +55,10 @@ def test_nodes_share_the_fleet_and_take_over_a_stopped_and_a_dead_node(tmp_path,
         with pytest.raises(Exception, match="runs on node 'a'"):
             b.structure(remote)
         b.trends(None, None, source=remote)  # its stored rows are answered by any node
+        # /metrics per node: its own structures only
+        states = [line for line in b.fleet_metrics().splitlines() if line.startswith("shm_structure_state{")]
+        assert sorted(line.split('structure="')[1].split('"')[0] for line in states) == sorted(
+            sid for sid, n in view.items() if n == "b")
 
         # b stops cleanly: its leases released, a takes all five
         b.stop(drain_s=0)
