@@ -81,8 +81,13 @@ def test_a_node_killed_mid_stream_is_taken_over_with_no_window_missing_or_double
         assert list(view) == IDS
         assert sent.wait(120)
         last_s = max(max(x["log_time_ns"] for x in orjson.loads(bodies[sid][-1])["messages"]) for sid in IDS) / 1e9
-        wait_for(lambda: all((s["data_time_s"] or 0) >= last_s - 1.0 for s in _structures(urls["b"]).values()) or None,
-                 180, "b to take every body")
+        try:
+            wait_for(lambda: all((s["data_time_s"] or 0) >= last_s - 1.0 for s in _structures(urls["b"]).values())
+                     or None, 300, "b to take every body")
+        except AssertionError:
+            sources = {sid: httpx.get(f"{urls['b']}/api/structures/{sid}/status", timeout=10).json()["sources"][0]
+                       for sid in IDS}
+            raise AssertionError(f"b did not take every body up to {last_s}: {_structures(urls['b'])} {sources}") from None
     finally:
         for p in nodes.values():
             if p.process.poll() is None:
