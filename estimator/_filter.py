@@ -448,6 +448,7 @@ def build_model(
     gauge_angle = np.array([by_name["strain", n].angle_deg for n in selection.gauges], dtype=float) if biaxial else None
     if check_observable:
         if biaxial:
+            assert units_xi is not None  # a biaxial beam's ξ basis was built above
             zeta_p, xi_p = (np.asarray(v, dtype=float).reshape(-1) for v in rig.beam.section_point(gauge_eta, gauge_angle)) \
                 if gauge_eta.size else (np.zeros(0), np.zeros(0))
             problem = biaxial_observability_problem(units, units_xi, selection, imu_eta=imu_eta, tof_eta=tof_eta,

@@ -128,7 +128,7 @@ class Structure:
         src = settings.source
         self.kind = src.kind
         self.queue = _WakingQueue(maxsize=settings.queue_batches)
-        self.source = self._make_source()
+        self.source = _make_source(self)
         self.id = self.source.id
         self.rig: RigDescription = self.source.rig  # type: ignore[assignment]
         est = settings.estimator
@@ -189,53 +189,6 @@ class Structure:
             self.source.committed_until_s = _committed_until(self, storage)  # type: ignore[attr-defined]
 
     # -- construction -----------------------------------------------------------------------
-
-    def _make_source(self) -> Source:
-        s = self.settings
-        src = s.source
-        kind = src.kind
-        truth = s.dashboard.enabled and not self.service.fleet  # the truth shape is drawn for one structure only
-        rig_override = None
-        if src.rig:
-            try:
-                rig_override = load_rig(src.rig)
-            except (OSError, ValueError) as exc:
-                raise ServiceError(f"source.rig: {exc}") from None
-        try:
-            if kind == "sim":
-                return SimSource(src.id or "sim", self.queue, s, raw=s.archive.enabled and s.archive.raw != "never", truth=truth,
-                                 rig=rig_override)
-            if kind in ("replay", "follow"):
-                path = Path(src.path or "")
-                source = FileSource(src.id or path.stem, self.queue, s, follow=kind == "follow", rig=rig_override, truth=truth)
-                if source.rig is None:
-                    if kind == "follow":
-                        # The model needs the rig: without source.rig, wait for the file's rig.json
-                        # (``shm serve`` serves the API meanwhile and retries; see RigPending).
-                        if source.wait_for_rig(timeout=self.service.rig_wait_s) is None:
-                            raise RigPending(f"follow: waiting for {path} and its rig.json "
-                                             "(or give the rig with source.rig)")
-                    else:
-                        raise ServiceError(f"{path}: no rig.json")
-                return source
-            if kind == "ingest":
-                from ...rig_layouts import default_rig
-
-                rig = rig_override or default_rig(src.layout)
-                return IngestSource(src.id or "ingest", self.queue, rig, max_messages=s.server.max_ingest_messages,
-                                    wait_s=s.server.ingest_wait_s, raw=s.archive.enabled and s.archive.raw != "never",
-                                    clock=self._clock(live=True), limits=src.limits)
-            if kind == "mqtt":
-                from ...rig_layouts import default_rig
-                from ..sources._mqtt import MqttSource
-
-                return MqttSource(src.id or "mqtt", self.queue, rig_override or default_rig(src.layout), s.mqtt,
-                                  max_messages=s.server.max_ingest_messages,
-                                  raw=s.archive.enabled and s.archive.raw != "never", clock=self._clock(live=True),
-                                  limits=src.limits, password=s.mqtt.password())
-        except (RecordingError, FileNotFoundError, ValueError) as exc:
-            raise ServiceError(str(exc)) from None
-        raise ServiceError(f"unknown source {src.spec!r}")
 
     def _clock(self, *, live: bool) -> SourceClock:
         src = self.settings.source
@@ -439,6 +392,55 @@ def _committed_until(structure: "Structure", storage: Storage) -> Callable[[], f
         return float(start) + step_s - float(calibration.rest_end) - warmup_s
 
     return until
+
+
+def _make_source(self: Structure) -> Source:
+    """The source of a structure's settings (a ServiceError naming what is wrong)."""
+    s = self.settings
+    src = s.source
+    kind = src.kind
+    truth = s.dashboard.enabled and not self.service.fleet  # the truth shape is drawn for one structure only
+    rig_override = None
+    if src.rig:
+        try:
+            rig_override = load_rig(src.rig)
+        except (OSError, ValueError) as exc:
+            raise ServiceError(f"source.rig: {exc}") from None
+    try:
+        if kind == "sim":
+            return SimSource(src.id or "sim", self.queue, s, raw=s.archive.enabled and s.archive.raw != "never", truth=truth,
+                             rig=rig_override)
+        if kind in ("replay", "follow"):
+            path = Path(src.path or "")
+            source = FileSource(src.id or path.stem, self.queue, s, follow=kind == "follow", rig=rig_override, truth=truth)
+            if source.rig is None:
+                if kind == "follow":
+                    # The model needs the rig: without source.rig, wait for the file's rig.json
+                    # (``shm serve`` serves the API meanwhile and retries; see RigPending).
+                    if source.wait_for_rig(timeout=self.service.rig_wait_s) is None:
+                        raise RigPending(f"follow: waiting for {path} and its rig.json "
+                                         "(or give the rig with source.rig)")
+                else:
+                    raise ServiceError(f"{path}: no rig.json")
+            return source
+        if kind == "ingest":
+            from ...rig_layouts import default_rig
+
+            rig = rig_override or default_rig(src.layout)
+            return IngestSource(src.id or "ingest", self.queue, rig, max_messages=s.server.max_ingest_messages,
+                                wait_s=s.server.ingest_wait_s, raw=s.archive.enabled and s.archive.raw != "never",
+                                clock=self._clock(live=True), limits=src.limits)
+        if kind == "mqtt":
+            from ...rig_layouts import default_rig
+            from ..sources._mqtt import MqttSource
+
+            return MqttSource(src.id or "mqtt", self.queue, rig_override or default_rig(src.layout), s.mqtt,
+                              max_messages=s.server.max_ingest_messages,
+                              raw=s.archive.enabled and s.archive.raw != "never", clock=self._clock(live=True),
+                              limits=src.limits, password=s.mqtt.password())
+    except (RecordingError, FileNotFoundError, ValueError) as exc:
+        raise ServiceError(str(exc)) from None
+    raise ServiceError(f"unknown source {src.spec!r}")
 
 
 class _FailedStructure:
