@@ -153,3 +153,21 @@ def test_a_newer_schema_is_refused_and_a_token_needs_postgres(fresh_postgres_url
     finally:
         local.close()
 
+
+
+def test_two_nodes_notifiers_take_each_notification_once(fresh_postgres_url):
+    targets = [("webhook", "http://127.0.0.1:1/x")]
+    a, b = Storage(fresh_postgres_url, notify_targets=targets), Storage(fresh_postgres_url, notify_targets=targets)
+    try:
+        change = AlarmChange("raise", "mode2", "frequency", 2, "alarm", 20.0, 6.0, 5.0, "m")
+        a.commit_window(WindowCommit("mast-01", 0.0, 20.0, [], None, None, [change]))
+        (row,) = b.due_notifications(time.time())  # due to both nodes' notifiers
+        assert a.claim_notification(row["id"], 60.0) and not b.claim_notification(row["id"], 60.0)
+        assert b.due_notifications(time.time()) == []  # taken by a for its attempt
+        a.record_attempt(row["id"], True, "HTTP 200", next_attempt_at=None, give_up=False)
+        assert not b.claim_notification(row["id"], 60.0) and [r["status"] for r in b.outbox()] == ["sent"]
+        with pytest.raises(ValueError, match="hold_s=0"):
+            a.claim_notification(row["id"], 0)
+    finally:
+        a.close()
+        b.close()
