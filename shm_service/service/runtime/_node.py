@@ -213,6 +213,13 @@ class NodeService(MonitoringService):
                                                      error="no node holds it: one takes it within nodes.lease_s"))
         return StructuresDocument(structures=rows)
 
+    def fleet_metrics(self) -> str:
+        """``/metrics`` of this node: its own structures (each node is scraped for its own)."""
+        from ..http._metrics import fleet_metrics
+
+        own = [s for s in self.structures_document().structures if s.node == self.node]
+        return fleet_metrics(StructuresDocument(structures=own), self.statuses())
+
     def health(self) -> Any:
         doc = super().health()
         if self.node_error is None:

@@ -183,28 +183,7 @@ class Structure:
         )
         self.pipeline.live = self.live
         if self.source.kind == "mqtt":
-            self.source.committed_until_s = self._committed_until(storage)  # type: ignore[attr-defined]
-
-    def _committed_until(self, storage: Storage) -> Callable[[], float | None]:
-        """The data time (UNIX s) before which this structure, resumed from its committed state, needs
-        no sample again (None: nothing committed yet): it analyses from the window after the last one
-        committed, and a resumed estimator skips the windows of its first rest_end + warmup_s (its
-        filter converging), so its data must begin that much before."""
-        resumed = (storage.load_state(self.id) or {}).get("last_window_start_s")
-        a = self.settings.engine_config()
-        step_s = a.window_s * (1 - a.overlap)
-        warmup_s = self.settings.estimator.warmup_s
-        pipeline = self.pipeline
-
-        def until() -> float | None:
-            last = pipeline.commits.last_window
-            start = last.start_s if last is not None else resumed
-            calibration = pipeline.estimate.estimator.calibration
-            if start is None or calibration is None:
-                return None
-            return float(start) + step_s - float(calibration.rest_end) - warmup_s
-
-        return until
+            self.source.committed_until_s = _committed_until(self, storage)  # type: ignore[attr-defined]
 
     @property
     def attached(self) -> bool:
@@ -400,6 +379,28 @@ class Structure:
                                         data_time_s=None if self.pipeline.newest_ns is None else self.pipeline.newest_ns / 1e9,
                                         lag_s=self.lag_s(), windows=self.pipeline.windows_committed,
                                         active_alarms=dict(self.pipeline.committed_alarms))
+
+
+def _committed_until(structure: "Structure", storage: Storage) -> Callable[[], float | None]:
+    """The data time (UNIX s) before which ``structure``, resumed from its committed state, needs
+    no sample again (None: nothing committed yet): it analyses from the window after the last one
+    committed, and a resumed estimator skips the windows of its first rest_end + warmup_s (its
+    filter converging), so its data must begin that much before."""
+    resumed = (storage.load_state(structure.id) or {}).get("last_window_start_s")
+    a = structure.settings.engine_config()
+    step_s = a.window_s * (1 - a.overlap)
+    warmup_s = structure.settings.estimator.warmup_s
+    pipeline = structure.pipeline
+
+    def until() -> float | None:
+        last = pipeline.commits.last_window
+        start = last.start_s if last is not None else resumed
+        calibration = pipeline.estimate.estimator.calibration
+        if start is None or calibration is None:
+            return None
+        return float(start) + step_s - float(calibration.rest_end) - warmup_s
+
+    return until
 
 
 def _make_source(self: Structure) -> Source:
