@@ -319,6 +319,7 @@ class TrendRow(_Document):
     curvature_index: Num = Field(None, description="RMS curvature-change index of the window")
     score_sigma: Num = None
     level: Level | None = None
+    plane: Literal["zeta", "xi"] = Field("zeta", description="the bending plane of the mode (a biaxial beam's ξ modes: \"xi\")")
 
 
 class TrendsDocument(_Document):

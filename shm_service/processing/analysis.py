@@ -165,10 +165,11 @@ def baseline_from_recording(path, *, config: AnalysisConfig | None = None, rig=N
     return baseline_from_deformations(rec.rig, data, config=config, warmup_s=warmup_s, not_before_s=not_before_s)
 
 
-def trend_rows(source: str, result, start_s: float, end_s: float) -> list:
+def trend_rows(source: str, result, start_s: float, end_s: float, plane: str = "zeta") -> list:
     """The storage rows (``contract.TrendRow``, one per mode estimate) of one analysed window
     (``analytics.WindowResult``) of ``source`` from ``start_s`` to ``end_s`` (UNIX s): what
-    ``shm serve`` stores live and ``shm reprocess`` stores from archives."""
+    ``shm serve`` stores live and ``shm reprocess`` stores from archives; ``plane``: the bending
+    plane whose b(t) the window analysed ("zeta", or a biaxial beam's "xi")."""
     from contract import TrendRow, chart_name
 
     rows = []
@@ -178,6 +179,6 @@ def trend_rows(source: str, result, start_s: float, end_s: float) -> list:
             source=source, window_start_s=start_s, window_end_s=end_s, mode=e.mode, unit=e.unit, kind=result.kind,
             frequency_hz=e.frequency_hz, damping_ratio=e.damping_ratio, amplitude=e.amplitude, confidence=e.confidence,
             temperature_c=result.temperature_c, curvature_index=None if result.curvature is None else result.curvature.total,
-            score_sigma=score, level=result.levels.get(chart_name("frequency", e.mode)),
+            score_sigma=score, level=result.levels.get(chart_name("frequency", e.mode)), plane=plane,
         ))
     return rows
