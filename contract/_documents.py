@@ -226,6 +226,7 @@ class ModeDocument(_Document):
     method: Literal["ssi", "spectrum"] | None = Field(
         None, description="ssi: the subspace identification (cross-checked against the spectrum); spectrum: the spectral peak alone")
     track: int | None = Field(None, ge=0, description="id of the subspace mode's track across windows (analytics.ModeTracker; None without one)")
+    plane: Literal["zeta", "xi"] = Field("zeta", description="the bending plane of the mode (a biaxial beam's ξ modes: \"xi\")")
 
 
 class ChartDocument(_Document):
@@ -637,6 +638,7 @@ class BaselineModeDocument(_Document):
     temperature_ref_c: Finite
     slope_per_k: Finite
     sigma_rel: Finite
+    plane: Literal["zeta", "xi"] = "zeta"
 
 
 class BaselineStatusDocument(_Document):
