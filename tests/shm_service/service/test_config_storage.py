@@ -28,6 +28,22 @@ def test_rendered_defaults_parse_back_to_the_defaults():
     assert "# SQLite database" in text and "[analytics]" in text
 
 
+def test_the_sections_are_the_stages_settings_with_one_default_each():
+    from shm_service.service.stages._archive import ArchiveSettings
+    from shm_service.service.stages._checks import CheckSettings
+    from shm_service.service.stages._commit import CommitSettings
+    from shm_service.service.stages._estimate import EstimateSettings
+    from shm_service.service.stages._merge import MergeSettings
+
+    s = load_settings(overrides={"source": {"silent_after_s": 3.0, "lateness_s": 0.5}, "archive": {"estimate_decimation": 2}})
+    assert isinstance(s.source, MergeSettings) and isinstance(s.source, CheckSettings)
+    assert isinstance(s.estimator, EstimateSettings) and isinstance(s.archive, ArchiveSettings)
+    assert (s.source.silent_after_s, s.source.lateness_s, s.archive.estimate_decimation) == (3.0, 0.5, 2)
+    # a stage built without settings has the defaults the configuration's users have
+    assert (CheckSettings().silent_after_s, MergeSettings().lateness_s, ArchiveSettings().estimate_decimation) == (2.0, 1.0, 4)
+    assert CommitSettings().retry_s == ServiceSettings().storage_retry_s == 10.0
+
+
 def test_config_is_closed_and_flags_override(tmp_path):
     cfg = tmp_path / "c.toml"
     cfg.write_text('db = "a.sqlite"\n[server]\nport = 9000\n')
