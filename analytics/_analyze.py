@@ -108,6 +108,8 @@ class AnalysisResult:
     def _add_xi(self, out: dict) -> None:
         """The ξ plane's modes after the ζ plane's, every flag naming its plane, the ξ plane's windows,
         baseline and tracks under ``*_xi`` keys, and the degenerate pairs."""
+        if self.xi is None:
+            raise ValueError("a planar analysis has no xi plane to add")
         xi = self.xi.as_dict()
         out["modes"] += xi["modes"]
         out["flags"] = [{**f, "plane": "zeta"} for f in out["flags"]] + [{**f, "plane": "xi"} for f in xi["flags"]]

@@ -9,6 +9,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ._analyze import AnalysisResult
+
 __all__ = ["DEGENERATE_REL", "PLANE_NAMES", "DegeneratePair", "combine_planes", "degenerate_pairs", "with_plane"]
 
 #: the plane names of the contract: "zeta" (the planar contract's plane) and "xi"
@@ -112,7 +114,7 @@ def with_plane(summaries: tuple, plane: str) -> tuple:
     return tuple(replace(m, plane=plane) for m in summaries)
 
 
-def combine_planes(zeta: object, xi: object, *, rel_tol: float = DEGENERATE_REL) -> object:
+def combine_planes(zeta: AnalysisResult, xi: AnalysisResult, *, rel_tol: float = DEGENERATE_REL) -> AnalysisResult:
     """One record's analysis of both planes of a biaxial beam.
 
     Parameters

@@ -8,6 +8,7 @@ recording's UNIX time), so a recording analysed here gives the windows the live 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -73,7 +74,14 @@ def _kwargs(rig, data: DeformationRecord, config: AnalysisConfig | None, warmup_
 def _xi_kwargs(rig, data: DeformationRecord, kw: dict) -> dict:
     """The ξ plane's engine arguments: its own eigenfrequencies; no FE damage signatures of the
     plane (the flags are located by the curvature change instead)."""
-    return {**kw, "expected_hz": data.units_xi.frequencies_hz, "signatures": None}
+    return {**kw, "expected_hz": _units_xi(data).frequencies_hz, "signatures": None}
+
+
+def _units_xi(data: DeformationRecord) -> Any:
+    """The ξ plane's unit deformations (``estimator.UnitDeformations``) of a biaxial record."""
+    if data.units_xi is None:
+        raise ValueError("a planar deformation record has no xi plane")
+    return data.units_xi
 
 
 def biaxial(data: DeformationRecord) -> bool:
@@ -109,9 +117,10 @@ def analyze_deformations(rig, data: DeformationRecord, *, config: AnalysisConfig
         return result
     from analytics import combine_planes
 
-    xi = analyze(data.times, data.b_xi, data.units_xi.curvature(data.stations), data.stations, baseline=baseline_xi,
+    xi = analyze(data.times, data.b_xi, _units_xi(data).curvature(data.stations), data.stations, baseline=baseline_xi,
                  **_xi_kwargs(rig, data, kw))
-    return combine_planes(result, xi)
+    combined: AnalysisResult = combine_planes(result, xi)
+    return combined
 
 
 def recording_gauges(rec) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -140,7 +149,7 @@ def baseline_xi_from_deformations(rig, data: DeformationRecord, *, config: Analy
     if not biaxial(data):
         return None
     kw = _xi_kwargs(rig, data, _kwargs(rig, data, config, warmup_s, not_before_s, None, located=False))
-    return learn_baseline(data.times, data.b_xi, data.units_xi.curvature(data.stations), data.stations, **kw)
+    return learn_baseline(data.times, data.b_xi, _units_xi(data).curvature(data.stations), data.stations, **kw)
 
 
 def analyze_recording(path, *, config: AnalysisConfig | None = None, baseline: Baseline | None = None, rig=None,
