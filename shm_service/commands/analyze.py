@@ -14,49 +14,43 @@ __all__ = ['cmd_analyze']
 def cmd_analyze(args: argparse.Namespace) -> int:
     from analytics import BaselineError
 
-    from ..processing.analysis import analyze_deformations, baseline_from_deformations, recording_gauges
+    from ..processing.analysis import analyze_deformations, baseline_from_deformations, baseline_xi_from_deformations, recording_gauges
 
     config, warmup = _analysis_settings(args)
-    baseline = None
+    baseline = baseline_xi = None
     if args.baseline:
         rec_b, healthy = _deformations_of(args.baseline, args)
         try:
             baseline = baseline_from_deformations(rec_b.rig, healthy, config=config, warmup_s=warmup)
+            baseline_xi = baseline_xi_from_deformations(rec_b.rig, healthy, config=config, warmup_s=warmup)
         except BaselineError as exc:
             raise CliError(f"{args.baseline}: {exc}") from None
     rec, data = _deformations_of(args.recording, args)
     try:
         result = analyze_deformations(rec.rig, data, config=config, baseline=baseline, warmup_s=warmup, not_before_s=args.not_before,
-                                      gauges=recording_gauges(rec))
+                                      gauges=recording_gauges(rec), baseline_xi=baseline_xi)
     except ValueError as exc:
         raise CliError(f"{args.recording}: {exc}{_cut_note(rec)}") from None
     output = {**result.as_dict(), **_recording_problems(rec)}
     if "loads" in output:
         output["loads_band"] = _loads_band_note(output["loads"])
     if data.truth_metadata and "eigenfrequencies_hz" in data.truth_metadata:
-        exact = json.loads(data.truth_metadata["eigenfrequencies_hz"])
-        zeta_key = next((k for k in ("modal_damping_ratios", "damping_ratios") if k in data.truth_metadata), None)
-        zeta = json.loads(data.truth_metadata[zeta_key]) if zeta_key else None
-        output["truth"] = {
-            "eigenfrequencies_hz": exact,
-            "relative_error": {
-                str(m["mode"]): (m["frequency_hz"] / exact[m["mode"] - 1] - 1 if m.get("frequency_hz") else None)
-                for m in output["modes"] if m.get("mode") and m["mode"] <= len(exact)
-            },
-            **({"damping_ratios": zeta,
-                "damping_relative_error": {
-                    str(m["mode"]): (m["damping_ratio"] / zeta[m["mode"] - 1] - 1 if m.get("damping_ratio") else None)
-                    for m in output["modes"] if m.get("mode") and m["mode"] <= len(zeta)}} if zeta else {}),
-        }
+        output["truth"] = _truth_errors(data.truth_metadata, output["modes"], "zeta")
+        if "degenerate_pairs" in output:  # a biaxial record: the ξ plane against its own truth
+            output["truth"].update(_truth_errors(data.truth_metadata, output["modes"], "xi"))
     if args.json:
         _print_json(output)
     else:
         skipped = ", ".join(f"{v} {k}" for k, v in output["skipped_windows"].items() if v)
         print(f"{rec.path}: {data.times[-1] - data.times[0]:.0f} s of b1..b{data.b.shape[1]}"
+              f"{'' if data.b_xi is None else f' and bxi1..bxi{data.b_xi.shape[1]}'}"
               f"{' (estimated here)' if data.estimated_here else ''}, {len(output['windows'])} windows"
               f"{f' ({skipped} skipped)' if skipped else ''}")
         print(f"{'unit':>4} {'mode':>4} {'f [Hz]':>9} {'± [Hz]':>8} {'zeta [%]':>9} {'± [%]':>7}  damping by")
-        for m in output["modes"]:
+        planes = "degenerate_pairs" in output
+        for k, m in enumerate(output["modes"]):
+            if planes and (k == 0 or output["modes"][k - 1]["plane"] != m["plane"]):
+                print(f"{m['plane']} plane:")
             f = m.get("frequency_hz")
             z = m.get("damping_ratio")
             sf = m.get("frequency_std_hz")
@@ -64,6 +58,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             print(f"{m['unit']:4d} {m.get('mode') or '-':>4} {'-' if f is None else round(f, 4)!s:>9} "
                   f"{'-' if sf is None else round(sf, 4)!s:>8} {'-' if z is None else round(100 * z, 3)!s:>9} "
                   f"{'-' if sz is None else round(100 * sz, 3)!s:>7}  {m.get('damping_method') or '-'}")
+        for pair in output.get("degenerate_pairs", []):
+            print(_degenerate_sentence(pair))
         bl = output.get("baseline")
         if bl:
             for m in bl["modes"]:
@@ -82,6 +78,36 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         if output.get("loads"):
             _print_loads(output["loads"][-1], output["loads_band"])
     return 0
+
+
+def _truth_errors(meta: dict, modes: list[dict], plane: str) -> dict:
+    """The simulator's eigenfrequencies and damping ratios of one plane ("zeta": the planar keys; "xi": the
+    ``_xi`` keys) and the relative errors of that plane's listed modes against them."""
+    suffix = "" if plane == "zeta" else "_xi"
+    key = f"eigenfrequencies{suffix}_hz"
+    if key not in meta:
+        return {}
+    exact = json.loads(meta[key])
+    mine = [m for m in modes if m.get("plane", "zeta") == plane and m.get("mode")]
+    zeta_key = next((k for k in (f"modal_damping_ratios{suffix}", f"damping_ratios{suffix}") if k in meta), None)
+    zeta = json.loads(meta[zeta_key]) if zeta_key else None
+    return {
+        key: exact,
+        f"relative_error{suffix}": {str(m["mode"]): (m["frequency_hz"] / exact[m["mode"] - 1] - 1 if m.get("frequency_hz") else None)
+                                    for m in mine if m["mode"] <= len(exact)},
+        **({f"damping_ratios{suffix}": zeta,
+            f"damping_relative_error{suffix}": {
+                str(m["mode"]): (m["damping_ratio"] / zeta[m["mode"] - 1] - 1 if m.get("damping_ratio") else None)
+                for m in mine if m["mode"] <= len(zeta)}} if zeta else {}),
+    }
+
+
+def _degenerate_sentence(pair: dict) -> str:
+    """A degenerate pair of ``shm analyze``'s text output."""
+    return (f"mode {pair['mode']} is a degenerate pair: zeta {pair['frequency_zeta_hz']:.5g} Hz and xi "
+            f"{pair['frequency_xi_hz']:.5g} Hz ({100 * pair['relative_difference']:+.3f} %, within "
+            f"{'their combined 1 sigma' if pair['within'] == 'sigma' else '0.5 %'}): a symmetric section bends alike in both "
+            f"planes; each plane is tracked on its own")
 
 
 def _loads_band_note(windows: list[dict]) -> str:

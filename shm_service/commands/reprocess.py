@@ -137,6 +137,9 @@ def analyse_file(path: str, options: AnalysisOptions, source: str) -> dict[str, 
     result = analyze_deformations(rec.rig, data, config=config, warmup_s=warmup, loads_tap=tap, gauges=recording_gauges(rec))
     rows = [row.model_dump() for w in result.windows
             for row in trend_rows(source, w, offset + w.start_s, offset + w.end_s)]
+    if result.xi is not None:  # a biaxial beam: the ξ plane's windows, their rows marked "xi"
+        rows += [row.model_dump() for w in result.xi.windows
+                 for row in trend_rows(source, w, offset + w.start_s, offset + w.end_s, plane="xi")]
     # each window's counted hot-spot stress, in UNIX s: this process chains them across the files
     tap = [(offset + start, *rest) for start, *rest in tap]
     return {"windows": len(result.windows), "rows": rows, "start_s": rec.start_ns / 1e9, "end_s": rec.end_ns / 1e9,
