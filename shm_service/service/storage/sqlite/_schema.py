@@ -168,6 +168,9 @@ _MIGRATIONS: tuple[str, ...] = (
         window_start_s REAL NOT NULL,
         window_end_s REAL NOT NULL,
         mode INTEGER NOT NULL,
+        -- beside the key's other columns: SQLite 3.40's integrity_check misreads a WITHOUT ROWID
+        -- row whose key column follows columns outside the key (it reports NOT NULL columns as NULL)
+        plane TEXT NOT NULL DEFAULT 'zeta' CHECK (plane IN ('zeta', 'xi')),
         unit INTEGER NOT NULL,
         kind TEXT NOT NULL,
         frequency_hz REAL,
@@ -179,7 +182,6 @@ _MIGRATIONS: tuple[str, ...] = (
         score_sigma REAL,
         level TEXT,
         created_at REAL NOT NULL,
-        plane TEXT NOT NULL DEFAULT 'zeta' CHECK (plane IN ('zeta', 'xi')),
         PRIMARY KEY (source, window_start_s, mode, plane)
     ) WITHOUT ROWID;
     INSERT INTO trends_new (source, window_start_s, window_end_s, mode, unit, kind, frequency_hz, damping_ratio, amplitude,
