@@ -23,6 +23,8 @@ LIVE_HZ = 10.0
 LIVE_CAPACITY = 600
 #: A read keeps the ring filled this long (a dashboard polls every fraction of a second).
 WATCH_S = 20.0
+#: A biaxial beam's "all" hot spots are judged anew once this many new estimates came (≈ 5 s of data).
+JUDGE_EVERY = 50
 
 
 class LiveRing:
@@ -44,6 +46,7 @@ class LiveRing:
         self._lock = threading.Lock()
         # (analytics.VirtualLoads, b of states): each estimate's strain, stress and moment at the stations
         self.loads = loads
+        self._judged_seq: int | None = None  # the newest estimate when an "all" hot spot's worst angle was judged
 
     @property
     def watched(self) -> bool:
@@ -90,6 +93,19 @@ class LiveRing:
             truths = [it[3] for it in items] if self._truths else None
             return self._seq, [it[1] for it in items], [it[2].tolist() for it in items], truths
 
+    def _biaxial(self, virtual: Any, b: tuple[np.ndarray, np.ndarray], b_of: Callable[[np.ndarray], Any],
+                 seq: int) -> dict[str, np.ndarray | None]:
+        """A biaxial beam's loads of the estimates read; an "all" hot spot's worst angle judged anew
+        over every estimate kept once ``JUDGE_EVERY`` new ones came (a few read at a time say little
+        of its DELs, and a steady angle reads better than one that jumps between reads)."""
+        if virtual.worst_around.any() and (self._judged_seq is None or seq - self._judged_seq >= JUDGE_EVERY):
+            with self._lock:
+                kept = np.array([it[2] for it in self._items], dtype=float)
+            if kept.shape[0] >= 2:
+                virtual.judge(*b_of(kept))
+                self._judged_seq = seq
+        return virtual(b[0], b_xi=b[1])
+
     def document(self, after: int, sensors: dict[str, str]) -> LiveEstimatesDocument:
         seq, times, states, truths = self._read(after)
         extra: dict[str, Any] = {}
@@ -97,7 +113,10 @@ class LiveRing:
             virtual, b_of = self.loads
             extra = {"loads_stations_m": virtual.positions.tolist(), "loads_station_names": list(virtual.names)}
             if states:
-                out = virtual(b_of(np.asarray(states, dtype=float)))
-                extra.update({k: None if v is None else v.tolist() for k, v in out.items()})
+                b = b_of(np.asarray(states, dtype=float))
+                out = virtual(b) if not isinstance(b, tuple) else self._biaxial(virtual, b, b_of, seq)
+                extra.update({k: None if v is None else v.tolist() for k, v in out.items() if k != "angles_deg"})
+            if hasattr(virtual, "angles_deg"):  # a biaxial beam's (analytics.BiaxialVirtualLoads)
+                extra.update(loads_angles_deg=virtual.angles_deg.tolist(), loads_worst_around=virtual.worst_around.tolist())
         return LiveEstimatesDocument(source=self.source_id, seq=seq, state_names=self.state_names, t_s=times, x=states,
                                      sensors=sensors, watch_s=self.watch_s, truth_deflection=truths, **extra)
