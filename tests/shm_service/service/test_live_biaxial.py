@@ -63,3 +63,24 @@ def test_a_planar_live_document_has_no_biaxial_keys():
     np.testing.assert_allclose(doc.strain, [[-0.01e-3, -0.01e-3], [-0.02e-3, -0.02e-3]], rtol=1e-12)
     assert doc.loads_angles_deg == [] and doc.loads_worst_around == []
     assert doc.moment_xi_nm is None and doc.root_moment_xi_nm is None and doc.root_moment_resultant_nm is None
+
+
+def test_the_estimate_loads_of_a_biaxial_record_are_judged_over_the_whole_record():
+    """/estimate/loads of a biaxial estimate: the payload's ξ figures, the girth weld at the worst
+    point over every estimate (bending along −ζ, 180°: largest at 0° and 180°)."""
+    from types import SimpleNamespace
+
+    from shm_service.processing.estimation import _loads_of, _xi_loads
+
+    virtual, _ = loads()
+    layout = SimpleNamespace(b_of=lambda x: x[:, 0:1], b_xi_of=lambda x: x[:, 1:2])
+    s = 1e-3 * np.sin(np.linspace(0.0, 30.0, 301))
+    result = SimpleNamespace(model=SimpleNamespace(state_layout=layout), x=np.stack([-s, 0.0 * s], axis=1))
+    out = _loads_of(virtual, result)
+    assert out["angles_deg"][0] == 90.0 and out["angles_deg"][1] in (0.0, 180.0)
+    np.testing.assert_allclose(out["strain"][:, 0], 0.0, atol=1e-20)  # the +ξ face does not strain in ζ bending
+    payload = _xi_loads(out, 7)
+    assert payload["root_moment_xi_nm"] == 0.0
+    assert payload["root_moment_resultant_nm"] == abs(float(out["root_moment_nm"][7]))
+    assert payload["moment_xi_nm"] == [0.0, 0.0]
+    assert _xi_loads({"strain": out["strain"]}, 7) == {}
