@@ -61,7 +61,7 @@ class OrbitPanel:
         self.plot = gui.add_uplot(
             data=data, series=({"label": "Δξ tip mm"}, {"label": "Δζ tip mm", "stroke": "#2563eb", "width": 0,
                                                          "points": {"show": True, "size": 3, "fill": "#2563eb"}},
-                               {"label": "now", "stroke": "#111111", "width": 0, "points": {"show": True, "size": 9}}),
+                               {"label": "now", "stroke": "#111111", "width": 0, "points": {"show": True, "size": 9, "fill": "#111111"}}),
             scales=scales, title="Tip orbit: Δζ (mm) against Δξ (mm)", height=320, legend={"live": False})
         self.count = 0  # tip positions drawn last
 

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import json
 import os
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +19,8 @@ from browser_helpers import ROOT, assert_chart_drawn, browser_page, close_webgl_
 
 from shm_service.service import start_serve
 
+# A picture of the Orbit tab for the docs: SHM_ORBIT_SCREENSHOT=docs/orbit-tab.png (else a temporary file).
+SCREENSHOT = Path(os.environ.get("SHM_ORBIT_SCREENSHOT", Path(tempfile.gettempdir()) / "shm-orbit-tab.png"))
 LENGTH, HALF = 3.0, 1.5
 TUBE = {"shape": "tube", "outer_diameter": 0.1, "wall_thickness": 0.004}
 RIG = {
@@ -82,6 +86,7 @@ def test_the_orbit_and_the_hot_spots_angles_of_a_biaxial_mast(chromium, tmp_path
                 assert np.abs(doc["root_moment_xi_nm"]).max() > 0.0  # the veering wind bends it in ξ too
                 time.sleep(3.0)  # the orbit's points: a few redraws
                 assert_chart_drawn(page, "Tip orbit")
+                SCREENSHOT.write_bytes(page.screenshot())
                 page.get_by_text("Loads", exact=True).first.click()
                 visible(page, "at 45°", exact=False).wait_for(timeout=30_000)
                 worst = page.get_by_text("all around the section: worst at ", exact=False).first
