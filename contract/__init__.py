@@ -75,6 +75,7 @@ from ._payloads import (
     IMU_PLANAR_COLUMNS,
     NOMINAL_PERIOD_NS,
     PAYLOAD_FIELDS,
+    PAYLOAD_FIELDS_BIAXIAL,
     SCHEMAS,
     TEMPERATURE_TOPIC,
     TRUTH_TOPIC,
@@ -83,6 +84,7 @@ from ._payloads import (
     RowLayout,
     TopicInfo,
     classify_topic,
+    payload_fields,
     row_layout,
 )
 from ._rig import (
@@ -126,8 +128,8 @@ __all__ = [
     "FatigueSettings", "HotSpot", "check_curve_spec", "RigError", "Sensor", "SensorKind", "StiffnessSegment",
     "STEEL_YOUNGS_MODULUS_TEMPERATURE_COEFFICIENT", "Support", "load_rig", "parse_rig",
     # topics and payloads
-    "BEARING_TOPIC", "ESTIMATE_LOADS_TOPIC", "ESTIMATE_TOPIC", "IMU_BIAXIAL_COLUMNS", "IMU_PLANAR_COLUMNS", "NOMINAL_PERIOD_NS", "PAYLOAD_FIELDS", "SCHEMAS",
-    "TEMPERATURE_TOPIC", "TRUTH_TOPIC", "FieldSpec", "Kind", "RowLayout", "TopicInfo", "classify_topic", "row_layout",
+    "BEARING_TOPIC", "ESTIMATE_LOADS_TOPIC", "ESTIMATE_TOPIC", "IMU_BIAXIAL_COLUMNS", "IMU_PLANAR_COLUMNS", "NOMINAL_PERIOD_NS", "PAYLOAD_FIELDS", "PAYLOAD_FIELDS_BIAXIAL", "SCHEMAS",
+    "TEMPERATURE_TOPIC", "TRUTH_TOPIC", "FieldSpec", "Kind", "RowLayout", "TopicInfo", "classify_topic", "payload_fields", "row_layout",
     # state and modes
     "ModeMap", "Peripheral", "StateIndex", "StateLayout",
     # documents

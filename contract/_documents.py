@@ -169,7 +169,8 @@ if tuple(EstimateDocument.model_fields) != tuple(f.name for f in PAYLOAD_FIELDS[
 
 
 def estimate_payloads(layout: StateLayout, x: np.ndarray, covariance_diagonal: np.ndarray, e: np.ndarray,
-                      deflection: np.ndarray, curvature: np.ndarray) -> list[dict[str, Any]]:
+                      deflection: np.ndarray, curvature: np.ndarray,
+                      xi: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> list[dict[str, Any]]:
     """``EstimateDocument`` payloads as plain dicts (for bulk writing: no per-sample validation).
 
     Parameters
@@ -177,6 +178,8 @@ def estimate_payloads(layout: StateLayout, x: np.ndarray, covariance_diagonal: n
     layout : the estimator's state layout.
     x, covariance_diagonal : (N, n) states and covariance diagonals.
     e : (N,) tip deflection, m. deflection, curvature : (N, k) at the truth stations.
+    xi : a biaxial estimate's (e_xi (N,), deflection_xi (N, k), curvature_xi (N, k)): the payloads then
+        add ``b_xi``, ``e_xi``, ``deflection_xi`` and ``curvature_xi`` after the planar keys.
 
     Returns
     -------
@@ -199,10 +202,19 @@ def estimate_payloads(layout: StateLayout, x: np.ndarray, covariance_diagonal: n
                          f"and curvature ({curvature.shape[0]}) need one row per estimate")
     d, h, phi = x[:, layout.d].tolist(), x[:, layout.h].tolist(), layout.phi_of(x).tolist()
     b = layout.b_of(x).tolist()
-    return [
+    rows = [
         {"d": dd, "h": hh, "phi": pp, "e": ee, "b": bb, "deflection": w, "curvature": k, "covariance_diagonal": c}
         for dd, hh, pp, ee, bb, w, k, c in zip(d, h, phi, e.tolist(), b, deflection.tolist(), curvature.tolist(), P.tolist())
     ]
+    if xi is not None:
+        e_xi = np.asarray(xi[0], dtype=float).reshape(-1)
+        w_xi, k_xi = (np.atleast_2d(np.asarray(a, dtype=float)) for a in xi[1:])
+        if not (e_xi.shape[0] == w_xi.shape[0] == k_xi.shape[0] == n):
+            raise ValueError(f"e_xi ({e_xi.shape[0]}), deflection_xi ({w_xi.shape[0]}) and curvature_xi ({k_xi.shape[0]}) "
+                             f"need one row per estimate ({n})")
+        for row, bb, ee, w, k in zip(rows, layout.b_xi_of(x).tolist(), e_xi.tolist(), w_xi.tolist(), k_xi.tolist()):
+            row.update(b_xi=bb, e_xi=ee, deflection_xi=w, curvature_xi=k)
+    return rows
 
 
 # -- analysis windows ----------------------------------------------------------------------

@@ -20,6 +20,7 @@ __all__ = [
     "IMU_PLANAR_COLUMNS",
     "NOMINAL_PERIOD_NS",
     "PAYLOAD_FIELDS",
+    "PAYLOAD_FIELDS_BIAXIAL",
     "SCHEMAS",
     "TEMPERATURE_TOPIC",
     "TRUTH_TOPIC",
@@ -28,6 +29,7 @@ __all__ = [
     "RowLayout",
     "TopicInfo",
     "classify_topic",
+    "payload_fields",
     "row_layout",
 ]
 
@@ -153,6 +155,22 @@ PAYLOAD_FIELDS: Final[dict[str, tuple[FieldSpec, ...]]] = {
     "shm.EstimateLoads": (FieldSpec("strain", "free"), FieldSpec("moment_nm", "free"), FieldSpec("root_moment_nm", 0)),
 }
 
+_XI_FIELDS = (FieldSpec("e_xi", 0), FieldSpec("deflection_xi", "stations"), FieldSpec("curvature_xi", "stations"))
+#: A biaxial beam's payloads (beam.bending = "biaxial"): the planar keys, then the ξ plane's
+#: (recording-format.md, "Bending in two planes"); the titles not listed here are the same.
+PAYLOAD_FIELDS_BIAXIAL: Final[dict[str, tuple[FieldSpec, ...]]] = {
+    "shm.TruthState": (*PAYLOAD_FIELDS["shm.TruthState"], *_XI_FIELDS),
+    "shm.EstimateState": (*PAYLOAD_FIELDS["shm.EstimateState"], FieldSpec("b_xi", "free"), *_XI_FIELDS),
+}
+
+
+def payload_fields(title: str, *, biaxial: bool = False) -> tuple[FieldSpec, ...]:
+    """The payload keys of schema ``title`` in row order; ``biaxial``: a biaxial beam's (the ξ keys
+    after the planar ones for the truth and the estimate). KeyError for an unknown title."""
+    if biaxial and title in PAYLOAD_FIELDS_BIAXIAL:
+        return PAYLOAD_FIELDS_BIAXIAL[title]
+    return PAYLOAD_FIELDS[title]
+
 #: Nominal sample period (ns) of the kinds that have a fixed rate.
 NOMINAL_PERIOD_NS: Final[dict[str, int]] = {
     "imu": 5_000_000,
@@ -222,10 +240,11 @@ class RowLayout:
 
     title: str
     widths: tuple[int, ...]
+    biaxial: bool = False
 
     @property
     def fields(self) -> tuple[FieldSpec, ...]:
-        return PAYLOAD_FIELDS[self.title]
+        return payload_fields(self.title, biaxial=self.biaxial)
 
     @property
     def width(self) -> int:
@@ -256,15 +275,16 @@ class RowLayout:
         return tuple(out)
 
 
-def row_layout(title: str, *, stations: int | None = None, free: dict[str, int] | None = None) -> RowLayout:
+def row_layout(title: str, *, stations: int | None = None, free: dict[str, int] | None = None,
+               biaxial: bool = False) -> RowLayout:
     """The row layout of schema ``title`` with ``stations`` truth stations and the ``free``
-    lengths (by key) of the estimate's vectors. Raises KeyError for an unknown title and
-    ValueError when a size the schema needs is not given."""
+    lengths (by key) of the estimate's vectors; ``biaxial``: a biaxial beam's payload (its ξ keys).
+    Raises KeyError for an unknown title and ValueError when a size the schema needs is not given."""
     if title not in PAYLOAD_FIELDS:
         raise KeyError(f"unknown payload schema {title!r}; known: {sorted(PAYLOAD_FIELDS)}")
     free = dict(free or {})
     widths: list[int] = []
-    for spec in PAYLOAD_FIELDS[title]:
+    for spec in payload_fields(title, biaxial=biaxial):
         if spec.size == "stations":
             if stations is None or stations < 0:
                 raise ValueError(f"{title}.{spec.name} has one entry per truth station: give {stations=} >= 0")
@@ -279,7 +299,7 @@ def row_layout(title: str, *, stations: int | None = None, free: dict[str, int] 
             raise ValueError(f"{title}.{spec.name}: unknown field size {spec.size!r}")
     if free:
         raise ValueError(f"{title} has no free-length keys {sorted(free)}")
-    return RowLayout(title, tuple(widths))
+    return RowLayout(title, tuple(widths), biaxial)
 
 
 _IMU = row_layout("shm.Imu")

@@ -249,6 +249,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         "realtime_factor": round(float((result.t[-1] - result.t[0]) / max(result.filter_seconds, 1e-9)), 1),
         "selection": result.model.selection.as_dict(),
         "modes": result.model.gamma,
+        **({"modes_xi": result.model.gamma_xi} if result.model.biaxial else {}),
         "rest_end_s": round(float(result.calibration.rest_end), 3),
         "diagnostics": result.diagnostics,
         **_recording_problems(rec),
@@ -434,8 +435,8 @@ def _print_loads(last: dict, note: str) -> None:
 def _analysis_options(args: argparse.Namespace):
     from .commands.reprocess import AnalysisOptions
 
-    return AnalysisOptions(rig=args.rig, peripheral=args.peripheral, modes=args.modes, imus=args.imus, tofs=args.tofs,
-                           gauges=args.gauges, config=args.config)
+    return AnalysisOptions(rig=args.rig, peripheral=args.peripheral, modes=args.modes, modes_xi=args.modes_xi, imus=args.imus,
+                           tofs=args.tofs, gauges=args.gauges, config=args.config)
 
 
 def _cmd_reprocess(args: argparse.Namespace) -> int:

@@ -41,17 +41,20 @@ def _count_or_names(text: str | None, default: int) -> int | tuple[str, ...]:
 
 def add_model_arguments(p: argparse.ArgumentParser, *, aided: bool = True) -> None:
     """The estimator model's options, one definition for ``shm estimate``, ``analyze``, ``reprocess``,
-    ``baseline learn`` and ``loads``: --rig, --peripheral, --modes, --imus, --tofs, --gauges and
-    (``aided``: where the command builds the model with it) --aided."""
+    ``baseline learn`` and ``loads``: --rig, --peripheral, --modes, --modes-xi, --imus, --tofs, --gauges
+    and (``aided``: where the command builds the model with it) --aided."""
     from .._argtypes import number
 
     p.add_argument("--rig", help="rig description to use instead of the attached rig.json")
     p.add_argument("--peripheral", choices=("gyro", "acc"), default="gyro")
     p.add_argument("--modes", type=number(int, low=1, high=5), default=4, metavar="Γ", help="unit deformations (1-5)")
+    p.add_argument("--modes-xi", type=number(int, low=1, high=5), default=None, metavar="Γξ",
+                   help="unit deformations in ξ of a biaxial beam (beam.bending = 'biaxial'; 1-5, default: as --modes)")
     p.add_argument("--imus", default=None,
                    help="peripheral IMUs: a count Γ..(the rig's) chosen by EfI, or names s1,s2,... (default 4, or all if fewer)")
     p.add_argument("--tofs", default=None, help="ToFs: a count 0..(the rig's) or names (default 4, or all if fewer)")
-    p.add_argument("--gauges", default=None, help="strain gauges: a count 0..(the rig's) or names (default 4, or all if fewer)")
+    p.add_argument("--gauges", default=None, help="strain gauges: a count 0..(the rig's) or names (default 4, or all if fewer; "
+                                                  "a biaxial beam's default 8, four per plane)")
     if aided:
         p.add_argument("--aided", default=None, help="unit deformations aided by the gauges, e.g. 2,3,4 (Eq. 22)")
 
@@ -68,11 +71,19 @@ def _model_from_args(rig, args: argparse.Namespace):
         bad = [a for a in aided if not 1 <= a <= args.modes]
         if bad:
             raise CliError(f"--aided {args.aided}: unit deformations {bad} are outside 1..{args.modes} (Γ = --modes)")
-    counts = _sensor_counts(rig, args)
     try:
-        return build_model(rig, peripheral=args.peripheral, modes=args.modes, aided=aided, **counts)
+        return build_model(rig, aided=aided, **model_kwargs(rig, args))
     except ValueError as exc:
         raise CliError(str(exc)) from None
+
+
+def model_kwargs(rig, args: argparse.Namespace) -> dict:
+    """``estimator.build_model``'s keywords of the options: --peripheral, --modes, the sensor counts
+    and, given, --modes-xi (a planar beam refuses it there)."""
+    kwargs = dict(peripheral=args.peripheral, modes=args.modes, **_sensor_counts(rig, args))
+    if getattr(args, "modes_xi", None) is not None:
+        kwargs["modes_xi"] = args.modes_xi
+    return kwargs
 
 
 def _recording_problems(rec) -> dict:
@@ -95,6 +106,8 @@ def _sensor_counts(rig, args: argparse.Namespace) -> dict[str, int | tuple[str, 
     from ..processing.estimation import sensor_count_problem
 
     counts = {kind: _count_or_names(getattr(args, kind), DEFAULT_SENSOR_COUNT) for kind in ("imus", "tofs", "gauges")}
+    if args.gauges is None and getattr(rig.beam, "biaxial", False):
+        counts["gauges"] = 2 * DEFAULT_SENSOR_COUNT  # a biaxial beam's gauges hold two planes: four per plane
     for kind, wanted in counts.items():
         if getattr(args, kind) is not None and isinstance(wanted, int):
             problem = sensor_count_problem(rig, kind, wanted, modes=args.modes)
@@ -124,7 +137,7 @@ def _deformations_of(path: str, args: argparse.Namespace):
     from ..recording import read_recording
 
     rec = read_recording(path, rig=args.rig)
-    model_args = dict(peripheral=args.peripheral, modes=args.modes, **_sensor_counts(rec.rig, args))
+    model_args = model_kwargs(rec.rig, args)
     streaming = None
     if getattr(args, "config", None):  # a raw file is estimated as the service with this configuration would
         from ..service._config import load_settings

@@ -395,6 +395,8 @@ def _out_of_sample(rec: Any, gauges: list, gauge_masks: list, t: Any, used: tupl
     deformations left to the estimator, which picks them for the gauges it has). A gauge the
     estimate did not use is out of sample already. (name, position, virtual, measured, leverage 0)."""
 
+    from estimator import UnobservableRig
+
     from ..processing.estimation import deformation_record
 
     sensors = {s.name: s for s in rec.rig.sensors_of("strain")}
@@ -405,6 +407,14 @@ def _out_of_sample(rec: Any, gauges: list, gauge_masks: list, t: Any, used: tupl
             args = {k: v for k, v in model_args.items() if k != "aided"}
             try:
                 again = deformation_record(rec, model_args=dict(args, gauges=others))
+            except UnobservableRig:
+                # the other gauges alone cannot hold the unit deformations (a mast without ToFs and
+                # as many gauges as modes): this gauge's residual stays in sample, widened by the
+                # leverage bound, and its row says so ("out_of_sample": false)
+                from analytics import UNKNOWN_LEVERAGE
+
+                out.append((name, position, virtual, measured, UNKNOWN_LEVERAGE))
+                continue
             except ValueError as exc:
                 raise LoadsError(f"the band's re-estimate without gauge {name}: {exc}") from None
             if not again.estimated_here:  # an estimate recording gives its own b again: that is not out of sample
@@ -469,7 +479,7 @@ def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: flo
 
 
 def _cmd_loads(args: argparse.Namespace) -> int:
-    from ._common import CliError, _sensor_counts
+    from ._common import CliError, model_kwargs
     from ..formats.tables import TableError, read_table, select_channels
 
     try:
@@ -491,7 +501,7 @@ def _cmd_loads(args: argparse.Namespace) -> int:
                 rec = None  # a plain MCAP of channels: counted as a table
             if rec is not None:
                 stations = parse_stations(args.stations, rec.rig.beam.length) if args.stations else None
-                model_args = dict(peripheral=args.peripheral, modes=args.modes, **_sensor_counts(rec.rig, args))
+                model_args = model_kwargs(rec.rig, args)
                 if args.aided:
                     model_args["aided"] = tuple(int(a) for a in args.aided.split(","))
                 doc = loads_of_recording(rec, model_args=model_args, stations=stations, curve=curve, exponents=exponents,

@@ -37,6 +37,7 @@ class AnalysisOptions:
     rig: str | None = None
     peripheral: str = "gyro"
     modes: int = 4
+    modes_xi: int | None = None
     imus: str | None = None
     tofs: str | None = None
     gauges: str | None = None
@@ -58,7 +59,10 @@ class AnalysisOptions:
         def digest(path: str | None) -> str | None:
             return None if path is None else hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
-        return json.dumps({**asdict(self), "rig_sha256": digest(self.rig), "config_sha256": digest(self.config),
+        options = asdict(self)
+        if options["modes_xi"] is None:  # left out at its default: a planar configuration's key is as before
+            del options["modes_xi"]
+        return json.dumps({**options, "rig_sha256": digest(self.rig), "config_sha256": digest(self.config),
                            "program": program, "source": source}, sort_keys=True)
 
     def settings(self):
@@ -315,7 +319,7 @@ def learn_baseline(paths: list[str], db: str | Path, structure: str, period: tup
     from analytics import learn_baseline as engine_baseline
     from estimator import build_model, damage_signatures
 
-    from ._common import _sensor_counts
+    from ._common import model_kwargs
     from ..recording import read_recording
     from ..service.storage._storage import Storage
 
@@ -328,8 +332,7 @@ def learn_baseline(paths: list[str], db: str | Path, structure: str, period: tup
                          + (f" ({len(failures)} failed: {failures[0]['error']})" if failures else ""))
     kept = _without_overlaps(parts)
     rec = read_recording(kept[0]["path"], rig=options.rig, kinds=())
-    model = build_model(rec.rig, peripheral=options.peripheral, modes=options.modes,
-                        **_sensor_counts(rec.rig, options.namespace()))
+    model = build_model(rec.rig, **model_kwargs(rec.rig, options.namespace()))
     config, _ = options.settings()
     config = config or AnalysisConfig()
     origin_ns, t, b, support, temperature = _joined(kept)

@@ -11,6 +11,7 @@ import numpy as np
 from contract import (
     ESTIMATE_LOADS_TOPIC,
     BEARING_TOPIC,
+    IMU_BIAXIAL_COLUMNS,
     IMU_PLANAR_COLUMNS,
     TEMPERATURE_TOPIC,
     TRUTH_TOPIC,
@@ -62,16 +63,18 @@ def sensor_count_problem(rig, kind: str, wanted: int, *, modes: int) -> str | No
 
 
 def measurements_from_recording(rec: Recording) -> Measurements:
-    """The planar measurements of a recording (times in s from the recording's start)."""
+    """The measurements of a recording (times in s from the recording's start): a biaxial beam's IMUs
+    with accel z and gyro y too (``IMU_BIAXIAL_COLUMNS``)."""
     start = rec.start_ns
 
     def series(channel, columns) -> SensorSeries:
         return SensorSeries((channel.log_time_ns - start) * _NS, channel.values[:, columns])
 
     imu, tof, strain, bearing = {}, {}, {}, None
+    imu_columns = IMU_BIAXIAL_COLUMNS if rec.rig.beam.biaxial else IMU_PLANAR_COLUMNS
     for channel in rec.channels.values():
         if channel.kind == "imu":
-            imu[channel.name] = series(channel, IMU_PLANAR_COLUMNS)
+            imu[channel.name] = series(channel, imu_columns)
         elif channel.kind == "tof":
             tof[channel.name] = series(channel, [0])
         elif channel.kind == "strain":
@@ -92,6 +95,9 @@ class TruthSeries:
     e: np.ndarray
     deflection: np.ndarray
     curvature: np.ndarray
+    e_xi: np.ndarray | None = None  # a biaxial recording's ξ plane
+    deflection_xi: np.ndarray | None = None
+    curvature_xi: np.ndarray | None = None
 
 
 def estimate_recording(rec: Recording, model, settings=None) -> EstimateResult:
@@ -123,13 +129,15 @@ def truth_from_recording(rec: Recording) -> TruthSeries | None:
     if channel is None or len(channel) == 0:
         return None
     v = channel.values
-    layout = row_layout("shm.TruthState", stations=len(rec.rig.truth_stations))
+    biaxial = rec.rig.beam.biaxial
+    layout = row_layout("shm.TruthState", stations=len(rec.rig.truth_stations), biaxial=biaxial)
     if v.shape[1] != layout.width:
         raise ValueError(f"{rec.path}: {TRUTH_TOPIC} rows have {v.shape[1]} values; rig.json's {len(rec.rig.truth_stations)} "
                          f"truth stations give {layout.width}")
     col = layout.columns
+    xi = (v[:, col("e_xi")].ravel(), v[:, col("deflection_xi")], v[:, col("curvature_xi")]) if biaxial else (None, None, None)
     return TruthSeries((channel.log_time_ns - rec.start_ns) * _NS, v[:, col("d")].ravel(), v[:, col("h")].ravel(),
-                       v[:, col("phi")].ravel(), v[:, col("e")].ravel(), v[:, col("deflection")], v[:, col("curvature")])
+                       v[:, col("phi")].ravel(), v[:, col("e")].ravel(), v[:, col("deflection")], v[:, col("curvature")], *xi)
 
 
 def score_against_truth(result: EstimateResult, truth: TruthSeries, *, after: float) -> dict:
@@ -140,12 +148,19 @@ def score_against_truth(result: EstimateResult, truth: TruthSeries, *, after: fl
     if not np.any(match):
         # A recording that never leaves its rest phase has nothing to score.
         keys = ("phi_deg", "e_m", "d_m", "deflection_m", "curvature_per_m")
+        if truth.e_xi is not None and result.model.biaxial:
+            keys += ("e_xi_m", "deflection_xi_m", "curvature_xi_per_m")
         return {"rmse": dict.fromkeys(keys), "nees": {"phi": None, "e": None}, "scored_samples": 0}
     i = idx[match]
     rms = lambda a: float(np.sqrt(np.mean(np.square(a))))  # noqa: E731
     phi_err = result.phi[match] - truth.phi[i]
     e_err = result.e[match] - truth.e[i]
     i_phi = result.model.state_layout.phi
+    xi = {}
+    if truth.e_xi is not None and truth.deflection_xi is not None and truth.curvature_xi is not None and result.model.biaxial:
+        xi = {"e_xi_m": rms(result.e_xi[match] - truth.e_xi[i]),
+              "deflection_xi_m": rms(result.deflection_xi()[match] - truth.deflection_xi[i]),
+              "curvature_xi_per_m": rms(result.curvature_xi()[match] - truth.curvature_xi[i])}
     return {
         "rmse": {
             "phi_deg": rms(np.degrees(phi_err)),
@@ -153,6 +168,7 @@ def score_against_truth(result: EstimateResult, truth: TruthSeries, *, after: fl
             "d_m": rms(result.d[match] - truth.d[i]),
             "deflection_m": rms(result.deflection()[match] - truth.deflection[i]),
             "curvature_per_m": rms(result.curvature()[match] - truth.curvature[i]),
+            **xi,
         },
         "nees": {
             "phi": None if i_phi is None else float(np.mean(phi_err**2 / result.P_diag[match, i_phi])),
@@ -166,8 +182,9 @@ def estimate_payloads(result: EstimateResult) -> list[bytes]:
     """``/estimate/state`` payloads (contract's shm.EstimateState) for every estimate sample."""
     import orjson
 
+    xi = (result.e_xi, result.deflection_xi(), result.curvature_xi()) if result.model.biaxial else None
     rows = _estimate_payloads(result.model.state_layout, result.x, result.P_diag, result.e, result.deflection(),
-                              result.curvature())
+                              result.curvature(), xi)
     return [orjson.dumps(row) for row in rows]
 
 
@@ -215,6 +232,7 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
     metadata["estimator"] = {
         "selection": json.dumps(result.model.selection.as_dict()),
         "modes": str(result.model.gamma),
+        **({"modes_xi": str(result.model.gamma_xi)} if result.model.biaxial else {}),
         "state_names": json.dumps(result.model.state_names),
         "calibration": json.dumps(result.calibration.as_dict()),
         **(extra_metadata or {}),

@@ -28,7 +28,7 @@ import zstandard
 
 from contract import (
     NOMINAL_PERIOD_NS,
-    PAYLOAD_FIELDS,
+    payload_fields,
     Kind,
     RigDescription,
     RigError,
@@ -208,13 +208,15 @@ class _ChannelReader:
     as one bytes object each; ``flush`` decodes a block with the compiled template decoder and
     hands only what it could not decode to the reference path (orjson, then the stdlib)."""
 
-    def __init__(self, topic: str, info: TopicInfo, name: str, position: float | None, stations: int, decode: bool) -> None:
+    def __init__(self, topic: str, info: TopicInfo, name: str, position: float | None, stations: int, decode: bool,
+                 biaxial: bool = False) -> None:
         self.topic = topic
         self.info = info
         self.name = name
         self.position = position
         self.decode = decode
-        self.fields = PAYLOAD_FIELDS[info.title]
+        # a biaxial beam's truth and estimates carry the ξ plane's keys after the planar ones
+        self.fields = payload_fields(info.title, biaxial=biaxial)
         self.sizes: list[int | None] = [
             stations if f.size == "stations" else None if f.size == "free" else f.size for f in self.fields
         ]
@@ -709,7 +711,7 @@ class _Reader:
                     return
                 name, position = sensor.name, sensor.position
             decode = (self.topics is None or topic in self.topics) and (self.kinds is None or info.kind in self.kinds)
-            reader = _ChannelReader(topic, info, name, position, len(rig.truth_stations), decode)
+            reader = _ChannelReader(topic, info, name, position, len(rig.truth_stations), decode, rig.beam.biaxial)
             self.readers[topic] = reader
         self.routes[channel_id] = reader
 

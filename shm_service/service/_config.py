@@ -235,6 +235,8 @@ class EstimatorSettings(_Closed):
 
     peripheral: Literal["gyro", "acc"] = Field("gyro", description="kinematic model of the peripheral IMUs")
     modes: int = Field(4, ge=1, le=5, description="unit deformations, Γ")
+    modes_xi: int | None = Field(None, ge=1, le=5, description="unit deformations in ξ of a biaxial beam, Γξ (None: as modes; "
+                                 "ignored for a planar beam)")
     imus: int = Field(4, ge=0, le=16, description="peripheral IMUs (chosen by effective independence)")
     tofs: int = Field(4, ge=0, le=16, description="ToF sensors")
     gauges: int = Field(4, ge=0, le=16, description="strain gauges")

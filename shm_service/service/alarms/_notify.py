@@ -202,6 +202,10 @@ class Notifier:
         return done
 
     def _attempt(self, target: tuple[str, str], row: dict[str, Any]) -> int:
+        # The nodes of a fleet share one outbox: the row is taken first, for longer than an
+        # attempt lasts, or another node's notifier would send it too (a no-op on a SQLite file).
+        if not self.storage.claim_notification(row["id"], self.settings.webhook_timeout_s + 30.0):
+            return 0
         result = self._send(row)
         attempt = int(row["attempts"]) + 1
         s = self.settings

@@ -107,12 +107,15 @@ class _ModelCache:
         self._lock = threading.Lock()
 
     def get(self, rig: RigDescription, est: Any) -> Any:
-        key = rig.model_dump_json() + "|" + est.model_dump_json(include={"peripheral", "modes", "imus", "tofs", "gauges"})
+        key = rig.model_dump_json() + "|" + est.model_dump_json(include={"peripheral", "modes", "modes_xi", "imus", "tofs", "gauges"})
         with self._lock:
             model = self._models.get(key)
             if model is None:
+                biaxial = rig.beam.biaxial
+                # a biaxial beam's gauges hold two planes: the default count is four per plane
+                gauges = 2 * est.gauges if biaxial and "gauges" not in est.model_fields_set else est.gauges
                 model = build_model(rig, peripheral=est.peripheral, modes=est.modes, imus=est.imus, tofs=est.tofs,
-                                    gauges=est.gauges)
+                                    gauges=gauges, **({"modes_xi": est.modes_xi} if biaxial else {}))
                 self._models[key] = model
             return model
 

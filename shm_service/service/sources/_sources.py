@@ -487,7 +487,7 @@ class FileSource(Source):
             return None
         truth = None
         if truth_block is not None and self.truth and self.rig is not None:
-            layout = row_layout("shm.TruthState", stations=len(self.rig.truth_stations))
+            layout = row_layout("shm.TruthState", stations=len(self.rig.truth_stations), biaxial=self.rig.beam.biaxial)
             if truth_block.values.shape[1] == layout.width:
                 truth = (truth_block.log_time_ns, truth_block.values[:, layout.columns("deflection")])
         return Batch(data_blocks, None, truth)

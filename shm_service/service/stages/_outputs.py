@@ -97,6 +97,11 @@ class OutputStage:
             self._estimate_maps = (m.tip_row(), m.units.shape(m.stations).T, m.units.curvature(m.stations).T)
         tip, shape, curvature = self._estimate_maps
         b = layout.b_of(x)
-        rows = estimate_payloads(layout, x, P, b @ tip, b @ shape, b @ curvature)
+        xi = None
+        if self.model.biaxial:  # the ξ plane's keys too: a biaxial rig's reader expects them
+            m, b_xi = self.model, layout.b_xi_of(x)
+            units = m.units_xi
+            xi = (b_xi @ units.shape(m.rig.beam.length), b_xi @ units.shape(m.stations).T, b_xi @ units.curvature(m.stations).T)
+        rows = estimate_payloads(layout, x, P, b @ tip, b @ shape, b @ curvature, xi)
         stamps = epoch_ns + np.round(t * 1e9).astype(np.int64)
         self.archive.write_estimates(stamps, encode_payloads_json(rows))

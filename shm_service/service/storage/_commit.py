@@ -68,6 +68,7 @@ class _Ticket:
     durable: bool
     retry_s: float
     plain: tuple[list[tuple], tuple] | None = None  # (trend rows, monitor state row): no alarm, no baseline
+    token: int | None = None  # the fencing token of the window's commit
     done: bool = False
     result: list[int] | None = None
     error: BaseException | None = None
@@ -153,8 +154,8 @@ class WindowWriter:
             return [e for e in events if e is not None]
 
         simple = not commit.alarm_changes and commit.baseline is None and commit.loads is None
-        plain = (rows, state) if simple and self.staged else None
-        return self._group_commit(_Ticket(run, bool(commit.alarm_changes), float(retry_s), plain))
+        plain = (rows, state) if simple else None
+        return self._group_commit(_Ticket(run, bool(commit.alarm_changes), float(retry_s), plain, token))
 
     def _group_commit(self, ticket: _Ticket) -> list[int]:
         """Write ``ticket`` with the others waiting: the first thread to find no group under way
@@ -205,6 +206,8 @@ class WindowWriter:
         """Stage the windows (no lock taken) and move them with one statement; a passing fault
         is retried, for the longest retry time of the group. False when the move failed for good
         (nothing of it kept, the windows untouched): the caller writes them one by one."""
+        if not self.staged:
+            return self._write_direct(batch)
         trends = [row for t in batch for row in t.plain[0]]  # type: ignore[index]
         states = [t.plain[1] for t in batch]  # type: ignore[index]
         columns = len(TREND_COLUMNS)
@@ -232,6 +235,34 @@ class WindowWriter:
         self.grouped_windows += len(batch)
         for t in batch:
             t.result, t.error, t.done = [], None, True
+        return True
+
+    def _write_direct(self, batch: list[_Ticket]) -> bool:
+        """PostgreSQL's plain windows: one transaction of a few statements for all of them (the
+        fencing tokens checked at once, then the rows, states and stale flags of the windows whose
+        token holds; a window with a stale token gets ``StaleLease``). As ``_write_plain``: a
+        passing fault is retried; False when it failed for good and nothing of it was kept."""
+        windows = [(t.plain[0], t.plain[1], t.token) for t in batch]  # type: ignore[index]
+        refused: list[str | None] = []
+
+        def run(db: sqlite3.Connection) -> None:
+            refused[:] = self.database.write_plain(db, windows, time.time())  # type: ignore[attr-defined]
+
+        try:
+            self.database.write(run, retry_s=max(t.retry_s for t in batch))
+        except StorageUnavailable as exc:
+            for t in batch:
+                t.result, t.error, t.done = None, exc, True
+            return True
+        except Exception as exc:
+            if self.database.is_transient(exc):
+                raise
+            return False
+        self.groups += 1
+        self.grouped_windows += len(batch)
+        for t, why in zip(batch, refused):
+            t.result, t.error, t.done = (None, StaleLease(why), True) if why is not None else ([], None, True)
+        self.fenced += sum(why is not None for why in refused)
         return True
 
     def _write_savepoints(self, batch: list[_Ticket]) -> None:

@@ -25,6 +25,8 @@ class OutboxStore(Protocol):
 
     def fail_pending(self, channel: str, target: str, detail: str) -> int: ...
 
+    def claim(self, outbox_id: int, now: float, hold_s: float) -> bool: ...
+
     def rows(self, table: str) -> list[dict[str, Any]]: ...
 
     def counts(self) -> dict[str, int]: ...
@@ -79,6 +81,14 @@ class OutboxRepository:
         else:
             self.db.execute("UPDATE outbox SET attempts=?, next_attempt_at=?, last_error=? WHERE id=?",
                             (attempt, next_attempt_at, detail[:500], outbox_id))
+
+    def claim(self, outbox_id: int, now: float, hold_s: float) -> bool:
+        """Take a due pending row for one delivery attempt: it is not due again for ``hold_s``
+        (then the attempt's record sets its state); False when it is no longer due (another
+        notifier took it, or it was delivered)."""
+        cur = self.db.execute("UPDATE outbox SET next_attempt_at=? WHERE id=? AND status='pending' AND next_attempt_at <= ?",
+                              (now + hold_s, outbox_id, now))
+        return bool(cur.rowcount)
 
     def fail_pending(self, channel: str, target: str, detail: str) -> int:
         """Mark failed (for good) every pending row of a target no longer configured."""

@@ -340,6 +340,13 @@ class Storage:
     def pending_targets(self) -> list[tuple[str, str]]:
         return self._read(lambda db: OutboxRepository(db).pending_targets())
 
+    def claim_notification(self, outbox_id: int, hold_s: float) -> bool:
+        """Take a due row for one attempt (no other notifier's for ``hold_s``); False: taken (nodes share PostgreSQL's outbox)."""
+        if not (math.isfinite(hold_s) and hold_s > 0):
+            raise ValueError(f"{hold_s=} must be a positive number of seconds")
+        return self.database.dialect == "sqlite" or self._write(
+            lambda db: OutboxRepository(db).claim(outbox_id, time.time(), hold_s), durable=True)
+
     def record_attempt(self, outbox_id: int, ok: bool, detail: str, *, next_attempt_at: float | None, give_up: bool,
                        permanent: bool = False) -> None:
         """Log one delivery attempt and, in the same transaction, mark the row sent, failed or due again."""

@@ -52,7 +52,7 @@ WRITER_KEY = "SHM_STORAGE_WRITER_KEY"
 #: the methods of ``Storage`` that write: a worker sends these to the writer
 WRITES = frozenset({"commit_window", "commit_reprocessed", "touch_source", "touch_sources", "save_calibration",
                     "request_baseline", "store_baseline", "renotify_due", "mark_stale", "delete_trends_older_than",
-                    "acknowledge", "record_attempt", "fail_pending"})
+                    "acknowledge", "record_attempt", "fail_pending", "claim_notification"})
 
 #: the errors that cross the channel as themselves (any other: RuntimeError naming it)
 _KINDS: dict[str, type[Exception]] = {"StorageUnavailable": StorageUnavailable, "ValueError": ValueError,

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from shm_service.service import Storage, WindowCommit
+from shm_service.service import AlarmChange, Storage, WindowCommit
 from shm_service.service.storage.postgres import Leases, StaleLease, check_fence
 
 
@@ -83,7 +83,10 @@ def test_a_stale_tokens_commit_is_refused_and_counted_and_writes_nothing(nodes, 
         (lease_b,) = b.take_expired("node-b")
         with pytest.raises(StaleLease, match="fencing token 1 is stale"):
             store_a.commit_window(_commit("mast-01", 1, lease_a.token))
-        assert (store_a.fenced, store_b.fenced) == (1, 0)
+        raise_ = AlarmChange("raise", "mode2", "frequency", 2, "alarm", 60.0, 6.0, 5.0, "m")  # a window of its own savepoint
+        with pytest.raises(StaleLease, match="fencing token 1 is stale"):
+            store_a.commit_window(WindowCommit("mast-01", 30.0, 90.0, [], None, None, [raise_], fencing_token=lease_a.token))
+        assert (store_a.fenced, store_b.fenced) == (2, 0) and store_b.alarms() == []
         assert store_b.load_state("mast-01")["last_window_start_s"] == 0.0  # nothing of the refused window
         assert store_b.commit_window(_commit("mast-01", 1, lease_b.token)) == []
         assert store_a.load_state("mast-01")["last_window_start_s"] == 30.0
@@ -150,3 +153,21 @@ def test_a_newer_schema_is_refused_and_a_token_needs_postgres(fresh_postgres_url
     finally:
         local.close()
 
+
+
+def test_two_nodes_notifiers_take_each_notification_once(fresh_postgres_url):
+    targets = [("webhook", "http://127.0.0.1:1/x")]
+    a, b = Storage(fresh_postgres_url, notify_targets=targets), Storage(fresh_postgres_url, notify_targets=targets)
+    try:
+        change = AlarmChange("raise", "mode2", "frequency", 2, "alarm", 20.0, 6.0, 5.0, "m")
+        a.commit_window(WindowCommit("mast-01", 0.0, 20.0, [], None, None, [change]))
+        (row,) = b.due_notifications(time.time())  # due to both nodes' notifiers
+        assert a.claim_notification(row["id"], 60.0) and not b.claim_notification(row["id"], 60.0)
+        assert b.due_notifications(time.time()) == []  # taken by a for its attempt
+        a.record_attempt(row["id"], True, "HTTP 200", next_attempt_at=None, give_up=False)
+        assert not b.claim_notification(row["id"], 60.0) and [r["status"] for r in b.outbox()] == ["sent"]
+        with pytest.raises(ValueError, match="hold_s=0"):
+            a.claim_notification(row["id"], 0)
+    finally:
+        a.close()
+        b.close()

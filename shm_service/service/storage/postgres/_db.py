@@ -27,12 +27,14 @@ from typing import Any, TypeVar
 import psycopg
 
 from .._commit import StaleLease
+from .._state import STATE_COLUMNS, STATE_UPSERT
+from .._trends import TrendRepository
 from .._url import check_postgres_url, redact
 from ..sqlite._db import StorageUnavailable
 from ._connection import PgConnection
 from ._schema import SCHEMA_VERSION, migrate, schema_version
 
-__all__ = ["PgDatabase", "check_fence", "is_transient"]
+__all__ = ["PgDatabase", "check_fence", "is_transient", "write_plain"]
 
 log = logging.getLogger("shm.serve.storage")
 
@@ -62,12 +64,38 @@ def check_fence(db: Any, structure_id: str, token: int) -> None:
     StaleLease
         When the lease's token differs (or the structure has no lease).
     """
-    row = db.execute("SELECT token, holder FROM leases WHERE structure_id = ? FOR SHARE", (structure_id,)).fetchone()
-    if row is None:
-        raise StaleLease(f"structure {structure_id!r} has no lease: a commit with fencing token {token} is refused")
-    if int(row[0]) != int(token):
-        raise StaleLease(f"structure {structure_id!r}: fencing token {token} is stale (the lease's is {int(row[0])}, "
-                         f"held by {row[1]!r}): the commit is refused")
+    row = db.execute("SELECT token FROM leases WHERE structure_id = ? FOR SHARE", (structure_id,)).fetchone()
+    current = None if row is None else int(row[0])
+    if current != int(token):
+        raise StaleLease(_refusal(structure_id, token, current))
+
+
+def _refusal(structure_id: str, token: int, current: int | None) -> str:
+    if current is None:
+        return f"structure {structure_id!r} has no lease: a commit with fencing token {token} is refused"
+    return f"structure {structure_id!r}: fencing token {token} is stale (the lease's is {current}): the commit is refused"
+
+
+def write_plain(db: PgConnection, windows: list[tuple[list[tuple], tuple, int | None]], now: float) -> list[str | None]:
+    """Write plain windows (trend rows as tuples of ``TREND_COLUMNS``, a monitor state row of
+    ``STATE_COLUMNS``, a fencing token or None) inside the caller's transaction: the tokens
+    checked in one statement (their lease rows locked FOR SHARE, in key order), then every row of
+    the windows whose token holds in three. Per window, why it was refused (None: written)."""
+    fences = sorted({(state[0], token) for _, state, token in windows if token is not None})
+    current: dict[str, int] = {}
+    if fences:
+        rows = db.execute("SELECT structure_id, token FROM leases WHERE structure_id = ANY(?) ORDER BY structure_id FOR SHARE",
+                          ([source for source, _ in fences],)).fetchall()
+        current = {str(r[0]): int(r[1]) for r in rows}
+    refused = [None if token is None or current.get(state[0]) == token else _refusal(state[0], token, current.get(state[0]))
+               for _, state, token in windows]
+    kept = [w for w, no in zip(windows, refused) if no is None]
+    if kept:
+        TrendRepository(db).insert([row for rows, _, _ in kept for row in rows], now)  # type: ignore[arg-type]
+        db.executemany(f"INSERT INTO monitor_state ({', '.join(STATE_COLUMNS)}, updated_at) "
+                       f"VALUES ({', '.join('?' * (len(STATE_COLUMNS) + 1))}) {STATE_UPSERT}", [(*state, now) for _, state, _ in kept])
+        db.execute("UPDATE alarms SET stale=0 WHERE stale=1 AND source = ANY(?)", (sorted({state[0] for _, state, _ in kept}),))
+    return refused
 
 
 class PgDatabase:
@@ -163,6 +191,11 @@ class PgDatabase:
     def check_fence(db: PgConnection, structure_id: str, token: int) -> None:
         """``check_fence`` (the window writer's check of a commit's fencing token)."""
         check_fence(db, structure_id, token)
+
+    @staticmethod
+    def write_plain(db: PgConnection, windows: list[tuple[list[tuple], tuple, int | None]], now: float) -> list[str | None]:
+        """``write_plain`` (the window writer's plain windows)."""
+        return write_plain(db, windows, now)
 
     def use_synchronous(self, wanted: str) -> None:
         """Nothing to change: every commit is durable (see the module's docstring)."""
