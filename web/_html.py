@@ -35,6 +35,7 @@ __all__ = [
     "hot_spots_html",
     "level_badge",
     "message_html",
+    "orbit_intro",
     "overview_html",
     "rates_text",
     "severity",
@@ -458,3 +459,9 @@ def angles_html(hot_spots: list[Any], found: dict[str, float]) -> str:
         rows.append(f"<li><b>{html.escape(h.name)}</b> (η = {h.position:.2f} m) {at}</li>")
     return ("<div style='font-size:12px'>Around the section (degrees from +ζ towards +ξ):<ul style='margin:2px 0'>"
             + "".join(rows) + "</ul></div>")
+
+
+def orbit_intro(span_s: float) -> str:
+    """The Orbit tab's introduction (markdown)."""
+    return ("**Tip orbit**: the tip's deflection across the beam, ζ against ξ (mm, body frame), "
+            f"over the last {span_s / 60:g} minutes; the newest position is the black dot.")

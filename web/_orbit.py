@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ._html import orbit_intro
 from ._plots import set_scales
 
 if TYPE_CHECKING:
@@ -55,8 +56,7 @@ class OrbitPanel:
         self.tip_xi = np.asarray(feed.units_xi.shape(np.array([feed.length])), dtype=float)[0]
         self.kept: deque[tuple[float, float, float]] = deque()  # (t_s, Δζ mm, Δξ mm)
         self._drawn_at = -np.inf
-        gui.add_markdown("**Tip orbit**: the tip's deflection across the beam, ζ against ξ (mm, body frame), "
-                         f"over the last {ORBIT_S / 60:g} minutes; the newest position is the black dot.")
+        gui.add_markdown(orbit_intro(ORBIT_S))
         data, scales = orbit_plot(np.zeros(0), np.zeros(0))
         self.plot = gui.add_uplot(
             data=data, series=({"label": "Δξ tip mm"}, {"label": "Δζ tip mm", "stroke": "#2563eb", "width": 0,
