@@ -16,7 +16,7 @@ from ._engine import EngineWindow, MonitoringEngine
 from ._fatigue import SECONDS_PER_YEAR, FatigueDetail, HotSpotFatigue, LifeEstimate, LoadsWindow, remaining_life
 from ._loads_monitor import GaugeSpec, HotSpotSpec, LoadsConfig, LoadsMonitor
 from ._loads import BAND_COVERAGE, BAND_FLOOR, UNKNOWN_LEVERAGE, WITHHOLD_HALF_WIDTH, DelBand, OutsideBasis, outside_basis_bands, SignalLoads, VirtualLoads, bending_moment, gauge_bands, signal_loads, virtual_strain
-from ._section_loads import AROUND_STEP_DEG, around_angles, resultant_moment, section_strain, worst_around
+from ._section_loads import AROUND_STEP_DEG, BiaxialVirtualLoads, around_angles, outline_corners, resultant_moment, section_strain, worst_around
 from ._rainflow import Cycles, HalfCyclePolicy, RainflowCounter, RainflowResidue, cycles_by_range, rainflow_cycles
 from ._sn_curves import DNV_RP_C203_CURVES, EN1993_DETAIL_CATEGORIES, SnCurve, damage_equivalent_range, miner_damage, sn_curve
 from ._monitor import Baseline, BaselineError, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model, support_acceleration
@@ -61,5 +61,5 @@ __all__ = [
     "BAND_COVERAGE", "BAND_FLOOR", "UNKNOWN_LEVERAGE", "WITHHOLD_HALF_WIDTH", "DelBand", "OutsideBasis", "outside_basis_bands", "SignalLoads", "VirtualLoads", "bending_moment", "gauge_bands", "signal_loads", "virtual_strain",
     # both bending planes: per-plane modes, degenerate pairs of a symmetric section
     "DEGENERATE_REL", "DegeneratePair", "combine_planes", "degenerate_pairs", "with_plane",
-    "AROUND_STEP_DEG", "around_angles", "resultant_moment", "section_strain", "worst_around", "GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor",
+    "AROUND_STEP_DEG", "BiaxialVirtualLoads", "around_angles", "outline_corners", "resultant_moment", "section_strain", "worst_around", "GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor",
 ]

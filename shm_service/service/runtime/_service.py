@@ -399,7 +399,8 @@ class MonitoringService(_StoredRows, SingleStructureView):
     def structure_model(self, structure_id: str) -> StructureModel:
         structure = self.structure(structure_id)
         m = structure.model
-        return StructureModel(id=structure.id, rig=structure.rig, units=m.units, layout=m.state_layout, stations=m.stations)
+        return StructureModel(id=structure.id, rig=structure.rig, units=m.units, layout=m.state_layout, stations=m.stations,
+                              units_xi=getattr(m, "units_xi", None))
 
     def live(self, structure_id: str, after: int = 0) -> LiveEstimatesDocument:
         """The structure's newest estimates after ``after`` (``GET /api/structures/{id}/live``); starts its watch."""

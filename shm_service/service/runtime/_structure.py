@@ -481,9 +481,13 @@ class _FailedStructure:
 
 def _virtual_loads(rig: RigDescription, model: Any) -> tuple[Any, Any] | None:
     """(analytics.VirtualLoads of the rig's hot spots and a 16-station grid, b of states) for the live view."""
-    from analytics import VirtualLoads
+    from analytics import BiaxialVirtualLoads, VirtualLoads
 
     try:
+        if getattr(model, "units_xi", None) is not None:  # both planes: each station at its point of the section
+            layout = model.state_layout
+            return (BiaxialVirtualLoads.from_rig_biaxial(rig, model.units.curvature, model.units_xi.curvature),
+                    lambda x: (layout.b_of(x), layout.b_xi_of(x)))
         return VirtualLoads.from_rig(rig, model.units.curvature), model.state_layout.b_of
     except ValueError as exc:  # never stops the service: the live view goes without loads
         log.warning("no virtual loads in the live view: %s", exc)

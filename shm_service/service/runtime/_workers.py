@@ -355,7 +355,8 @@ class WorkerFleet(_StoredRows):
         rig = self.structure_rig(structure_id)
         settings = next(s for s in self.settings.structures if s.id == structure_id)
         model = self._models.get(rig, self.settings.for_structure(settings).estimator)
-        found = StructureModel(id=structure_id, rig=rig, units=model.units, layout=model.state_layout, stations=model.stations)
+        found = StructureModel(id=structure_id, rig=rig, units=model.units, layout=model.state_layout, stations=model.stations,
+                               units_xi=getattr(model, "units_xi", None))
         self._structure_models[structure_id] = found
         return found
 
