@@ -240,7 +240,7 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
     stamps = rec.start_ns + np.round(result.t * 1e9).astype(np.int64)
     loads = _virtual_loads(rec.rig, result.model)
     out = None if loads is None else _loads_of(loads, result)
-    if loads is not None:
+    if loads is not None and out is not None:
         metadata["loads"] = {"stations_m": json.dumps(loads.positions.tolist()), "names": json.dumps(loads.names),
                              "youngs_modulus_pa": json.dumps(rec.rig.beam.youngs_modulus),
                              "note": "stress = youngs_modulus_pa x strain (reference temperature); moments at the reference temperature"}
