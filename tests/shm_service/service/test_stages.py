@@ -281,14 +281,13 @@ def test_a_source_lane_hands_batches_on_at_their_pace_and_waits_when_told_withou
     src = Items("s", out)
     src.speed, src.state = 2.0, "running"
     lane = SourceLane(src)
-    started = time.monotonic()
     assert lane.ready()
     lane.step()  # made and, due at once (the pace's origin), handed on
     assert out.get_nowait().blocks[0].log_time_ns[0] == int(100e9) and src.messages == 1
-    lane.step()  # told to wait
-    assert not lane.ready()
+    before = time.monotonic()
+    lane.step()  # told to wait: idle until 0.3 s after this step, by the lane's own deadline
+    assert not lane.ready() and lane._idle_until >= before + 0.3
     wait_for(lane.ready, 5.0)
-    assert time.monotonic() - started >= 0.3
     lane.step()  # made; due 0.25 s after the origin: already, handed on in the same step
     assert out.qsize() == 1 and src.messages == 2
     assert lane.ready()
