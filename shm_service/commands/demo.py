@@ -50,7 +50,7 @@ def add_demo_parser(sub: Any) -> argparse.ArgumentParser:
                    help="demo directory (default var/demo); an earlier run's moves to DIR.previous")
     p.add_argument("--structure", choices=tuple(STRUCTURES), default="sheet",
                    help="sheet: the paper's 4 m sheet on its moving bearing (default); mast: the 20 m tapered tubular "
-                        "mast of examples/mast under a storm that passes")
+                        "mast of examples/mast, bending in both planes in a veering wind, under a storm that passes")
     p.add_argument("--storm-peak", type=number(low=1, high=100), default=4.0, metavar="FACTOR",
                    help="mast: the wind load's RMS at the storm's peak over its ambient level (default 4: twice the "
                         "wind speed)")
