@@ -10,6 +10,7 @@ from ._curvature import (CurvatureChange, CurvatureStatistic, beam_third, curvat
                          curvature_statistic, mode_shape_curvature)
 from ._damping import DampingEstimate, bandpass, combine_estimates, envelope_decay, find_decay_segments, log_decrement, random_decrement
 from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
+from ._planes import DEGENERATE_REL, DegeneratePair, combine_planes, degenerate_pairs, with_plane
 from ._location import DamageLocation, locate_damage
 from ._engine import EngineWindow, MonitoringEngine
 from ._fatigue import SECONDS_PER_YEAR, FatigueDetail, HotSpotFatigue, LifeEstimate, LoadsWindow, remaining_life
@@ -58,5 +59,7 @@ __all__ = [
     "LifeEstimate", "LoadsWindow", "RainflowCounter", "RainflowResidue", "SECONDS_PER_YEAR", "SnCurve", "cycles_by_range",
     "damage_equivalent_range", "miner_damage", "rainflow_cycles", "remaining_life", "sn_curve",
     "BAND_COVERAGE", "BAND_FLOOR", "UNKNOWN_LEVERAGE", "WITHHOLD_HALF_WIDTH", "DelBand", "OutsideBasis", "outside_basis_bands", "SignalLoads", "VirtualLoads", "bending_moment", "gauge_bands", "signal_loads", "virtual_strain",
+    # both bending planes: per-plane modes, degenerate pairs of a symmetric section
+    "DEGENERATE_REL", "DegeneratePair", "combine_planes", "degenerate_pairs", "with_plane",
     "AROUND_STEP_DEG", "around_angles", "resultant_moment", "section_strain", "worst_around", "GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor",
 ]

@@ -238,6 +238,7 @@ class ModeDocument(_Document):
     method: Literal["ssi", "spectrum"] | None = Field(
         None, description="ssi: the subspace identification (cross-checked against the spectrum); spectrum: the spectral peak alone")
     track: int | None = Field(None, ge=0, description="id of the subspace mode's track across windows (analytics.ModeTracker; None without one)")
+    plane: Literal["zeta", "xi"] = Field("zeta", description="the bending plane of the mode (a biaxial beam's ξ modes: \"xi\")")
 
 
 class ChartDocument(_Document):
@@ -331,6 +332,7 @@ class TrendRow(_Document):
     curvature_index: Num = Field(None, description="RMS curvature-change index of the window")
     score_sigma: Num = None
     level: Level | None = None
+    plane: Literal["zeta", "xi"] = Field("zeta", description="the bending plane of the mode (a biaxial beam's ξ modes: \"xi\")")
 
 
 class TrendsDocument(_Document):
@@ -648,6 +650,7 @@ class BaselineModeDocument(_Document):
     temperature_ref_c: Finite
     slope_per_k: Finite
     sigma_rel: Finite
+    plane: Literal["zeta", "xi"] = "zeta"
 
 
 class BaselineStatusDocument(_Document):

@@ -7,7 +7,7 @@ its resultant. A planar beam's stations sit at 0 (or 180): its figures are those
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from typing import Any, Callable, Literal
 
 __all__ = ["XI_MISSING", "parse_station_points", "root_planes", "station_points", "station_signals", "virtual_at_gauge", "xi_of"]
 
@@ -78,7 +78,7 @@ def _corners(beam: Any, eta: float) -> list[float]:
 
 def station_signals(beam: Any, b: Any, units: Any, xi: tuple[Any, Any] | None, points: list, spots: dict, factor: Any, *,
                     detail_of: Callable[[Any], Any], exponents: tuple[float, ...], n_eq: float,
-                    half_cycles: str) -> tuple[Any, Any, list[dict[str, Any]]]:
+                    half_cycles: Literal["half", "full", "ignore"]) -> tuple[Any, Any, list[dict[str, Any]]]:
     """(strain (N, S), bending moment in ζ (N, S), per station its angle and, off the ζ plane, its ξ
     figures) at the ``points`` from b (N, Γ) and, when given, ``xi`` = (b_ξ, ξ unit deformations).
 
@@ -136,7 +136,7 @@ def virtual_at_gauge(beam: Any, sensor: Any, b: Any, units: Any, xi: tuple[Any, 
 
 
 def root_planes(root: dict[str, Any], b: Any, units: Any, xi: tuple[Any, Any], beam: Any, factor: Any, exponents: Any,
-                n_eq: float, half_cycles: str) -> dict[str, Any]:
+                n_eq: float, half_cycles: Literal["half", "full", "ignore"]) -> dict[str, Any]:
     """The root bending moment of a biaxial beam: (Mζ, Mξ) = EI·κ per plane at η = 0 and the resultant
     √(Mζ² + Mξ²); ``root`` is the ζ plane's entry (kept at the top level as for a planar beam)."""
     import numpy as np

@@ -18,7 +18,7 @@ from contract import (
     row_layout,
 )
 from contract import estimate_payloads as _estimate_payloads
-from estimator import EstimateResult, Measurements, SensorSeries
+from estimator import EstimateResult, Measurements, SensorSeries, UnitDeformations
 
 from ..recording import Recording
 
@@ -147,7 +147,7 @@ def score_against_truth(result: EstimateResult, truth: TruthSeries, *, after: fl
     match = (np.abs(truth.t[idx] - result.t) < 1e-6) & (result.t >= after)
     if not np.any(match):
         # A recording that never leaves its rest phase has nothing to score.
-        keys = ("phi_deg", "e_m", "d_m", "deflection_m", "curvature_per_m")
+        keys: tuple[str, ...] = ("phi_deg", "e_m", "d_m", "deflection_m", "curvature_per_m")
         if truth.e_xi is not None and result.model.biaxial:
             keys += ("e_xi_m", "deflection_xi_m", "curvature_xi_per_m")
         return {"rmse": dict.fromkeys(keys), "nees": {"phi": None, "e": None}, "scored_samples": 0}
@@ -252,7 +252,7 @@ class DeformationRecord:
 
     times: np.ndarray
     b: np.ndarray
-    units: object  # estimator.UnitDeformations
+    units: UnitDeformations
     stations: np.ndarray
     temperature: tuple[np.ndarray, np.ndarray] | None
     bearing: np.ndarray | None
