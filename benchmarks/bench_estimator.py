@@ -171,14 +171,14 @@ def speed(workdir: Path, duration: float) -> None:
 
 
 def _mast_rig(biaxial: bool) -> dict:
-    """The example mast; ``biaxial``: bending in both planes, a gauge pair (0°, 90°) at each gauge's height."""
+    """The example mast (it bends in both planes, a gauge pair at 0° and 90° at each gauge's height);
+    not ``biaxial``: the same mast bending in ζ alone (its gauges at 0°, no veering wind)."""
     data = json.loads(MAST.read_text())
-    if biaxial:
-        data["beam"]["bending"] = "biaxial"
-        gauges = [s for s in data["sensors"] if s["kind"] == "strain"]
-        data["sensors"] = [s for s in data["sensors"] if s["kind"] != "strain"]
-        for s in gauges:
-            data["sensors"] += [dict(s), {**s, "name": f"{s['name']}x", "angle_deg": 90}]
+    if not biaxial:
+        data["beam"].pop("bending", None)
+        data["sensors"] = [s for s in data["sensors"] if s.get("angle_deg", 0.0) in (0, 180)]
+        for key in ("excitation", "wind_direction"):
+            data.get("simulator", {}).pop(key, None)
     return data
 
 

@@ -10,7 +10,8 @@ scenario's configuration. It ends by itself when the scenario ends; Ctrl-C stops
 
 ``--structure`` picks what is simulated: the paper's sheet on its moving bearing (the default) or the
 20 m tapered steel tubular mast of ``examples/mast/rig.json`` (clamped on a fixed foundation, IMUs and
-strain gauges, no ToFs) under a storm that passes: the wind load, scaled to the mast, ramps up to
+strain gauge pairs at 0° and 90°, no ToFs), which bends in both planes in a wind that veers, under a
+storm that passes: the wind load, scaled to the mast, ramps up to
 ``--storm-peak`` times its ambient RMS and back down between 40 % and 80 % of the scenario after
 its rest phase.
 """
@@ -49,7 +50,7 @@ def add_demo_parser(sub: Any) -> argparse.ArgumentParser:
                    help="demo directory (default var/demo); an earlier run's moves to DIR.previous")
     p.add_argument("--structure", choices=tuple(STRUCTURES), default="sheet",
                    help="sheet: the paper's 4 m sheet on its moving bearing (default); mast: the 20 m tapered tubular "
-                        "mast of examples/mast under a storm that passes")
+                        "mast of examples/mast, bending in both planes in a veering wind, under a storm that passes")
     p.add_argument("--storm-peak", type=number(low=1, high=100), default=4.0, metavar="FACTOR",
                    help="mast: the wind load's RMS at the storm's peak over its ambient level (default 4: twice the "
                         "wind speed)")
@@ -128,8 +129,9 @@ def demo_overrides(args: argparse.Namespace, directory: Path) -> dict[str, Any]:
         # ambient: the wind load alone (a rig file's ambient excitation), scaled to the mast
         sim.update(rig=str(_mast_rig()), excitation="ambient",
                    storm_start_s=start, storm_end_s=end, storm_peak=float(args.storm_peak))
-        # examples/mast/serve.toml's estimator: Γ = 4, the four IMUs and four gauges, no ToFs
-        overrides["estimator"] = {"peripheral": "gyro", "modes": 4, "imus": 4, "tofs": 0, "gauges": 4}
+        # examples/mast/serve.toml's estimator: both planes (Γ = Γξ = 4), the four IMUs and the four gauge
+        # pairs (0° and 90°), no ToFs
+        overrides["estimator"] = {"peripheral": "gyro", "modes": 4, "modes_xi": 4, "imus": 4, "tofs": 0, "gauges": 8}
     elif structure != "sheet":
         raise DemoError(f"unknown structure {structure!r}: one of {', '.join(STRUCTURES)}")
     return overrides
@@ -241,6 +243,10 @@ def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, 
     at(0, f"the beam rests for {t.rest_s:g} s: the estimator learns the sensors' biases and noise",
        *([f"(its first modes: {', '.join(f'{f:.3g}' for f in modes)} Hz)"] if modes and settings.sim.rig else []))
     ambient = (f"ambient wind, {wind['rms_n_per_m']:.3g} N/m RMS along the beam" if wind else "ambient excitation")
+    if "wind_direction" in truth:  # a biaxial beam: the wind veers between its bending planes
+        d = json.loads(truth["wind_direction"])
+        ambient += (f", its direction veering {d['mean_deg']:g}° ± {d['veer_deg']:g}° from ζ towards ξ "
+                    f"(period {d['period_s']:g} s): the beam bends in both planes")
     at(t.rest_s, f"{ambient}; the filter converges ({settings.estimator.warmup_s:g} s are not analysed)")
     at(t.first_window_s[1], f"the first analysis window ({t.first_window_s[0]:g}-{t.first_window_s[1]:g} s); "
        f"a {a.window_s:g} s window every {t.step_s:g} s")

@@ -3,15 +3,14 @@ chart's statistic by hand, a healthy structure under another balance of its exci
 stiffness loss of the 20 m mast raising the curvature chart and located by it."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
+from example_mast import planar_mast_data
 from scipy import signal
 
 from analytics import AnalysisConfig, analyze, curvature_shape, curvature_statistic, mode_shape_curvature
 
-ROOT = Path(__file__).resolve().parents[2]
 FS = 50.0
 ETA = np.linspace(0.5, 4.0, 8)
 S2 = np.column_stack([np.cos(np.pi * ETA / 8), np.sin(np.pi * ETA / 4), np.cos(3 * np.pi * ETA / 8)])
@@ -114,13 +113,13 @@ def test_a_healthy_structure_under_another_balance_of_its_excitation_raises_no_c
 
 @pytest.fixture(scope="module")
 def mast():
-    """The 20 m mast of examples/mast: its healthy FE modes (the unit deformations of a clamped beam:
+    """The 20 m mast of examples/mast bending in ζ: its healthy FE modes (the unit deformations of a clamped beam:
     each mode is its own, so the healthy shapes are unit vectors) and the modes after a stiffness
     loss of 30 % over 9–11 m, projected onto the healthy unit deformations as the estimator sees them."""
     from contract import parse_rig
     from estimator import assemble_beam, damage_signatures, natural_modes, unit_deformations
 
-    raw = json.loads((ROOT / "examples" / "mast" / "rig.json").read_text())
+    raw = planar_mast_data()  # one plane's modes (a round tube: the other plane's are the same)
     rig = parse_rig(raw)
     damaged = json.loads(json.dumps(raw))
     damaged["beam"]["stiffness_segments"] = [{"start": 9.0, "end": 11.0, "factor": 0.7}]

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from example_mast import planar_mast_data
 from simdata import simulate
 
 from contract import StateLayout, parse_rig
@@ -155,7 +156,7 @@ def test_too_few_xi_aiding_rows_are_refused_naming_the_xi_plane_and_its_unit_def
 
 
 def test_modes_xi_on_a_planar_beam_is_refused():
-    data = json.loads(MAST.read_text())
+    data = planar_mast_data()
     with pytest.raises(ValueError, match="modes_xi=2: unit deformations in ξ need a beam that bends in both planes"):
         build_model(parse_rig(data), modes=4, modes_xi=2)
 

@@ -292,10 +292,9 @@ def test_sectioned_beam_frequencies_follow_the_temperature():
 
 # -- the estimator and the damage signatures on a sectioned beam --------------------------------------
 def _example_mast_with_bearing():
-    import json
-    from pathlib import Path
+    from example_mast import planar_mast_data
 
-    data = json.loads((Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json").read_text())
+    data = planar_mast_data()  # the planar estimator's strain rows (Eq. 19)
     data["sensors"].append({"name": "bearing", "kind": "bearing"})
     return parse_rig(data)
 

@@ -214,6 +214,8 @@ def test_the_mast_demo_has_its_storm_and_its_damage_in_the_timeline():
     args = parser.parse_args(["demo", "--structure", "mast", "--storm-peak", "3"])
     settings = load_settings(None, demo_overrides(args, Path("unused")))
     assert settings.sim.rig.endswith("examples/mast/rig.json") and settings.estimator.tofs == 0
+    # both planes in one filter: Γ = Γξ = 4 and the four gauge pairs (0° and 90°)
+    assert (settings.estimator.modes, settings.estimator.modes_xi, settings.estimator.gauges) == (4, 4, 8)
     # 1 % of the mast's own mass (1443.4 kg: tapered tubes, 7850 kg/m³) at its 20 m tip
     assert settings.sim.damage == ("mass:14.4@20",)
     t = demo_timeline(settings)
@@ -239,13 +241,14 @@ def test_a_short_mast_demo_under_a_storm_runs_at_max_speed(tmp_path):
     assert re.search(r"\n\s+96 s\s+a storm begins", out) and re.search(r"\n\s+114 s\s+the storm peaks: the wind load is 4 x", out)
     assert re.search(r"\n\s+132 s\s+the storm has passed", out)
     assert re.search(r"ambient wind, [\d.]+ N/m RMS along the beam", out)
+    assert "its direction veering 25° ± 30° from ζ towards ξ (period 600 s): the beam bends in both planes" in out
     assert re.search(r"115 s\s+the damage appears: mass:14\.4@20", out)
     storage = Storage(demo / "shm.sqlite")
     try:
         assert storage.count("trends") > 0
     finally:
         storage.close()
-    # the recording is the mast's: its rig has the tubes' sections and no ToF
+    # the recording is the mast's: its rig has the tubes' sections and no ToF, and it bends in both planes
     from mcap.reader import make_reader
 
     (recording,) = (demo / "recordings").glob("*.mcap")
@@ -254,3 +257,5 @@ def test_a_short_mast_demo_under_a_storm_runs_at_max_speed(tmp_path):
     rig = json.loads(attachments["rig.json"])
     assert rig["beam"]["sections"][0]["shape"] == "tube"
     assert not any(s["kind"] == "tof" for s in rig["sensors"])
+    assert rig["beam"]["bending"] == "biaxial"
+    assert [s.get("angle_deg", 0) for s in rig["sensors"] if s["kind"] == "strain"] == [0, 90] * 4

@@ -4,14 +4,12 @@ keys, --modes-xi, and its refusal on a planar beam."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
+from example_mast import mast_data, planar_mast_data, write_planar_mast
 
 from shm_service.cli import main
-
-MAST = Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json"
 
 
 def run(capsys, *argv):
@@ -24,14 +22,8 @@ def run(capsys, *argv):
 
 
 def biaxial_mast() -> dict:
-    """The example mast bending in both planes, a gauge pair at 0° and 90° at each gauge's height."""
-    data = json.loads(MAST.read_text())
-    data["beam"]["bending"] = "biaxial"
-    gauges = [s for s in data["sensors"] if s["kind"] == "strain"]
-    data["sensors"] = [s for s in data["sensors"] if s["kind"] != "strain"]
-    for s in gauges:
-        data["sensors"] += [dict(s), {**s, "name": f"{s['name']}x", "angle_deg": 90}]
-    return data
+    """The example mast: it bends in both planes, a gauge pair at 0° and 90° at each gauge's height."""
+    return mast_data()
 
 
 @pytest.fixture(scope="module")
@@ -83,7 +75,7 @@ def test_modes_xi_sets_the_xi_unit_deformations(capsys, biaxial_recording):
 
 def test_modes_xi_on_a_planar_recording_is_refused(capsys, tmp_path):
     path = tmp_path / "planar.mcap"
-    assert main(["simulate", "--rig", str(MAST), "--duration", "5", "--out", str(path)]) == 0
+    assert main(["simulate", "--rig", str(write_planar_mast(tmp_path)), "--duration", "5", "--out", str(path)]) == 0
     capsys.readouterr()
     code, _, err = run(capsys, "estimate", str(path), "--modes-xi", "2")
     assert code == 2
@@ -95,7 +87,7 @@ def test_the_service_configuration_sets_modes_xi_for_a_biaxial_rig_and_ignores_i
     from shm_service.service._config import EstimatorSettings
     from shm_service.service.runtime._structure import _ModelCache
 
-    planar = _ModelCache().get(parse_rig(json.loads(MAST.read_text())), EstimatorSettings(modes_xi=3))
+    planar = _ModelCache().get(parse_rig(planar_mast_data()), EstimatorSettings(modes_xi=3))
     assert not planar.biaxial and planar.gamma == 4 and len(planar.selection.gauges) == 4
     data = biaxial_mast()
     model = _ModelCache().get(parse_rig(data), EstimatorSettings(modes_xi=3))

@@ -295,11 +295,11 @@ def test_damage_and_life_are_withheld_where_the_virtual_strain_does_not_hold():
 def test_a_mast_with_as_many_gauges_as_modes_keeps_its_band_in_sample(capsys, tmp_path):
     """Without ToFs, leaving one of Γ gauges out leaves the unit deformations unobservable: each
     gauge's residual stays in sample (widened by the leverage bound), and shm loads says so."""
-    from pathlib import Path
+    from example_mast import write_planar_mast
 
     from analytics import UNKNOWN_LEVERAGE
 
-    rig = Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json"
+    rig = write_planar_mast(tmp_path)  # the mast bending in ζ alone: its four gauges for Γ = 4
     recording = tmp_path / "mast.mcap"
     assert main(["simulate", "--rig", str(rig), "--duration", "120", "--seed", "3", "--out", str(recording)]) == 0
     capsys.readouterr()

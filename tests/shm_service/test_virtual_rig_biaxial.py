@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from example_mast import planar_mast_data
 
 from contract import parse_rig
 from shm_service.virtual_rig import SensorErrors, SimulationSettings, VirtualRig
@@ -165,8 +166,7 @@ def test_the_biaxial_mast_veers_the_wind_into_xi_and_carries_a_tip_mass_and_a_te
 
 
 def test_bad_biaxial_input_is_refused():
-    planar = json.loads(MAST.read_text())
-    planar["beam"].pop("bending", None)
+    planar = planar_mast_data()
     with pytest.raises(ValueError, match="wind_direction.*biaxial"):
         VirtualRig(SimulationSettings(duration=1.0, support="clamped", orientation="standing", length=20.0,
                                       wind_direction={"mean_deg": 10.0}), parse_rig(planar))

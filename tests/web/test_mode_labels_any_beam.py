@@ -4,21 +4,17 @@ not the laboratory sheet's."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from example_mast import planar_mast_data
 
 import estimator
-from contract import StateLayout
-from estimator import load_rig
+from contract import StateLayout, parse_rig
 from web import StructureFeed
-
-MAST = Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json"
 
 
 def test_the_masts_spectra_are_labelled_by_its_own_modes():
-    rig = load_rig(MAST)
+    rig = parse_rig(planar_mast_data())  # the planar estimator's unit deformations b1..b4
     model = estimator.build_model(rig, peripheral="gyro", modes=4, imus=4, tofs=0, gauges=4)
     feed = StructureFeed(rig=rig, units=model.units, layout=StateLayout("gyro", 4, 4), stations=np.linspace(2.0, 20.0, 10))
     assert [feed.mode_map.unit_label(k) for k in range(1, 5)] == [f"b{k} · mode {k}" for k in range(1, 5)]

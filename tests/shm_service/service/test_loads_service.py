@@ -18,32 +18,37 @@ from pathlib import Path
 import httpx
 import pytest
 import tomli_w
+from example_mast import write_planar_mast
 from svc_helpers import fast_overrides, wait_for
 
 from contract import FatigueDocument
 from shm_service.cli import main
 from shm_service.service import start_serve
 
-ROOT = Path(__file__).resolve().parents[3]
-MAST = ROOT / "examples" / "mast" / "rig.json"
 SPOTS = ("base_flange_weld", "door_opening")
 
 
 @pytest.fixture(scope="module")
-def mast_recording(tmp_path_factory) -> Path:
+def mast_rig(tmp_path_factory) -> Path:
+    """The mast of examples/mast bending in ζ alone (its four 0° gauges for the service's Γ = 4)."""
+    return write_planar_mast(tmp_path_factory.mktemp("rig"))
+
+
+@pytest.fixture(scope="module")
+def mast_recording(mast_rig, tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("mast") / "mast.mcap"
     # a storm (145 N/m RMS, ten times the mast's everyday wind, which consumes nothing): the hot spots consume life
-    assert main(["simulate", "--rig", str(MAST), "--excitation", "operational", "--duration", "150", "--seed", "11",
+    assert main(["simulate", "--rig", str(mast_rig), "--excitation", "operational", "--duration", "150", "--seed", "11",
                  "--wind-load", "145", "--out", str(path)]) == 0
     return path
 
 
-def _config(tmp: Path, recording: Path, db: Path, speed: str = "max") -> Path:
+def _config(tmp: Path, rig: Path, recording: Path, db: Path, speed: str = "max") -> Path:
     o = fast_overrides(tmp)
     o.pop("archive")
     o["db"] = str(db)
     o["estimator"].update({"peripheral": "gyro", "modes": 4, "imus": 4, "tofs": 0, "gauges": 4})
-    o["source"] = {"spec": f"replay:{recording}", "rig": str(MAST), "speed": speed, "keep_running": True}
+    o["source"] = {"spec": f"replay:{recording}", "rig": str(rig), "speed": speed, "keep_running": True}
     o["archive"] = {"directory": str(tmp / "recordings"), "estimate_decimation": 1}
     toml = tmp / "serve.toml"
     toml.write_text(tomli_w.dumps(o))
@@ -87,10 +92,10 @@ def _rows(db: Path) -> dict[tuple[float, str], tuple[float, float]]:
 
 
 @pytest.fixture(scope="module")
-def served(mast_recording, tmp_path_factory):
+def served(mast_rig, mast_recording, tmp_path_factory):
     """The mast replayed through a real ``shm serve`` to its end; its fatigue and metrics over HTTP."""
     tmp = tmp_path_factory.mktemp("served")
-    toml = _config(tmp, mast_recording, tmp / "shm.sqlite")
+    toml = _config(tmp, mast_rig, mast_recording, tmp / "shm.sqlite")
     serve = _serve(toml, tmp)
     try:
         sid = httpx.get(f"{serve.url}/api/structures", timeout=30).json()["structures"][0]["id"]
@@ -181,7 +186,7 @@ def test_fatigue_csv_limits_errors_and_openapi(served):
     assert "FatigueDocument" in a["openapi"]["components"]["schemas"]
 
 
-def test_a_sigkill_neither_loses_nor_double_counts_a_cycle(served, mast_recording, tmp_path):
+def test_a_sigkill_neither_loses_nor_double_counts_a_cycle(served, mast_rig, mast_recording, tmp_path):
     """The same replay killed (SIGKILL) after a few windows and started again on its database: the
     same windows, each once, and the same consumed life as the uninterrupted run."""
     whole_tmp, _, a = served
@@ -189,7 +194,7 @@ def test_a_sigkill_neither_loses_nor_double_counts_a_cycle(served, mast_recordin
     db = tmp_path / "shm.sqlite"
     # paced (10x), so the kill lands mid-run: at max speed a fast machine committed every window
     # before the poll that saw the fourth could kill it
-    serve = _serve(_config(tmp_path, mast_recording, db, speed="10"), tmp_path)
+    serve = _serve(_config(tmp_path, mast_rig, mast_recording, db, speed="10"), tmp_path)
     try:
         wait_for(lambda: _status(serve.url)["pipeline"]["windows_committed"] >= 4, timeout=300)
         os.kill(serve.pid, signal.SIGKILL)
@@ -198,7 +203,7 @@ def test_a_sigkill_neither_loses_nor_double_counts_a_cycle(served, mast_recordin
         serve.kill()
     before = _rows(db)
     assert 0 < len(before) < len(whole)
-    serve = _serve(_config(tmp_path, mast_recording, db), tmp_path)  # the rest at max speed
+    serve = _serve(_config(tmp_path, mast_rig, mast_recording, db), tmp_path)  # the rest at max speed
     try:
         wait_for(lambda: _finished(serve.url), timeout=300)
     finally:
@@ -243,7 +248,7 @@ def test_the_fatigue_router_in_process(served, tmp_path):
 
 
 @pytest.mark.slow
-def test_reprocess_of_the_archive_accumulates_the_damage_the_live_service_did(served, tmp_path, capsys):
+def test_reprocess_of_the_archive_accumulates_the_damage_the_live_service_did(served, mast_rig, tmp_path, capsys):
     """``shm reprocess`` of the service's own archive (its estimates at 200 Hz): the live service's
     windows again, with the same damage window by window and the same consumed life."""
     import json
@@ -252,7 +257,7 @@ def test_reprocess_of_the_archive_accumulates_the_damage_the_live_service_did(se
     archives = sorted(str(p) for p in (whole_tmp / "recordings").glob("*.mcap"))
     assert archives
     db = tmp_path / "re.sqlite"
-    assert main(["reprocess", *archives, "--db", str(db), "--config", str(toml), "--rig", str(MAST), "--workers", "1",
+    assert main(["reprocess", *archives, "--db", str(db), "--config", str(toml), "--rig", str(mast_rig), "--workers", "1",
                  "--json"]) == 0
     assert all(f["status"] == "done" for f in json.loads(capsys.readouterr().out)["files"])
     live, again = _rows(whole_tmp / "shm.sqlite"), _rows(db)
@@ -269,7 +274,7 @@ def test_reprocess_of_the_archive_accumulates_the_damage_the_live_service_did(se
         assert again[last][1] == pytest.approx(live[last][1], rel=1e-5)
 
 
-def test_the_live_view_carries_virtual_strain_stress_and_moments(served):
+def test_the_live_view_carries_virtual_strain_stress_and_moments(served, mast_rig):
     """Each live estimate carries ε = −c κ, σ = E ε, M = EI κ at the hot spots and the grid, and the
     clamped mast's root bending moment."""
     import numpy as np
@@ -284,7 +289,7 @@ def test_the_live_view_carries_virtual_strain_stress_and_moments(served):
     assert len(doc.loads_stations_m) == 2 + 16 and set(names[2:]) == {""}
     strain, stress, moment = np.array(doc.strain), np.array(doc.stress_pa), np.array(doc.moment_nm)
     assert strain.shape == stress.shape == moment.shape == (n, 18) and len(doc.root_moment_nm) == n
-    beam = load_rig(MAST).beam
+    beam = load_rig(mast_rig).beam
     eta = np.array(doc.loads_stations_m)
     np.testing.assert_allclose(stress, strain * 2.1e11, rtol=1e-12)
     # M = EI κ and ε = −c κ: M = −EI ε / c at every station
