@@ -27,7 +27,15 @@ def _int_list(text: str, option: str) -> tuple[int, ...]:
 def cmd_study(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
+    from contract import load_rig
+
     from ..study import DesignTargets, StudyError, StudySettings, run_command
+
+    if args.rig and load_rig(args.rig).beam.biaxial:
+        # the study simulates and selects sensors for one plane: said before it simulates for minutes
+        raise CliError(f"{args.rig}: shm study is the paper's study of one bending plane and this beam bends in two "
+                       "(beam.bending = \"biaxial\"); study its ζ plane on a planar copy (beam.bending = \"planar\", "
+                       "the gauges at angle 0 or 180)")
 
     fields = {
         "seeds": _int_list(args.seeds, "--seeds") if args.seeds else None,

@@ -189,3 +189,12 @@ def test_a_rig_files_study_is_validated(tmp_path):
         StudySettings(modes=3)
     with pytest.raises(ValidationError, match="imus=3 must be at least Γ=4"):
         Configuration(peripheral="gyro", imus=3, tofs=0, gauges=4)
+
+
+def test_a_beam_that_bends_in_two_planes_is_refused_before_it_simulates(capsys):
+    from pathlib import Path
+
+    mast = Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json"
+    assert main(["study", "--rig", str(mast), "--quick", "--seeds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "bends in two" in err and 'beam.bending = "planar"' in err
