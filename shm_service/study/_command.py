@@ -114,8 +114,9 @@ def run_command(settings: StudySettings, out: str | Path, *, targets: DesignTarg
                        series=series, benchmark_series=bench)
     import json
 
+    configurations: list[dict[str, object]] = []
     design = {"targets": targets.model_dump(), "criterion": "mean + std over seeds of the RMSE against the truth",
-              "configurations": []}
+              "configurations": configurations}
     print(f"design: {len(chosen)} configurations meet {wanted}; cheapest first (fewest gauges, then boards):", file=stdout)
     print(_HEADER, file=stdout)
     for rank, r in enumerate(chosen, start=1):
@@ -125,7 +126,7 @@ def run_command(settings: StudySettings, out: str | Path, *, targets: DesignTarg
             print(_row_text(r) + f"  → {entry['figure']}", file=stdout)
         elif rank <= top:
             print(_row_text(r), file=stdout)
-        design["configurations"].append(entry)
+        configurations.append(entry)
     (out / "design.json").write_text(json.dumps(design, indent=2, allow_nan=False) + "\n")
     print(f"wrote {out}/design.json", file=stdout)
     return 0
