@@ -63,7 +63,7 @@ def support_moment_factor(length_m: float, correlation_m: float, points: int = 8
     w = np.full(points, x[1] - x[0])
     w[[0, -1]] *= 0.5
     kernel = np.exp(-np.abs(x[:, None] - x[None, :]) / correlation_m)
-    value = (w * x) @ kernel @ (w * x)
+    value = float((w * x) @ kernel @ (w * x))  # a scalar: the quadratic form of two vectors
     return float(math.sqrt(max(value, 0.0)))
 
 
