@@ -61,6 +61,10 @@ class BearingMotion:
             window = s**4
             window_d = 4 * s**3 * c * k
             window_dd = (12 * s**2 * c**2 - 4 * s**4) * k**2
+            # a plain move multiplies the window by constants, an oscillation by arrays over tt
+            osc: np.ndarray | float
+            osc_d: np.ndarray | float
+            osc_dd: np.ndarray | float
             if comp.frequency > 0:
                 w = 2 * np.pi * comp.frequency
                 osc = np.sin(w * tt + comp.phase)
