@@ -78,7 +78,9 @@ def xi_twin(rig: RigDescription) -> RigDescription:
     if beam.get("sections") is None:
         beam["width"], beam["thickness"] = beam["thickness"], beam["width"]
     else:
-        for index, (station, typed) in enumerate(zip(beam["sections"], rig.beam.sections)):
+        typed_sections = rig.beam.sections
+        assert typed_sections is not None, "the dump of a beam with sections is the dump of its sections"
+        for index, (station, typed) in enumerate(zip(beam["sections"], typed_sections)):
             if station["shape"] == "rectangle":
                 station["width"], station["thickness"] = station["thickness"], station["width"]
             elif station["shape"] == "table":
@@ -121,9 +123,11 @@ def gauge_point(rig: RigDescription, twin: RigDescription | None, position: floa
 
 
 def _shape_at(rig: RigDescription, position: float) -> str:
+    sections = rig.beam.sections
+    assert sections is not None, "asked only of a beam described by its stations (gauge_point)"
     positions = rig.beam.station_positions
     j = int(np.clip(np.searchsorted(positions, position, side="right") - 1, 0, len(positions) - 1))
-    return rig.beam.sections[j].shape
+    return sections[j].shape
 
 
 def wind_angle(t: np.ndarray, mean_deg: float, veer_deg: float, period_s: float) -> np.ndarray:
