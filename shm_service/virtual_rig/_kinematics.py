@@ -36,7 +36,8 @@ def foreshortening_matrix(basis: NodalShapes, x: float) -> np.ndarray:
     return np.einsum("k,ki,kj->ij", weights, slopes, slopes)
 
 
-_SHAPES: dict[tuple[int, float], tuple] = {}
+# keyed by (id of the basis, one arc length) for a point, (id, arc lengths) for points side by side
+_SHAPES: dict[tuple[int, float | tuple[float, ...]], tuple] = {}
 _SHAPES_MAX = 4096
 
 
