@@ -109,7 +109,13 @@ class Damage(_Closed):
 
     @property
     def nodes(self) -> tuple[float, ...]:
-        return (self.position,) if self.kind == "mass" else (self.start, self.end)
+        # Damage comes from parse_damage (or a recording's settings), which sets the fields of its kind:
+        # the callers compare and mesh at these positions.
+        if self.kind == "mass":
+            assert self.position is not None, "a mass damage has its position"
+            return (self.position,)
+        assert self.start is not None and self.end is not None, "a stiffness damage has its start and end"
+        return (self.start, self.end)
 
 
 _MASS = re.compile(r"^mass:(?P<kg>[^@]+)@(?P<pos>.+)$")
@@ -211,7 +217,7 @@ class SimulationSettings(_Closed):
         return self
 
     @model_serializer(mode="wrap")
-    def _without_an_unset_wind_direction(self, handler):  # type: ignore[no-untyped-def]
+    def _without_an_unset_wind_direction(self, handler):
         # A planar run's settings (written into its recording) stay as they were before the setting existed.
         data = handler(self)
         if self.wind_direction is None and isinstance(data, dict):
