@@ -113,17 +113,17 @@ def simulate(settings: SimulationSettings, out: str | Path, *, block_seconds: fl
     """Simulate ``settings`` and write the recording to ``out`` (rig.json and truth included);
     ``rig``: a rig description to simulate instead of the settings' layout."""
     started = time.perf_counter()
-    rig = VirtualRig(settings, rig)
-    metadata = rig.truth_metadata()
+    virtual = VirtualRig(settings, rig)
+    metadata = virtual.truth_metadata()
     totals: dict[str, int] = {}
-    with RecordingWriter(out, rig.nominal_rig, metadata={"truth": metadata}) as writer:
-        for block in rig.blocks(block_seconds):
+    with RecordingWriter(out, virtual.nominal_rig, metadata={"truth": metadata}) as writer:
+        for block in virtual.blocks(block_seconds):
             for topic, count in write_block(writer, block, settings.start_time_ns).items():
                 totals[topic] = totals.get(topic, 0) + count
     after = metadata.get("eigenfrequencies_after_damage_hz")
     return SimulationSummary(
         path=str(out),
-        duration_s=rig.n_samples / 200.0,
+        duration_s=virtual.n_samples / 200.0,
         messages=totals,
         eigenfrequencies_hz=orjson.loads(metadata["eigenfrequencies_hz"]),
         eigenfrequencies_after_damage_hz=None if after is None else orjson.loads(after),
