@@ -184,7 +184,8 @@ def _eisel_lemire(man, exp10, neg, table):
     if ret_exp2 <= 0 or ret_exp2 >= 0x7FF:  # subnormal, infinite: the reference path decides
         return 0.0, False
     # mantissa has 53 bits (exact as a double) and the result is normal: ldexp is exact.
-    v = math.ldexp(np.float64(mantissa), ret_exp2 - 1075)
+    # numba compiles ldexp of an int64 exponent as it is; an int() for the stubs would be extra code in the kernel
+    v = math.ldexp(np.float64(mantissa), ret_exp2 - 1075)  # type: ignore[arg-type]
     return (-v if neg else v), True
 
 
