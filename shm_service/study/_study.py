@@ -13,7 +13,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, TextIO
+from typing import Iterable, TextIO, cast
 
 import numpy as np
 
@@ -153,7 +153,11 @@ def _execute(settings: StudySettings, configs: tuple[Configuration, ...], seeds:
                     try:
                         value = fut.result()
                     except Exception as exc:
-                        what = "simulating" if kind == "sim" else f"estimating {config.label} on"
+                        if kind == "sim":
+                            what = "simulating"
+                        else:
+                            assert config is not None, "an estimation task names its configuration"
+                            what = f"estimating {config.label} on"
                         raise StudyError(f"{what} seed {seed} failed: {type(exc).__name__}: {exc}") from exc
                     if kind == "sim":
                         prog.simulated(seed)
@@ -193,8 +197,9 @@ def _aggregate(outcomes: Iterable[RunOutcome], configs: tuple[Configuration, ...
             config=c,
             seeds=tuple(o.seed for o in runs),
             selection=runs[0].selection,
-            rmse_truth={k: v[0] for k, v in truth.items()},
-            rmse_truth_std={k: v[1] for k, v in truth.items()},
+            # each seed's RMSE against the truth is one number, so are their mean and std
+            rmse_truth={k: cast(float, v[0]) for k, v in truth.items()},
+            rmse_truth_std={k: cast(float, v[1]) for k, v in truth.items()},
             rmse_benchmark={k: v[0] for k, v in bench.items()},
             rmse_benchmark_std={k: v[1] for k, v in bench.items()},
             filter_seconds=float(np.mean([o.filter_seconds for o in runs])),
