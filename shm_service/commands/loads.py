@@ -27,7 +27,7 @@ import argparse
 import json
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 from .._argtypes import number
 from ._around import XI_MISSING, parse_station_points, root_planes, station_points, station_signals, virtual_at_gauge, xi_of
@@ -35,6 +35,8 @@ from ._common import add_model_arguments
 
 if TYPE_CHECKING:
     import numpy as np
+
+    from analytics import HalfCyclePolicy
 
 __all__ = ["add_loads_parser", "loads_of_recording", "loads_of_table", "parse_stations"]
 
@@ -171,7 +173,7 @@ def withhold_figures(stations: list[dict[str, Any]], gauges: list[dict[str, Any]
 
 
 def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[Any, ...] | None, curve: Any, exponents: tuple[float, ...],
-                       n_eq: float | None, half_cycles: str, start_s: float | None, window_s: float | None = None,
+                       n_eq: float | None, half_cycles: HalfCyclePolicy, start_s: float | None, window_s: float | None = None,
                        leave_one_out: bool | None = None) -> dict[str, Any]:
     """The ``shm loads`` document of a contract recording (raw or estimate); with ``window_s`` also
     per window of that length (each counted on its own, its band from that window's gauges).
@@ -223,7 +225,7 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[An
                                                        half_cycles=half_cycles)
 
     design = rig.fatigue.design_life_years if rig.fatigue is not None else None
-    stress_of = dict(youngs=youngs, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, duration=duration, design=design)
+    stress_of = _StressOf(youngs=youngs, exponents=exponents, n_eq=n_eq_value, half_cycles=half_cycles, duration=duration, design=design)
     out_stations = [{**_station_doc(pos, spots.get(key), strain[:, j], moment[:, j], beam, default_detail,
                                    band=None if bands is None else bands[j], **stress_of), **around[j]}
                     for j, (pos, key) in enumerate(zip(positions, points))]
@@ -254,7 +256,7 @@ def loads_of_recording(rec, *, record=None, model_args: dict, stations: tuple[An
 
 def _station_bands(rec: Any, record: Any, model_args: dict, leave_one_out: bool | None, compared: list, gauge_masks: list, t: Any,
                    units: Any, positions: list[float], station_rms: Any, *, exponents: tuple[float, ...], n_eq: float,
-                   half_cycles: str) -> tuple[list, Any, Any, Any]:
+                   half_cycles: HalfCyclePolicy) -> tuple[list, Any, Any, Any]:
     """The gauges as judged (out of sample where the estimate is made here), the stations' bands, the
     gauges' rows and the modes above the basis at the stations."""
     from analytics import UNKNOWN_LEVERAGE
@@ -279,7 +281,7 @@ def _station_bands(rec: Any, record: Any, model_args: dict, leave_one_out: bool 
     return judged, bands, gauge_rows, beyond
 
 
-def _channel_docs(judged: list, beam: Any, default_detail: Any, *, exponents: tuple[float, ...], n_eq: float, half_cycles: str,
+def _channel_docs(judged: list, beam: Any, default_detail: Any, *, exponents: tuple[float, ...], n_eq: float, half_cycles: HalfCyclePolicy,
                   duration: float, design: float | None) -> list[dict[str, Any]]:
     """The measured gauges' own loads and life, beside the virtual ones."""
     from analytics import signal_loads
@@ -316,8 +318,20 @@ def _gauge_comparisons(rec: Any, t: Any, b: Any, units: Any, beam: Any,
     return gauges, gauge_masks
 
 
+
+class _StressOf(TypedDict):
+    """The keywords every station's ``_station_doc`` shares."""
+
+    youngs: Any
+    exponents: Any
+    n_eq: float
+    half_cycles: HalfCyclePolicy
+    duration: float
+    design: float | None
+
+
 def _station_doc(pos: float, spot: Any, strain: Any, moment: Any, beam: Any, default_detail: Any, *, youngs: Any, exponents: Any,
-                 n_eq: float, half_cycles: str, band: Any, duration: float, design: float | None) -> dict[str, Any]:
+                 n_eq: float, half_cycles: HalfCyclePolicy, band: Any, duration: float, design: float | None) -> dict[str, Any]:
     """One station's entry of the ``shm loads`` document: strain counted, and stress counted on its
     own when the beam has an E (E follows the temperature sample by sample)."""
     import numpy as np
@@ -344,7 +358,7 @@ def _station_doc(pos: float, spot: Any, strain: Any, moment: Any, beam: Any, def
             "bending_moment_range_max_nm": float(np.ptp(moment))}
 
 
-def _root_moment(b: Any, units: Any, beam: Any, factor: Any, exponents: Any, n_eq: float, half_cycles: str) -> dict[str, Any]:
+def _root_moment(b: Any, units: Any, beam: Any, factor: Any, exponents: Any, n_eq: float, half_cycles: HalfCyclePolicy) -> dict[str, Any]:
     """The root bending moment of a clamped support, counted (N·m)."""
     import numpy as np
 
@@ -357,7 +371,7 @@ def _root_moment(b: Any, units: Any, beam: Any, factor: Any, exponents: Any, n_e
             "del": [{"m": m, "n_eq": n, "moment_range_nm": v} for m, n, v in rl.dels]}
 
 
-def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, exponents, half_cycles: str, origin: float,
+def _windows(t, strain, gauges, gauge_masks, positions, window_s: float, *, exponents, half_cycles: HalfCyclePolicy, origin: float,
              outside_at: Any = None, angles: Any = None) -> list[dict[str, Any]]:
     """Per window of ``window_s`` (1 Hz equivalent): each station's strain DEL with the band of that window's gauges."""
     import numpy as np
@@ -446,7 +460,7 @@ def _gauges_used(rec, record, model_args: dict) -> tuple[str, ...]:
     return tuple(build_model(rec.rig, **model_args).selection.gauges)
 
 
-def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: float | None, half_cycles: str,
+def loads_of_table(table, *, curve: Any, exponents: tuple[float, ...], n_eq: float | None, half_cycles: HalfCyclePolicy,
                    quantity: str, youngs_modulus: float, start_s: float | None) -> dict[str, Any]:
     """The ``shm loads`` document of plain measured channels (strain m/m or stress Pa), counted directly."""
     import numpy as np
