@@ -128,6 +128,8 @@ class IngestValidator:
         whole = clock.source_jump(_first_stamps(messages, self.sensors), mono)
         judge = clock.judge_stamps(wall_ns=wall, mono=mono, whole_source=whole)
         result = IngestResult([], [], clock=clock, last=last)
+        # the validated payloads, encoded into result.raw's bytes once the batch is read
+        validated: list[tuple[str, int, dict, int]] = []
         rows: dict[str, tuple[list[int], list[int], list[list[float]]]] = {}
         off_clock: dict[tuple[str, str], list[int]] = {}
         for index, message in enumerate(messages):
@@ -164,7 +166,7 @@ class IngestValidator:
             t.append(log_ns)
             p.append(pub_ns)
             v.append(row)
-            result.raw.append((topic, log_ns, payload, pub_ns))
+            validated.append((topic, log_ns, payload, pub_ns))
             result.accepted += 1
         for (topic, reason), stamps in off_clock.items():
             clock.record(topic, reason, len(stamps), clock.offset_s(topic, stamps[0], mono))
@@ -174,11 +176,12 @@ class IngestValidator:
                 clock.record(None, "source_jump", result.accepted, clock.offset_s(None, min(firsts), mono))
         # exact-size bytes (one orjson dump per block: orjson's own are ~4 kB each), written from
         # the validated numbers, never the client's bytes
-        encoded = encode_payloads_json([m[2] for m in result.raw])
-        result.raw = [(topic, log_ns, data, pub_ns) for (topic, log_ns, _, pub_ns), data in zip(result.raw, encoded)]
+        encoded = encode_payloads_json([m[2] for m in validated])
+        result.raw = [(topic, log_ns, data, pub_ns) for (topic, log_ns, _, pub_ns), data in zip(validated, encoded)]
         for topic, (t, p, v) in rows.items():
             sensor = self.sensors[topic]
             info = classify_topic(topic)
+            assert info is not None, "an accepted topic is a sensor's, which classifies"
             result.blocks.append(FollowBlock(topic, info.kind, sensor.name, np.array(t, dtype=np.int64),
                                              np.array(p, dtype=np.int64), np.array(v, dtype=np.float64)))
         return result
@@ -297,15 +300,17 @@ class IngestValidator:
             groups.setdefault(topic, []).append(index)
         blocks: list[FollowBlock] = []
         last = dict(self.last)
-        for topic, index in groups.items():
+        for topic, members in groups.items():
             sensor = self.sensors.get(topic) if isinstance(topic, str) else None
-            info = classify_topic(topic) if sensor is not None else None
+            if sensor is None:
+                return None
+            info = classify_topic(topic)
             if info is None or info.kind not in _SENSOR_KINDS:
                 return None
-            values = _payload_columns(PAYLOAD_FIELDS[info.title], [payloads[i] for i in index])
+            values = _payload_columns(PAYLOAD_FIELDS[info.title], [payloads[i] for i in members])
             if values is None or implausible_values(info.kind, values, self.limits).any():
                 return None
-            rows = np.asarray(index)
+            rows = np.asarray(members)
             t = log_ns[rows]
             before = last.get(topic)
             if (before is not None and t[0] <= before) or (len(t) > 1 and (t[1:] <= t[:-1]).any()):
