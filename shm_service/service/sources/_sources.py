@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from contract import RigDescription, row_layout
+from contract import Kind, RigDescription, row_layout
 
 from ...recording import FollowBlock, RecordingError, RecordingFollower, classify_topic, read_recording
 from ._settings import SourceConfig
@@ -294,10 +294,12 @@ class SimSource(Source):
         from ...virtual_rig._record import encode_payloads
 
         start_ns = self.settings.start_time_ns
+        assert self.rig is not None, "the simulator's rig is its nominal rig, set in __init__"
         sensors = self.rig.sensor_by_topic()
         kinds: dict[str, tuple[str, str]] = {}  # topic -> (kind, name): the same for every block
         for block in self.rigsim.blocks(block_s or self.block_s):
-            blocks, raw = [], [] if self.raw else None
+            blocks: list[FollowBlock] = []
+            raw: list[tuple[str, int, bytes, int]] | None = [] if self.raw else None
             for topic, (times, values) in block.measurements.items():
                 stamps = start_ns + np.round(times * _NS).astype(np.int64)
                 delays = np.round(block.delays[topic] * _NS).astype(np.int64)
@@ -311,7 +313,9 @@ class SimSource(Source):
                     continue
                 if topic not in kinds:
                     sensor = sensors.get(topic)
-                    kinds[topic] = (classify_topic(topic).kind, sensor.name if sensor else topic)
+                    info = classify_topic(topic)
+                    assert info is not None, "the simulator writes the topics of its sensors, which classify"
+                    kinds[topic] = (info.kind, sensor.name if sensor else topic)
                 kind, name = kinds[topic]
                 blocks.append(FollowBlock(topic, kind, name, stamps, stamps + delays, np.asarray(values, dtype=float)))
                 if raw is not None:
@@ -429,7 +433,7 @@ class FileSource(Source):
         # follow: a missing file is waited for (the follower notes it once, with a count)
         self._open()
 
-    def _kinds(self) -> tuple[str, ...]:
+    def _kinds(self) -> tuple[Kind, ...]:
         """What the pipeline uses: the sensors, and the truth only when it is shown."""
         return ("imu", "tof", "strain", "bearing", "temperature", *(("truth",) if self.truth else ()))
 
@@ -463,6 +467,7 @@ class FileSource(Source):
 
     def _update_rejects(self) -> None:
         f = self.follower
+        assert f is not None, "called once _open has made the follower"
         for topic, r in f.topic_reports.items():
             for reason in ("malformed", "nonfinite", "duplicate", "backwards"):
                 key = f"{topic}:{reason}"
