@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -191,7 +192,10 @@ def _rows(result: StudyResult, **match) -> list[ConfigurationResult]:
 
 def _metric(r: ConfigurationResult, against: str, key: str) -> tuple[float, float]:
     """(mean, std) of one RMSE in display units (° for φ, mm for e and b)."""
-    table, std = (r.rmse_truth, r.rmse_truth_std) if against == "truth" else (r.rmse_benchmark, r.rmse_benchmark_std)
+    # against the benchmark, "b" holds a list (one RMSE per Γ): the tables are read by key
+    truth = against == "truth"
+    table: dict[str, Any] = r.rmse_truth if truth else r.rmse_benchmark
+    std: dict[str, Any] = r.rmse_truth_std if truth else r.rmse_benchmark_std
     if key.startswith("b"):
         k = int(key[1:]) - 1
         return 1000 * table["b"][k], 1000 * std["b"][k]
@@ -252,7 +256,7 @@ def _fig_b(result: StudyResult, path: Path, configs: list, window: Any, title: s
     return _save(fig, path)
 
 
-def _fig17(result: StudyResult, out: Path, peripherals: list[str]) -> Path:
+def _fig17(result: StudyResult, out: Path, peripherals: Sequence[str]) -> Path:
     s = result.settings
     # Fig. 17: RMSE against ν_ρ without gauges, ν_s = 4, 5.
     fig = Figure(figsize=(11, 7), layout="constrained")
@@ -292,7 +296,7 @@ def _fig18(result: StudyResult, out: Path, extra: list, ex: int) -> Path:
     return _save(fig, out / "fig18_extra_tofs.png")
 
 
-def _fig20(result: StudyResult, out: Path, peripherals: list[str], ex: int, styles: dict) -> Path:
+def _fig20(result: StudyResult, out: Path, peripherals: Sequence[str], ex: int, styles: dict) -> Path:
     s = result.settings
     # Fig. 20: RMSE of φ and e with reduced gauges, against ν_ρ and against ν_ε.
     fig = Figure(figsize=(11, 7), layout="constrained")
@@ -314,9 +318,9 @@ def _fig20(result: StudyResult, out: Path, peripherals: list[str], ex: int, styl
         ax.set_ylim(bottom=0)
         ax = axes[1, col]
         for p in peripherals:
-            rows = [result.find(_no_gauges(p, ex))] + [result.find(Configuration(peripheral=p, imus=4, tofs=ex, gauges=g))
-                                                       for g in sorted(s.reduced_gauges)]
-            rows = [r for r in rows if r is not None]
+            found = [result.find(_no_gauges(p, ex))] + [result.find(Configuration(peripheral=p, imus=4, tofs=ex, gauges=g))
+                                                        for g in sorted(s.reduced_gauges)]
+            rows = [r for r in found if r is not None]
             mean, std = zip(*(_metric(r, "truth", key) for r in rows))
             _errorbar(ax, [r.config.gauges for r in rows], mean, std, color=COLORS[p], label=f"{p} ν_ρ={ex}")
             r4 = result.find(Configuration(peripheral=p, imus=4, tofs=4, gauges=4))
@@ -335,7 +339,7 @@ def _fig20(result: StudyResult, out: Path, peripherals: list[str], ex: int, styl
     return _save(fig, out / "fig20_rmse_vs_gauges.png")
 
 
-def _fig21(result: StudyResult, out: Path, peripherals: list[str], styles: dict) -> Path:
+def _fig21(result: StudyResult, out: Path, peripherals: Sequence[str], styles: dict) -> Path:
     s = result.settings
     # Fig. 21: RMSE of b3 and b4.
     fig = Figure(figsize=(11, 4), layout="constrained")
