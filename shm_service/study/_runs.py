@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -133,10 +134,11 @@ def estimate_configuration(task: EstimateTask) -> RunOutcome:
         tmp = task.benchmark + ".part.npz"
         np.savez(tmp, t=t, phi=phi, e=e, b=b, rest_end=rest_end, truth_phi=truth_phi, truth_e=truth_e)
         Path(tmp).replace(task.benchmark)
-        bench = {"t": t, "phi": phi, "e": e, "b": b, "rest_end": np.float64(rest_end)}
+        # the arrays and rest_end: a scalar here, a 0-d array when _load_benchmark reads the file
+        bench: dict[str, Any] = {"t": t, "phi": phi, "e": e, "b": b, "rest_end": np.float64(rest_end)}
     else:
         bench = _load_benchmark(task.benchmark)
-    series = None
+    series: dict[str, Any] | None = None  # arrays and the scalar rest_end
     if task.want_series:
         series = {"t": t, "phi": phi.astype(np.float32), "e": e.astype(np.float32), "b": b.astype(np.float32),
                   "rest_end": np.float64(rest_end)}
