@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from typing import Iterator
+from collections.abc import Iterable
+from typing import Iterator, cast
 
 import numpy as np
 import scipy.signal
 
-from estimator import BucklingError, RigDescription, assemble_beam, natural_modes, parse_rig
+from contract import Sensor
+from estimator import BucklingError, NodalShapes, RigDescription, assemble_beam, natural_modes, parse_rig
 
 from ..rig_layouts import build_rig
 from ._biaxial import bending_of, biaxial_points_motion, gauge_angle, gauge_point, wind_angle, xi_twin
@@ -165,8 +167,10 @@ class VirtualRig:
             settings.excitation, settings.duration, self._rng_excitation,
             eigenfrequencies_hz=nominal_freqs, rest_s=settings.rest, ambient_force_std=settings.plant.ambient_force,
             # A fixed support does not move: the operational excitation is then the wind load alone.
-            operational=OperationalExcitation(0.0 if self.fixed_support else op.support_rms, tuple(op.support_band),
-                                              self.wind_load_rms, self.wind_correlation_m, tuple(op.load_band), op.ramp),
+            # the bands are (low, high) pairs (OperationalSettings)
+            operational=OperationalExcitation(0.0 if self.fixed_support else op.support_rms,
+                                              cast(tuple[float, float], tuple(op.support_band)), self.wind_load_rms,
+                                              self.wind_correlation_m, cast(tuple[float, float], tuple(op.load_band)), op.ramp),
         )
         self._ambient_loads()
         self._sensor_setup()
@@ -182,14 +186,14 @@ class VirtualRig:
         healthy_model = _plant_model(self.plant_rig, damage_nodes, "the simulated plant (E and board masses drawn off the nominal)")
         models = [healthy_model]
         if settings.damage:
-            self.damaged_rig = _with_damage(self.plant_rig, settings)
+            self.damaged_rig: RigDescription | None = _with_damage(self.plant_rig, settings)
             models.append(_plant_model(self.damaged_rig, damage_nodes, "the damaged plant"))
         else:
             self.damaged_rig = None
         _refuse_buckling_over_the_temperature_range(settings, self.plant_rig, models)
         basis = clamped_basis(models, settings.plant.modes)
         self.plants_xi: list[Plant] = []
-        self.basis_xi = None
+        self.basis_xi: NodalShapes | None = None
         if self.biaxial:
             self._build_xi_plants(damage_nodes, healthy_model)
         friction = 0.0 if settings.ideal else settings.plant.friction_torque
@@ -218,8 +222,8 @@ class VirtualRig:
             raise AssertionError("the ξ plane's FE mesh must be the ζ plane's (the kinematics add both planes' fields)")
         _refuse_buckling_over_the_temperature_range(settings, twin, models)
         self.xi_rig = xi_twin(self.nominal_rig)
-        self.basis_xi = clamped_basis(models, settings.plant.modes)
-        self.plants_xi = [build_plant(m, self.basis_xi, damping_ratios=np.array(settings.plant.damping_ratios))
+        self.basis_xi = basis_xi = clamped_basis(models, settings.plant.modes)
+        self.plants_xi = [build_plant(m, basis_xi, damping_ratios=np.array(settings.plant.damping_ratios))
                           for m in models]
 
     def _ambient_loads(self) -> None:
@@ -233,7 +237,7 @@ class VirtualRig:
         self._load_map = T[2::2].T  # (n, nodes-1): generalized force per nodal load
         if self.basis_xi is not None:
             T_xi = np.column_stack([rigid, self.basis_xi.dofs])  # θ's column stays zero: the clamp holds it
-            self._load_map_xi = T_xi[2::2].T
+            self._load_map_xi: np.ndarray = T_xi[2::2].T
         self._distributed_load = None
         # The wind load: the operational excitation's, and the ambient one's for a rig file (the
         # built-in sheet's ambient excitation keeps its random nodal forces).
@@ -241,7 +245,7 @@ class VirtualRig:
         if wind:
             self._distributed_load = DistributedLoad(
                 self._rng_ambient, np.asarray(basis.nodes[1:], dtype=float), rms_n_per_m=self.wind_load_rms,
-                correlation_m=self.wind_correlation_m, band_hz=tuple(op.load_band), sample_rate_hz=SAMPLE_RATE_HZ,
+                correlation_m=self.wind_correlation_m, band_hz=cast(tuple[float, float], tuple(op.load_band)), sample_rate_hz=SAMPLE_RATE_HZ,
                 start_s=self.excitation.rest_s, ramp_s=op.ramp,
                 storm=None if settings.wind_storm is None else (settings.wind_storm.start_s, settings.wind_storm.end_s,
                                                                 settings.wind_storm.peak))
@@ -297,7 +301,7 @@ class VirtualRig:
         index = {id(s): i for i, s in enumerate(rig.sensors)}
         angles = [gauge_angle(g, index[id(g)], self.biaxial) for g in self.gauges]
         twin = xi_twin(rig) if self.biaxial else None
-        self._gauge_points = np.array([gauge_point(rig, twin, g.position, a) for g, a in zip(self.gauges, angles)],
+        self._gauge_points = np.array([gauge_point(rig, twin, x, a) for x, a in zip(_positions(self.gauges), angles)],
                                       dtype=float).reshape(-1, 2)
         if not self.biaxial:
             self._fibre_distance = self._gauge_points[:, 0]  # +c on the +ζ face (as before), −c at 180°
@@ -326,6 +330,7 @@ class VirtualRig:
             # one along-wind load, split by the wind's veering direction between the planes
             loads = self._distributed_load.nodal_loads(t)
             direction = self.wind_direction
+            assert direction is not None, "a biaxial rig has its wind direction (__init__)"
             psi = wind_angle(t, direction.mean_deg, direction.veer_deg, direction.period_s)[:, None]
             force = (loads * np.cos(psi)) @ self._load_map.T
             force_xi = (loads * np.sin(psi)) @ self._load_map_xi.T
@@ -353,8 +358,10 @@ class VirtualRig:
             if force_xi is None:
                 force_xi = np.zeros((n, plant_xi.size))
             # the support moves D along ζ only: no bearing acceleration acts on the ξ plane
+            state_xi = self._state_xi
+            assert state_xi is not None, "a biaxial rig has its ξ state (__init__)"
             r, rd, rdd, r_end, rd_end = integrate(
-                plant_xi, self._state_xi[0], self._state_xi[1], np.zeros_like(fine_acc), temperature, force_xi,
+                plant_xi, state_xi[0], state_xi[1], np.zeros_like(fine_acc), temperature, force_xi,
                 sample_period=self.dt, substeps=substeps)
             self._state_xi = (r_end, rd_end)
             self._xi_range = (r, rd, rdd)
@@ -414,6 +421,15 @@ class VirtualRig:
         }
 
 
+def _positions(sensors: Iterable[Sensor]) -> list[float]:
+    """The arc lengths of sensors on the beam (IMUs, gauges, ToFs: the rig description places each)."""
+    out = []
+    for s in sensors:
+        assert s.position is not None, f"{s.name} sits on the beam"
+        out.append(s.position)
+    return out
+
+
 def _fast_sensors(self: VirtualRig, t, y, yd, ydd, d, d_acc, meas: dict, delays: dict) -> None:
     """The IMUs and strain gauges at the sample rate."""
     n = len(t)
@@ -422,7 +438,7 @@ def _fast_sensors(self: VirtualRig, t, y, yd, ydd, d, d_acc, meas: dict, delays:
     accel_wander = self._accel_wander.next(n)
     gyro_wander = self._gyro_wander.next(n)
     # every sensor's kinematics in one pass (fields (n, sensors)), its own column taken below
-    fast = points_motion(self.basis, [s.position for s in (*self.imus, *self.gauges)], y, yd, ydd, d, d_acc,
+    fast = points_motion(self.basis, _positions((*self.imus, *self.gauges)), y, yd, ydd, d, d_acc,
                          self.plants[0].gravity)
     for i, imu in enumerate(self.imus):
         fx, fy = fast.specific_force_x[:, i], fast.specific_force_y[:, i]
@@ -450,7 +466,8 @@ def _biaxial_fast_sensors(self: VirtualRig, t, zeta, xi, d, d_acc, meas: dict, d
     rng = self._rng_sensors
     accel_wander = self._accel_wander.next(n)
     gyro_wander = self._gyro_wander.next(n)
-    fast = biaxial_points_motion(self.basis, self.basis_xi, [s.position for s in (*self.imus, *self.gauges)],
+    assert self.basis_xi is not None, "a biaxial rig has its ξ basis (_build_xi_plants)"
+    fast = biaxial_points_motion(self.basis, self.basis_xi, _positions((*self.imus, *self.gauges)),
                                  tuple(a[:, 1:] for a in zeta), tuple(a[:, 1:] for a in xi),
                                  d, d_acc, self.plants[0].gravity)
     for i, imu in enumerate(self.imus):
@@ -492,14 +509,15 @@ def _slow_sensors(self: VirtualRig, index, t, y, yd, ydd, d, d_acc, meas: dict, 
         t_slow = t_slow + s[:, 0] * self.dt
         d_slow, _, d_acc_slow = self.support_motion(t_slow)
     theta_slow = y_slow[:, 0]
-    slow_motion = points_motion(self.basis, [s.position for s in self.tofs], y_slow, yd_slow, ydd_slow, d_slow,
+    slow_motion = points_motion(self.basis, _positions(self.tofs), y_slow, yd_slow, ydd_slow, d_slow,
                                 d_acc_slow, plant_g) if self.tofs and xi is None else None
     biaxial_motion = None
     if self.tofs and xi is not None:
         if e.tof_time_offset > 0:
             raise ValueError("errors.tof_time_offset is not simulated on a biaxial beam (its ToFs sample on the grid)")
+        assert self.basis_xi is not None, "a biaxial rig has its ξ basis (_build_xi_plants)"
         biaxial_motion = biaxial_points_motion(
-            self.basis, self.basis_xi, [s.position for s in self.tofs], (y_slow[:, 1:], yd_slow[:, 1:], ydd_slow[:, 1:]),
+            self.basis, self.basis_xi, _positions(self.tofs), (y_slow[:, 1:], yd_slow[:, 1:], ydd_slow[:, 1:]),
             tuple(a[slow][:, 1:] for a in xi), d_slow, d_acc_slow, plant_g)
     for i, tof in enumerate(self.tofs):
         if biaxial_motion is not None:
@@ -507,6 +525,7 @@ def _slow_sensors(self: VirtualRig, index, t, y, yd, ydd, d, d_acc, meas: dict, 
             zeta = biaxial_motion.inertial[1][:, i]
             distance = (rig.reflector_distance - zeta) / biaxial_motion.y_axis[1][:, i]
         else:
+            assert slow_motion is not None, "a planar rig's ToFs have their motion (above)"
             zeta, slope_angle = slow_motion.inertial_zeta[:, i], slow_motion.slope_angle[:, i]
             distance = (rig.reflector_distance - zeta) / np.cos(theta_slow + slope_angle)
         distance = distance + self._tof_offset[i] + e.tof_noise * rng.standard_normal(distance.size)
@@ -529,10 +548,12 @@ def _truth_xi_fields(self: VirtualRig, r: np.ndarray) -> dict[str, np.ndarray]:
     rig = self.nominal_rig
     stations = np.asarray(rig.truth_stations, dtype=float)
     q = r[:, 1:]
+    basis_xi = self.basis_xi
+    assert basis_xi is not None, "asked of a biaxial rig, which has its ξ basis (_build_xi_plants)"
     return {
-        "e_xi": q @ self.basis_xi.evaluate(rig.beam.length, 0),
-        "deflection_xi": q @ self.basis_xi.evaluate(stations, 0).T,
-        "curvature_xi": q @ self.basis_xi.evaluate(stations, 2).T,
+        "e_xi": q @ basis_xi.evaluate(rig.beam.length, 0),
+        "deflection_xi": q @ basis_xi.evaluate(stations, 0).T,
+        "curvature_xi": q @ basis_xi.evaluate(stations, 2).T,
     }
 
 
@@ -574,6 +595,7 @@ def _truth_metadata(self: VirtualRig) -> dict[str, str]:
             meta["eigenfrequencies_after_damage_xi_hz"] = json.dumps(
                 self.plants_xi[1].linear_frequencies_hz[:8].round(6).tolist())
         if self._distributed_load is not None:
+            assert self.wind_direction is not None, "a biaxial rig has its wind direction (__init__)"
             meta["wind_direction"] = self.wind_direction.model_dump_json()
     return meta
 
