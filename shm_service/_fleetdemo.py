@@ -42,9 +42,9 @@ def start_nodes(config: Path, names: Sequence[str], directory: Path, *, dashboar
         for name in names:
             args = ["--config", str(config), "--node", name, "--port", "0", "--no-archive"]
             args += ["--dashboard-port", "0"] if dashboard else ["--no-dashboard"]
-            log = open(directory / f"node-{name}.log", "w")  # noqa: SIM115  (the node writes to it while it runs)
-            nodes.append(start_serve(args, stdout=log, stderr=log, timeout=timeout_s, start_new_session=True,
-                                     ready_file=directory / f"ready-{name}.json"))
+            with open(directory / f"node-{name}.log", "w") as log:  # the node writes to its own copy of the descriptor
+                nodes.append(start_serve(args, stdout=log, stderr=log, timeout=timeout_s, start_new_session=True,
+                                         ready_file=directory / f"ready-{name}.json"))
     except BaseException:
         stop_nodes(nodes)
         raise
