@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test check lint types bench docs clean servers servers-installed fleet-demo
+.PHONY: demo test check lint types architecture bench docs clean servers servers-installed fleet-demo
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -21,25 +21,31 @@ demo: $(STAMP)
 	$(PY) -m shm_service.warmup  # at once when cached; after a pull that changed the kernels, compiles them first
 	$(VENV)/bin/shm demo $(DEMO_ARGS)
 
-# The lint and the types ([tool.ruff], [tool.mypy] in pyproject.toml: strict on contract, estimator, analytics).
+# The lint and the types ([tool.ruff], [tool.mypy] in pyproject.toml: strict on contract, estimator, analytics,
+# web and tools; every function body of shm_service checked).
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 types: $(STAMP)
 	$(VENV)/bin/mypy
 
-# The quick tier (under 2 minutes on 2 cores): lint, types and the unit tests; no browser, no service
+# No import cycle of any kind (modules or sibling packages, lazy and type-only imports included) and
+# docs/development/tree.md equal to the folders (tools/architecture.py; --write regenerates the page).
+architecture: $(STAMP)
+	$(PY) tools/architecture.py --check
+
+# The quick tier (under 2 minutes on 2 cores): lint, types, the architecture and the unit tests; no browser, no service
 # processes, no long physics runs (the markers of tests/conftest.py).
-check: lint types servers-installed
+check: lint types architecture servers-installed
 	$(PY) -m pytest -q -n auto --dist loadgroup --no-loadscope-reorder -m "not slow and not e2e and not browser"
 
-# Everything: lint, types and the whole suite. One worker per core, single tests handed out as workers
+# Everything: lint, types, the architecture and the whole suite. One worker per core, single tests handed out as workers
 # free up (--dist loadgroup): the tests sharing a module fixture (the quick study, a served service)
 # go to one worker so it runs once; tests/conftest.py puts the long tiers first.
 # TEST_WORKERS: the xdist workers (default: one per core); the browser and service tests mostly wait
 # on paced replays, so a worker more than the cores may pay off: make test TEST_WORKERS=3.
 TEST_WORKERS ?= auto
-test: lint types servers-installed
+test: lint types architecture servers-installed
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder
 
 # PostgreSQL and Mosquitto (Debian's packages) when missing: the tests of a fleet start throwaway

@@ -10,12 +10,13 @@ from ._curvature import (CurvatureChange, CurvatureStatistic, beam_third, curvat
                          curvature_statistic, mode_shape_curvature)
 from ._damping import DampingEstimate, bandpass, combine_estimates, envelope_decay, find_decay_segments, log_decrement, random_decrement
 from ._frf import ExcitationClass, Frf, FrfMode, classify_excitation, frf_h1, frf_modes
+from ._planes import DEGENERATE_REL, DegeneratePair, combine_planes, degenerate_pairs, with_plane
 from ._location import DamageLocation, locate_damage
 from ._engine import EngineWindow, MonitoringEngine
 from ._fatigue import SECONDS_PER_YEAR, FatigueDetail, HotSpotFatigue, LifeEstimate, LoadsWindow, remaining_life
 from ._loads_monitor import GaugeSpec, HotSpotSpec, LoadsConfig, LoadsMonitor
 from ._loads import BAND_COVERAGE, BAND_FLOOR, UNKNOWN_LEVERAGE, WITHHOLD_HALF_WIDTH, DelBand, OutsideBasis, outside_basis_bands, SignalLoads, VirtualLoads, bending_moment, gauge_bands, signal_loads, virtual_strain
-from ._section_loads import AROUND_STEP_DEG, around_angles, resultant_moment, section_strain, worst_around
+from ._section_loads import AROUND_STEP_DEG, BiaxialVirtualLoads, around_angles, outline_corners, resultant_moment, section_strain, worst_around
 from ._rainflow import Cycles, HalfCyclePolicy, RainflowCounter, RainflowResidue, cycles_by_range, rainflow_cycles
 from ._sn_curves import DNV_RP_C203_CURVES, EN1993_DETAIL_CATEGORIES, SnCurve, damage_equivalent_range, miner_damage, sn_curve
 from ._monitor import Baseline, BaselineError, BaselineMode, ModalMonitor, ModeEstimate, WindowResult, fit_temperature_model, support_acceleration
@@ -58,5 +59,7 @@ __all__ = [
     "LifeEstimate", "LoadsWindow", "RainflowCounter", "RainflowResidue", "SECONDS_PER_YEAR", "SnCurve", "cycles_by_range",
     "damage_equivalent_range", "miner_damage", "rainflow_cycles", "remaining_life", "sn_curve",
     "BAND_COVERAGE", "BAND_FLOOR", "UNKNOWN_LEVERAGE", "WITHHOLD_HALF_WIDTH", "DelBand", "OutsideBasis", "outside_basis_bands", "SignalLoads", "VirtualLoads", "bending_moment", "gauge_bands", "signal_loads", "virtual_strain",
-    "AROUND_STEP_DEG", "around_angles", "resultant_moment", "section_strain", "worst_around", "GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor",
+    # both bending planes: per-plane modes, degenerate pairs of a symmetric section
+    "DEGENERATE_REL", "DegeneratePair", "combine_planes", "degenerate_pairs", "with_plane",
+    "AROUND_STEP_DEG", "BiaxialVirtualLoads", "around_angles", "outline_corners", "resultant_moment", "section_strain", "worst_around", "GaugeSpec", "HotSpotSpec", "LoadsConfig", "LoadsMonitor",
 ]

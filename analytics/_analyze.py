@@ -51,6 +51,7 @@ class ModeSummary:
     mpc: float | None = None
     mac: float | None = None
     spectral_hz: float | None = None
+    plane: str = "zeta"  # the bending plane of the mode: "zeta" (the planar contract's) or "xi"
 
     def as_dict(self) -> dict:
         return {
@@ -61,6 +62,7 @@ class ModeSummary:
             "method": self.method, "mpc": _round(self.mpc, 4), "mac": _round(self.mac, 4), "spectral_hz": _none(self.spectral_hz),
             "damping": [{"method": d.method, "damping_ratio": _none(d.damping_ratio), "damping_std": _none(d.damping_std)}
                         for d in self.damping],
+            "plane": self.plane,
         }
 
 
@@ -79,6 +81,8 @@ class AnalysisResult:
     loads: tuple = ()  # per window (contract.LoadsWindowDocument, its fatigue AlarmEvents), with hot spots
     tracks: tuple = ()  # analytics.ModeTrack: each subspace mode followed across the windows (the engine's tracker)
     usability: dict | None = None  # analytics.usability_document of the windows: why none is usable, when none is
+    xi: AnalysisResult | None = None  # a biaxial beam: the ξ plane's analysis (this one is the ζ plane's)
+    degenerate: tuple = ()  # a biaxial beam: analytics.DegeneratePair of the two planes' modes
 
     def as_dict(self) -> dict:
         """JSON-safe {"modes": [...], "windows": [...], "flags": [...], "baseline": {...}} (None instead of NaN)."""
@@ -92,11 +96,26 @@ class AnalysisResult:
         out = {"modes": [m.as_dict() for m in self.modes], "windows": [w.as_dict() for w in self.windows],
                "flags": [dict(f) for f in self.flags], "baseline": bl, "skipped_windows": dict(self.skipped or {}),
                "tracks": [t.as_dict() for t in self.tracks], "usability": self.usability}
+        if self.xi is not None:
+            self._add_xi(out)
         if self.loads:
             out["loads"] = [{**doc.model_dump(mode="json"), "alarm_events": [{"action": e.action, "chart": e.chart, "level": e.level,
                                                                                "at_s": e.at_s, "message": e.message()} for e in events]}
                             for doc, events in self.loads]
         return out
+
+
+    def _add_xi(self, out: dict) -> None:
+        """The ξ plane's modes after the ζ plane's, every flag naming its plane, the ξ plane's windows,
+        baseline and tracks under ``*_xi`` keys, and the degenerate pairs."""
+        if self.xi is None:
+            raise ValueError("a planar analysis has no xi plane to add")
+        xi = self.xi.as_dict()
+        out["modes"] += xi["modes"]
+        out["flags"] = [{**f, "plane": "zeta"} for f in out["flags"]] + [{**f, "plane": "xi"} for f in xi["flags"]]
+        for key in ("windows", "baseline", "skipped_windows", "tracks", "usability"):
+            out[f"{key}_xi"] = xi[key]
+        out["degenerate_pairs"] = [p.as_dict() for p in self.degenerate]
 
 
 def _above_floor(y: np.ndarray, s: int, e: int, fs: float, trim: float) -> int:

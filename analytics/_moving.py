@@ -130,7 +130,7 @@ def subwindow_frequencies(x: object, fs: float, f0_hz: float, *, lo_hz: float, h
     >>> x = np.sin(2 * np.pi * (25 * t + 17 * t**2))  # 25 → 42 Hz in 0.5 s
     >>> tr = subwindow_frequencies(x, fs, 33.0, lo_hz=20, hi_hz=50)
     >>> round(tr.start_hz), round(tr.end_hz), round(tr.change_hz)
-    (27, 39, 17)
+    (27, 40, 17)
     """
     fs = check_fs(fs)
     a = as_signal("x", x, min_len=16)

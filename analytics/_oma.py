@@ -631,7 +631,13 @@ def _order_model(model: SsiModel, n: int, cache: dict) -> _OrderModel:
     Oup_pinv = np.linalg.pinv(Oup)
     A = Oup_pinv @ Odown
     mu, W, V = linalg.eig(A, left=True, right=True)
-    om = _OrderModel(A, mu, W, V, np.log(mu.astype(complex)) * model.fs_hz, Oup_pinv, np.linalg.inv(Oup.T @ Oup), Odown - Oup @ A)
+    # an eigenvalue μ = 0 (a rank-deficient state matrix: a constant or clipped channel) is no
+    # vibration: its continuous pole is −∞, never the nearest to a mode's (log(0)·fs would be NaN,
+    # and a NaN distance is the one argmin picks)
+    zero = mu == 0
+    lam = np.log(np.where(zero, 1.0, mu).astype(complex)) * model.fs_hz
+    lam[zero] = -np.inf
+    om = _OrderModel(A, mu, W, V, lam, Oup_pinv, np.linalg.inv(Oup.T @ Oup), Odown - Oup @ A)
     cache[n] = om
     return om
 

@@ -11,16 +11,17 @@ Pure numerics: arrays in, arrays out.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from ._fatigue import FatigueDetail
-from ._loads import SignalLoads, signal_loads
+from ._loads import SignalLoads, VirtualLoads, signal_loads
 from ._rainflow import HalfCyclePolicy
 from ._validate import as_signal
 
-__all__ = ["AROUND_STEP_DEG", "around_angles", "resultant_moment", "section_strain", "worst_around"]
+__all__ = ["AROUND_STEP_DEG", "WORST_EXPONENTS", "WORST_N_EQ", "BiaxialVirtualLoads", "outline_corners", "around_angles", "resultant_moment", "section_strain", "worst_around"]
 
 #: Step (degrees) of the angles around the section at which a hot spot of ``angle_deg = "all"`` is
 #: evaluated. On a round section the strain at θ is a projection of the curvature vector,
@@ -141,3 +142,112 @@ def worst_around(strain: object, angles: object, *, exponents: tuple[float, ...]
     worst = max(range(theta.size), key=score)
     judged = "the largest Miner damage" if by_damage else f"the largest DEL at m = {exponents[top]:g}"
     return worst, loads, judged
+
+
+#: Wöhler exponents and equivalent cycles by which :class:`BiaxialVirtualLoads` judges the worst
+#: point around an ``"all"`` hot spot (the ranking weighs the large ranges as damage does; n_eq
+#: scales every DEL alike, so it does not change the ranking).
+WORST_EXPONENTS, WORST_N_EQ = (3.0, 5.0), 1.0e7
+
+
+class BiaxialVirtualLoads(VirtualLoads):
+    """:class:`VirtualLoads` of a beam that bends in two planes: each station at its point of the
+    section (``angle_deg`` from +ζ towards +ξ, ``contract.Beam.section_point``) strains by
+    ε = −(ζp·κζ + ξp·κξ); the moments per plane Mζ = EIζ κζ, Mξ = EIξ κξ and their resultant;
+    a hot spot of ``angle_deg = "all"`` at its worst point around the section (:func:`worst_around`
+    over :func:`around_angles`, judged by :meth:`judge` on a stretch of estimates).
+
+    Parameters
+    ----------
+    positions, names, curvature_shapes, beam, root_shape : as :class:`VirtualLoads` (the ζ plane).
+    curvature_shapes_xi : (S, Γξ) s''ξ at the stations. root_shape_xi : (Γξ,) s''ξ at η = 0.
+    angles : (S,) each station's angle, degrees, or "all".
+    """
+
+    def __init__(self, positions: object, names: list[str], curvature_shapes: object, curvature_shapes_xi: object,
+                 angles: Sequence[float | str], beam: Any, root_shape: object, root_shape_xi: object) -> None:
+        super().__init__(positions, names, curvature_shapes, beam.fibre_distance(np.asarray(positions, dtype=float)), beam,
+                         root_shape)
+        self.shapes_xi = as_signal("curvature_shapes_xi", curvature_shapes_xi, min_len=1, ndim=(2,))
+        if self.shapes_xi.shape[0] != self.positions.size:
+            raise ValueError(f"curvature_shapes_xi has {self.shapes_xi.shape[0]} stations, positions {self.positions.size}")
+        self.angle_specs = list(angles)
+        if len(self.angle_specs) != self.positions.size:
+            raise ValueError(f"{len(self.angle_specs)} angles for {self.positions.size} stations (must agree)")
+        self.worst_around = np.array([a == "all" for a in self.angle_specs], dtype=bool)
+        # the angle each station is evaluated at: its own, and 0 for an "all" one until judged
+        self.angles_deg = np.array([0.0 if a == "all" else float(a) for a in self.angle_specs])
+        self.root_shape_xi = np.asarray(root_shape_xi, dtype=float).reshape(-1)
+        self._rings = {int(j): around_angles(outline_corners(beam, float(self.positions[j]))) for j in np.flatnonzero(self.worst_around)}
+        self._points()
+
+    @classmethod
+    def from_rig_biaxial(cls, rig: Any, curvature_at: Callable[[np.ndarray], Any], curvature_xi_at: Callable[[np.ndarray], Any],
+                         *, grid: int = 16) -> "BiaxialVirtualLoads":
+        """The rig's hot spots (at their ``angle_deg``) and a grid of ``grid`` stations at 0 degrees
+        (the +ζ face, as a planar beam's), from a clamped biaxial rig's s''(η) and s''ξ(η)."""
+        beam = rig.beam
+        if not beam.biaxial:
+            raise ValueError("BiaxialVirtualLoads needs a beam with beam.bending = 'biaxial'")
+        planar = VirtualLoads.from_rig(rig, curvature_at, grid=grid)
+        spots = list(rig.hot_spots)
+        angles: list[float | str] = [h.angle_deg if h.angle_deg == "all" else float(h.angle_deg) for h in spots]
+        angles += [0.0] * (planar.positions.size - len(spots))
+        xi = np.asarray(curvature_xi_at(planar.positions), dtype=float)
+        root_xi = np.asarray(curvature_xi_at(np.array([0.0])), dtype=float)[0]
+        return cls(planar.positions, planar.names, planar.shapes, xi, angles, beam, planar.root_shape, root_xi)
+
+    def _points(self) -> None:
+        zeta_p, xi_p = self.beam.section_point(self.positions, self.angles_deg)
+        self.zeta_p, self.xi_p = np.asarray(zeta_p, dtype=float), np.asarray(xi_p, dtype=float)
+
+    def _kappas(self, b: object, b_xi: object) -> tuple[np.ndarray, np.ndarray]:
+        B = as_signal("b", b, min_len=1, ndim=(2,))
+        Bx = as_signal("b_xi", b_xi, min_len=1, ndim=(2,))
+        if B.shape[1] != self.shapes.shape[1] or Bx.shape != (B.shape[0], self.shapes_xi.shape[1]):
+            raise ValueError(f"b has shape {B.shape} and b_xi {Bx.shape}; the stations' shapes have {self.shapes.shape[1]} "
+                             f"and {self.shapes_xi.shape[1]} unit deformations")
+        return B @ self.shapes.T, Bx @ self.shapes_xi.T
+
+    def judge(self, b: object, b_xi: object) -> np.ndarray:
+        """Set (and return) the angle of each "all" station to its worst point around the section
+        over the estimates b (N, Γ), bξ (N, Γξ): the largest DEL at m = 5 (``WORST_EXPONENTS``)."""
+        kz, kx = self._kappas(b, b_xi)
+        for j, ring in self._rings.items():
+            zeta_p, xi_p = self.beam.section_point(np.full(ring.size, self.positions[j]), ring)
+            strain = section_strain(np.repeat(kz[:, j:j + 1], ring.size, axis=1), zeta_p,
+                                    np.repeat(kx[:, j:j + 1], ring.size, axis=1), xi_p)
+            self.angles_deg[j] = ring[worst_around(strain, ring, exponents=WORST_EXPONENTS, n_eq=WORST_N_EQ)[0]]
+        self._points()
+        return self.angles_deg.copy()
+
+    def __call__(self, b: object, temperature_c: float | None = None, *, b_xi: object = None) -> dict[str, np.ndarray | None]:
+        """:class:`VirtualLoads`' figures of b (N, Γ) and bξ (N, Γξ) at the stations' points, with
+        "moment_xi_nm" (N, S), "root_moment_xi_nm" and "root_moment_resultant_nm" (N,) and
+        "angles_deg" (S,): the angle each station was evaluated at (an "all" one's worst as last judged)."""
+        if b_xi is None:
+            raise ValueError("a biaxial beam's loads need b_xi, the ξ plane's unit deformations")
+        kz, kx = self._kappas(b, b_xi)
+        strain = section_strain(kz, self.zeta_p, kx, self.xi_p)
+        stress = None
+        if getattr(self.beam, "youngs_modulus", None) is not None:
+            stress = strain * self.beam.youngs_modulus_at(temperature_c)
+        ei = np.asarray(self.beam.bending_stiffness(self.positions, temperature_c), dtype=float)
+        ei_xi = np.asarray(self.beam.bending_stiffness_xi(self.positions, temperature_c), dtype=float)
+        B, Bx = np.asarray(b, dtype=float), np.asarray(b_xi, dtype=float)
+        root = (B @ self.root_shape) * float(self.beam.bending_stiffness(0.0, temperature_c))
+        root_xi = (Bx @ self.root_shape_xi) * float(np.asarray(self.beam.bending_stiffness_xi([0.0], temperature_c))[0])
+        return {"strain": strain, "stress_pa": stress, "moment_nm": kz * ei, "root_moment_nm": root,
+                "moment_xi_nm": kx * ei_xi, "root_moment_xi_nm": root_xi,
+                "root_moment_resultant_nm": resultant_moment(root, root_xi), "angles_deg": self.angles_deg.copy()}
+
+
+def outline_corners(beam: Any, eta: float) -> list[float]:
+    """The outline's corner angles at η (degrees): none for a tube, four for a rectangle or a table station."""
+    sections = getattr(beam, "sections", None)
+    if sections is not None:
+        k = int(np.clip(np.searchsorted(beam.station_positions, eta, side="right") - 1, 0, len(sections) - 1))
+        if sections[k].shape == "tube":
+            return []
+    corner = float(np.degrees(np.arctan2(float(beam.fibre_distance_xi(eta)), float(beam.fibre_distance(eta)))))
+    return [corner, 180.0 - corner, 180.0 + corner, 360.0 - corner]

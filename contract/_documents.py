@@ -238,6 +238,7 @@ class ModeDocument(_Document):
     method: Literal["ssi", "spectrum"] | None = Field(
         None, description="ssi: the subspace identification (cross-checked against the spectrum); spectrum: the spectral peak alone")
     track: int | None = Field(None, ge=0, description="id of the subspace mode's track across windows (analytics.ModeTracker; None without one)")
+    plane: Literal["zeta", "xi"] = Field("zeta", description="the bending plane of the mode (a biaxial beam's ξ modes: \"xi\")")
 
 
 class ChartDocument(_Document):
@@ -331,6 +332,7 @@ class TrendRow(_Document):
     curvature_index: Num = Field(None, description="RMS curvature-change index of the window")
     score_sigma: Num = None
     level: Level | None = None
+    plane: Literal["zeta", "xi"] = Field("zeta", description="the bending plane of the mode (a biaxial beam's ξ modes: \"xi\")")
 
 
 class TrendsDocument(_Document):
@@ -648,6 +650,7 @@ class BaselineModeDocument(_Document):
     temperature_ref_c: Finite
     slope_per_k: Finite
     sigma_rel: Finite
+    plane: Literal["zeta", "xi"] = "zeta"
 
 
 class BaselineStatusDocument(_Document):
@@ -793,6 +796,17 @@ class LiveEstimatesDocument(_Document):
                                                                "reference temperature's E (None: a beam of table sections has no E)")
     moment_nm: list[list[Finite]] = Field(default_factory=list, description="bending moment EI κ per estimate and station, N·m")
     root_moment_nm: list[Finite] | None = Field(None, description="the root bending moment per estimate, N·m (clamped support only)")
+    # a biaxial beam (beam.bending = "biaxial") only; empty or None for a planar one
+    loads_angles_deg: list[Finite] = Field(default_factory=list, description="a biaxial beam: the angle around the section "
+                                           "(degrees from +ζ towards +ξ) each station is evaluated at; an 'all' hot spot's "
+                                           "worst point found over the estimates kept")
+    loads_worst_around: list[bool] = Field(default_factory=list, description="a biaxial beam: per station, whether it is "
+                                           "a hot spot of angle_deg 'all' (its angle is the worst found, not given)")
+    moment_xi_nm: list[list[Finite]] | None = Field(None, description="a biaxial beam: bending moment EIξ κξ per estimate "
+                                                    "and station, N·m")
+    root_moment_xi_nm: list[Finite] | None = Field(None, description="a biaxial beam: the root bending moment in ξ per estimate, N·m")
+    root_moment_resultant_nm: list[Finite] | None = Field(None, description="a biaxial beam: the root moment's resultant "
+                                                          "√(Mζ² + Mξ²) per estimate, N·m")
     truth_deflection: list[list[Finite] | None] | None = Field(
         None, description="a simulated source only: the true deflection (m) at the structure's stations at each estimate "
                           "(None where the simulation gave none near it); None for measured data")

@@ -82,13 +82,15 @@ class Page(Generic[T]):
 class StructureModel:
     """What a dashboard draws one structure with: its rig (length, support, orientation, sensors),
     the model's unit deformations (``estimator.UnitDeformations``), the state layout its estimates
-    are read through and the stations of the curvature index (m)."""
+    are read through and the stations of the curvature index (m); for a beam that bends in two
+    planes also the ξ plane's unit deformations (None for a planar one)."""
 
     id: str
     rig: RigDescription
     units: Any
     layout: StateLayout
     stations: np.ndarray
+    units_xi: Any = None
 
 
 @runtime_checkable

@@ -24,6 +24,7 @@ from ._calibration import (
     modal_frequencies,
 )
 from ._damage_signatures import DamageSignatures, damage_signatures
+from ._observability import UnobservableRig
 from ._health import (
     AidingWindow,
     HealthConfig,
@@ -64,6 +65,7 @@ from ._streaming import (
 from ._unit_deformations import MAX_UNIT_DEFORMATIONS, UnitDeformations, unit_deformations
 
 __all__ = [
+    "UnobservableRig",
     "AidingWindow",
     "HealthConfig",
     "HealthVerdict",

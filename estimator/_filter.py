@@ -31,7 +31,7 @@ from ._imms import (
     run_events,
     tip_variance,
 )
-from ._observability import biaxial_observability_problem, observability_problem
+from ._observability import UnobservableRig, biaxial_observability_problem, observability_problem
 from ._selection import SensorSelection, select_sensors
 from ._unit_deformations import UnitDeformations, unit_deformations, with_residual_modes
 
@@ -454,11 +454,11 @@ def build_model(
             problem = biaxial_observability_problem(units, units_xi, selection, imu_eta=imu_eta, tof_eta=tof_eta,
                                                     gauge_eta=gauge_eta, gauge_points=(zeta_p, xi_p))
             if problem:
-                raise ValueError(f"this rig cannot be estimated with Γ={units.count}, Γξ={units_xi.count}: {problem}")
+                raise UnobservableRig(f"this rig cannot be estimated with Γ={units.count}, Γξ={units_xi.count}: {problem}")
         else:
             problem = observability_problem(units, selection, imu_eta=imu_eta, tof_eta=tof_eta, gauge_eta=gauge_eta)
             if problem:
-                raise ValueError(f"this rig cannot be estimated with Γ={units.count}: {problem}")
+                raise UnobservableRig(f"this rig cannot be estimated with Γ={units.count}: {problem}")
     return ImmsModel(
         rig=rig,
         units=units,

@@ -17,7 +17,12 @@ import numpy as np
 from ._selection import SensorSelection
 from ._unit_deformations import UnitDeformations
 
-__all__ = ["biaxial_observability_problem", "observability_problem"]
+__all__ = ["UnobservableRig", "biaxial_observability_problem", "observability_problem"]
+
+
+class UnobservableRig(ValueError):
+    """The selected sensors cannot observe the unit deformations asked for; the message says
+    which and what to add."""
 
 # A row space direction weaker than this (relative to the strongest, rows and columns scaled to
 # unit size) counts as not seen: sensors at a node of a unit deformation see nothing of it.

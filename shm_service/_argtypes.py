@@ -43,19 +43,6 @@ def number(kind: type = float, *, low: float | None = None, high: float | None =
     return parse
 
 
-def database_target(text: str) -> str:
-    """An argparse ``type`` for the service's database: a PostgreSQL URL (checked for a host and
-    a database) or a SQLite file (as ``output_path``)."""
-    from .service.storage._url import check_postgres_url, is_postgres_url
-
-    if is_postgres_url(text) or "://" in text:
-        try:
-            return check_postgres_url(text, "--db")
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-    return output_path(text)
-
-
 def output_path(text: str) -> str:
     """An argparse ``type`` for an output file: its directory must exist (nothing is created)."""
     path = Path(text)

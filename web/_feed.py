@@ -181,12 +181,13 @@ class StructureFeed:
     layout : ``contract.StateLayout`` of the estimator's state vector.
     stations : η (m) of the curvature-change index (and of ``truth_deflection``).
     structure_id : the structure's id in a fleet (None: the service's one structure).
+    units_xi : a beam that bends in two planes: the ξ plane's unit deformations (None: planar).
 
     Raises ValueError (TypeError for a layout of another type) naming what does not fit.
     """
 
     def __init__(self, *, rig: Any, units: Any, layout: StateLayout, stations: np.ndarray,
-                 structure_id: str | None = None) -> None:
+                 structure_id: str | None = None, units_xi: Any = None) -> None:
         gamma = int(getattr(units, "count", 0))
         if gamma < 1:
             raise ValueError("units must provide at least one unit deformation (units.count >= 1)")
@@ -222,11 +223,18 @@ class StructureFeed:
         self.rig = rig
         self.units = units
         self.layout = layout
+        gamma_xi = int(getattr(units_xi, "count", 0)) if units_xi is not None else 0
+        if gamma_xi != layout.gamma_xi:
+            raise ValueError(f"layout has Γξ={layout.gamma_xi} ξ unit deformations, units_xi {gamma_xi}")
+        # a beam that bends in two planes: drawn bending in both, with its tip's orbit
+        self.units_xi = units_xi if gamma_xi else None
+        self.biaxial = self.units_xi is not None
         self.mode_map = mode_map
         self.gamma = gamma
         self.stations = stations.copy()
         self.sensor_topics = {s.topic: s for s in rig.sensors}
         self.store = _Store()
+        self._angles: dict[str, float] = {}  # hot spot -> the angle its live loads are evaluated at (biaxial)
         # live estimates: (t_s, state, true deflection) waiting for their turn, and the playout clock
         self._pending: deque[tuple[float, BeamState, np.ndarray | None]] = deque(maxlen=MAX_PENDING)
         self._sensors: dict[str, str] = {}
@@ -331,6 +339,8 @@ class StructureFeed:
         now = time.monotonic() if now is None else now
         with self.store.lock:
             self._sensors = dict(doc.sensors)
+            if doc.loads_angles_deg:  # a biaxial beam: the angle each hot spot is evaluated at
+                self._angles = {n: float(a) for n, a in zip(doc.loads_station_names, doc.loads_angles_deg) if n}
             truths = doc.truth_deflection or [None] * len(doc.t_s)
             fresh = [(t, x, true) for t, x, true in zip(doc.t_s, doc.x, truths) if t > self._newest_t]
             for t, x, true in fresh:
@@ -340,6 +350,12 @@ class StructureFeed:
             self._newest_t = fresh[-1][0]
             self._arrivals.append((now, self._newest_t))
             self._retime(now)
+
+    def hot_spot_angles(self) -> dict[str, float]:
+        """Per hot spot the angle around the section (degrees) the service evaluates its live loads
+        at, an "all" one's worst found (a biaxial beam; empty until its live estimates came)."""
+        with self.store.lock:
+            return dict(self._angles)
 
     def _truth(self, values: list[float] | None) -> np.ndarray | None:
         """A simulation's true deflection at the stations (None: none, or not one per station)."""

@@ -12,11 +12,14 @@ World (viewer) coordinates: x = ζ, y = across the sheet's width, z up: z = −�
 beam, z = +η for a standing one (``standing=True``), so a mast is drawn upright. Overscaling
 multiplies the elastic part Δ (and the slope Δ′) by ``elastic_scale`` and the rigid motion
 (h, d, φ) by ``rigid_scale``, like the paper's Figure 15.
+
+A beam that bends in two planes also deflects by Δξ(η) = Σ bξ sξ(η) along ξ = η × ζ, which is
+world +y for a standing beam and −y for a hanging one (``lateral``); a clamp holds it (φ ≡ 0).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -26,6 +29,7 @@ from contract import StateLayout
 __all__ = [
     "BeamState",
     "clamp_boxes",
+    "lateral",
     "UnitShapes",
     "centreline",
     "parse_state",
@@ -55,12 +59,14 @@ class UnitShapes(Protocol):
 
 @dataclass(frozen=True)
 class BeamState:
-    """The part of the estimator state the picture needs: d, h (m), φ (rad), b (Γ,)."""
+    """The part of the estimator state the picture needs: d, h (m), φ (rad), b (Γ,), and bξ (Γξ,)
+    of a beam that bends in two planes (empty for a planar one)."""
 
     d: float
     h: float
     phi: float
     b: np.ndarray
+    b_xi: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def parse_state(x: object, layout: StateLayout) -> BeamState:
@@ -78,9 +84,10 @@ def parse_state(x: object, layout: StateLayout) -> BeamState:
         raise ValueError(f"state vector x must be 1-D, got shape {arr.shape}")
     arr = layout.check(arr)
     d, h, phi, b = arr[layout.d], arr[layout.h], float(layout.phi_of(arr)), layout.b_of(arr)
-    if not (np.isfinite(d) and np.isfinite(h) and np.isfinite(phi) and np.all(np.isfinite(b))):
-        raise ValueError("state vector x has NaN or infinite values in d, h, phi or b")
-    return BeamState(d=float(d), h=float(h), phi=phi, b=b.copy())
+    b_xi = layout.b_xi_of(arr)
+    if not (np.isfinite(d) and np.isfinite(h) and np.isfinite(phi) and np.all(np.isfinite(b)) and np.all(np.isfinite(b_xi))):
+        raise ValueError("state vector x has NaN or infinite values in d, h, phi, b or b_xi")
+    return BeamState(d=float(d), h=float(h), phi=phi, b=b.copy(), b_xi=b_xi.copy())
 
 
 def _place(state: BeamState, eta: np.ndarray, delta: np.ndarray, rigid_scale: float) -> np.ndarray:
@@ -125,6 +132,17 @@ def centreline(
     return _place(state, eta, elastic_scale * delta, rigid_scale)
 
 
+def lateral(state: BeamState, units_xi: UnitShapes | None, eta: np.ndarray, *, elastic_scale: float = 1.0,
+            standing: bool = False) -> np.ndarray:
+    """World y (len(eta),) of the centre line: the ξ deflection Σ bξ sξ(η) overscaled, signed as ξ
+    lies in the world (+y standing, −y hanging); zeros for a planar beam (``units_xi`` None)."""
+    _check_scales(elastic_scale, 1.0)
+    eta = np.atleast_1d(np.asarray(eta, dtype=float))
+    if units_xi is None or state.b_xi.size == 0:
+        return np.zeros(eta.shape)
+    return up_sign(standing) * elastic_scale * (units_xi.shape(eta) @ state.b_xi)
+
+
 def tangent_angle(
     state: BeamState, units: UnitShapes, eta: np.ndarray, *, elastic_scale: float = 1.0, rigid_scale: float = 1.0
 ) -> np.ndarray:
@@ -165,11 +183,13 @@ def ribbon_faces(n: int) -> np.ndarray:
     return np.concatenate([np.stack([a, c, b], axis=1), np.stack([b, c, d], axis=1)]).astype(np.uint32)
 
 
-def ribbon(plane: np.ndarray, width: float | np.ndarray, *, standing: bool = False) -> np.ndarray:
+def ribbon(plane: np.ndarray, width: float | np.ndarray, *, standing: bool = False,
+           offset: np.ndarray | None = None) -> np.ndarray:
     """Vertices (2N, 3) of the sheet: each centre-line point at y = −w/2 and y = +w/2 (world).
 
     ``width`` (m) is one figure, or one per centre-line point (a taper: a tube's diameter, a
-    blade's depth along it).
+    blade's depth along it). ``offset`` (N,): the centre line's world y (``lateral``: a beam that
+    bends in ξ too), 0 when None.
     """
     w = np.asarray(width, dtype=float)
     n = np.shape(plane)[0]
@@ -180,6 +200,12 @@ def ribbon(plane: np.ndarray, width: float | np.ndarray, *, standing: bool = Fal
     verts = np.repeat(centre, 2, axis=0)
     verts[0::2, 1] = -0.5 * width
     verts[1::2, 1] = 0.5 * width
+    if offset is not None:
+        y = np.asarray(offset, dtype=np.float32)
+        if y.shape != (n,):
+            raise ValueError(f"offset has shape {y.shape}, expected ({n},) (one per centre-line point)")
+        verts[0::2, 1] += y
+        verts[1::2, 1] += y
     return verts
 
 

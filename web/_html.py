@@ -29,11 +29,13 @@ __all__ = [
     "MARKER_LEGEND",
     "SPECTRA_INTRO",
     "alarms_html",
+    "angles_html",
     "fmt_time",
     "header_html",
     "hot_spots_html",
     "level_badge",
     "message_html",
+    "orbit_intro",
     "overview_html",
     "rates_text",
     "severity",
@@ -442,3 +444,24 @@ def hot_spots_html(record: LoadsRecord, error: str | None = None) -> str:
         "<table style='width:100%;font-size:12px;border-collapse:collapse'><tr><th style='text-align:left'>hot spot</th>"
         "<th>consumed D, rate</th><th>remaining life</th><th>latest window, MPa</th></tr>" + "".join(rows) + "</table></div>"
     )
+
+
+def angles_html(hot_spots: list[Any], found: dict[str, float]) -> str:
+    """Where around the section each hot spot of a biaxial beam sits (degrees from +ζ towards +ξ):
+    its given angle, or for a girth weld (``angle_deg = "all"``) the worst point found so far."""
+    rows = []
+    for h in hot_spots:
+        if h.angle_deg == "all":
+            worst = found.get(h.name)
+            at = "all around the section: worst at " + ("…" if worst is None else f"{worst:g}°") + " (of the live estimates)"
+        else:
+            at = f"at {float(h.angle_deg):g}°"
+        rows.append(f"<li><b>{html.escape(h.name)}</b> (η = {h.position:.2f} m) {at}</li>")
+    return ("<div style='font-size:12px'>Around the section (degrees from +ζ towards +ξ):<ul style='margin:2px 0'>"
+            + "".join(rows) + "</ul></div>")
+
+
+def orbit_intro(span_s: float) -> str:
+    """The Orbit tab's introduction (markdown)."""
+    return ("**Tip orbit**: the tip's deflection across the beam, ζ against ξ (mm, body frame), "
+            f"over the last {span_s / 60:g} minutes; the newest position is the black dot.")

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ._data import LoadsRecord
-from ._html import LOADS_INTRO, hot_spots_html, message_html
+from ._html import LOADS_INTRO, angles_html, hot_spots_html, message_html
 from ._plots import colour, scales_of, set_scales
 
 if TYPE_CHECKING:
@@ -51,6 +51,8 @@ class LoadsPanel:
         self.hot_spots = [(h.name, float(h.position)) for h in feed.rig.hot_spots]
         self._version = -1
         gui.add_markdown(LOADS_INTRO)
+        # a biaxial beam: each hot spot's angle around the section (a girth weld's worst point)
+        self.angles = gui.add_html(angles_html(list(feed.rig.hot_spots), {})) if feed.biaxial else None
         self.table = gui.add_html(message_html("Waiting for the structure's loads…"))
         x0, z = np.array([0.0, feed.length]), np.zeros(2)
         self.stress = gui.add_uplot(
@@ -71,6 +73,10 @@ class LoadsPanel:
         self.dels: dict[str, Any] = {}
 
     def render(self, snap: "Snapshot") -> None:
+        if self.angles is not None:
+            text = angles_html(list(self.feed.rig.hot_spots), self.feed.hot_spot_angles())
+            if text != self.angles.content:
+                self.angles.content = text
         if snap.loads_version == self._version:
             return
         self._version = snap.loads_version

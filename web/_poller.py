@@ -260,7 +260,7 @@ class PortPoller:
             try:
                 model = self._call("structure_model", sid)
                 feed = StructureFeed(rig=model.rig, units=model.units, layout=model.layout, stations=model.stations,
-                                     structure_id=sid)
+                                     structure_id=sid, units_xi=getattr(model, "units_xi", None))
             except Exception as exc:
                 self._errors[sid] = (now, f"{sid}: cannot be drawn: {type(exc).__name__}: {exc}")
                 continue

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._geometry import BeamState, centreline, clamp_boxes, ribbon, ribbon_faces, segments, to_world, tof_rays, up_sign
+from ._geometry import BeamState, centreline, clamp_boxes, lateral, ribbon, ribbon_faces, segments, to_world, tof_rays, up_sign
 from ._html import STATE_COLOURS
 
 if TYPE_CHECKING:
@@ -119,6 +119,7 @@ class SceneView:
         self.faces = ribbon_faces(N_BEAM_POINTS)
         self.widths = feed.width_at(self.eta)  # to scale: a tube's diameter, a sheet's width
         self.shape_eta = np.asarray(feed.units.shape(self.eta), dtype=float)
+        self.shape_eta_xi = None if feed.units_xi is None else np.asarray(feed.units_xi.shape(self.eta), dtype=float)
         self.up = up_sign(feed.standing)
         self._envelope = 0.0
         add_rig(scene, feed)
@@ -214,7 +215,10 @@ class SceneView:
     def auto_overscale(self, state: BeamState, current: float) -> float:
         """The overscale that keeps the largest drawn elastic deflection of the last seconds near
         ``AUTO_TARGET_FRACTION`` of the length (``current`` while the picture is readable)."""
-        peak = float(np.max(np.abs(self.shape_eta @ state.b)))
+        if self.shape_eta_xi is None or state.b_xi.size == 0:
+            peak = float(np.max(np.abs(self.shape_eta @ state.b)))
+        else:  # both planes: the deflection's magnitude
+            peak = float(np.max(np.hypot(self.shape_eta @ state.b, self.shape_eta_xi @ state.b_xi)))
         self._envelope = max(peak, self._envelope * AUTO_DECAY_PER_FRAME)
         if self._envelope <= 0:
             return current
@@ -227,6 +231,10 @@ class SceneView:
     def reset_envelope(self) -> None:
         self._envelope = 0.0
 
+    def _lateral(self, state: BeamState, eta: np.ndarray, opt: SceneOptions) -> np.ndarray:
+        """World y of the centre line at ``eta``: the ξ deflection of a beam that bends in two planes."""
+        return lateral(state, self.feed.units_xi, eta, elastic_scale=opt.elastic_scale, standing=self.feed.standing)
+
     def _line(self, state: BeamState, eta: np.ndarray, opt: SceneOptions, **kwargs: Any) -> np.ndarray:
         return centreline(state, self.feed.units, eta, elastic_scale=opt.elastic_scale, rigid_scale=opt.rigid_scale, **kwargs)
 
@@ -234,7 +242,7 @@ class SceneView:
         """Draw ``est`` (labels and texts only when ``texts``: HTML labels cost the browser)."""
         state = est.state
         line = self._line(state, self.eta, opt)
-        self.beam.vertices = ribbon(line, self.widths, standing=self.feed.standing)
+        self.beam.vertices = ribbon(line, self.widths, standing=self.feed.standing, offset=self._lateral(state, self.eta, opt))
         self._render_ghost(mean, opt)
         self._render_truth(est, opt)
         d_world = np.array([opt.rigid_scale * state.d, 0.0, self.up * opt.rigid_scale * state.h], dtype=np.float32)
@@ -291,7 +299,8 @@ class SceneView:
             self.bearing_marker.colors = self._colours(states, [self.bearing_topic])
         for kind, items in self.sensor_groups.items():
             eta = np.array([e for _, e in items])
-            pos = to_world(self._line(state, eta, opt), y=self.marker_offsets[kind], standing=feed.standing)
+            pos = to_world(self._line(state, eta, opt), y=self.marker_offsets[kind] + self._lateral(state, eta, opt),
+                           standing=feed.standing)
             if kind == "strain":  # on the +ζ face
                 pos[:, 0] += 0.01
             self.markers[kind].points = pos
@@ -311,12 +320,18 @@ class SceneView:
     def _render_texts(self, state: BeamState, line: np.ndarray, opt: SceneOptions) -> None:
         feed = self.feed
         if self.labels:
-            pos = to_world(self._line(state, self.label_eta, opt), y=0.5 * feed.width + 0.1, standing=feed.standing)
+            pos = to_world(self._line(state, self.label_eta, opt), y=0.5 * feed.width + 0.1 + self._lateral(state, self.label_eta, opt),
+                           standing=feed.standing)
             for handle, p in zip(self.labels, pos):
                 handle.visible = opt.labels
                 if opt.labels:
                     handle.position = (float(p[0]), float(p[1]), float(p[2]))
         tip = line[-1]
-        self.tip_label.position = (float(tip[1]), 0.0, float(self.up * (tip[0] + 0.08)))
+        tip_y = float(self._lateral(state, np.array([feed.length]), opt)[0])
+        self.tip_label.position = (float(tip[1]), tip_y, float(self.up * (tip[0] + 0.08)))
         delta_tip = float(feed.units.shape(np.array([feed.length]))[0] @ state.b)
-        self.tip_label.text = f"tip Δ = {1e3 * delta_tip:+.1f} mm  (×{opt.elastic_scale:g})"
+        if feed.units_xi is None:
+            self.tip_label.text = f"tip Δ = {1e3 * delta_tip:+.1f} mm  (×{opt.elastic_scale:g})"
+        else:
+            delta_xi = float(feed.units_xi.shape(np.array([feed.length]))[0] @ state.b_xi)
+            self.tip_label.text = f"tip Δζ = {1e3 * delta_tip:+.1f} mm, Δξ = {1e3 * delta_xi:+.1f} mm  (×{opt.elastic_scale:g})"

@@ -12,6 +12,7 @@ import viser
 from ._context import ViewContext, ViewSettings
 from ._html import HeaderInfo, header_html
 from ._loads import LoadsPanel
+from ._orbit import OrbitPanel
 from ._panels import AlarmsPanel, ControlsPanel, SettingsPanel, StatusPanel
 from ._plots import SpectraPanel, TrendsPanel
 from ._scene import SceneView, camera_of
@@ -41,6 +42,10 @@ class _Shown:
         if feed.rig.hot_spots:  # only a structure with fatigue details has loads to show
             with tabs.add_tab("Loads", viser.Icon.WEIGHT) as tab:
                 self.loads = LoadsPanel(gui, tab, feed)
+        self.orbit: OrbitPanel | None = None
+        if feed.biaxial:  # a beam that bends in two planes: its tip's orbit
+            with tabs.add_tab("Orbit", viser.Icon.CIRCLE_DOT):
+                self.orbit = OrbitPanel(gui, feed)
         with tabs.add_tab("Alarms", viser.Icon.ALERT_TRIANGLE):
             self.alarms = AlarmsPanel(gui, ctx, feed)
         with tabs.add_tab("Status", viser.Icon.HEART_RATE_MONITOR):
@@ -170,6 +175,10 @@ class ClientView:
         if not s.paused and snap.estimate is not None and shown.changed("estimate", snap.estimate_version):
             shown.drawn = (snap.estimate, snap.mean_state)
             s.dirty_scene = True
+            if shown.orbit is not None:
+                shown.orbit.add(snap.estimate)
+        if shown.orbit is not None and not s.paused:
+            shown.orbit.render(time.monotonic())
         if self.controls.auto_changed:
             self.controls.auto_changed = False
             shown.scene.reset_envelope()

@@ -7,7 +7,7 @@ its resultant. A planar beam's stations sit at 0 (or 180): its figures are those
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from typing import Any, Callable, Literal
 
 __all__ = ["XI_MISSING", "parse_station_points", "root_planes", "station_points", "station_signals", "virtual_at_gauge", "xi_of"]
 
@@ -64,21 +64,9 @@ def xi_of(record: Any, keep: Any = None) -> tuple[Any, Any] | None:
     return (b_xi if keep is None else b_xi[keep]), record.units_xi
 
 
-def _corners(beam: Any, eta: float) -> list[float]:
-    """The outline's corner angles at η (degrees): none for a tube, four for a rectangle or table station."""
-    import numpy as np
-
-    shapes = beam.sections[int(np.clip(np.searchsorted(beam.station_positions, eta, side="right") - 1, 0, len(beam.sections) - 1))].shape \
-        if beam.sections is not None else "rectangle"
-    if shapes == "tube":
-        return []
-    corner = math.degrees(math.atan2(float(beam.fibre_distance_xi(eta)), float(beam.fibre_distance(eta))))
-    return [corner, 180.0 - corner, 180.0 + corner, 360.0 - corner]
-
-
 def station_signals(beam: Any, b: Any, units: Any, xi: tuple[Any, Any] | None, points: list, spots: dict, factor: Any, *,
                     detail_of: Callable[[Any], Any], exponents: tuple[float, ...], n_eq: float,
-                    half_cycles: str) -> tuple[Any, Any, list[dict[str, Any]]]:
+                    half_cycles: Literal["half", "full", "ignore"]) -> tuple[Any, Any, list[dict[str, Any]]]:
     """(strain (N, S), bending moment in ζ (N, S), per station its angle and, off the ζ plane, its ξ
     figures) at the ``points`` from b (N, Γ) and, when given, ``xi`` = (b_ξ, ξ unit deformations).
 
@@ -86,7 +74,7 @@ def station_signals(beam: Any, b: Any, units: Any, xi: tuple[Any, Any] | None, p
     ``analytics.around_angles``: every 5 degrees and a rectangle's corners), by its hot spot's detail."""
     import numpy as np
 
-    from analytics import around_angles, bending_moment, section_strain, worst_around
+    from analytics import around_angles, bending_moment, outline_corners, section_strain, worst_around
 
     eta = np.array([p for p, _ in points], dtype=float)
     kappa = b @ units.curvature(eta).T
@@ -100,7 +88,7 @@ def station_signals(beam: Any, b: Any, units: Any, xi: tuple[Any, Any] | None, p
                                           None if kappa_xi is None else [xi_p])[:, 0]
             extras.append({"angle_deg": float(angle)})
             continue
-        angles = around_angles(_corners(beam, pos))
+        angles = around_angles(outline_corners(beam, pos))
         zeta_p, xi_p = beam.section_point(np.full(angles.size, pos), angles)
         ring = section_strain(np.repeat(kappa[:, j:j + 1], angles.size, axis=1), zeta_p,
                               None if kappa_xi is None else np.repeat(kappa_xi[:, j:j + 1], angles.size, axis=1),
@@ -136,7 +124,7 @@ def virtual_at_gauge(beam: Any, sensor: Any, b: Any, units: Any, xi: tuple[Any, 
 
 
 def root_planes(root: dict[str, Any], b: Any, units: Any, xi: tuple[Any, Any], beam: Any, factor: Any, exponents: Any,
-                n_eq: float, half_cycles: str) -> dict[str, Any]:
+                n_eq: float, half_cycles: Literal["half", "full", "ignore"]) -> dict[str, Any]:
     """The root bending moment of a biaxial beam: (Mζ, Mξ) = EI·κ per plane at η = 0 and the resultant
     √(Mζ² + Mξ²); ``root`` is the ζ plane's entry (kept at the top level as for a planar beam)."""
     import numpy as np

@@ -1,7 +1,7 @@
-"""What the commands share, below the command line: the user error, JSON output, the estimator
-model and sensor counts of --modes/--imus/--tofs/--gauges, and b(t) of a recording as ``shm analyze``
-takes it. ``cli`` (which only parses), ``reprocess``, ``loads`` and ``daq_import`` call these; none
-of them imports ``cli`` (no cycle).
+"""What the commands share, below the command line: the user error, JSON output, the rig of
+--rig/--layout, a settings error in one line, the estimator model and sensor counts of
+--modes/--imus/--tofs/--gauges, and b(t) of a recording as ``shm analyze`` takes it. The command
+modules call these; none of them imports ``cli`` (no cycle).
 
 The functions take the parsed options as an object with the options' attributes (an
 ``argparse.Namespace`` or ``reprocess.AnalysisOptions.namespace()``).
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import TypedDict
 
 __all__ = ["DEFAULT_SENSOR_COUNT", "CliError", "add_model_arguments"]
 
@@ -100,7 +101,16 @@ def _cut_note(rec) -> str:
     return f" (the recording is cut off: {cut})"
 
 
-def _sensor_counts(rig, args: argparse.Namespace) -> dict[str, int | tuple[str, ...]]:
+
+class SensorCounts(TypedDict):
+    """--imus/--tofs/--gauges as ``estimator.build_model`` takes them: a count or the sensors' names."""
+
+    imus: int | tuple[str, ...]
+    tofs: int | tuple[str, ...]
+    gauges: int | tuple[str, ...]
+
+
+def _sensor_counts(rig, args: argparse.Namespace) -> SensorCounts:
     """--imus/--tofs/--gauges as the estimator takes them. A count the user gave must exist on the
     rig; the default (4 each) is capped to what the rig has, as the help says."""
     from ..processing.estimation import sensor_count_problem
@@ -113,7 +123,7 @@ def _sensor_counts(rig, args: argparse.Namespace) -> dict[str, int | tuple[str, 
             problem = sensor_count_problem(rig, kind, wanted, modes=args.modes)
             if problem:
                 raise CliError(f"--{kind} {wanted}: {problem} (or give names)")
-    return counts
+    return SensorCounts(imus=counts["imus"], tofs=counts["tofs"], gauges=counts["gauges"])
 
 
 def _analysis_settings(args: argparse.Namespace):
@@ -147,3 +157,29 @@ def _deformations_of(path: str, args: argparse.Namespace):
         return rec, deformation_record(rec, model_args=model_args, settings=streaming)
     except ValueError as exc:
         raise CliError(f"{exc}{_cut_note(rec)}") from None
+
+
+def _rig_from_args(args: argparse.Namespace):
+    """The rig of --rig (with --support/--orientation overriding its keys) or of --layout
+    (with --length, --support, --orientation)."""
+    from estimator import RigError, load_rig, parse_rig
+
+    from ..rig_layouts import build_rig
+
+    if getattr(args, "rig", None):
+        if args.length is not None:
+            raise CliError("--length scales a --layout rig; with --rig set beam.length in the file")
+        rig = load_rig(args.rig)
+        overrides = {k: v for k, v in (("support", args.support), ("orientation", args.orientation)) if v is not None}
+        return parse_rig({**rig.model_dump(mode="json"), **overrides}, source=args.rig) if overrides else rig
+    try:
+        return build_rig(args.layout, length=args.length, support=args.support or "pinned",
+                         orientation=args.orientation or "hanging")
+    except ValueError as exc:
+        if isinstance(exc, RigError):
+            raise
+        raise CliError(str(exc)) from None
+
+
+def _pydantic_message(exc) -> str:
+    return "; ".join(f"{'.'.join(str(p) for p in e['loc']) or 'settings'}: {e['msg']}" for e in exc.errors())

@@ -253,7 +253,8 @@ def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, 
            "eigenfrequencies do not change)")
         at(peak, f"the storm peaks: the wind load is {factor:g} x its ambient RMS{level}")
         at(passed, "the storm has passed: the wind load is back at its ambient level")
-    if t.damage_s is not None:
+    # a damage comes with the times of its alarms (DemoTimeline sets them together)
+    if t.damage_s is not None and t.earliest_alarm_s is not None and t.expected_alarm_s is not None:
         shifts = ", ".join(f"mode {m} {100 * r:+.2f} %" for m, _, r in changes)
         at(t.damage_s, f"the damage appears: {', '.join(settings.sim.damage)}",
            *([f"the simulated plant's eigenfrequencies change by {shifts}"] if changes else []))
@@ -275,7 +276,7 @@ def describe(settings: Any, timeline: Timeline, changes: list[tuple[int, float, 
         lines.append(f"  (after the end: {'; '.join(e[2] for e in sorted(later))}: give a longer --duration)")
     if t.damage_s is None:
         lines.append("  (no damage: no alarm is expected)")
-    elif t.expected_alarm_s > t.duration_s:
+    elif t.expected_alarm_s is not None and t.expected_alarm_s > t.duration_s:
         lines.append("  NOTE: the scenario ends before an alarm can be raised; give a longer --duration")
     lines += ["", "Stop it at any time with Ctrl-C (exit status 0).",
               f"Its data: {settings.data_dir}/ (database {Path(settings.db).name}, recordings "

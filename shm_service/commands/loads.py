@@ -395,6 +395,8 @@ def _out_of_sample(rec: Any, gauges: list, gauge_masks: list, t: Any, used: tupl
     deformations left to the estimator, which picks them for the gauges it has). A gauge the
     estimate did not use is out of sample already. (name, position, virtual, measured, leverage 0)."""
 
+    from estimator import UnobservableRig
+
     from ..processing.estimation import deformation_record
 
     sensors = {s.name: s for s in rec.rig.sensors_of("strain")}
@@ -405,6 +407,14 @@ def _out_of_sample(rec: Any, gauges: list, gauge_masks: list, t: Any, used: tupl
             args = {k: v for k, v in model_args.items() if k != "aided"}
             try:
                 again = deformation_record(rec, model_args=dict(args, gauges=others))
+            except UnobservableRig:
+                # the other gauges alone cannot hold the unit deformations (a mast without ToFs and
+                # as many gauges as modes): this gauge's residual stays in sample, widened by the
+                # leverage bound, and its row says so ("out_of_sample": false)
+                from analytics import UNKNOWN_LEVERAGE
+
+                out.append((name, position, virtual, measured, UNKNOWN_LEVERAGE))
+                continue
             except ValueError as exc:
                 raise LoadsError(f"the band's re-estimate without gauge {name}: {exc}") from None
             if not again.estimated_here:  # an estimate recording gives its own b again: that is not out of sample

@@ -3,7 +3,7 @@
 (a baseline from a healthy period spread over files, stored for the live service).
 
 Each file is one task. A task runs exactly what ``shm analyze`` runs on the file (the analyze
-command's own path, ``cli._analysis_of``), so both give the same windows and figures; its trend
+command's own path), so both give the same windows and figures; its trend
 rows are committed by this process (the database's only writer) in one transaction with the
 file's ledger row. A file is done only once that commit happened: a killed run is restarted by
 running it again, and a file already done under the same key (content hash + configuration,
@@ -24,9 +24,11 @@ from collections.abc import Iterator
 from contextlib import closing, contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
-__all__ = ["AnalysisOptions", "FileOutcome", "learn_baseline", "reprocess", "source_of"]
+from ._common import CliError, _print_json
+
+__all__ = ["AnalysisOptions", "FileOutcome", "cmd_baseline_learn", "cmd_reprocess", "learn_baseline", "reprocess", "source_of"]
 
 
 @dataclass(frozen=True)
@@ -35,7 +37,7 @@ class AnalysisOptions:
     ``shm serve`` TOML whose analytics, alarm hysteresis and warm-up are used."""
 
     rig: str | None = None
-    peripheral: str = "gyro"
+    peripheral: Literal["gyro", "acc"] = "gyro"
     modes: int = 4
     modes_xi: int | None = None
     imus: str | None = None
@@ -96,7 +98,7 @@ def source_of(path: str | Path) -> str:
     """The source (structure) id a recording's rows go to by default: the service's own for its
     archive files (``SOURCE-YYYYmmddTHHMMSSZ-w....mcap``), else the file's stem, as ``shm serve
     --source replay:FILE`` names it."""
-    from ..service.stages._archive import parse_archive_name
+    from ..service.storage._archive_names import parse_archive_name
 
     name = parse_archive_name(path)
     return name.source if name is not None else Path(path).stem
@@ -135,6 +137,9 @@ def analyse_file(path: str, options: AnalysisOptions, source: str) -> dict[str, 
     result = analyze_deformations(rec.rig, data, config=config, warmup_s=warmup, loads_tap=tap, gauges=recording_gauges(rec))
     rows = [row.model_dump() for w in result.windows
             for row in trend_rows(source, w, offset + w.start_s, offset + w.end_s)]
+    if result.xi is not None:  # a biaxial beam: the ξ plane's windows, their rows marked "xi"
+        rows += [row.model_dump() for w in result.xi.windows
+                 for row in trend_rows(source, w, offset + w.start_s, offset + w.end_s, plane="xi")]
     # each window's counted hot-spot stress, in UNIX s: this process chains them across the files
     tap = [(offset + start, *rest) for start, *rest in tap]
     return {"windows": len(result.windows), "rows": rows, "start_s": rec.start_ns / 1e9, "end_s": rec.end_ns / 1e9,
@@ -413,3 +418,50 @@ def _joined(kept: list[dict[str, Any]]) -> tuple[int, Any, Any, Any, Any]:
         first = np.concatenate([[True], np.diff(tt) > 0])
         temperature = (tt[first], tv[first])
     return origin_ns, t, b, support, temperature
+
+
+# -- the commands: shm reprocess, shm baseline learn ------------------------------------------
+def _analysis_options(args: argparse.Namespace):
+    return AnalysisOptions(rig=args.rig, peripheral=args.peripheral, modes=args.modes, modes_xi=args.modes_xi, imus=args.imus,
+                           tofs=args.tofs, gauges=args.gauges, config=args.config)
+
+
+def cmd_reprocess(args: argparse.Namespace) -> int:
+    import time
+
+    started = time.perf_counter()
+    outcomes = reprocess(args.recordings, args.db, workers=args.workers, scheduler=args.scheduler, force=args.force,
+                         options=_analysis_options(args), source=args.structure, progress=not args.json)
+    wall = time.perf_counter() - started
+    if args.json:
+        _print_json({"files": [o.as_dict() for o in outcomes], "wall_s": round(wall, 3)})
+    else:
+        for o in outcomes:
+            detail = f"{o.windows} windows" if o.status == "done" else (o.error or "")
+            print(f"{o.status:8} {o.path}  {detail}")
+        counts = {s: sum(o.status == s for o in outcomes) for s in ("done", "skipped", "failed")}
+        print(f"{counts['done']} done, {counts['skipped']} skipped, {counts['failed']} failed in {wall:.1f} s -> {args.db}")
+    return 1 if any(o.status == "failed" for o in outcomes) else 0
+
+
+def cmd_baseline_learn(args: argparse.Namespace) -> int:
+    period = (args.start if args.start is not None else -math.inf, args.end if args.end is not None else math.inf)
+    if period[0] >= period[1]:
+        raise CliError(f"--from {args.start} must be before --to {args.end}")
+    try:
+        summary = learn_baseline(args.recordings, args.db, args.structure, (max(period[0], -1e18), min(period[1], 1e18)),
+                                 workers=args.workers, scheduler=args.scheduler, options=_analysis_options(args),
+                                 progress=not args.json)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if args.json:
+        _print_json(summary)
+    else:
+        print(f"baseline {summary['baseline_id']} of {summary['structure']} from {summary['trusted_windows']} trusted "
+              f"windows in {summary['files_used']} file(s), stored in {args.db} (active)")
+        for m in summary["modes"]:
+            print(f"  mode {m['mode']} (unit {m['unit']}): {m['frequency_hz']:.4f} Hz ± {100 * m['sigma_rel']:.3f} % "
+                  f"({m['windows']} windows)")
+        for failure in summary["failed"]:
+            print(f"  failed: {failure['path']}: {failure['error']}")
+    return 0

@@ -396,6 +396,7 @@ def _log_times(clock: ClockMap, table: Table, where: str) -> np.ndarray:
                            f"(start {start} ns plus the column's first value {t0!r} s = {first} ns): the column's values "
                            "are added to start; set start or start_ns so that start plus the first value is at or after 1970")
         return np.where(valid, first + relative.astype(np.int64), 0)
+    assert clock.rate_hz is not None, "a clock without a column has a rate (ClockMap)"
     step = 1e9 / clock.rate_hz
     if start + step * (n - 1) > _MAX_NS:
         raise MapError(f"{where}: the clock's log times pass 2**63 ns")
@@ -435,6 +436,15 @@ def _payloads(plan: _TopicPlan, values: np.ndarray) -> list[bytes]:
         cuts.append((name, position, size))
         position += max(size, 1)
     return [dumps({name: (r[a] if size == 0 else r[a:a + size]) for name, a, size in cuts}) for r in rows]
+
+
+
+def _rate_of(table_hz: float | None, clock_hz: float | None) -> float:
+    """A clock's sample rate: its table's (a time column), else the map's ``rate_hz`` (one is set)."""
+    rate = table_hz or clock_hz
+    if rate is None:
+        raise MapError("a clock has neither a time column nor rate_hz")
+    return float(rate)
 
 
 def import_recording(
@@ -491,7 +501,7 @@ def import_recording(
     rig_doc = _rig_document(rig, axes_written)
     clocks_report = {
         name: ClockImport(str(files[name]), tables[name].format, int(tables[name].data.shape[0]),
-                          float(tables[name].fs_hz or channel_map.clocks[name].rate_hz),
+                          _rate_of(tables[name].fs_hz, channel_map.clocks[name].rate_hz),
                           channel_map.clocks[name].start_time_ns(), int(times[name][0]), int(times[name][-1]))
         for name in channel_map.clocks
     }

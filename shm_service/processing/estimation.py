@@ -18,7 +18,7 @@ from contract import (
     row_layout,
 )
 from contract import estimate_payloads as _estimate_payloads
-from estimator import EstimateResult, Measurements, SensorSeries
+from estimator import EstimateResult, Measurements, SensorSeries, UnitDeformations
 
 from ..recording import Recording
 
@@ -147,7 +147,7 @@ def score_against_truth(result: EstimateResult, truth: TruthSeries, *, after: fl
     match = (np.abs(truth.t[idx] - result.t) < 1e-6) & (result.t >= after)
     if not np.any(match):
         # A recording that never leaves its rest phase has nothing to score.
-        keys = ("phi_deg", "e_m", "d_m", "deflection_m", "curvature_per_m")
+        keys: tuple[str, ...] = ("phi_deg", "e_m", "d_m", "deflection_m", "curvature_per_m")
         if truth.e_xi is not None and result.model.biaxial:
             keys += ("e_xi_m", "deflection_xi_m", "curvature_xi_per_m")
         return {"rmse": dict.fromkeys(keys), "nees": {"phi": None, "e": None}, "scored_samples": 0}
@@ -189,13 +189,36 @@ def estimate_payloads(result: EstimateResult) -> list[bytes]:
 
 
 def _virtual_loads(rig, model):
-    """analytics.VirtualLoads of the rig's hot spots and a 16-station grid, or None (no station to give)."""
-    from analytics import VirtualLoads
+    """analytics.VirtualLoads of the rig's hot spots and a 16-station grid (BiaxialVirtualLoads for a
+    model of both planes: each at its angle around the section), or None (no station to give)."""
+    from analytics import BiaxialVirtualLoads, VirtualLoads
 
     try:
+        if getattr(model, "units_xi", None) is not None:
+            return BiaxialVirtualLoads.from_rig_biaxial(rig, model.units.curvature, model.units_xi.curvature)
         return VirtualLoads.from_rig(rig, model.units.curvature)
     except ValueError:
         return None
+
+
+def _loads_of(loads, result: EstimateResult) -> dict:
+    """The virtual loads of every estimate; a model of both planes' at each station's angle, an
+    "all" hot spot at its worst point over the whole record."""
+    layout = result.model.state_layout
+    b = layout.b_of(result.x)
+    if not hasattr(loads, "judge"):
+        return loads(b)
+    b_xi = layout.b_xi_of(result.x)
+    loads.judge(b, b_xi)
+    return loads(b, b_xi=b_xi)
+
+
+def _xi_loads(out: dict, k: int) -> dict:
+    """Estimate k's ξ figures of a biaxial /estimate/loads payload (none for a planar one)."""
+    if "moment_xi_nm" not in out:
+        return {}
+    return {"moment_xi_nm": out["moment_xi_nm"][k].tolist(), "root_moment_xi_nm": float(out["root_moment_xi_nm"][k]),
+            "root_moment_resultant_nm": float(out["root_moment_resultant_nm"][k])}
 
 
 def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metadata: dict[str, str] | None = None) -> int:
@@ -216,10 +239,14 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
     }
     stamps = rec.start_ns + np.round(result.t * 1e9).astype(np.int64)
     loads = _virtual_loads(rec.rig, result.model)
-    if loads is not None:
+    out = None if loads is None else _loads_of(loads, result)
+    if loads is not None and out is not None:
         metadata["loads"] = {"stations_m": json.dumps(loads.positions.tolist()), "names": json.dumps(loads.names),
                              "youngs_modulus_pa": json.dumps(rec.rig.beam.youngs_modulus),
                              "note": "stress = youngs_modulus_pa x strain (reference temperature); moments at the reference temperature"}
+        if "angles_deg" in out:  # both planes: each station's point around the section ("all": the worst found)
+            metadata["loads"].update(angles_deg=json.dumps(out["angles_deg"].tolist()),
+                                     worst_around=json.dumps(loads.worst_around.tolist()))
     with RecordingWriter(path, rec.rig, metadata=metadata) as writer:
         # the strain gauges too: `shm loads` of an estimate sees the modal truncation at them
         gauge_topics = tuple(s.topic for s in rec.rig.sensors_of("strain"))
@@ -232,11 +259,12 @@ def write_estimates(path, rec: Recording, result: EstimateResult, *, extra_metad
                 writer.write(topic, lt, {key: value}, pt)
         for stamp, payload in zip(stamps.tolist(), estimate_payloads(result)):
             writer.write(ESTIMATE_TOPIC, stamp, payload)
-        if loads is not None:  # each estimate's strain and moments at the hot spots and the grid
-            out = loads(result.model.state_layout.b_of(result.x))
+        if out is not None:  # each estimate's strain and moments at the hot spots and the grid
             root = out["root_moment_nm"] if out["root_moment_nm"] is not None else np.zeros(len(stamps))
-            for stamp, strain, moment, m0 in zip(stamps.tolist(), out["strain"].tolist(), out["moment_nm"].tolist(), root.tolist()):
-                writer.write(ESTIMATE_LOADS_TOPIC, stamp, {"strain": strain, "moment_nm": moment, "root_moment_nm": m0})
+            for k, (stamp, strain, moment, m0) in enumerate(zip(stamps.tolist(), out["strain"].tolist(), out["moment_nm"].tolist(),
+                                                                root.tolist())):
+                writer.write(ESTIMATE_LOADS_TOPIC, stamp, {"strain": strain, "moment_nm": moment, "root_moment_nm": m0,
+                                                           **_xi_loads(out, k)})
     return len(stamps)
 
 
@@ -252,7 +280,7 @@ class DeformationRecord:
 
     times: np.ndarray
     b: np.ndarray
-    units: object  # estimator.UnitDeformations
+    units: UnitDeformations
     stations: np.ndarray
     temperature: tuple[np.ndarray, np.ndarray] | None
     bearing: np.ndarray | None

@@ -221,6 +221,13 @@ class SourceClock:
         mono = time.monotonic() if mono is None else mono
         return max(self._now(t, mono) for t in self.last) if self.last else None
 
+    def _span(self, mono: float) -> tuple[int, int]:
+        """(newest, current) of a source that has a stamp (``last`` not empty)."""
+        newest, current = self.newest(), self.current(mono)
+        if newest is None or current is None:
+            raise RuntimeError("the source's clock has no stamp yet")
+        return newest, current
+
     # -- judgement ------------------------------------------------------------------------------
 
     def source_jump(self, firsts: dict[str, int], mono: float | None = None) -> bool:
@@ -230,8 +237,7 @@ class SourceClock:
         known = set(self.last) | set(firsts)
         if len(known) < 2 or not self.last:
             return False
-        current = self.current(mono)
-        newest = self.newest()
+        newest, current = self._span(mono)
         off = [t for t, first in firsts.items() if first > current + self.ahead_ns or first < newest - self.window_ns]
         return len(off) >= 2 and 2 * len(off) >= len(known)
 
@@ -253,7 +259,7 @@ class SourceClock:
         else:
             live = np.zeros(len(t), dtype=bool)
         if self.last and not whole_source:
-            newest, current = self.newest(), self.current(mono)
+            newest, current = self._span(mono)
             off = ((t < newest - self.window_ns) | (t > current + self.window_ns)) & ~live
             code[(code == 0) & off] = 1
             ref = self.reference(topic, mono)
@@ -281,7 +287,8 @@ class SourceClock:
             return False
         if not self.last or whole_source:
             return True
-        if lo < self.newest() - self.window_ns or hi > self.current(mono) + self.window_ns:
+        newest, current = self._span(mono)
+        if lo < newest - self.window_ns or hi > current + self.window_ns:
             return False
         ref = self.reference(topic, mono)
         return ref is None or topic not in self.last or hi <= ref + self.ahead_ns
@@ -307,13 +314,10 @@ class SourceClock:
             return 1
         if not self.last or whole_source:
             return 0
-        newest = current = ref = None
-        for other, last in self.last.items():
-            now = last + int(max(mono - self.seen[other], 0.0) * _NS) if self.live else last
-            newest = last if newest is None else max(newest, last)
-            current = now if current is None else max(current, now)
-            if other != topic:
-                ref = now if ref is None else max(ref, now)
+        nows = {other: last + int(max(mono - self.seen[other], 0.0) * _NS) if self.live else last
+                for other, last in self.last.items()}
+        newest, current = max(self.last.values()), max(nows.values())
+        ref = max((now for other, now in nows.items() if other != topic), default=None)
         if self.live and abs(stamp - wall_ns) <= self.tolerance_ns and abs(current - wall_ns) <= self.window_ns:
             return 0  # the source runs on the wall clock: a stamp near it is on time
         if stamp < newest - self.window_ns or stamp > current + self.window_ns:
@@ -415,7 +419,7 @@ class StampJudge:
                 return 1
             if self.near_wall and abs(stamp - self.wall_ns) <= c.tolerance_ns:
                 return 0
-        if self.first is None or self.whole:
+        if self.first is None or self.newest is None or self.whole:  # (a first topic: a newest stamp)
             return 0
         if stamp < self.newest - c.window_ns or stamp > self.first[1] + c.window_ns:
             return 1

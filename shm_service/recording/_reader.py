@@ -19,7 +19,7 @@ from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Final, get_args
+from typing import Any, Final, cast, get_args
 
 import lz4.frame
 import numpy as np
@@ -282,7 +282,7 @@ class _ChannelReader:
         """The payload skeleton of this schema once every vector size is known."""
         if self._template is None and None not in self.sizes:
             example = orjson.dumps({f.name: 0 if scalar else [0] * size
-                                    for f, size, scalar in zip(self.fields, self.sizes, self.scalar)})
+                                    for f, size, scalar in zip(self.fields, cast("list[int]", self.sizes), self.scalar)})
             self._width = example.count(b"0")
             from ._fastdecode import template_codes
 
@@ -577,6 +577,7 @@ class _Reader:
                stops: np.ndarray) -> None:
         """Hand the scanned messages to their channels' readers (file order kept per channel)."""
         routes = self.routes
+        groups: list[tuple[int, np.ndarray | None]]
         if cids[0] == cids[-1] and (cids == cids[0]).all():
             groups = [(int(cids[0]), None)]
         else:
@@ -702,7 +703,8 @@ class _Reader:
             )
         reader = self.readers.get(topic)
         if reader is None:
-            name, position = info.kind, None
+            name: str = info.kind
+            position = None
             if info.kind not in ("truth", "estimate"):
                 sensor = rig.sensor_by_topic().get(topic)
                 if sensor is None:
@@ -800,7 +802,7 @@ def _describe_topic(report: Any, limits: ValueLimits, reader: _ChannelReader, ch
     if r.backwards:
         problems.append(f"{topic}: {r.backwards} message(s) stamped before the previous sample skipped")
     period = NOMINAL_PERIOD_NS.get(channel.kind)
-    if r.gaps:
+    if r.gaps and period is not None:  # gaps are counted only for a kind with a nominal period
         problems.append(f"{topic}: {r.gaps} gap(s), {r.missing_samples} sample(s) missing at {1e9 / period:.2f} Hz")
     if r.messages and not r.accepted:
         problems.append(f"{topic}: no valid sample")

@@ -427,7 +427,7 @@ def _checked_metadata(name: str, data: Mapping[str, str]) -> dict[str, str]:
     return dict(data)
 
 
-def encode_payloads_json(payloads: list[Mapping[str, Any]]) -> list[bytes]:
+def encode_payloads_json(payloads: Sequence[Mapping[str, Any]]) -> list[bytes]:
     """The compact JSON of each payload (flat objects: numbers and lists of numbers), each an
     exact-size ``bytes``.
 

@@ -14,10 +14,11 @@ _HOMES = {
     # the service and its configuration
     "MonitoringService": "runtime._service", "ServiceError": "runtime._service",
     "ServiceSettings": "_config", "SettingsError": "_config", "load_settings": "_config", "render_toml": "_config",
-    "resolve_token": "_config", "AlarmSettings": "_config", "ArchiveSettings": "_config",
-    "DashboardSettings": "_config", "EstimatorSettings": "_config", "NotifySettings": "_config",
-    "RetentionSettings": "_config", "ServerSettings": "_config", "SimSettings": "_config",
-    "SourceSettings": "_config", "StructureSettings": "_config",
+    "resolve_token": "_config", "AlarmSettings": "_config", "DashboardSettings": "_config",
+    "EstimatorSettings": "_config", "ServerSettings": "_config", "StructureSettings": "_config",
+    # the sections a part defines for itself (the configuration is made of them)
+    "ArchiveSettings": "stages._archive", "NotifySettings": "alarms._notify", "RetentionSettings": "storage._retention",
+    "SimSettings": "sources._settings", "SourceSettings": "sources._settings",
     # the HTTP API over a service
     "create_app": "http._app", "ApiServer": "http._server",
     # the database

@@ -114,7 +114,7 @@ def run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = N
     if settings.storage.url is not None:  # a shared PostgreSQL: nodes are fenced by their leases, not by a file
         return _run_serve(args, environ=environ)
     try:
-        lock = DatabaseLock.acquire(settings.db)
+        lock = DatabaseLock.acquire(settings.db_path)
     except (DatabaseBusy, OSError) as exc:
         print(f"shm serve: error: {exc}", file=sys.stderr)
         return 3
@@ -206,7 +206,7 @@ def _run_serve(args: argparse.Namespace, *, environ: Mapping[str, str] | None = 
         if node is not None:
             from .runtime._node import NodeService
 
-            service = NodeService(settings, node, environ=environ)
+            service: MonitoringService | None = NodeService(settings, node, environ=environ)
         else:
             service = MonitoringService(settings, environ=environ, deliver=deliver)
         slot = ServiceSlot(service)

@@ -1,6 +1,12 @@
 """Settings of ``shm serve``: one typed, closed model, read from one TOML file and overridden
 by command-line flags. Secrets (the API token) come from a file or from the environment, which
-is injectable (tests pass a dict)."""
+is injectable (tests pass a dict).
+
+The configuration is made of the parts' own settings: a section is the settings model of the part
+it configures, defined in that part's package (``[archive]`` the archive's, ``[retention]``
+retention's, ``[notify]`` the notifier's, ``[sim]``, ``[source]`` and ``[mqtt]`` the sources', ``[source]``
+made of the merge's and the checks'; ``[estimator]`` extends the estimate stage's), so each key
+has one definition and one default, and the parts never import this module."""
 
 from __future__ import annotations
 
@@ -9,6 +15,7 @@ import os
 import re
 import tomllib
 from collections.abc import Mapping
+from copy import copy
 from pathlib import Path
 from typing import Annotated, Any, Literal
 from urllib.parse import urlsplit
@@ -19,23 +26,22 @@ from analytics import AnalysisConfig
 from contract import is_loopback
 from estimator import StreamingSettings
 
-from ..recording._plausibility import ValueLimits
+from .alarms._notify import NotifySettings
+from .sources._settings import SOURCE_SPEC, MqttSettings, SimSettings, SourceSettings, check_spec
+from .stages._archive import ArchiveSettings
+from .stages._commit import CommitSettings
+from .stages._estimate import EstimateSettings
+from .storage._retention import RetentionSettings
 from .storage._url import check_postgres_url, is_postgres_url, redact
 
 __all__ = [
     "AlarmSettings",
-    "ArchiveSettings",
     "DashboardSettings",
     "EstimatorSettings",
-    "MqttSettings",
     "NodeSettings",
-    "NotifySettings",
-    "RetentionSettings",
     "ServerSettings",
     "ServiceSettings",
     "SettingsError",
-    "SimSettings",
-    "SourceSettings",
     "StructureSettings",
     "load_settings",
     "render_toml",
@@ -51,6 +57,13 @@ class SettingsError(ValueError):
 
 class _Closed(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+
+def _key_of(model: type[BaseModel], name: str) -> Any:
+    """A part's field as a key of another section, with its definition (default, bounds and
+    description): a key users know under another name has one source of truth."""
+    return copy(model.model_fields[name])
 
 
 class ServerSettings(_Closed):
@@ -121,117 +134,10 @@ class DashboardSettings(_Closed):
         return is_loopback(self.host)
 
 
-class SimSettings(_Closed):
-    """The virtual rig as a live source (``--source sim``)."""
+class EstimatorSettings(EstimateSettings):
+    """The IMMS estimator (model from the rig description).
 
-    duration_s: float = Field(7 * 24 * 3600.0, gt=0, le=7 * 24 * 3600, description="simulated run length, s (the run ends then)")
-    seed: int = Field(1, ge=0, description="random seed of the simulation")
-    layout: Literal["benchmark", "dense"] = Field("benchmark", description="sensor layout")
-    support: Literal["pinned", "clamped"] = Field(
-        "pinned", description="pinned: the plain bearing (the beam swings about D); clamped: the fixed bearing (phi = 0)")
-    orientation: Literal["hanging", "standing"] = Field(
-        "hanging", description="hanging below D, or standing above it as a mast (needs support = clamped; must not buckle)")
-    length_m: float = Field(
-        4.0, gt=0, le=100, description="beam length, m; the layout's sensors scale with it (damage positions do not)")
-    excitation: Literal["paper", "ambient", "decay", "operational"] = Field(
-        "ambient", description="excitation of the rig (operational: the support moving randomly and a random distributed load)")
-    damage: tuple[str, ...] = Field(("mass:0.126@4.0",), description="damage specs (mass:KG@POS, stiffness:FACTOR@A-B)")
-    damage_at_s: float | None = Field(
-        900.0, ge=0,
-        description="simulated time the damage appears, s (None: never); after rest (60 s), warm-up and the baseline (analytics.baseline_s)")
-    temperature_mean_c: float = Field(20.0, description="mean temperature, degC")
-    temperature_swing_k: float = Field(40.0, ge=0, description="peak-to-peak temperature swing over the whole run, K")
-    block_s: float = Field(1.0, gt=0, le=60, description="simulated seconds per block handed to the pipeline")
-    rig: str | None = Field(
-        None, description="simulate this rig description (.json/.toml; its beam, support, orientation and sensors, as "
-        "shm simulate --rig) instead of the built-in sheet of layout/support/orientation/length_m")
-    wind_load_rms: float | None = Field(
-        None, ge=0, description="RMS of the wind load along the beam, N/m (None: scaled to the structure for a rig file)")
-    storm_start_s: float | None = Field(
-        None, ge=0, description="a storm that passes begins, s (None: no storm): the wind load's RMS rises to storm_peak "
-        "times its ambient level halfway to storm_end_s and falls back (the virtual rig's WindStorm)")
-    storm_end_s: float | None = Field(None, gt=0, description="the storm has passed, s")
-    storm_peak: float = Field(3.0, gt=0, le=100, description="the wind load's RMS at the storm's peak over its ambient RMS")
-    faults: tuple[str, ...] = Field(
-        (), description="sensor faults to inject, KIND:TOPIC[.FIELD]@START+DURATION[:VALUE] with KIND silence, nan, "
-        "spike (VALUE added), stuck or clock (stamps shifted by VALUE s); START and DURATION in simulated s, "
-        "e.g. spike:/imu/D.accel_y@300+1:100")
-
-    @model_validator(mode="after")
-    def _storm(self) -> "SimSettings":
-        if (self.storm_start_s is None) != (self.storm_end_s is None):
-            raise ValueError("sim.storm_start_s and sim.storm_end_s come together (a storm begins and passes)")
-        if self.storm_start_s is not None and not self.storm_start_s < self.storm_end_s:
-            raise ValueError(f"sim.storm_start_s={self.storm_start_s} must come before sim.storm_end_s={self.storm_end_s}")
-        return self
-
-    @field_validator("faults")
-    @classmethod
-    def _faults(cls, value: tuple[str, ...]) -> tuple[str, ...]:
-        from .sources._faults import parse_fault
-
-        for spec in value:
-            parse_fault(spec)  # raises with the spec's problem
-        return value
-
-
-class SourceSettings(_Closed):
-    """Where the data comes from."""
-
-    spec: str = Field("sim", description="sim | replay:FILE.mcap | follow:FILE.mcap | ingest | mqtt")
-    id: str | None = Field(None, description="source id of the trend rows (default: sim, ingest, or the recording's file stem)")
-    speed: float | Literal["max"] = Field(1.0, description="sim/replay pace: a factor of real time, or max")
-    keep_running: bool = Field(False, description="keep serving the API after a replay (or sim run) ends")
-    rig: str | None = Field(None, description="rig description (.json/.toml) for ingest and mqtt, or to replace a recording's rig.json")
-    layout: Literal["benchmark", "dense"] = Field("benchmark", description="rig layout for ingest and mqtt when no rig file is given")
-    follow_poll_s: float = Field(0.2, gt=0, description="how often a followed file is checked for new data, s")
-    follow_idle_s: float | None = Field(None, gt=0, description="stop following after this long without growth, s (None: never)")
-    follow_rotations: bool = Field(
-        True, description="follow: after the writer closed the file, keep watching its name for a new file (a logger's "
-        "rotation; a replaced file is read from its start); false: the source ends with the file")
-    lateness_s: float = Field(1.0, gt=0, le=60, description="how long the merge waits for a late sensor before moving on, s")
-    silent_after_s: float = Field(2.0, gt=0, description="a sensor without data this long is reported degraded, s")
-    stuck_after_s: float = Field(
-        1.0, gt=0, description="a sensor whose readings stay exactly the same this long is reported degraded (stuck), s")
-    time_window_s: float = Field(
-        3600.0, gt=0, description="a stamp more than this before the source's newest one, or after its current time, is "
-        "rejected (implausible_time), s; ingest's current time runs on with the wall clock, sim and replay have their own")
-    max_ahead_s: float | None = Field(
-        None, gt=0, description="a sensor whose stamps run ahead of every other sensor of the source by more than this is "
-        "rejected (ahead_of_source: its clock jumped), s (None: lateness_s)")
-    future_tolerance_s: float = Field(
-        60.0, gt=0, description="ingest: no stamp may lie beyond the wall clock plus this, s; a stamp this close to the "
-        "wall clock is always on time")
-    limits: ValueLimits = Field(ValueLimits(), description="readings beyond these are rejected (implausible_value)")
-
-    @field_validator("speed", mode="before")
-    @classmethod
-    def _speed(cls, value: Any) -> Any:
-        if isinstance(value, str) and value != "max":
-            try:
-                value = float(value)
-            except ValueError:
-                raise ValueError(f"speed {value!r} must be a number > 0 or 'max'") from None
-        if isinstance(value, (int, float)) and not (value > 0 and value < 1e6):
-            raise ValueError(f"speed {value!r} must be > 0 (or 'max')")
-        return value
-
-    @field_validator("spec")
-    @classmethod
-    def _spec(cls, value: str) -> str:
-        return _check_spec(value)
-
-    @property
-    def kind(self) -> str:
-        return self.spec.partition(":")[0]
-
-    @property
-    def path(self) -> str | None:
-        return self.spec.partition(":")[2] or None
-
-
-class EstimatorSettings(_Closed):
-    """The IMMS estimator (model from the rig description)."""
+    The estimate stage's settings (``EstimateSettings``) and the model's sensors."""
 
     peripheral: Literal["gyro", "acc"] = Field("gyro", description="kinematic model of the peripheral IMUs")
     modes: int = Field(4, ge=1, le=5, description="unit deformations, Γ")
@@ -240,52 +146,6 @@ class EstimatorSettings(_Closed):
     imus: int = Field(4, ge=0, le=16, description="peripheral IMUs (chosen by effective independence)")
     tofs: int = Field(4, ge=0, le=16, description="ToF sensors")
     gauges: int = Field(4, ge=0, le=16, description="strain gauges")
-    calibration_s: float = Field(60.0, ge=5, le=600, description="data gathered for the rest calibration before filtering, s")
-    warmup_s: float = Field(120.0, ge=0, le=3600, description="windows starting less than this after the rest phase are not analysed (the filter converges), s")
-    chunk_s: float = Field(2.0, gt=0, le=60, description="data per estimator call, s")
-
-
-class ArchiveSettings(_Closed):
-    """Rotating MCAP recordings of everything incoming and of the estimates."""
-
-    enabled: bool = Field(True, description="write recordings")
-    directory: str | None = Field(None, description="where the recordings go (default: DATA_DIR/recordings)")
-    raw: Literal["auto", "always", "never"] = Field("auto", description="record incoming samples: auto = not for replay/follow (already a file)")
-    estimates: bool = Field(True, description="record /estimate/state")
-    estimate_decimation: int = Field(
-        4, ge=1, le=200, description="record every n-th estimate [4: 50 Hz of a 200 Hz estimator, Nyquist 25 Hz, three "
-        "times mode 6; the raw samples are recorded in full, so the estimates can be recomputed at any rate]")
-    rotate_mb: float = Field(256.0, gt=0, description="start a new file after this many MB of (uncompressed) messages")
-    rotate_s: float = Field(3600.0, gt=0, description="start a new file after this much data time, s")
-    flush_s: float = Field(2.0, gt=0, description="flush (end a chunk) at least this often, wall-clock s")
-
-
-class StorageSettings(_Closed):
-    """Where the service stores what it computes: the SQLite file ``db`` (the default) or, with
-    ``url``, a PostgreSQL database that the nodes of a fleet share."""
-
-    url: str | None = Field(
-        None, description="PostgreSQL database, postgresql://USER[:PASSWORD]@HOST:PORT/DB (the server's other options as "
-        "URL query parameters); unset: the SQLite file db")
-
-    @field_validator("url")
-    @classmethod
-    def _url(cls, value: str | None) -> str | None:
-        return None if value is None else check_postgres_url(value, "storage.url")
-
-
-class RetentionSettings(_Closed):
-    """What the service keeps of the past. Ages are in data time (the newest sample or window), so a
-    replay of old data keeps what it writes. Checked at start and every ``interval_s``."""
-
-    recordings_max_gb: float = Field(
-        100.0, gt=0, description="most disk the recordings may take, GB (oldest files go first); the default holds "
-        "a week of the benchmark rig: 0.52 GB per hour of data (raw samples and 50 Hz estimates, measured), 87 GB a week")
-    recordings_max_age_days: float | None = Field(7.0, gt=0, description="recordings whose data are older are deleted, days (None: no age limit)")
-    trends_max_age_days: float | None = Field(
-        400.0, gt=0, description="trend rows older than this before their source's newest window are deleted, days "
-        "(None: keep all; 2 MB per day of one structure with 5 modes and a window every 30 s, measured)")
-    interval_s: float = Field(60.0, gt=0, le=86400, description="how often retention runs, wall-clock s")
 
 
 class AlarmSettings(_Closed):
@@ -308,48 +168,18 @@ class AlarmSettings(_Closed):
     notify_stale: bool = Field(True, description="notify when an alarm goes stale (its source went silent)")
 
 
-class NotifySettings(_Closed):
-    """Notifications of alarm events: webhooks and e-mail, through a persistent outbox. Each target
-    gets an alarm's events in their order; a 4xx answer other than 408/429 is permanent (the
-    notification fails at once, reported), 5xx, 408, 429 and network errors are retried with
-    jittered exponential back-off; targets are served independently."""
+class StorageSettings(_Closed):
+    """Where the service stores what it computes: the SQLite file ``db`` (the default) or, with
+    ``url``, a PostgreSQL database that the nodes of a fleet share."""
 
-    webhooks: tuple[str, ...] = Field((), description="URLs that receive a JSON POST per alarm event")
-    webhook_timeout_s: float = Field(5.0, gt=0, description="timeout of one webhook attempt, s")
-    retry_initial_s: float = Field(1.0, gt=0, description="first retry delay, s (doubles each attempt, times a random 0.5-1)")
-    retry_max_s: float = Field(300.0, gt=0, description="longest retry delay, s")
-    max_attempts: int | None = Field(None, ge=1, description="attempts before a notification is given up (None: no limit)")
-    give_up_after_s: float = Field(
-        7 * 86400.0, gt=0, description="a notification still failing this long after its event is given up (logged and "
-        "counted as failed), s")
-    smtp_host: str | None = Field(None, description="SMTP server for e-mail (None: no e-mail)")
-    smtp_port: int = Field(25, ge=1, le=65535, description="SMTP port")
-    smtp_starttls: bool = Field(False, description="use STARTTLS")
-    smtp_user: str | None = Field(None, description="SMTP user (password from env SHM_SMTP_PASSWORD)")
-    mail_from: str = Field("shm@localhost", description="sender address")
-    mail_to: tuple[str, ...] = Field((), description="recipients")
+    url: str | None = Field(
+        None, description="PostgreSQL database, postgresql://USER[:PASSWORD]@HOST:PORT/DB (the server's other options as "
+        "URL query parameters); unset: the SQLite file db")
 
-    @field_validator("webhooks")
+    @field_validator("url")
     @classmethod
-    def _urls(cls, value: tuple[str, ...]) -> tuple[str, ...]:
-        # Parsed here, once, as the notifier will use them: a URL the HTTP client cannot use is a
-        # configuration error at start, not a notification failing for ever.
-        import httpx
-
-        for url in value:
-            try:
-                parsed = httpx.URL(url)
-            except (httpx.InvalidURL, TypeError, ValueError) as exc:
-                raise ValueError(f"webhook {url!r} is not a valid URL: {exc}") from None
-            if parsed.scheme not in ("http", "https"):
-                raise ValueError(f"webhook {url!r} must be an http:// or https:// URL")
-            if not parsed.host:
-                raise ValueError(f"webhook {url!r} has no host")
-            if parsed.port is not None and not 0 < parsed.port < 65536:
-                raise ValueError(f"webhook {url!r}: port {parsed.port} is not within 1-65535")
-        if len(set(value)) != len(value):
-            raise ValueError(f"webhooks {list(value)} name a URL twice")
-        return value
+    def _url(cls, value: str | None) -> str | None:
+        return None if value is None else check_postgres_url(value, "storage.url")
 
 
 class NodeSettings(_Closed):
@@ -361,116 +191,6 @@ class NodeSettings(_Closed):
         "third of it): a node that dies loses its structures to the others within this")
 
 
-MQTT_PASSWORD_ENV = "SHM_MQTT_PASSWORD"
-
-
-class MqttSettings(_Closed):
-    """The MQTT broker that structures with ``source = "mqtt"`` take their data from: each
-    subscribes ``TOPIC_PREFIX/ID/ingest`` with QoS 1 in a persistent session of its own (client id
-    ``shm-TOPIC_PREFIX-ID``), each message's body a ``POST /api/ingest`` body. The password comes
-    from ``password_file`` or the environment variable SHM_MQTT_PASSWORD, never from this file."""
-
-    url: str | None = Field(None, description="the broker, mqtt://HOST[:PORT] (default port 1883) or mqtts://HOST[:PORT] "
-                            "(TLS, default port 8883); needed when a structure's source is mqtt")
-    topic_prefix: str = Field("shm", min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+(/[A-Za-z0-9_-]+)*$",
-                              description="a structure ID's bodies are published to TOPIC_PREFIX/ID/ingest")
-    username: str | None = Field(None, description="user name at the broker (None: anonymous)")
-    password_file: str | None = Field(None, description="file holding the broker password (first line); else the "
-                                      "environment variable SHM_MQTT_PASSWORD")
-    ca_file: str | None = Field(None, description="mqtts: CA certificates (PEM) the broker's certificate is checked "
-                                "against (default: the system's)")
-    cert_file: str | None = Field(None, description="mqtts: this client's certificate (PEM), for brokers that require one")
-    key_file: str | None = Field(None, description="mqtts: the private key (PEM) of cert_file")
-    tls_insecure: bool = Field(False, description="mqtts: accept a broker certificate whose host name does not match "
-                               "(the chain is still checked; for a broker reached by an address its certificate lacks)")
-    keepalive_s: int = Field(30, ge=5, le=3600, description="MQTT keep-alive, s: a dead connection is noticed within "
-                             "1.5 times this")
-    session_expiry_s: int = Field(
-        7 * 86400, ge=60, le=2**32 - 2, description="how long the broker keeps a structure's session, and the messages "
-        "published to it, while no node holds the structure, s")
-    receive_maximum: int = Field(
-        2000, ge=2, le=65535, description="bodies the broker sends a structure before it has acknowledged the first; "
-        "a body is acknowledged once the window after it is committed, so half of this must hold the bodies of the "
-        "calibration, warm-up and two windows (2000: 1 s bodies)")
-    reconnect_max_s: float = Field(30.0, ge=1, le=3600, description="longest wait between attempts to reach the broker, s "
-                                   "(from 1 s, doubling)")
-
-    @field_validator("url")
-    @classmethod
-    def _url(cls, value: str | None) -> str | None:
-        if value is None:
-            return None
-        from urllib.parse import urlsplit
-
-        parts = urlsplit(value)
-        if parts.scheme not in ("mqtt", "mqtts"):
-            raise ValueError(f"url {value!r} must be mqtt://HOST[:PORT] or mqtts://HOST[:PORT]")
-        try:
-            port = parts.port
-        except ValueError:
-            raise ValueError(f"url {value!r}: the port must be a number within 1-65535") from None
-        if not parts.hostname:
-            raise ValueError(f"url {value!r} has no host")
-        if port == 0 or parts.path not in ("", "/") or parts.query or parts.fragment:
-            raise ValueError(f"url {value!r} must be mqtt://HOST[:PORT] or mqtts://HOST[:PORT], nothing after the port "
-                             "(the topics come from topic_prefix)")
-        if parts.username or parts.password:
-            raise ValueError(f"url {value!r}: give the user as mqtt.username and the password in mqtt.password_file "
-                             "or SHM_MQTT_PASSWORD, not in the URL")
-        return value
-
-    @field_validator("password_file", "ca_file", "cert_file", "key_file")
-    @classmethod
-    def _file(cls, value: str | None) -> str | None:
-        if value is not None and not Path(value).is_file():
-            raise ValueError(f"{value} does not exist (or is not a file)")
-        return value
-
-    @model_validator(mode="after")
-    def _tls(self) -> "MqttSettings":
-        if (self.cert_file is None) != (self.key_file is None):
-            raise ValueError("mqtt.cert_file and mqtt.key_file come together (a client certificate and its key)")
-        tls_keys = [k for k in ("ca_file", "cert_file", "tls_insecure") if k in self.model_fields_set]
-        if tls_keys and self.url is not None and not self.url.startswith("mqtts:"):
-            raise ValueError(f"mqtt.{tls_keys[0]} needs TLS: an mqtts:// url")
-        return self
-
-    @property
-    def tls(self) -> bool:
-        return self.url is not None and self.url.startswith("mqtts:")
-
-    @property
-    def address(self) -> tuple[str, int]:
-        """(host, port) of ``url``."""
-        from urllib.parse import urlsplit
-
-        parts = urlsplit(self.url or "")
-        return parts.hostname or "", parts.port or (8883 if self.tls else 1883)
-
-    def password(self, environ: Mapping[str, str] | None = None) -> str | None:
-        """The password: the first line of ``password_file``, else SHM_MQTT_PASSWORD (None: neither)."""
-        if self.password_file is not None:
-            try:
-                text = Path(self.password_file).read_text(encoding="utf-8")
-            except OSError as exc:
-                raise SettingsError(f"mqtt.password_file: cannot read {self.password_file}: {exc}") from None
-            return text.splitlines()[0].strip() if text.strip() else ""
-        env = os.environ if environ is None else environ
-        return env.get(MQTT_PASSWORD_ENV) or None
-
-
-_SOURCE_SPEC = "sim | replay:FILE.mcap | follow:FILE.mcap | ingest | mqtt"
-
-
-def _check_spec(value: str) -> str:
-    kind, _, arg = value.partition(":")
-    if kind in ("sim", "ingest", "mqtt") and not arg:
-        return value
-    if kind in ("replay", "follow") and arg:
-        return value
-    raise ValueError(f"source {value!r} must be sim, ingest, mqtt, replay:FILE.mcap or follow:FILE.mcap")
-
-
 class StructureSettings(_Closed):
     """One structure of a fleet (``[[structures]]``). Its tables ``sim``, ``estimator``,
     ``analytics`` and ``alarms`` override the keys of the service's tables of the same name for
@@ -478,7 +198,7 @@ class StructureSettings(_Closed):
 
     id: str = Field(..., min_length=1, max_length=64, pattern=r"^[a-z0-9-]+$",
                     description="structure id ([a-z0-9-]): the source id of its trend rows, alarms and notifications")
-    source: str = Field("sim", description=_SOURCE_SPEC)
+    source: str = Field("sim", description=SOURCE_SPEC)
     rig: str | None = Field(None, description="rig description (.json/.toml) for ingest and mqtt, or to replace a recording's rig.json")
     sim: dict[str, Any] = Field(default_factory=dict, description="keys of [sim] for this structure (e.g. seed)")
     estimator: dict[str, Any] = Field(default_factory=dict, description="keys of [estimator] for this structure")
@@ -488,7 +208,7 @@ class StructureSettings(_Closed):
     @field_validator("source")
     @classmethod
     def _spec(cls, value: str) -> str:
-        return _check_spec(value)
+        return check_spec(value)
 
 
 class ServiceSettings(_Closed):
@@ -518,9 +238,8 @@ class ServiceSettings(_Closed):
     storage_alarm_sync: Literal["normal", "full"] = Field(
         "full", description="SQLite synchronous mode of transactions that write alarms, alarm events or the "
         "notification outbox (full: they survive a power loss)")
-    storage_retry_s: float = Field(
-        10.0, ge=0, le=3600, description="how long a write is retried on a transient database error (locked by another "
-        "process, disk full, I/O error) before the window waits in memory for the next attempt, s")
+    # the commit stage's retry under the key users know (one definition: CommitSettings.retry_s)
+    storage_retry_s: float = _key_of(CommitSettings, "retry_s")
     pipeline_threads: int = Field(
         3, ge=1, le=64, description="threads of a (worker) process that step its structures' pipelines, round-robin "
         "(each structure's data and analysis lanes; its source has a thread of its own)")
@@ -599,6 +318,13 @@ class ServiceSettings(_Closed):
             return int(self.workers)
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         return max(1, min(cores, len(self.structures), 64))
+
+    @property
+    def db_path(self) -> str:
+        """The database file: ``db``, which the validation resolved against ``data_dir``."""
+        if self.db is None:
+            raise SettingsError("db is not resolved (load the settings through ServiceSettings)")
+        return self.db
 
     @property
     def fleet(self) -> bool:
@@ -702,7 +428,8 @@ def render_toml(settings: ServiceSettings | None = None) -> str:
     lines = ["# shm serve configuration: every key, its default and what it means.", ""]
 
     def section(model: BaseModel, name: str | None) -> None:
-        scalars, tables = [], []
+        scalars: list[tuple[str, Any, Any]] = []
+        tables: list[tuple[str, Any, Any]] = []
         for key, info in type(model).model_fields.items():
             if key == "structures":
                 continue  # arrays of tables, after everything else

@@ -113,7 +113,7 @@ def storm_factor(t: np.ndarray | list[float], start_s: float, end_s: float, peak
 
     Examples
     --------
-    >>> storm_factor([0.0, 150.0, 200.0, 250.0, 400.0], 100.0, 300.0, 3.0).tolist()
+    >>> np.round(storm_factor([0.0, 150.0, 200.0, 250.0, 400.0], 100.0, 300.0, 3.0), 12).tolist()
     [1.0, 2.0, 3.0, 2.0, 1.0]
     """
     if not (math.isfinite(start_s) and math.isfinite(end_s) and start_s < end_s):

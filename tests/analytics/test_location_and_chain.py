@@ -7,6 +7,7 @@ import pytest
 from scipy import signal
 
 from analytics import AnalysisConfig, DamageLocation, analyze, locate_damage, mode_shape_curvature
+from contract import CURVATURE_CHART
 
 FS = 50.0
 ETA = np.linspace(0.5, 4.0, 8)
@@ -169,3 +170,18 @@ def test_decay_fit_stops_at_the_noise_floor():
 def test_bad_inputs(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_against_another_records_baseline_the_curvature_chart_warns_but_never_alarms():
+    """The same shape change as above, charted against a baseline learnt by a separate analysis (as
+    of another record): the statistic still rises beyond the alarm level, the chart stays at
+    "warning" and raises no curvature flag."""
+    t, b, exp = synthetic(mix_at=800.0, mix=0.15, seed=2)
+    own = analyze(t, b, S2, ETA, fs=FS, expected_hz=exp)
+    assert any(f["kind"] == "curvature" for f in own.flags)
+    res = analyze(t, b, S2, ETA, fs=FS, expected_hz=exp, baseline=own.baseline)
+    scores = [w.curvature_score for w in res.windows if w.curvature_score is not None]
+    assert max(scores) > AnalysisConfig().curvature_alarm_sigma
+    levels = {w.levels.get(CURVATURE_CHART) for w in res.windows}
+    assert levels <= {None, "ok", "warning"} and "warning" in levels
+    assert not [f for f in res.flags if f["kind"] == "curvature"]

@@ -66,6 +66,12 @@ def test_estimate_scores_both_planes_and_writes_the_xi_keys(capsys, biaxial_reco
     for key in ("b_xi[3]", "e_xi", "deflection_xi[9]", "curvature_xi[0]"):
         assert key in estimates.fields
     assert "b_xi[4]" not in estimates.fields
+    # its virtual loads: each station at its angle around the section (the grid's at 0, the +ζ face)
+    est = read_recording(out_path)
+    loads = est.metadata["loads"]
+    angles, names = json.loads(loads["angles_deg"]), json.loads(loads["names"])
+    assert len(angles) == len(names) and angles[len(names) - 16:] == [0.0] * 16
+    assert est.channels["/estimate/loads"].values.shape[0] == estimates.values.shape[0]
 
 
 def test_modes_xi_sets_the_xi_unit_deformations(capsys, biaxial_recording):

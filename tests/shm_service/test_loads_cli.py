@@ -289,3 +289,23 @@ def test_damage_and_life_are_withheld_where_the_virtual_strain_does_not_hold():
     stations = [station(1.0, 0.04)]
     out = withhold_figures(stations, [{"name": "g3", "strain_rms_discrepancy": 10.0}])
     assert "strain gauge g3 by 1000%" in out[0]["reason"] and stations[0]["life_at_this_load_years"] is None
+
+
+@pytest.mark.slow
+def test_a_mast_with_as_many_gauges_as_modes_keeps_its_band_in_sample(capsys, tmp_path):
+    """Without ToFs, leaving one of Γ gauges out leaves the unit deformations unobservable: each
+    gauge's residual stays in sample (widened by the leverage bound), and shm loads says so."""
+    from pathlib import Path
+
+    from analytics import UNKNOWN_LEVERAGE
+
+    rig = Path(__file__).resolve().parents[2] / "examples" / "mast" / "rig.json"
+    recording = tmp_path / "mast.mcap"
+    assert main(["simulate", "--rig", str(rig), "--duration", "120", "--seed", "3", "--out", str(recording)]) == 0
+    capsys.readouterr()
+    code, out, err = run(capsys, "loads", str(recording), "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert [(g["name"], g["out_of_sample"], g["leverage"]) for g in doc["gauges"]] == [
+        (f"g{j}", False, UNKNOWN_LEVERAGE) for j in range(1, 5)]
+    assert all(s["band_half_width"] is not None for s in doc["stations"])

@@ -30,18 +30,64 @@ from email.message import EmailMessage
 from typing import Any
 
 import httpx
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from .._config import NotifySettings
-from ..stages._sinks import SinkGuard
+from ._sinks import SinkGuard
 from ..storage._storage import Storage
 
-__all__ = ["DeliveryResult", "Notifier", "classify_http", "notify_targets", "retry_delay"]
+__all__ = ["DeliveryResult", "NotifySettings", "Notifier", "classify_http", "notify_targets", "retry_delay"]
 
 log = logging.getLogger("shm.serve.notify")
 
 #: Outcome kinds of one attempt (counted in /metrics): sent; retry (a temporary failure, tried
 #: again later); permanent (refused for good by the target); given_up (retried too long).
 OUTCOMES = ("sent", "retry", "permanent", "given_up")
+
+
+class NotifySettings(BaseModel):
+    """Notifications of alarm events: webhooks and e-mail, through a persistent outbox. Each target
+    gets an alarm's events in their order; a 4xx answer other than 408/429 is permanent (the
+    notification fails at once, reported), 5xx, 408, 429 and network errors are retried with
+    jittered exponential back-off; targets are served independently."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    webhooks: tuple[str, ...] = Field((), description="URLs that receive a JSON POST per alarm event")
+    webhook_timeout_s: float = Field(5.0, gt=0, description="timeout of one webhook attempt, s")
+    retry_initial_s: float = Field(1.0, gt=0, description="first retry delay, s (doubles each attempt, times a random 0.5-1)")
+    retry_max_s: float = Field(300.0, gt=0, description="longest retry delay, s")
+    max_attempts: int | None = Field(None, ge=1, description="attempts before a notification is given up (None: no limit)")
+    give_up_after_s: float = Field(
+        7 * 86400.0, gt=0, description="a notification still failing this long after its event is given up (logged and "
+        "counted as failed), s")
+    smtp_host: str | None = Field(None, description="SMTP server for e-mail (None: no e-mail)")
+    smtp_port: int = Field(25, ge=1, le=65535, description="SMTP port")
+    smtp_starttls: bool = Field(False, description="use STARTTLS")
+    smtp_user: str | None = Field(None, description="SMTP user (password from env SHM_SMTP_PASSWORD)")
+    mail_from: str = Field("shm@localhost", description="sender address")
+    mail_to: tuple[str, ...] = Field((), description="recipients")
+
+    @field_validator("webhooks")
+    @classmethod
+    def _urls(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        # Parsed here, once, as the notifier will use them: a URL the HTTP client cannot use is a
+        # configuration error at start, not a notification failing for ever.
+        import httpx
+
+        for url in value:
+            try:
+                parsed = httpx.URL(url)
+            except (httpx.InvalidURL, TypeError, ValueError) as exc:
+                raise ValueError(f"webhook {url!r} is not a valid URL: {exc}") from None
+            if parsed.scheme not in ("http", "https"):
+                raise ValueError(f"webhook {url!r} must be an http:// or https:// URL")
+            if not parsed.host:
+                raise ValueError(f"webhook {url!r} has no host")
+            if parsed.port is not None and not 0 < parsed.port < 65536:
+                raise ValueError(f"webhook {url!r}: port {parsed.port} is not within 1-65535")
+        if len(set(value)) != len(value):
+            raise ValueError(f"webhooks {list(value)} name a URL twice")
+        return value
 
 
 def notify_targets(settings: NotifySettings) -> list[tuple[str, str]]:
@@ -132,10 +178,6 @@ class Notifier:
     def sent(self) -> int:
         return self.outcomes["sent"]
 
-    @property
-    def failed_attempts(self) -> int:
-        return self.outcomes["retry"] + self.outcomes["permanent"] + self.outcomes["given_up"]
-
     def snapshot(self) -> tuple[Counter, Any]:
         """(outcomes of this run, the notifier sink's status) read at one instant."""
         with self._lock:
@@ -149,8 +191,9 @@ class Notifier:
             if (channel, target) not in configured:
                 n = self.storage.fail_pending(channel, target, "target no longer configured (notify settings)")
                 log.warning("%d pending notification(s) to %s %s failed: the target is no longer configured", n, channel, target)
-        for target in self.targets:
-            thread = threading.Thread(target=self._worker, args=(target,), name=f"notify-{target[0]}", daemon=True)
+        for channel_target in self.targets:
+            thread = threading.Thread(target=self._worker, args=(channel_target,), name=f"notify-{channel_target[0]}",
+                                      daemon=True)
             thread.start()
             self._threads.append(thread)
 
@@ -274,6 +317,8 @@ class Notifier:
 
     def _mail(self, to: list[str], payload: dict[str, Any]) -> DeliveryResult:
         s = self.settings
+        if s.smtp_host is None:  # start() failed every e-mail left pending when the settings had no server
+            return DeliveryResult("permanent", "no smtp_host configured")
         alarm = payload["alarm"]
         msg = EmailMessage()
         msg["Subject"] = f"[shm] {payload['level']} {payload['event']}: {alarm['message']}"

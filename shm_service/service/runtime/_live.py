@@ -23,6 +23,10 @@ LIVE_HZ = 10.0
 LIVE_CAPACITY = 600
 #: A read keeps the ring filled this long (a dashboard polls every fraction of a second).
 WATCH_S = 20.0
+#: A biaxial beam's "all" hot spots are judged anew at most this often (wall s): a judgement counts
+#: the rainflow of every kept estimate at each of ~72 points around the section, about 0.8 s of a
+#: core for a full ring of noisy estimates, so at most ~8 % of a core while someone watches.
+JUDGE_EVERY_S = 10.0
 
 
 class LiveRing:
@@ -44,6 +48,7 @@ class LiveRing:
         self._lock = threading.Lock()
         # (analytics.VirtualLoads, b of states): each estimate's strain, stress and moment at the stations
         self.loads = loads
+        self._judged_at = -np.inf  # monotonic s when an "all" hot spot's worst angle was last judged
 
     @property
     def watched(self) -> bool:
@@ -90,6 +95,20 @@ class LiveRing:
             truths = [it[3] for it in items] if self._truths else None
             return self._seq, [it[1] for it in items], [it[2].tolist() for it in items], truths
 
+    def _biaxial(self, virtual: Any, b: tuple[np.ndarray, np.ndarray],
+                 b_of: Callable[[np.ndarray], Any]) -> dict[str, np.ndarray | None]:
+        """A biaxial beam's loads of the estimates read; an "all" hot spot's worst angle judged anew
+        over every estimate kept, at most every ``JUDGE_EVERY_S`` (a few estimates read at a time say
+        little of its DELs, and a steady angle reads better than one that jumps between reads)."""
+        now = time.monotonic()
+        if virtual.worst_around.any() and now - self._judged_at >= JUDGE_EVERY_S:
+            with self._lock:
+                kept = np.array([it[2] for it in self._items], dtype=float)
+            if kept.shape[0] >= 2:
+                virtual.judge(*b_of(kept))
+                self._judged_at = now
+        return virtual(b[0], b_xi=b[1])
+
     def document(self, after: int, sensors: dict[str, str]) -> LiveEstimatesDocument:
         seq, times, states, truths = self._read(after)
         extra: dict[str, Any] = {}
@@ -97,7 +116,10 @@ class LiveRing:
             virtual, b_of = self.loads
             extra = {"loads_stations_m": virtual.positions.tolist(), "loads_station_names": list(virtual.names)}
             if states:
-                out = virtual(b_of(np.asarray(states, dtype=float)))
-                extra.update({k: None if v is None else v.tolist() for k, v in out.items()})
+                b = b_of(np.asarray(states, dtype=float))
+                out = virtual(b) if not isinstance(b, tuple) else self._biaxial(virtual, b, b_of)
+                extra.update({k: None if v is None else v.tolist() for k, v in out.items() if k != "angles_deg"})
+            if hasattr(virtual, "angles_deg"):  # a biaxial beam's (analytics.BiaxialVirtualLoads)
+                extra.update(loads_angles_deg=virtual.angles_deg.tolist(), loads_worst_around=virtual.worst_around.tolist())
         return LiveEstimatesDocument(source=self.source_id, seq=seq, state_names=self.state_names, t_s=times, x=states,
                                      sensors=sensors, watch_s=self.watch_s, truth_deflection=truths, **extra)

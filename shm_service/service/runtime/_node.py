@@ -175,7 +175,7 @@ class NodeService(MonitoringService):
         if structure is None:
             return
         structure.stop_source()
-        if lost and isinstance(structure, Structure) and structure.pipeline is not None:
+        if lost and isinstance(structure, Structure) and structure.attached:
             structure.pipeline.stop_deadline = time.monotonic()
         if structure.started:
             structure.wait(30.0)
@@ -212,6 +212,13 @@ class NodeService(MonitoringService):
                 rows.append(StructureSummaryDocument(id=sid, kind=kind, state="starting", node=None,
                                                      error="no node holds it: one takes it within nodes.lease_s"))
         return StructuresDocument(structures=rows)
+
+    def fleet_metrics(self) -> str:
+        """``/metrics`` of this node: its own structures (each node is scraped for its own)."""
+        from ..http._metrics import fleet_metrics
+
+        own = [s for s in self.structures_document().structures if s.node == self.node]
+        return fleet_metrics(StructuresDocument(structures=own), self.statuses())
 
     def health(self) -> Any:
         doc = super().health()

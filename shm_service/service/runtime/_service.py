@@ -7,7 +7,6 @@ import logging
 import threading
 import time
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 
@@ -34,7 +33,7 @@ from ..http._metrics import fleet_metrics
 from ..alarms._notify import Notifier, notify_targets
 from ..storage._retention import RetentionWorker
 from ._scheduler import Scheduler, SchedulerSettings
-from ..stages._sinks import SinkGuard
+from ..alarms._sinks import SinkGuard
 from ..sources._sources import IngestSource
 from ..storage._storage import Storage, is_transient
 from ..storage._fatigue import fatigue_document
@@ -148,7 +147,7 @@ class MonitoringService(_StoredRows, SingleStructureView):
         self.models = _ModelCache()
         self.structures: dict[str, Structure | _FailedStructure] = self._build_structures(settings)
         # a worker of a fleet writes through its front (one writer per database: storage._writer)
-        self.storage = open_storage(settings.db, notify_targets=notify_targets(settings.notify),
+        self.storage = open_storage(settings.db_path, notify_targets=notify_targets(settings.notify),
                                     notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
                                     notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
                                     alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
@@ -247,7 +246,7 @@ class MonitoringService(_StoredRows, SingleStructureView):
         structure's data time and pace start with its own first batch."""
         if len(paced) < 2:
             return 0.0
-        step_wall = max(s.settings.analytics.window_s * (1 - s.settings.analytics.overlap) / s.speed for s in paced)
+        step_wall = max(s.settings.analytics.window_s * (1 - s.settings.analytics.overlap) / s.speed for s in paced if s.speed)
         return min(most_s, min(step_wall, span_s) / len(paced))
 
     def _start_staggered(self, structures: list[Structure], delay_s: float) -> None:
@@ -284,8 +283,8 @@ class MonitoringService(_StoredRows, SingleStructureView):
             stale = self.storage.mark_stale(now - a.stale_after_s, now)
             if stale:
                 log.warning("alarm(s) %s marked stale: their source has delivered no data for %.0f s", stale, a.stale_after_s)
-            if a.repeat_interval_s is not None and self.storage.renotify_due(a.repeat_interval_s, now):
-                pass
+            if a.repeat_interval_s is not None:  # queues a re-notification of each alarm still firing since then
+                self.storage.renotify_due(a.repeat_interval_s, now)
             self.notifier.wake()
         except Exception as exc:
             if is_transient(exc):  # the database locked or full for a while: expected, no traceback
@@ -400,7 +399,8 @@ class MonitoringService(_StoredRows, SingleStructureView):
     def structure_model(self, structure_id: str) -> StructureModel:
         structure = self.structure(structure_id)
         m = structure.model
-        return StructureModel(id=structure.id, rig=structure.rig, units=m.units, layout=m.state_layout, stations=m.stations)
+        return StructureModel(id=structure.id, rig=structure.rig, units=m.units, layout=m.state_layout, stations=m.stations,
+                              units_xi=getattr(m, "units_xi", None))
 
     def live(self, structure_id: str, after: int = 0) -> LiveEstimatesDocument:
         """The structure's newest estimates after ``after`` (``GET /api/structures/{id}/live``); starts its watch."""
@@ -415,8 +415,4 @@ class MonitoringService(_StoredRows, SingleStructureView):
         result = structure.source.submit(document)
         return None if result is None else IngestResultDocument(**result.as_dict())
 
-
-def _check(settings: ServiceSettings) -> None:
-    if settings.source.kind == "replay" and not Path(settings.source.path or "").is_file():
-        raise SettingsError(f"replay: {settings.source.path} does not exist")
 

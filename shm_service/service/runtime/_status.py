@@ -19,7 +19,7 @@ from contract import (
 
 from .._config import ServiceSettings
 from ..alarms._notify import Notifier
-from ..stages._sinks import SinkGuard
+from ..alarms._sinks import SinkGuard
 from ..storage._storage import Storage
 from ..storage._url import redact
 from ._progress import describe_progress

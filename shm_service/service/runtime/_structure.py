@@ -27,18 +27,14 @@ from estimator import build_model
 
 from ...recording import RecordingError
 from ..stages._archive import Archive
-from ..stages._checks import CheckSettings
 from .._config import ServiceSettings
-from ._delegate import ReadThrough
+from .._delegate import ReadThrough
 from ._live import LiveRing
-from ..stages._merge import MergeSettings
 from ..stages._pipeline import Batch, Pipeline
 from ...recording._plausibility import SourceClock
-from ..stages._sinks import SinkGuard
+from ..alarms._sinks import SinkGuard
 from ..sources._sources import END, FileSource, IngestSource, SimSource, Source
 from ..stages._commit import CommitSettings
-from ..stages._estimate import EstimateSettings
-from ..stages._outputs import OutputSettings
 from ..storage._storage import Storage
 
 __all__ = ["NotSingleStructure", "SingleStructureView", "RigPending", "ServiceError", "Structure", "StructureUnavailable"]
@@ -84,7 +80,7 @@ class _AnalysisLane:
 
     def ready(self) -> bool:
         pipeline = self.structure.pipeline
-        return pipeline.lane_started and pipeline.inbox.ready()
+        return pipeline.lane_started and pipeline.inbox is not None and pipeline.inbox.ready()
 
     def step(self) -> None:
         self.structure.pipeline.step_analysis()
@@ -162,7 +158,7 @@ class Structure:
         self.model_document = ModelDocument(peripheral=m.selection.peripheral, support=m.rig.support, gamma=m.gamma,
                                             state_names=list(m.state_layout.names),
                                             unit_modes=[list(g) for g in m.mode_map.unit_modes])
-        self.pipeline: Pipeline | None = None
+        self._pipeline: Pipeline | None = None  # created by attach
         self.archive: Archive | None = None
         # its estimates for a live view, kept while watched, with their virtual strain, stress and moment
         self.live = LiveRing(self.id, list(m.state_layout.names), loads=_virtual_loads(self.rig, m))
@@ -174,43 +170,32 @@ class Structure:
         if settings.archive.enabled:
             self.archive = Archive(settings.archive, self.rig, self.id, getattr(self.source, "metadata", None))
         raw = settings.archive.raw == "always" or (settings.archive.raw == "auto" and self.source.kind in ("sim", "ingest", "mqtt"))
-        self.pipeline = Pipeline(
+        self._pipeline = Pipeline(
             # the alarm hysteresis of [alarms] is in the engine's configuration (one place: engine_config)
             model=self.model, source_id=self.id, storage=storage, analysis=settings.engine_config(),
-            estimate=EstimateSettings(calibration_s=est.calibration_s, chunk_s=est.chunk_s, warmup_s=est.warmup_s),
-            merge=MergeSettings(lateness_s=src.lateness_s),
-            checks=CheckSettings(stuck_after_s=src.stuck_after_s, silent_after_s=src.silent_after_s),
+            # the sections are the stages' settings: [estimator] the estimate stage's, [source] the merge's
+            # and the checks', [archive] the outputs'
+            estimate=est, merge=src, checks=src, outputs=settings.archive, record_raw=raw,
             commits=CommitSettings(retry_s=settings.storage_retry_s),
-            outputs=OutputSettings(archive_raw=raw, archive_estimates=settings.archive.estimates,
-                                   estimate_decimation=settings.archive.estimate_decimation),
             archive=self.archive, sink_guard=sink_guard,
             # ingest and mqtt are judged per message by their validator (which counts what it refused)
             clock=None if self.source.kind in ("ingest", "mqtt") else self._clock(live=False), limits=src.limits, analysis_lane=True,
         )
         self.pipeline.live = self.live
         if self.source.kind == "mqtt":
-            self.source.committed_until_s = self._committed_until(storage)  # type: ignore[attr-defined]
+            self.source.committed_until_s = _committed_until(self, storage)  # type: ignore[attr-defined]
 
-    def _committed_until(self, storage: Storage) -> Callable[[], float | None]:
-        """The data time (UNIX s) before which this structure, resumed from its committed state, needs
-        no sample again (None: nothing committed yet): it analyses from the window after the last one
-        committed, and a resumed estimator skips the windows of its first rest_end + warmup_s (its
-        filter converging), so its data must begin that much before."""
-        resumed = (storage.load_state(self.id) or {}).get("last_window_start_s")
-        a = self.settings.engine_config()
-        step_s = a.window_s * (1 - a.overlap)
-        warmup_s = self.settings.estimator.warmup_s
-        pipeline = self.pipeline
+    @property
+    def attached(self) -> bool:
+        """Whether ``attach`` created the pipeline."""
+        return self._pipeline is not None
 
-        def until() -> float | None:
-            last = pipeline.commits.last_window
-            start = last.start_s if last is not None else resumed
-            calibration = pipeline.estimate.estimator.calibration
-            if start is None or calibration is None:
-                return None
-            return float(start) + step_s - float(calibration.rest_end) - warmup_s
-
-        return until
+    @property
+    def pipeline(self) -> Pipeline:
+        """The structure's stages, wired (created by ``attach``, which comes before anything asks)."""
+        if self._pipeline is None:
+            raise RuntimeError(f"structure {self.id!r}: its pipeline is created by attach()")
+        return self._pipeline
 
     # -- construction -----------------------------------------------------------------------
 
@@ -337,8 +322,8 @@ class Structure:
 
     def stop_source(self) -> None:
         """Stop the source; the backlog is estimated and analysed for ``stop_drain_s`` more, the rest set aside."""
-        if self.pipeline is not None:
-            self.pipeline.stop_deadline = time.monotonic() + self.settings.stop_drain_s
+        if self._pipeline is not None:
+            self._pipeline.stop_deadline = time.monotonic() + self.settings.stop_drain_s
         self.source.stop()  # returns once no request of an ingest source is putting a batch any more
         self._stopping = True
 
@@ -394,6 +379,28 @@ class Structure:
                                         data_time_s=None if self.pipeline.newest_ns is None else self.pipeline.newest_ns / 1e9,
                                         lag_s=self.lag_s(), windows=self.pipeline.windows_committed,
                                         active_alarms=dict(self.pipeline.committed_alarms))
+
+
+def _committed_until(structure: "Structure", storage: Storage) -> Callable[[], float | None]:
+    """The data time (UNIX s) before which ``structure``, resumed from its committed state, needs
+    no sample again (None: nothing committed yet): it analyses from the window after the last one
+    committed, and a resumed estimator skips the windows of its first rest_end + warmup_s (its
+    filter converging), so its data must begin that much before."""
+    resumed = (storage.load_state(structure.id) or {}).get("last_window_start_s")
+    a = structure.settings.engine_config()
+    step_s = a.window_s * (1 - a.overlap)
+    warmup_s = structure.settings.estimator.warmup_s
+    pipeline = structure.pipeline
+
+    def until() -> float | None:
+        last = pipeline.commits.last_window
+        start = last.start_s if last is not None else resumed
+        calibration = pipeline.estimate.estimator.calibration
+        if start is None or calibration is None:
+            return None
+        return float(start) + step_s - float(calibration.rest_end) - warmup_s
+
+    return until
 
 
 def _make_source(self: Structure) -> Source:
@@ -474,9 +481,13 @@ class _FailedStructure:
 
 def _virtual_loads(rig: RigDescription, model: Any) -> tuple[Any, Any] | None:
     """(analytics.VirtualLoads of the rig's hot spots and a 16-station grid, b of states) for the live view."""
-    from analytics import VirtualLoads
+    from analytics import BiaxialVirtualLoads, VirtualLoads
 
     try:
+        if getattr(model, "units_xi", None) is not None:  # both planes: each station at its point of the section
+            layout = model.state_layout
+            return (BiaxialVirtualLoads.from_rig_biaxial(rig, model.units.curvature, model.units_xi.curvature),
+                    lambda x: (layout.b_of(x), layout.b_xi_of(x)))
         return VirtualLoads.from_rig(rig, model.units.curvature), model.state_layout.b_of
     except ValueError as exc:  # never stops the service: the live view goes without loads
         log.warning("no virtual loads in the live view: %s", exc)

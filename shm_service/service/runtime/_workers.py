@@ -43,7 +43,8 @@ from ..sources._ingest import IngestError
 from ._launch import ServeProcess, ServeStartError, start_serve
 from ..alarms._notify import Notifier, notify_targets
 from ._processes import StaleWorkers, record_workers, stop_stale_workers
-from ._service import NotSingleStructure, ServiceError, StructureUnavailable, _ModelCache, _StoredRows
+from ._service import NotSingleStructure, ServiceError, StructureUnavailable, _StoredRows
+from ._structure import _ModelCache
 from ..storage._storage import Storage
 from ..storage._writer import WriterServer
 
@@ -83,7 +84,7 @@ class WorkerFleet(_StoredRows):
         self.started_at = time.time()
         self.order = [s.id for s in settings.structures]
         # the database exists (and is migrated) before the workers open it
-        self.storage = Storage(settings.db, notify_targets=notify_targets(settings.notify),
+        self.storage = Storage(settings.db_path, notify_targets=notify_targets(settings.notify),
                                notify_levels=settings.alarms.notify_levels, notify_cleared=settings.alarms.notify_cleared,
                                notify_stale=settings.alarms.notify_stale, sync=settings.storage_sync,
                                alarm_sync=settings.storage_alarm_sync, retry_s=settings.storage_retry_s)
@@ -163,8 +164,10 @@ class WorkerFleet(_StoredRows):
             self.dashboard = start_dashboard(self, self.settings, self.token)
 
     def _drain(self, worker: _Worker) -> None:
-        with worker.process.stdout:  # type: ignore[union-attr]  (closed at its end: no pipe left to the GC)
-            for line in worker.process.stdout:  # type: ignore[union-attr]
+        stdout = worker.process.stdout
+        assert stdout is not None, "a worker is started with stdout=PIPE"
+        with stdout:  # closed at its end: no pipe left to the GC
+            for line in stdout:
                 line = line.strip()
                 if line:
                     worker.summary = line
@@ -352,7 +355,8 @@ class WorkerFleet(_StoredRows):
         rig = self.structure_rig(structure_id)
         settings = next(s for s in self.settings.structures if s.id == structure_id)
         model = self._models.get(rig, self.settings.for_structure(settings).estimator)
-        found = StructureModel(id=structure_id, rig=rig, units=model.units, layout=model.state_layout, stations=model.stations)
+        found = StructureModel(id=structure_id, rig=rig, units=model.units, layout=model.state_layout, stations=model.stations,
+                               units_xi=getattr(model, "units_xi", None))
         self._structure_models[structure_id] = found
         return found
 
@@ -371,7 +375,7 @@ def _fleet_exposition(fleet: WorkerFleet) -> str:
         except httpx.HTTPError as exc:
             log.warning("worker %d: /metrics failed: %s", worker.index, exc)
     outcomes, _ = fleet.notifier.snapshot()
-    overrides = {"shm_notifications_total": [({"outcome": k}, float(outcomes.get(k, 0)))
+    overrides: dict[str, list[tuple[dict[str, Any], float]]] = {"shm_notifications_total": [({"outcome": k}, float(outcomes.get(k, 0)))
                                              for k in ("sent", "retry", "permanent", "given_up")],
                  "shm_uptime_seconds": [({}, round(time.time() - fleet.started_at, 1))]}
     # the structures as the front lists them (a worker that died: its structures failed)

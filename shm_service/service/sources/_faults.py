@@ -143,6 +143,7 @@ def apply_faults(faults: list[Fault] | tuple[Fault, ...], topic: str, times_s: n
             elif f.kind == "spike":
                 values[hit, f.column] += f.value
             elif f.kind == "clock":
+                assert f.value is not None, "parse_fault gives a clock fault its shift"
                 stamps[hit] += int(round(f.value * _NS))
             elif f.kind != "stuck":
                 raise ValueError(f"unknown fault kind {f.kind!r}")

@@ -33,7 +33,7 @@ from typing import Any
 from contract import RigDescription
 
 from ...recording._plausibility import SourceClock, ValueLimits
-from .._config import MqttSettings
+from ._settings import MqttSettings
 from ..stages._pipeline import Batch
 from ._ingest import IngestError, IngestResult, IngestValidator, parse_body
 from ._sources import Source
@@ -158,7 +158,7 @@ class MqttSource(Source):
         client.on_connect = self._on_connect
         client.on_message = self._on_message
         client.on_disconnect = self._on_disconnect
-        properties = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+        properties = Properties(PacketTypes.CONNECT)
         properties.SessionExpiryInterval = s.session_expiry_s
         properties.ReceiveMaximum = s.receive_maximum
         host, port = s.address

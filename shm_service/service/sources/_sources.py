@@ -23,7 +23,7 @@ import numpy as np
 from contract import RigDescription, row_layout
 
 from ...recording import FollowBlock, RecordingError, RecordingFollower, classify_topic, read_recording
-from .._config import ServiceSettings
+from ._settings import SourceConfig
 from ._ingest import IngestResult, IngestValidator
 from ...recording._plausibility import SourceClock, ValueLimits
 from ..stages._pipeline import Batch
@@ -225,7 +225,7 @@ class _Pacer:
         return wall0 + (data_ns - data0) / _NS / self.speed - time.monotonic()
 
 
-def simulation_settings(settings: ServiceSettings):
+def simulation_settings(settings: SourceConfig):
     """The virtual rig's settings for ``--source sim`` (``sim`` section of the service settings)."""
     from ...virtual_rig import SimulationSettings
 
@@ -246,7 +246,7 @@ def simulation_settings(settings: ServiceSettings):
     return settings_for_rig(rig, SimulationSettings(**common), given)
 
 
-def simulated_rig(settings: ServiceSettings):
+def simulated_rig(settings: SourceConfig):
     """The rig description ``sim.rig`` names (None: the built-in sheet)."""
     if settings.sim.rig is None:
         return None
@@ -260,7 +260,7 @@ class SimSource(Source):
 
     kind = "sim"
 
-    def __init__(self, source_id: str, out: queue.Queue, settings: ServiceSettings, *, raw: bool, truth: bool,
+    def __init__(self, source_id: str, out: queue.Queue, settings: SourceConfig, *, raw: bool, truth: bool,
                  rig: RigDescription | None = None) -> None:
         super().__init__(source_id, out)
         from ...virtual_rig import VirtualRig, settings_for_rig
@@ -405,7 +405,7 @@ class FileSource(Source):
     """``replay:FILE`` (read to the end, paced or at max speed) or ``follow:FILE`` (a file being
     written; new chunks are read as the writer flushes them)."""
 
-    def __init__(self, source_id: str, out: queue.Queue, settings: ServiceSettings, *, follow: bool,
+    def __init__(self, source_id: str, out: queue.Queue, settings: SourceConfig, *, follow: bool,
                  rig: RigDescription | None, truth: bool) -> None:
         super().__init__(source_id, out)
         self.kind = "follow" if follow else "replay"

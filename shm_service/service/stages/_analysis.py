@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
 from analytics import AnalysisConfig, Baseline, EngineWindow, LoadsMonitor, ModalMonitor, MonitoringEngine, WindowResult, usability_document
 from contract import LoadsWindowDocument, SpectrumDocument, TrendRow
-from estimator import ImmsModel, damage_signatures
+from estimator import DamageSignatures, ImmsModel, damage_signatures
 
 from ...processing.analysis import trend_rows
 from ..alarms._changes import alarm_changes
@@ -76,7 +77,7 @@ class AnalysisStage:
         self.window_s = config.window_s
         self.step_s = config.window_s * (1 - config.overlap)
         self.min_coverage = min_coverage
-        self.signatures = None
+        self.signatures: DamageSignatures | None = None
         self.monitor = self._monitor(monitor_state, baseline)
         # the hot spots' loads in the same engine; its state (the rainflow residue, the
         # damage) is committed with every window, so a restart continues the count exactly
@@ -228,6 +229,7 @@ class AnalysisStage:
         self.learning_baseline = self.monitor.baseline is None
         rows = trend_rows(self.source_id, res, start, end)
         spec = res.spectrum
+        assert spec is not None, "an engine window has its spectrum"
         pad = spec.pad_factor
         f, amp = spec.frequencies[::pad], spec.amplitude[::pad]  # the unpadded DFT bins of the window
         keep = f <= 12.0
@@ -238,4 +240,6 @@ class AnalysisStage:
             baseline_hz=None if baseline is None else self._per_unit([m.f_ref_hz for m in baseline.modes]),
         )
         return WindowOutput(res, rows, spectrum, start, baseline is not None and not had_baseline,
-                            alarm_changes([*res.alarm_events, *w.loads_events]), w.loads)
+                            alarm_changes([*res.alarm_events, *w.loads_events]),
+                            # the engine's loads are the hot spots' document (analytics types them as object)
+                            cast("LoadsWindowDocument | None", w.loads))

@@ -3,49 +3,45 @@
 Each file is a valid recording of the contract (rig.json attached first, JSON messages, flushed
 at least every ``flush_s`` seconds so a crash loses at most that much). A new file starts after
 ``rotate_mb`` or ``rotate_s`` seconds of data. A file is named after its source and the data
-time of its first message (``parse_archive_name`` reads it back for retention).
+time of its first message (``storage._archive_names``: retention reads it back).
 """
 
 from __future__ import annotations
 
 import logging
-import re
 import time
-from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from contract import RigDescription
 
 from ...recording import ESTIMATE_TOPIC, RecordingWriter
-from .._config import ArchiveSettings
+from ..storage._archive_names import archive_file_name
 
-__all__ = ["Archive", "ArchiveName", "parse_archive_name"]
+__all__ = ["Archive", "ArchiveSettings"]
 
 log = logging.getLogger("shm.serve.archive")
 
-_STAMP = "%Y%m%dT%H%M%SZ"
-_NAME = re.compile(r"^(?P<source>.+)-(?P<start>\d{8}T\d{6}Z)-w\d{8}T\d{6}(?:-\d+)?\.mcap$")
 
+class ArchiveSettings(BaseModel):
+    """Rotating MCAP recordings of everything incoming and of the estimates."""
 
-@dataclass(frozen=True)
-class ArchiveName:
-    """What an archive file's name says: its source and the data time of its first message."""
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
-    source: str
-    start_s: float
-
-
-def parse_archive_name(path: str | Path) -> ArchiveName | None:
-    """The source and first data time (UNIX s) of an archive file, or None for any other file."""
-    match = _NAME.match(Path(path).name)
-    if match is None:
-        return None
-    start = datetime.strptime(match["start"], _STAMP).replace(tzinfo=timezone.utc)
-    return ArchiveName(match["source"], start.timestamp())
+    enabled: bool = Field(True, description="write recordings")
+    directory: str | None = Field(None, description="where the recordings go (default: DATA_DIR/recordings)")
+    raw: Literal["auto", "always", "never"] = Field("auto", description="record incoming samples: auto = not for replay/follow (already a file)")
+    estimates: bool = Field(True, description="record /estimate/state")
+    estimate_decimation: int = Field(
+        4, ge=1, le=200, description="record every n-th estimate [4: 50 Hz of a 200 Hz estimator, Nyquist 25 Hz, three "
+        "times mode 6; the raw samples are recorded in full, so the estimates can be recomputed at any rate]")
+    rotate_mb: float = Field(256.0, gt=0, description="start a new file after this many MB of (uncompressed) messages")
+    rotate_s: float = Field(3600.0, gt=0, description="start a new file after this much data time, s")
+    flush_s: float = Field(2.0, gt=0, description="flush (end a chunk) at least this often, wall-clock s")
 
 
 class Archive:
@@ -73,12 +69,11 @@ class Archive:
 
     def _open(self, first_ns: int) -> RecordingWriter:
         self.directory.mkdir(parents=True, exist_ok=True)
-        stamp = datetime.fromtimestamp(first_ns / 1e9, tz=timezone.utc).strftime(_STAMP)
         written = datetime.now(tz=timezone.utc).strftime("%Y%m%dT%H%M%S")
-        path = self.directory / f"{self.source_id}-{stamp}-w{written}.mcap"
+        path = self.directory / archive_file_name(self.source_id, first_ns, written)
         n = 1
         while path.exists():
-            path = self.directory / f"{self.source_id}-{stamp}-w{written}-{n}.mcap"
+            path = self.directory / archive_file_name(self.source_id, first_ns, written, n)
             n += 1
         self._writer = RecordingWriter(path, self.rig, metadata=self.metadata)
         self._path = path

@@ -27,8 +27,9 @@ class CheckSettings(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    stuck_after_s: float = Field(1.0, gt=0, description="a reading unchanged this long marks the sensor stuck, s")
-    silent_after_s: float = Field(5.0, gt=0, description="a sensor refused (or silent) this recently is degraded, s")
+    silent_after_s: float = Field(2.0, gt=0, description="a sensor without data this long is reported degraded, s")
+    stuck_after_s: float = Field(
+        1.0, gt=0, description="a sensor whose readings stay exactly the same this long is reported degraded (stuck), s")
 
 
 class SampleChecks:
@@ -124,7 +125,7 @@ class SampleChecks:
             if clock is not None and len(b):
                 clock.take(b.topic, int(b.log_time_ns[-1]), mono)
             out.append(b)
-        if whole:
+        if whole and clock is not None:  # a source jump is only found by a clock
             clock.record(None, "source_jump", sum(len(b) for b in out), clock.offset_s(None, min(firsts.values()), mono))
         return out
 

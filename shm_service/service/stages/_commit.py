@@ -39,7 +39,9 @@ class CommitSettings(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    retry_s: float = Field(5.0, ge=0, description="how long one write is retried on a transient database error, s")
+    retry_s: float = Field(
+        10.0, ge=0, le=3600, description="how long a write is retried on a transient database error (locked by another "
+        "process, disk full, I/O error) before the window waits in memory for the next attempt, s")
     max_pending: int = Field(20_000, ge=1, description="windows kept waiting with their trend rows; beyond, the oldest "
                              "waiting windows' rows are dropped (their alarms and state kept)")
 

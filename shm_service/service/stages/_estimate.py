@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -26,7 +27,7 @@ class EstimateSettings(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    calibration_s: float = Field(60.0, ge=5, le=600, description="data gathered for the rest calibration, s")
+    calibration_s: float = Field(60.0, ge=5, le=600, description="data gathered for the rest calibration before filtering, s")
     chunk_s: float = Field(2.0, gt=0, le=60, description="data per estimator call, s")
     warmup_s: float = Field(120.0, ge=0, le=3600, description="windows starting less than this after the rest phase are "
                             "not analysed (the filter converges), s")
@@ -38,7 +39,7 @@ def calibration_to_dict(cal: RestCalibration) -> dict:
 
 def calibration_from_dict(d: dict) -> RestCalibration:
     fields = RestCalibration.__dataclass_fields__
-    kw = {}
+    kw: dict[str, Any] = {}
     for name in fields:
         value = d[name]
         kw[name] = np.asarray(value, dtype=float) if isinstance(value, list) else value

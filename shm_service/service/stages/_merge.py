@@ -19,7 +19,7 @@ class MergeSettings(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    lateness_s: float = Field(1.0, ge=0, description="a sensor this far behind the newest one is not waited for, s")
+    lateness_s: float = Field(1.0, gt=0, le=60, description="how long the merge waits for a late sensor before moving on, s")
 
 
 class MergeStage:

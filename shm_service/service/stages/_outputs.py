@@ -9,17 +9,17 @@ from collections import deque
 from typing import Any, Protocol
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+
 
 from contract import estimate_payloads
 from estimator import FilterOutput, ImmsModel
 
 from ...recording import encode_payloads_json
-from ._archive import Archive
-from ._sinks import SinkGuard
+from ._archive import Archive, ArchiveSettings
+from ..alarms._sinks import SinkGuard
 from ..storage._storage import Storage
 
-__all__ = ["LiveRingLike", "OutputSettings", "OutputStage"]
+__all__ = ["LiveRingLike", "OutputStage"]
 
 log = logging.getLogger("shm.serve.pipeline")
 
@@ -31,28 +31,19 @@ class LiveRingLike(Protocol):
     def add(self, t_s: np.ndarray, x: np.ndarray, truth: Any = None) -> None: ...
 
 
-class OutputSettings(BaseModel):
-    """What the outputs record."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    archive_raw: bool = Field(False, description="record the incoming samples")
-    archive_estimates: bool = Field(True, description="record /estimate/state")
-    estimate_decimation: int = Field(1, ge=1, description="record every n-th estimate")
-
-
 class OutputStage:
     """The recording and live ring of one structure."""
 
-    def __init__(self, model: ImmsModel, source_id: str, storage: Storage, settings: OutputSettings | None = None, *,
-                 archive: Archive | None = None, sink_guard: SinkGuard | None = None) -> None:
-        self.settings = s = settings or OutputSettings()
+    def __init__(self, model: ImmsModel, source_id: str, storage: Storage, settings: ArchiveSettings | None = None, *,
+                 archive: Archive | None = None, sink_guard: SinkGuard | None = None, record_raw: bool = False) -> None:
+        self.settings = s = settings or ArchiveSettings()
         self.model = model
         self.source_id = source_id
         self.storage = storage
         self.archive = archive
-        self.archive_raw = s.archive_raw and archive is not None
-        self.archive_estimates = s.archive_estimates and archive is not None
+        # whether the incoming samples are recorded is the structure's to say ([archive] raw and its source's kind)
+        self.archive_raw = record_raw and archive is not None
+        self.archive_estimates = s.estimates and archive is not None
         self.live: LiveRingLike | None = None  # set by the service: the batches' estimates for a live view
         # A failing live ring is counted and logged once per kind; it never stops a batch.
         self.sink_guard = sink_guard or SinkGuard("dashboard", log)
@@ -60,7 +51,7 @@ class OutputStage:
         self._estimate_maps: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def raw(self, messages: list[tuple[str, int, bytes, int]] | None) -> None:
-        if self.archive_raw and messages:
+        if self.archive_raw and messages and self.archive is not None:
             self.archive.write_many(messages)
 
     def maybe_flush(self) -> None:
@@ -87,6 +78,8 @@ class OutputStage:
         return [defl[j] if abs(int(tt[j]) - int(want)) < 50_000_000 else None for j, want in zip(k, target)]
 
     def _archive_estimates(self, epoch_ns: int, out: FilterOutput) -> None:
+        if self.archive is None:  # archive_estimates says there is one
+            return
         k = self.settings.estimate_decimation
         t, x, P = out.t[::k], out.x[::k], out.P_diag[::k]
         if not len(t):
@@ -101,6 +94,7 @@ class OutputStage:
         if self.model.biaxial:  # the ξ plane's keys too: a biaxial rig's reader expects them
             m, b_xi = self.model, layout.b_xi_of(x)
             units = m.units_xi
+            assert units is not None, "a biaxial model has the ξ plane's unit deformations"
             xi = (b_xi @ units.shape(m.rig.beam.length), b_xi @ units.shape(m.stations).T, b_xi @ units.curvature(m.stations).T)
         rows = estimate_payloads(layout, x, P, b @ tip, b @ shape, b @ curvature, xi)
         stamps = epoch_ns + np.round(t * 1e9).astype(np.int64)

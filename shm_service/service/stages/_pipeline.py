@@ -31,16 +31,16 @@ from contract import PipelineStatusDocument
 from estimator import ImmsModel
 
 from ...recording import FollowBlock
-from ._archive import Archive
+from ._archive import Archive, ArchiveSettings
 from ._checks import CheckSettings, SampleChecks
-from ..runtime._delegate import ReadThrough
+from .._delegate import ReadThrough
 from ._merge import MergeSettings, MergeStage
 from ...recording._plausibility import SourceClock, ValueLimits
-from ._sinks import SinkGuard
+from ..alarms._sinks import SinkGuard
 from ._analysis import AnalysisStage
 from ._commit import CommitSettings, CommitStage
 from ._estimate import EstimateSettings, EstimateStage, stored_calibration
-from ._outputs import OutputSettings, OutputStage
+from ._outputs import OutputStage
 from ..storage._storage import Storage
 
 __all__ = ["Batch", "Pipeline"]
@@ -135,7 +135,7 @@ class _SetAside:
     def describe(self) -> str | None:
         if not self.samples and not self.chunks:
             return None
-        span = "" if self.first_ns is None else f" ({(self.last_ns - self.first_ns) / _NS:.1f} s of data from {self.first_ns / _NS:.3f})"
+        span = "" if self.first_ns is None or self.last_ns is None else f" ({(self.last_ns - self.first_ns) / _NS:.1f} s of data from {self.first_ns / _NS:.3f})"
         where = (f"{self.recorded} of them in the recording" if self.recorded
                  else "not recorded (their source's file holds them, or the recording of raw samples is off)")
         return (f"stopped under a backlog: {self.samples} samples{span} not estimated, {where}; "
@@ -181,7 +181,7 @@ class Pipeline:
     def __init__(self, *, model: ImmsModel, source_id: str, storage: Storage, analysis: AnalysisConfig,
                  estimate: EstimateSettings | None = None, merge: MergeSettings | None = None,
                  checks: CheckSettings | None = None, commits: CommitSettings | None = None,
-                 outputs: OutputSettings | None = None, archive: Archive | None = None,
+                 outputs: ArchiveSettings | None = None, archive: Archive | None = None, record_raw: bool = False,
                  sink_guard: SinkGuard | None = None, clock: SourceClock | None = None, limits: ValueLimits | None = None,
                  analysis_lane: bool = False) -> None:
         _one_blas_thread()
@@ -198,7 +198,8 @@ class Pipeline:
         baseline = None if blob.get("monitor") else storage.active_baseline(source_id)
         self.analytics = AnalysisStage(model, analysis, blob.get("monitor"), stored.get("last_window_start_s"), source_id,
                                        baseline=baseline, loads_state=blob.get("loads"))
-        self.outputs = OutputStage(model, source_id, storage, outputs, archive=archive, sink_guard=sink_guard)
+        self.outputs = OutputStage(model, source_id, storage, outputs, archive=archive, sink_guard=sink_guard,
+                                   record_raw=record_raw)
         self.commits = CommitStage(storage, source_id, self.analytics.active(), commits)
         # the analysis lane (None: analysed inline, within ``process``)
         self.inbox = AnalysisInbox(self._handle, self._retry_commits) if analysis_lane else None
@@ -291,7 +292,7 @@ class Pipeline:
     # -- the analysis lane ----------------------------------------------------------------------
 
     def _to_analysis(self, item: tuple) -> None:
-        if self.lane_started:
+        if self.lane_started and self.inbox is not None:  # a lane is started only with an inbox
             self.inbox.items.append(item)
         else:
             self._handle(item)
@@ -336,7 +337,7 @@ class Pipeline:
         for window in self.analytics.add(epoch, t, b, d, temperature, gauges):
             monitor = self.analytics.monitor
             self.commits.add(window, monitor_state=self.analytics.state(), raised=self.analytics.active(),
-                             baseline=monitor.baseline.to_dict() if window.new_baseline else None,
+                             baseline=monitor.baseline.to_dict() if window.new_baseline and monitor.baseline else None,
                              calibration=self.estimate.new_calibration())
 
     def _guarded(self, fn: Callable[..., object], *args: object) -> bool:
@@ -399,9 +400,6 @@ class Pipeline:
     @property
     def pending_commits(self) -> int:
         return len(self.commits.pending)
-
-    def flush_commits(self, retry_s: float | None = None) -> bool:
-        return self.commits.flush(retry_s)
 
     def stuck_sensors(self) -> list[str]:
         """Topics whose readings have stayed exactly the same for ``stuck_after_s`` and more."""

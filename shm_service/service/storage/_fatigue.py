@@ -64,7 +64,8 @@ _JSON = frozenset({"del_pa", "rate_band_per_year", "remaining_band_years", "del_
 
 
 def _conditions(source: str, from_s: float | None, to_s: float | None) -> tuple[str, list[Any]]:
-    where, args = ["source = ?"], [source]
+    where: list[str] = ["source = ?"]
+    args: list[Any] = [source]
     if from_s is not None:
         where.append("window_start_s >= ?")
         args.append(float(from_s))

@@ -20,14 +20,31 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..stages._archive import parse_archive_name
-from .._config import RetentionSettings
+from pydantic import BaseModel, ConfigDict, Field
 
-__all__ = ["RecordingFile", "RetentionWorker", "list_recordings", "plan_recording_retention"]
+from ._archive_names import parse_archive_name
+
+__all__ = ["RecordingFile", "RetentionSettings", "RetentionWorker", "list_recordings", "plan_recording_retention"]
 
 log = logging.getLogger("shm.serve.retention")
 
 _DAY_S = 86400.0
+
+
+class RetentionSettings(BaseModel):
+    """What the service keeps of the past. Ages are in data time (the newest sample or window), so a
+    replay of old data keeps what it writes. Checked at start and every ``interval_s``."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    recordings_max_gb: float = Field(
+        100.0, gt=0, description="most disk the recordings may take, GB (oldest files go first); the default holds "
+        "a week of the benchmark rig: 0.52 GB per hour of data (raw samples and 50 Hz estimates, measured), 87 GB a week")
+    recordings_max_age_days: float | None = Field(7.0, gt=0, description="recordings whose data are older are deleted, days (None: no age limit)")
+    trends_max_age_days: float | None = Field(
+        400.0, gt=0, description="trend rows older than this before their source's newest window are deleted, days "
+        "(None: keep all; 2 MB per day of one structure with 5 modes and a window every 30 s, measured)")
+    interval_s: float = Field(60.0, gt=0, le=86400, description="how often retention runs, wall-clock s")
 
 
 @dataclass(frozen=True)

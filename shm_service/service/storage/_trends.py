@@ -20,8 +20,9 @@ __all__ = ["TREND_COLUMNS", "TrendQuery", "TrendRepository", "TrendStore"]
 
 #: The trend table's columns are the trend row document's fields.
 TREND_COLUMNS = tuple(TrendRow.model_fields)
-#: A trend row's key and the order of every answer: window start, source, mode.
-_KEY = ("window_start_s", "source", "mode")
+#: A trend row's key and the order of every answer: window start, source, mode, bending plane
+#: (a biaxial beam's ζ and ξ mode k of one window are two rows).
+_KEY = ("window_start_s", "source", "mode", "plane")
 #: validates a chunk of rows in one call (a tenth of the cost of one call per row)
 _ROWS = TypeAdapter(list[TrendRow])
 
@@ -62,10 +63,10 @@ class TrendStore(Protocol):
 
 class TrendRepository:
     """``TrendStore`` over the SQLite connection ``db`` (table ``trends``, keyed and indexed by
-    (source, window start, mode) and window start: every query below is an index range)."""
+    (source, window start, mode, plane) and window start: every query below is an index range)."""
 
     name = "trends"
-    key_types: tuple[type, ...] = (float, str, int)
+    key_types: tuple[type, ...] = (float, str, int, str)
 
     def __init__(self, db: sqlite3.Connection, chunk_rows: int = 2000) -> None:
         self.db = db
@@ -84,7 +85,7 @@ class TrendRepository:
         where = [sql for sql, value in pairs if value is not None]
         args = [value for _, value in pairs if value is not None]
         if after is not None:
-            where.append(f"({', '.join(_KEY)}) > (?, ?, ?)")
+            where.append(f"({', '.join(_KEY)}) > ({', '.join('?' * len(_KEY))})")
             args.extend(after)
         return (" WHERE " + " AND ".join(where)) if where else "", args
 
@@ -102,7 +103,7 @@ class TrendRepository:
         where, args = self._where(query, after)
         row = self.db.execute(f"SELECT {', '.join(_KEY)} FROM trends{where} ORDER BY {', '.join(_KEY)} LIMIT 1 OFFSET ?",
                               [*args, int(offset)]).fetchone()
-        return None if row is None else (float(row[0]), str(row[1]), int(row[2]))
+        return None if row is None else (float(row[0]), str(row[1]), int(row[2]), str(row[3]))
 
     def chunks(self, query: TrendQuery, after: tuple | None, limit: int) -> Iterator[list[TrendRow]]:
         where, args = self._where(query, after)

@@ -28,6 +28,22 @@ def test_rendered_defaults_parse_back_to_the_defaults():
     assert "# SQLite database" in text and "[analytics]" in text
 
 
+def test_the_sections_are_the_stages_settings_with_one_default_each():
+    from shm_service.service.stages._archive import ArchiveSettings
+    from shm_service.service.stages._checks import CheckSettings
+    from shm_service.service.stages._commit import CommitSettings
+    from shm_service.service.stages._estimate import EstimateSettings
+    from shm_service.service.stages._merge import MergeSettings
+
+    s = load_settings(overrides={"source": {"silent_after_s": 3.0, "lateness_s": 0.5}, "archive": {"estimate_decimation": 2}})
+    assert isinstance(s.source, MergeSettings) and isinstance(s.source, CheckSettings)
+    assert isinstance(s.estimator, EstimateSettings) and isinstance(s.archive, ArchiveSettings)
+    assert (s.source.silent_after_s, s.source.lateness_s, s.archive.estimate_decimation) == (3.0, 0.5, 2)
+    # a stage built without settings has the defaults the configuration's users have
+    assert (CheckSettings().silent_after_s, MergeSettings().lateness_s, ArchiveSettings().estimate_decimation) == (2.0, 1.0, 4)
+    assert CommitSettings().retry_s == ServiceSettings().storage_retry_s == 10.0
+
+
 def test_config_is_closed_and_flags_override(tmp_path):
     cfg = tmp_path / "c.toml"
     cfg.write_text('db = "a.sqlite"\n[server]\nport = 9000\n')
@@ -67,7 +83,7 @@ def test_migrations_and_idempotent_windows(storage_target):
     db = storage_target
     st = Storage(db, notify_targets=[("webhook", "http://127.0.0.1:1/x")])
     # each engine its own numbering of migrations; SQLite's is the one exported
-    assert st.schema_version == st.database.schema_latest == (SCHEMA_VERSION if db.endswith(".sqlite") else 2)
+    assert st.schema_version == st.database.schema_latest == (SCHEMA_VERSION if db.endswith(".sqlite") else 3)
     raise_ = AlarmChange("raise", "mode2", "frequency", 2, "warning", 120.0, 3.1, 3.0, "m")
     commit = WindowCommit("src", 100.0, 120.0, [_row(100.0, 1), _row(100.0, 2)], {"monitor": None}, None, [raise_])
     st.commit_window(commit)
@@ -83,6 +99,38 @@ def test_migrations_and_idempotent_windows(storage_target):
     assert acked.acknowledged_by == "op" and acked.acknowledged and acked.acknowledged_at_s > 0
     assert st.acknowledge(1, "other").acknowledged_by == "op"
     assert st.acknowledge(99, "op") is None
+
+
+def test_a_biaxial_beams_zeta_and_xi_mode_of_one_window_are_two_rows_and_pages_follow_the_key(storage_target):
+    st = Storage(storage_target)
+    rows = [_row(100.0, 1), _row(100.0, 1, 1.01).model_copy(update={"plane": "xi"}), _row(100.0, 2)]
+    st.commit_window(WindowCommit("src", 100.0, 120.0, rows, {"monitor": None}, None, []))
+    assert st.count("trends") == 3
+    # the key's order: window start, source, mode, plane ("xi" < "zeta")
+    assert [(r.mode, r.plane, r.frequency_hz) for r in st.trends()] == [(1, "xi", 1.01), (1, "zeta", 1.0), (2, "zeta", 1.0)]
+    first = st.trends_page(limit=1)
+    got = list(first.items)
+    second = st.trends_page(limit=2, cursor=first.next_cursor)
+    assert [(r.mode, r.plane) for r in got + list(second.items)] == [(1, "xi"), (1, "zeta"), (2, "zeta")]
+    st.close()
+
+
+def test_a_version_5_database_keeps_its_trends_in_the_zeta_plane(tmp_path):
+    from shm_service.service.storage.sqlite._schema import _MIGRATIONS
+
+    db = tmp_path / "v5.sqlite"
+    con = sqlite3.connect(db)
+    for script in _MIGRATIONS[:5]:
+        con.executescript(script)
+    con.execute("INSERT INTO trends (source, window_start_s, window_end_s, mode, unit, kind, frequency_hz, created_at) "
+                "VALUES ('src', 100.0, 120.0, 1, 1, 'ambient', 1.5, 1.0)")
+    con.execute("PRAGMA user_version = 5")
+    con.commit()
+    con.close()
+    st = Storage(db)
+    (row,) = st.trends()
+    assert (row.mode, row.frequency_hz, row.plane) == (1, 1.5, "zeta")
+    st.close()
 
 
 def test_version_1_database_keeps_its_acknowledgements(tmp_path):
@@ -103,7 +151,7 @@ def test_version_1_database_keeps_its_acknowledgements(tmp_path):
     con.commit()
     con.close()
     st = Storage(db)
-    assert st.schema_version == SCHEMA_VERSION == 5  # 3: event sequence numbers and UUIDs; 4: the ledger of shm reprocess; 5: fatigue rows
+    assert st.schema_version == SCHEMA_VERSION == 6  # 3: event sequence numbers and UUIDs; 4: the ledger of shm reprocess; 5: fatigue rows; 6: the trends' plane
     assert st.fatigue_windows("src") == ([], 0, None)  # 5: the fatigue tables exist, empty
     (alarm,) = st.alarms()
     assert alarm.acknowledged_at_s == 12.5 and alarm.acknowledged_by == "op" and alarm.acknowledged and not alarm.stale

@@ -7,7 +7,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -39,7 +38,6 @@ def test_shm_modes_works_on_it(capsys):
 
 def test_shm_serve_refuses_it_at_once_naming_the_missing_imu(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    t0 = time.monotonic()
     proc = subprocess.run([sys.executable, "-m", "shm_service.cli", "serve", "--source", "ingest", "--rig", str(RIG),
                            "--db", str(tmp_path / "shm.sqlite"), "--port", "0", "--no-dashboard", "--no-archive"],
                           capture_output=True, text=True, env=env, timeout=180)
@@ -47,4 +45,3 @@ def test_shm_serve_refuses_it_at_once_naming_the_missing_imu(tmp_path):
     assert "Traceback" not in proc.stderr
     assert "no IMU named 'D'" in proc.stderr and "'sensors'" in proc.stderr and "the rig's IMUs: low_g, high_g" in proc.stderr
     assert "API at" not in proc.stdout  # refused before serving anything
-    assert time.monotonic() - t0 < 180

@@ -35,10 +35,10 @@ def test_it_waits_for_the_slowest_sensor_up_to_the_lateness():
 
 
 def test_a_sample_older_than_what_was_released_is_late_and_counted():
-    merge = MergeStage(MergeSettings(lateness_s=0.0))
+    merge = MergeStage(MergeSettings(lateness_s=0.001))  # 1 ms
     merge.add(_block("/imu/D", [0, 5, 10]))
     merge.add(_block("/imu/s1", [0, 5, 10]))
-    assert _ms(merge.release(), "/imu/D") == [0, 5, 10]  # cutoff 11 ms
+    assert _ms(merge.release(), "/imu/D") == [0, 5, 10]  # cutoff max(10 - 1, 10 + 1) = 11 ms
     merge.add(_block("/imu/s2", [8, 12]))
     assert merge.late == {"/imu/s2": 1}
     assert _ms(merge.release(final=True), "/imu/s2") == [12]
@@ -62,3 +62,9 @@ def test_one_sensor_waits_for_no_other():
 def test_the_settings_refuse_a_negative_lateness():
     with pytest.raises(ValidationError, match="lateness_s"):
         MergeSettings(lateness_s=-1.0)
+
+
+def test_the_settings_refuse_no_lateness():
+    # [source] lateness_s is also the default of max_ahead_s, which must be > 0
+    with pytest.raises(ValidationError, match="lateness_s"):
+        MergeSettings(lateness_s=0.0)

@@ -55,6 +55,10 @@ def test_nodes_share_the_fleet_and_take_over_a_stopped_and_a_dead_node(tmp_path,
         with pytest.raises(Exception, match="runs on node 'a'"):
             b.structure(remote)
         b.trends(None, None, source=remote)  # its stored rows are answered by any node
+        # /metrics per node: its own structures only
+        states = [line for line in b.fleet_metrics().splitlines() if line.startswith("shm_structure_state{")]
+        assert sorted(line.split('structure="')[1].split('"')[0] for line in states) == sorted(
+            sid for sid, n in view.items() if n == "b")
 
         # b stops cleanly: its leases released, a takes all five
         b.stop(drain_s=0)
@@ -84,3 +88,30 @@ def test_nodes_share_the_fleet_and_take_over_a_stopped_and_a_dead_node(tmp_path,
     finally:
         for node in nodes:
             node.stop(drain_s=0)
+
+
+def test_a_paused_node_stops_the_structures_taken_from_it(tmp_path, fresh_postgres_url, mqtt_server):
+    """A node that paused past its lease (its renewals stopped) finds at its next round that
+    another holds one of its structures: it stops that one and takes back what is still free."""
+    from shm_service.service.storage.postgres import Leases
+
+    settings = _settings(tmp_path, fresh_postgres_url, mqtt_server.url)
+    a = NodeService(settings, "a", environ={})
+    intruder = Leases(fresh_postgres_url, lease_s=60.0)
+    try:
+        a.start()
+        wait_for(lambda: len(a.running_structures()) == len(IDS) or None, 60, "a to hold every structure")
+        before = a.view["m1"].token
+        a._node_stop.set()  # paused: no renewal
+        a._node_thread.join(10)
+        taken = wait_for(lambda: intruder.acquire("m1", "z"), 30, "m1's lease to expire")
+        assert taken.token == before + 1
+        wait_for(lambda: all(r.expired for r in intruder.all() if r.holder == "a") or None, 30, "a's leases to expire")
+        a.step()
+        assert "m1" not in a.structures and a.view["m1"].holder == "z"
+        assert sorted(s.id for s in a.running_structures()) == IDS[1:]  # the others expired too: taken back
+        assert all(a.view[sid].token > before for sid in IDS[1:])
+        assert all(s.pipeline.commits.fencing_token == a.view[s.id].token for s in a.running_structures())
+    finally:
+        intruder.close()
+        a.stop(drain_s=0)

@@ -10,7 +10,7 @@ import pytest
 
 from contract import TrendRow
 from shm_service.service import RetentionSettings, SettingsError, Storage, WindowCommit, load_settings
-from shm_service.service.stages._archive import parse_archive_name
+from shm_service.service.storage._archive_names import parse_archive_name
 from shm_service.service.storage._retention import RecordingFile, RetentionWorker, list_recordings, plan_recording_retention
 
 HOUR = 3600.0

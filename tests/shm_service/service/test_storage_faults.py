@@ -105,21 +105,19 @@ def test_reads_answer_while_another_process_holds_the_write_lock(tmp_path):
             answer: dict = {}
 
             def baseline() -> None:  # an operator's write, waiting for the lock meanwhile
-                began = time.monotonic()
                 answer["response"] = c.post("/api/baseline", headers=auth)
-                answer["s"] = time.monotonic() - began
 
             writer = threading.Thread(target=baseline)
             writer.start()
             time.sleep(0.3)
             for path in ("/healthz", "/api/status", "/api/alarms", "/api/trends"):
-                began = time.monotonic()
                 r = c.get(path)
-                assert r.status_code == 200 and time.monotonic() - began < 1.0, (path, time.monotonic() - began)
+                # answered while the write still waits for the lock: a read does not queue behind it
+                assert r.status_code == 200 and writer.is_alive(), path
             writer.join(30)
             r = answer["response"]
             assert r.status_code == 503 and r.headers["Retry-After"] and "unavailable" in r.json()["detail"]
-            assert answer["s"] < 6.0
+            assert holder.poll() is None  # the write gave up while the lock was still held
             holder.kill()
             holder.wait()
             assert c.post("/api/baseline", headers=auth).status_code == 202

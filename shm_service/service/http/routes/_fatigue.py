@@ -18,8 +18,8 @@ __all__ = ["router", "fatigue_csv"]
 
 router = APIRouter(tags=["fatigue"])
 
-_CSV = {200: {"content": {"text/csv": {"schema": {"type": "string"}}}}}
-_UNKNOWN = {404: _error("no such structure (the message names it)"),
+_CSV: dict[int | str, dict[str, Any]] = {200: {"content": {"text/csv": {"schema": {"type": "string"}}}}}
+_UNKNOWN: dict[int | str, dict[str, Any]] = {404: _error("no such structure (the message names it)"),
             409: _error("the structure failed to start, or (/api/fatigue) the service monitors a fleet: ask per structure")}
 _COLUMNS = ("structure_id", "window_start_s", "duration_s", "temperature_c", "hot_spot", "position_m", "curve", "n_eq",
             "max_range_pa", "damage_increment", "consumed", "rate_per_year", "remaining_years", "verdict", "design_life_years")

@@ -39,7 +39,7 @@ __all__ = ["PgConnection", "PgRow", "translate"]
 
 #: the primary key of each table an ``INSERT OR REPLACE`` writes
 _PRIMARY_KEYS: dict[str, tuple[str, ...]] = {
-    "trends": ("source", "window_start_s", "mode"),
+    "trends": ("source", "window_start_s", "mode", "plane"),
     "fatigue_windows": ("source", "window_start_s"),
     "fatigue_hot_spots": ("source", "window_start_s", "hot_spot"),
     "reprocessed": ("key",),

@@ -164,6 +164,13 @@ _MIGRATIONS: tuple[str, ...] = (
     );
     CREATE INDEX leases_holder ON leases (holder, expires_at);
     """,
+    # 3: the bending plane of each trend row (a biaxial beam's ζ and ξ modes), part of the key; the
+    # rows stored before are the ζ plane's (SQLite's migration 6)
+    """
+    ALTER TABLE trends ADD COLUMN plane TEXT NOT NULL DEFAULT 'zeta' CHECK (plane IN ('zeta', 'xi'));
+    ALTER TABLE trends DROP CONSTRAINT trends_pkey;
+    ALTER TABLE trends ADD PRIMARY KEY (source, window_start_s, mode, plane);
+    """,
 )
 
 SCHEMA_VERSION = len(_MIGRATIONS)

@@ -160,6 +160,38 @@ _MIGRATIONS: tuple[str, ...] = (
     """,
     # 5: the hot spots' loads and life per window
     FATIGUE_SCHEMA,
+    # 6: the bending plane of each trend row (a biaxial beam's ζ and ξ modes): part of the key, so
+    # the table is rebuilt (new table, copy, drop, rename); the rows stored before are the ζ plane's
+    """
+    CREATE TABLE trends_new (
+        source TEXT NOT NULL,
+        window_start_s REAL NOT NULL,
+        window_end_s REAL NOT NULL,
+        mode INTEGER NOT NULL,
+        -- beside the key's other columns: SQLite 3.40's integrity_check misreads a WITHOUT ROWID
+        -- row whose key column follows columns outside the key (it reports NOT NULL columns as NULL)
+        plane TEXT NOT NULL DEFAULT 'zeta' CHECK (plane IN ('zeta', 'xi')),
+        unit INTEGER NOT NULL,
+        kind TEXT NOT NULL,
+        frequency_hz REAL,
+        damping_ratio REAL,
+        amplitude REAL,
+        confidence REAL,
+        temperature_c REAL,
+        curvature_index REAL,
+        score_sigma REAL,
+        level TEXT,
+        created_at REAL NOT NULL,
+        PRIMARY KEY (source, window_start_s, mode, plane)
+    ) WITHOUT ROWID;
+    INSERT INTO trends_new (source, window_start_s, window_end_s, mode, unit, kind, frequency_hz, damping_ratio, amplitude,
+                            confidence, temperature_c, curvature_index, score_sigma, level, created_at, plane)
+        SELECT source, window_start_s, window_end_s, mode, unit, kind, frequency_hz, damping_ratio, amplitude,
+               confidence, temperature_c, curvature_index, score_sigma, level, created_at, 'zeta' FROM trends;
+    DROP TABLE trends;
+    ALTER TABLE trends_new RENAME TO trends;
+    CREATE INDEX trends_time ON trends (window_start_s);
+    """,
 )
 
 SCHEMA_VERSION = len(_MIGRATIONS)
