@@ -204,8 +204,14 @@ def run_node(n: int, *, postgres_url: str, mqtt_url: str, recordings: list[Path]
                 publisher = subprocess.Popen([sys.executable, "-m", "benchmarks.bench_cluster", "--publish", mqtt_url, prefix,
                                               ",".join(ids), ",".join(map(str, recordings)), f"{seconds:g}"],
                                              cwd=ROOT, stdout=subprocess.PIPE, text=True)
-                while publisher.poll() is None or time.monotonic() - started < seconds + 2 * poll_s:
-                    time.sleep(poll_s)
+                # measured while data arrive: once the publisher has ended, the lag only grows with the wall clock
+                while True:
+                    ended = publisher.poll() is not None
+                    if not ended:
+                        try:  # back at once when it ends, so that no poll falls after the data stopped
+                            publisher.wait(poll_s)
+                        except subprocess.TimeoutExpired:
+                            pass
                     polled = client.get(f"{serve.url}/api/structures").json()["structures"]
                     for s in polled:
                         last[s["id"]] = s
@@ -214,7 +220,7 @@ def run_node(n: int, *, postgres_url: str, mqtt_url: str, recordings: list[Path]
                             if time.monotonic() - started >= after_s:
                                 worst_after = max(worst_after, s["lag_s"])
                     series.append(max((s["lag_s"] for s in polled if s["lag_s"] is not None), default=None))
-                    if time.monotonic() - started > seconds + 120:
+                    if ended or time.monotonic() - started > seconds + 120:
                         break
                 wall = time.monotonic() - started
                 procs = [node, *node.children(recursive=True)]

@@ -13,7 +13,7 @@ import signal
 import tempfile
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -67,14 +67,14 @@ def stop_nodes(nodes: Sequence[Any], timeout_s: float = 60.0) -> None:
 def _gateway(mqtt_url: str, ids: Sequence[str], stop: threading.Event, duration_s: float = 3600.0) -> None:
     """Publish each structure's virtual rig (seeded by its rank) at real time, 1 s bodies, QoS 1."""
     import orjson
-    import paho.mqtt.client as mqtt
-    from paho.mqtt.enums import MQTTProtocolVersion
+    from paho.mqtt.client import Client
+    from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 
     from shm_service.virtual_rig import SimulationSettings, VirtualRig
     from shm_service.virtual_rig._record import encode_payloads
 
     parts = urlsplit(mqtt_url)
-    client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="fleet-demo-gateway", protocol=MQTTProtocolVersion.MQTTv5)
+    client = Client(CallbackAPIVersion.VERSION2, client_id="fleet-demo-gateway", protocol=MQTTProtocolVersion.MQTTv5)
     client.connect(parts.hostname or "127.0.0.1", parts.port or 1883)
     client.loop_start()
     rigs = [VirtualRig(SimulationSettings(duration=duration_s, excitation="ambient", seed=k + 1)).blocks(1.0) for k in range(len(ids))]
@@ -100,11 +100,11 @@ def _gateway(mqtt_url: str, ids: Sequence[str], stop: threading.Event, duration_
         client.loop_stop()
 
 
-def run_two_nodes(structures: int = 4, *, lease_s: float = 15.0, seconds: float | None = None) -> int:
-    """Both servers, two nodes on ``structures`` mqtt structures and the gateway, until Ctrl-C
-    (or ``seconds``); everything stopped in order at the end."""
-    from shm_service.devservers import start_mosquitto, start_postgres
-
+def run_two_nodes(start_postgres: Callable[[], Any], start_mosquitto: Callable[[], Any], structures: int = 4, *,
+                  lease_s: float = 15.0, seconds: float | None = None) -> int:
+    """Both servers (started by the two callables, :mod:`shm_service.devservers`'), two nodes on
+    ``structures`` mqtt structures and the gateway, until Ctrl-C (or ``seconds``); everything
+    stopped in order at the end."""
     if structures < 1:
         raise ValueError(f"structures={structures}: at least one")
     ids = [f"mast-{k + 1:02d}" for k in range(structures)]

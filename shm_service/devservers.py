@@ -12,7 +12,7 @@ parent-death signal was set, which that change of user clears).
 
 ``python -m shm_service.devservers`` (``make servers``) runs both until Ctrl-C and prints their
 URLs; ``--two-nodes`` (``make fleet-demo``) also starts two nodes on a small fleet fed at real time
-(shm_service/_fleetdemo.py; docs/operations/index.md, "Fleets across machines").
+(shm_service/_fleetdemo.py; docs/operations/index.md, "Running a fleet across machines").
 """
 
 from __future__ import annotations
@@ -330,7 +330,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.two_nodes:
         from ._fleetdemo import run_two_nodes
 
-        return run_two_nodes(args.structures)
+        return run_two_nodes(start_postgres, start_mosquitto, args.structures)
     postgres = start_postgres(port=args.postgres_port)
     try:
         mqtt = start_mosquitto(port=args.mqtt_port)
