@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test check lint types architecture bench docs clean servers servers-installed
+.PHONY: demo test check lint types architecture bench docs clean servers servers-installed fleet-demo
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -57,6 +57,12 @@ servers-installed:
 # it prints their URLs. Ctrl-C stops both, their data go with them.
 servers: $(STAMP) servers-installed
 	$(PY) -m shm_service.devservers
+
+# A demo of two nodes: both servers, two `shm serve --node` processes sharing four mqtt structures
+# through leases, and a gateway publishing the virtual rig at real time; it prints the URLs.
+# Ctrl-C stops everything (nodes first, then the servers); kill -9 a node to watch the failover.
+fleet-demo: $(STAMP) servers-installed
+	$(PY) -m shm_service.devservers --two-nodes
 
 bench: $(STAMP)
 	$(PY) -m benchmarks

@@ -32,6 +32,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+# mkdocs puts this directory on sys.path only while it loads this hook and restores sys.path after:
+# the benchmarks package (not installed) is imported now so that its modules are found at build time
+import benchmarks  # noqa: E402,F401
 
 GENERATED = "!!! note \"Generated\"\n    This page is generated from the code at every build of the documentation ({what}); edit the code, not the page.\n\n"
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from ._pages import ROOT, command_line, stamp, write_result
 
 MODULES = ("bench_table1", "bench_simulator", "bench_estimator", "bench_analytics", "bench_operational", "bench_oma", "bench_dropbear", "bench_service",
-           "bench_fleet", "bench_loads", "bench_bands", "bench_export", "fault_campaign", "kill_campaign", "http_campaign", "daq_fault_campaign")
+           "bench_fleet", "bench_cluster", "bench_loads", "bench_bands", "bench_export", "fault_campaign", "kill_campaign", "http_campaign", "daq_fault_campaign")
 
 
 def _title(name: str) -> str:

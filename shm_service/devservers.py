@@ -11,7 +11,8 @@ runs as its ``mosquitto`` user likewise (started as root, it would drop to it by
 parent-death signal was set, which that change of user clears).
 
 ``python -m shm_service.devservers`` (``make servers``) runs both until Ctrl-C and prints their
-URLs, for a demo of two nodes (docs/operations/fleet.md).
+URLs; ``--two-nodes`` (``make fleet-demo``) also starts two nodes on a small fleet fed at real time
+(shm_service/_fleetdemo.py; docs/operations/index.md, "Running a fleet across machines").
 """
 
 from __future__ import annotations
@@ -322,7 +323,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m shm_service.devservers", description=__doc__.split("\n\n")[0])
     parser.add_argument("--postgres-port", type=int, default=None, help="PostgreSQL's port (default: a free one)")
     parser.add_argument("--mqtt-port", type=int, default=None, help="Mosquitto's port (default: a free one)")
+    parser.add_argument("--two-nodes", action="store_true",
+                        help="also two nodes (shm serve --node a|b) on a small fleet of mqtt structures fed at real time")
+    parser.add_argument("--structures", type=int, default=4, help="with --two-nodes: the fleet's structures (default 4)")
     args = parser.parse_args(argv)
+    if args.two_nodes:
+        from ._fleetdemo import run_two_nodes
+
+        return run_two_nodes(start_postgres, start_mosquitto, args.structures)
     postgres = start_postgres(port=args.postgres_port)
     try:
         mqtt = start_mosquitto(port=args.mqtt_port)
