@@ -21,7 +21,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -42,6 +42,8 @@ from ._commit import CommitSettings, CommitStage
 from ._estimate import EstimateSettings, EstimateStage, stored_calibration
 from ._outputs import OutputStage
 from ..storage._storage import Storage
+
+_Item = TypeVar("_Item")
 
 __all__ = ["Batch", "Pipeline"]
 
@@ -142,14 +144,41 @@ class _SetAside:
                 f"{self.chunks} estimator chunk(s) not analysed")
 
 
-class AnalysisInbox:
+@dataclass(frozen=True)
+class EstimatorChunk:
+    """The analysis lane's message of one estimator chunk: its b(t) (times ``t`` in s after
+    ``epoch_ns``; ``b`` (n, Γ)), the support displacement ``d`` (n,) or None, the temperature
+    samples, ``first_s`` (UNIX s of its first estimate; None for a chunk without estimates, which
+    carries its temperature only) and the released gauge samples by name."""
+
+    epoch_ns: int
+    t: np.ndarray
+    b: np.ndarray
+    d: np.ndarray | None
+    temperature: Any
+    first_s: float | None
+    gauges: dict | None = None
+
+
+@dataclass(frozen=True)
+class NotBefore:
+    """The analysis lane's message that no window may start before ``ns`` (UNIX ns): a filter restart."""
+
+    ns: int
+
+
+#: What the data lane hands the analysis lane, in order.
+AnalysisItem = EstimatorChunk | NotBefore
+
+
+class AnalysisInbox(Generic[_Item]):
     """The analysis lane's items in order (estimator chunks, not-before instants), handled by
     ``handle`` one per ``step``; ``full`` holds the data lane back (back-pressure). While it is
     empty, ``idle`` (the waiting windows' retry) is due every ``idle_s``."""
 
-    def __init__(self, handle: Callable[[tuple], None], idle: Callable[[], bool], capacity: int = 256,
+    def __init__(self, handle: Callable[[_Item], None], idle: Callable[[], bool], capacity: int = 256,
                  idle_s: float = 1.0) -> None:
-        self.items: deque[tuple] = deque()
+        self.items: deque[_Item] = deque()
         self.handle, self.idle, self.capacity, self.idle_s = handle, idle, capacity, idle_s
         self.lock = threading.Lock()  # one stepper at a time (the lane, or the data lane's finish)
         self._idle_at = time.monotonic() + idle_s
@@ -202,7 +231,7 @@ class Pipeline:
                                    record_raw=record_raw)
         self.commits = CommitStage(storage, source_id, self.analytics.active(), commits)
         # the analysis lane (None: analysed inline, within ``process``)
-        self.inbox = AnalysisInbox(self._handle, self._retry_commits) if analysis_lane else None
+        self.inbox: AnalysisInbox[AnalysisItem] | None = AnalysisInbox(self._handle, self._retry_commits) if analysis_lane else None
         self.lane_started = False  # until ``start_lane``, the windows are analysed inline (as without a lane)
         self.on_analysis_error: Callable[[Exception], None] | None = None
         self.analysis_error: str | None = None  # the last chunk's analysis error; None once one analyses fine
@@ -253,12 +282,12 @@ class Pipeline:
         if step is None:
             return
         for ns in step.not_before_ns:
-            self._to_analysis(("not_before", ns))
+            self._to_analysis(NotBefore(ns))
         out = step.out
         if out is None:
             if step.temperature is not None:
-                self._to_analysis(("chunk", (step.epoch_ns, np.zeros(0), np.zeros((0, self.model.gamma)), None,
-                                             step.temperature, None)))
+                self._to_analysis(EstimatorChunk(step.epoch_ns, np.zeros(0), np.zeros((0, self.model.gamma)), None,
+                                                 step.temperature, None))
             return
         self.estimates += len(out.t)
         t_abs = step.epoch_ns / _NS + out.t
@@ -267,8 +296,8 @@ class Pipeline:
         self.outputs.estimates(step.epoch_ns, t_abs, out)
         # b(t) and the support displacement d(t), the measured input of the identification; the
         # gauges' samples for the loads' band
-        self._to_analysis(("chunk", (step.epoch_ns, out.t, layout.b_of(out.x), out.x[:, layout.d], step.temperature,
-                                     float(t_abs[0]), self._gauges(released, step.epoch_ns))))
+        self._to_analysis(EstimatorChunk(step.epoch_ns, out.t, layout.b_of(out.x), out.x[:, layout.d], step.temperature,
+                                         float(t_abs[0]), self._gauges(released, step.epoch_ns)))
 
     def _gauges(self, released: dict, epoch_ns: int) -> dict | None:
         """The released strain gauge samples by gauge name (times s after ``epoch_ns``, values): the
@@ -291,7 +320,7 @@ class Pipeline:
 
     # -- the analysis lane ----------------------------------------------------------------------
 
-    def _to_analysis(self, item: tuple) -> None:
+    def _to_analysis(self, item: AnalysisItem) -> None:
         if self.lane_started and self.inbox is not None:  # a lane is started only with an inbox
             self.inbox.items.append(item)
         else:
@@ -308,24 +337,24 @@ class Pipeline:
         assert self.inbox is not None
         self.inbox.step()
 
-    def _handle(self, item: tuple) -> None:
-        kind, args = item
-        if kind == "not_before":
-            self.analytics.set_not_before(max(self.analytics.not_before_ns or args, args))
-        elif kind != "chunk":
-            raise ValueError(f"unknown analysis item {kind!r}")
+    def _handle(self, item: AnalysisItem) -> None:
+        if isinstance(item, NotBefore):
+            self.analytics.set_not_before(max(self.analytics.not_before_ns or item.ns, item.ns))
+        elif not isinstance(item, EstimatorChunk):
+            raise TypeError(f"unknown analysis item {item!r}")
         elif self.past_stop_deadline():
             self.set_aside.chunks += 1
         elif not self.lane_started:
-            self._analyse(*args)
-        elif self._guarded(self._analyse, *args):
+            self._analyse(item)
+        elif self._guarded(self._analyse, item):
             self.analysis_error = None
 
     def _retry_commits(self) -> bool:
         return not self.commits.pending or self._guarded(self.commits.flush)
 
-    def _analyse(self, epoch: int, t: np.ndarray, b: np.ndarray, d: np.ndarray | None, temperature,
-                 first_s: float | None, gauges: dict | None = None) -> None:
+    def _analyse(self, chunk: EstimatorChunk) -> None:
+        epoch, t, b, d, temperature, first_s, gauges = (chunk.epoch_ns, chunk.t, chunk.b, chunk.d, chunk.temperature,
+                                                         chunk.first_s, chunk.gauges)
         if self.commits.pending and self.lane_started:
             self.commits.flush()
         if first_s is not None and self._reset_requested:
