@@ -282,7 +282,7 @@ class MqttSource(Source):
         problems = list(self.validator.clock.problems())
         if not self.connected and self.state == "running":
             since = "" if self.down_since is None else time.strftime(" since %H:%M:%S UTC", time.gmtime(self.down_since))
-            problems.append(f"mqtt: not connected to the broker{since}: {self.link_error or 'connecting'}; what is "
+            problems.append(f"mqtt: not connected to the broker{since}: {self.link_error or f'connecting to {self.settings.url}'}; what is "
                             f"published to {self.topic} meanwhile waits in the session {self.client_id} at the broker")
         return problems
 
