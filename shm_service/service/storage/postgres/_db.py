@@ -17,9 +17,7 @@ committed is one another node resumes after, so none is committed less durably.
 from __future__ import annotations
 
 import logging
-import random
 import threading
-import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any, TypeVar
@@ -30,7 +28,7 @@ from .._commit import StaleLease
 from .._state import STATE_COLUMNS, STATE_UPSERT
 from .._trends import TrendRepository
 from .._url import check_postgres_url, redact
-from ..sqlite._db import StorageUnavailable
+from ..sqlite._db import StorageUnavailable, retry_transient
 from ._connection import PgConnection
 from ._schema import SCHEMA_VERSION, migrate, schema_version
 
@@ -158,27 +156,7 @@ class PgDatabase:
     def retry(self, fn: Callable[[], T], retry_s: float | None = None) -> T:
         """``fn()`` again after a transient error, with jittered exponential back-off (no lock is
         held while waiting), until ``retry_s`` has passed."""
-        budget = self.retry_s if retry_s is None else retry_s
-        deadline = time.monotonic() + budget
-        delay = self.retry_initial_s
-        attempt = 0
-        while True:
-            try:
-                return fn()
-            except psycopg.Error as exc:
-                if not is_transient(exc):
-                    raise
-                attempt += 1
-                self.last_error = f"{type(exc).__name__}: {exc}"
-                now = time.monotonic()
-                if now >= deadline:
-                    self.failures += 1
-                    raise StorageUnavailable(f"{self.path}: {exc} (still after {attempt} attempts in {budget:g} s)") from exc
-                self.retries += 1
-                if attempt == 1 or attempt % 20 == 0:
-                    log.warning("%s: %s; retrying (attempt %d)", self.path, exc, attempt)
-                time.sleep(min(random.uniform(0.5, 1.0) * delay, max(deadline - now, 0.0)))
-                delay = min(delay * 2, 2.0)
+        return retry_transient(self, fn, self.retry_s if retry_s is None else retry_s, (psycopg.Error,), is_transient)
 
     def read(self, fn: Callable[[PgConnection], T]) -> T:
         """``fn(reading connection)``, retried on passing faults."""

@@ -19,11 +19,11 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from ._schema import SCHEMA_VERSION, migrate
 
-__all__ = ["Database", "StorageUnavailable", "is_transient"]
+__all__ = ["Database", "StorageUnavailable", "is_transient", "retry_transient"]
 
 log = logging.getLogger("shm.serve.storage")
 
@@ -50,6 +50,35 @@ def is_transient(exc: BaseException) -> bool:
         return True
     text = str(exc).lower()
     return "locked" in text or "disk is full" in text or "disk i/o" in text
+
+
+def retry_transient(db: Any, fn: Callable[[], T], budget: float, errors: tuple[type[BaseException], ...],
+                    transient: Callable[[BaseException], bool]) -> T:
+    """``fn()``, again after each of ``errors`` that ``transient`` judges passing, with jittered
+    exponential back-off from ``db.retry_initial_s`` (no lock held while waiting), for ``budget``
+    s; then StorageUnavailable naming ``db.path``. Either engine's database: it counts in
+    ``db.retries``, ``db.failures`` and keeps ``db.last_error``."""
+    deadline = time.monotonic() + budget
+    delay = db.retry_initial_s
+    attempt = 0
+    while True:
+        try:
+            return fn()
+        except errors as exc:
+            if not transient(exc):
+                raise
+            attempt += 1
+            db.last_error = f"{type(exc).__name__}: {exc}"
+            now = time.monotonic()
+            if now >= deadline:
+                db.failures += 1
+                raise StorageUnavailable(f"{db.path}: {exc} (still after {attempt} attempts in {budget:g} s)") from exc
+            db.retries += 1
+            if attempt == 1 or attempt % 20 == 0:
+                log.warning("%s: %s; retrying (attempt %d)", db.path, exc, attempt)
+            # full jitter: many writers retrying do not retry in step
+            time.sleep(min(random.uniform(0.5, 1.0) * delay, max(deadline - now, 0.0)))
+            delay = min(delay * 2, 2.0)
 
 
 class Database:
@@ -115,28 +144,8 @@ class Database:
     def retry(self, fn: Callable[[], T], retry_s: float | None = None) -> T:
         """``fn()`` again after a transient error, with jittered exponential back-off (no lock is
         held while waiting), until ``retry_s`` has passed."""
-        budget = self.retry_s if retry_s is None else retry_s
-        deadline = time.monotonic() + budget
-        delay = self.retry_initial_s
-        attempt = 0
-        while True:
-            try:
-                return fn()
-            except (sqlite3.OperationalError, sqlite3.DatabaseError) as exc:
-                if not is_transient(exc):
-                    raise
-                attempt += 1
-                self.last_error = f"{type(exc).__name__}: {exc}"
-                now = time.monotonic()
-                if now >= deadline:
-                    self.failures += 1
-                    raise StorageUnavailable(f"{self.path}: {exc} (still after {attempt} attempts in {budget:g} s)") from exc
-                self.retries += 1
-                if attempt == 1 or attempt % 20 == 0:
-                    log.warning("%s: %s; retrying (attempt %d)", self.path, exc, attempt)
-                # full jitter: many writers retrying do not retry in step
-                time.sleep(min(random.uniform(0.5, 1.0) * delay, max(deadline - now, 0.0)))
-                delay = min(delay * 2, 2.0)
+        return retry_transient(self, fn, self.retry_s if retry_s is None else retry_s,
+                               (sqlite3.OperationalError, sqlite3.DatabaseError), is_transient)
 
     def read(self, fn: Callable[[sqlite3.Connection], T]) -> T:
         """``fn(reading connection)``, retried on passing faults."""
