@@ -409,6 +409,7 @@ def _out_of_sample(rec: Any, gauges: list, gauge_masks: list, t: Any, used: tupl
     deformations left to the estimator, which picks them for the gauges it has). A gauge the
     estimate did not use is out of sample already. (name, position, virtual, measured, leverage 0)."""
 
+    from analytics import UNKNOWN_LEVERAGE
     from estimator import UnobservableRig
 
     from ..processing.estimation import deformation_record
@@ -425,8 +426,6 @@ def _out_of_sample(rec: Any, gauges: list, gauge_masks: list, t: Any, used: tupl
                 # the other gauges alone cannot hold the unit deformations (a mast without ToFs and
                 # as many gauges as modes): this gauge's residual stays in sample, widened by the
                 # leverage bound, and its row says so ("out_of_sample": false)
-                from analytics import UNKNOWN_LEVERAGE
-
                 out.append((name, position, virtual, measured, UNKNOWN_LEVERAGE))
                 continue
             except ValueError as exc:
